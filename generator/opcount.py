@@ -1,0 +1,164 @@
+"""Operation counts of expressions, with one rule shared by the printer.
+
+Rule (also in the README):
+
+* ``add``: additions and subtractions. An n-term sum costs n - 1; a term with a negative
+  coefficient is a subtraction, not a negation plus an addition. A comparison (IK branch
+  tests) costs one ``add``.
+* ``mul``: multiplications and divisions. An n-factor product costs n - 1; a numeric factor
+  counts as a factor, a factor of -1 does not (it folds into the surrounding sum or flips a
+  sign bit); ``x**k`` for integer k >= 2 costs k - 1 (printed as repeated products);
+  ``x**-k`` costs k (k - 1 products and one division); a divisor in a product costs the
+  same as a factor.
+* ``call``: sin, cos, sqrt, atan2, ... one each; ``x**r`` with non-integer r is a call
+  (``pow``), except r = 1/2, which is ``sqrt``. A select (``c ? a : b``) is one call.
+* Numeric constants (``sqrt(2)/2``, ``pi``) are literals and cost nothing.
+
+"before" counts the expression tree as derived, every shared sub-expression paid at each
+occurrence; "after" counts the straight-line program after common-subexpression
+elimination, every temporary paid once. The printer (:mod:`generator.printer`) prints each
+node exactly as counted here, using :func:`add_parts` and :func:`mul_parts`.
+
+Example:
+
+>>> import symengine as se
+>>> x, y = se.symbols("x y")
+>>> tree_count([x*y - 2*x + se.sin(y)**2])
+OpCount(add=2, mul=3, call=1)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import symengine as se
+
+
+@dataclass(frozen=True)
+class OpCount:
+    add: int = 0
+    mul: int = 0
+    call: int = 0
+
+    def __add__(self, other: "OpCount") -> "OpCount":
+        return OpCount(self.add + other.add, self.mul + other.mul, self.call + other.call)
+
+    def to_json(self) -> dict:
+        return {"add": self.add, "mul": self.mul, "call": self.call}
+
+    @property
+    def total(self) -> int:
+        return self.add + self.mul + self.call
+
+
+ZERO = OpCount()
+COMPARISONS = (se.StrictLessThan, se.LessThan, se.Equality, se.Unequality)
+LOGIC = (se.And, se.Or, se.Not, type(se.true).__mro__[1])  # BooleanAtom: true/false
+
+
+def is_literal(e: se.Basic) -> bool:
+    """A numeric constant, printed as one literal."""
+    return e.is_Number or (not e.free_symbols and not isinstance(e, (se.Piecewise,) + COMPARISONS + LOGIC))
+
+
+def add_parts(e: se.Add) -> tuple[float, list[se.Basic]]:
+    """(constant term, non-constant terms) of a sum, in symengine's stable order."""
+    const = 0.0
+    terms = []
+    for a in e.args:
+        if is_literal(a):
+            const += float(a)
+        else:
+            terms.append(a)
+    return const, terms
+
+
+def mul_parts(e: se.Mul) -> tuple[float, list[se.Basic], list[se.Basic]]:
+    """(numeric factor, numerator factors, divisors) of a product.
+
+    A divisor is returned as its positive power: ``x*y**-2`` gives ``(1.0, [x], [y**2])``."""
+    coeff = 1.0
+    numer, denom = [], []
+    for a in e.args:
+        if is_literal(a):
+            coeff *= float(a)
+        elif isinstance(a, se.Pow) and a.args[1].is_Integer and a.args[1] < 0:
+            base, exp = a.args
+            denom.append(base if exp == -1 else se.Pow(base, -exp))
+        else:
+            numer.append(a)
+    return coeff, numer, denom
+
+
+def own_cost(e: se.Basic) -> OpCount:
+    """Cost of the node ``e`` itself; its arguments (as returned by :func:`children`) excluded."""
+    if is_literal(e) or e.is_Symbol:
+        return ZERO
+    if isinstance(e, se.Add):
+        const, terms = add_parts(e)
+        return OpCount(add=len(terms) - 1 + (const != 0.0))
+    if isinstance(e, se.Mul):
+        coeff, numer, denom = mul_parts(e)
+        factors = len(numer) + (abs(coeff) != 1.0)
+        return OpCount(mul=max(factors - 1, 0) + len(denom))
+    if isinstance(e, se.Pow):
+        exp = e.args[1]
+        if exp.is_Integer:
+            k = int(exp)
+            return OpCount(mul=k - 1) if k >= 2 else OpCount(mul=-k)
+        if exp == se.Rational(1, 2):
+            return OpCount(call=1)
+        if exp == se.Rational(-1, 2):
+            return OpCount(call=1, mul=1)
+        return OpCount(call=1)
+    if isinstance(e, se.Piecewise):
+        return OpCount(call=len(e.args) // 2 - 1)
+    if isinstance(e, COMPARISONS):
+        return OpCount(add=1)
+    if isinstance(e, LOGIC):
+        return ZERO
+    if e.is_Function:
+        return OpCount(call=1)
+    raise TypeError(f"no cost rule for {type(e).__name__}: {e}")
+
+
+def children(e: se.Basic) -> tuple:
+    """The sub-expressions that are evaluated separately (divisors as positive powers)."""
+    if is_literal(e) or e.is_Symbol:
+        return ()
+    if isinstance(e, se.Add):
+        return tuple(add_parts(e)[1])
+    if isinstance(e, se.Mul):
+        _, numer, denom = mul_parts(e)
+        return tuple(numer) + tuple(denom)
+    if isinstance(e, se.Pow):
+        return (e.args[0],)
+    if isinstance(e, se.Piecewise):
+        return tuple(a for a in e.args if a != se.true)
+    return tuple(e.args)
+
+
+def tree_count(exprs) -> OpCount:
+    """Operations of the expressions as trees (a shared node paid at every occurrence).
+
+    Memoised on the DAG, so tens of millions of operations are counted in milliseconds."""
+    memo: dict = {}
+
+    def visit(e) -> OpCount:
+        hit = memo.get(e)
+        if hit is None:
+            hit = own_cost(e)
+            for child in children(e):
+                hit = hit + visit(child)
+            memo[e] = hit
+        return hit
+
+    total = ZERO
+    for e in exprs:
+        total = total + visit(se.sympify(e))
+    return total
+
+
+def program_count(assignments, outputs) -> OpCount:
+    """Operations of a straight-line program: every assignment and output paid once, the
+    temporaries it reads being free."""
+    return tree_count([expr for _, expr in assignments] + list(outputs))

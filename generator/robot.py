@@ -1,0 +1,213 @@
+"""Robot descriptions: YAML file -> immutable :class:`RobotModel`.
+
+The schema is the one fixed in the project reference (``name``, ``dh``, ``gravity``,
+``joints``, ``links``).  Every problem in a file is reported as a
+:class:`RobotDescriptionError` naming the file, the field and the reason, so a user never
+sees a traceback from the YAML parser or from sympy.
+
+Example:
+
+>>> model = load_robot("robots/lwr4.yaml")      # doctest: +SKIP
+>>> model.n, model.convention
+(7, 'standard')
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import sympy
+import yaml
+
+CONVENTIONS = ("standard", "modified")
+
+
+class RobotDescriptionError(ValueError):
+    """A robot description that cannot be used, with the file, field and reason."""
+
+    def __init__(self, source: str, field: str, reason: str):
+        self.source, self.field, self.reason = source, field, reason
+        super().__init__(f"{source}: field '{field}': {reason}")
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One DH row. ``alpha`` is kept exact (a sympy number such as pi/2) so that its
+    cosine and sine are exact and zeros never reach generated code."""
+
+    a: sympy.Expr
+    alpha: sympy.Expr
+    d: sympy.Expr
+    offset: sympy.Expr
+    lower: float
+    upper: float
+
+
+@dataclass(frozen=True)
+class Link:
+    """Inertial parameters of one link, in that link's DH frame (SI units).
+
+    ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about the centre of mass."""
+
+    mass: float
+    com: tuple[float, float, float]
+    inertia: tuple[float, float, float, float, float, float]
+
+    def inertia_matrix(self) -> np.ndarray:
+        ixx, iyy, izz, ixy, ixz, iyz = self.inertia
+        return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A serial arm of revolute joints. Constant: derivations read it, never change it."""
+
+    name: str
+    convention: str  # "standard" or "modified" DH
+    gravity: tuple[float, float, float]
+    joints: tuple[Joint, ...]
+    links: tuple[Link, ...]
+    source: str = "<memory>"
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([j.lower for j in self.joints])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([j.upper for j in self.joints])
+
+    @property
+    def identifier(self) -> str:
+        """The name as a C identifier (used as the prefix of generated functions)."""
+        ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
+        return ident if not ident[0].isdigit() else "r_" + ident
+
+
+_SYMPY_NAMESPACE = {"pi": sympy.pi, "sqrt": sympy.sqrt}
+
+
+def _number(value, source: str, field: str, *, exact: bool = False):
+    """Parse a number or a constant expression such as ``pi/2``.
+
+    >>> _number("-pi/2", "f.yaml", "alpha", exact=True)
+    -pi/2
+    """
+    if isinstance(value, bool) or value is None or isinstance(value, (list, dict)):
+        raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
+        return sympy.nsimplify(value, rational=True) if exact else float(value)
+    if isinstance(value, str):
+        try:
+            expr = sympy.sympify(value, locals=_SYMPY_NAMESPACE, rational=True)
+        except (sympy.SympifyError, SyntaxError, TypeError) as exc:
+            raise RobotDescriptionError(source, field, f"cannot parse {value!r} as a number") from exc
+        if not expr.is_number or not expr.is_real:
+            raise RobotDescriptionError(source, field, f"{value!r} is not a real constant")
+        return expr if exact else float(expr)
+    raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
+
+
+def _vector(value, length: int, source: str, field: str) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)):
+        raise RobotDescriptionError(source, field, f"expected a list of {length} numbers, got {value!r}")
+    if len(value) != length:
+        raise RobotDescriptionError(source, field, f"expected {length} numbers, got {len(value)}")
+    return tuple(_number(v, source, f"{field}[{k}]") for k, v in enumerate(value))
+
+
+def _require(mapping: dict, key: str, source: str, prefix: str):
+    if key not in mapping:
+        raise RobotDescriptionError(source, prefix + key, "missing")
+    return mapping[key]
+
+
+def _parse_joint(row, source: str, field: str) -> Joint:
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+    exact = {k: _number(_require(row, k, source, field + "."), source, f"{field}.{k}", exact=True)
+             for k in ("a", "alpha", "d")}
+    offset = _number(row.get("offset", 0), source, f"{field}.offset", exact=True)
+    lower = _number(_require(row, "lower", source, field + "."), source, f"{field}.lower")
+    upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")
+    if not lower < upper:
+        raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower} >= upper {upper}")
+    return Joint(a=exact["a"], alpha=exact["alpha"], d=exact["d"], offset=offset, lower=lower, upper=upper)
+
+
+def check_inertia(inertia: np.ndarray, source: str, field: str) -> None:
+    """Reject a tensor that no rigid body has: not symmetric positive definite, or
+    principal moments violating the triangle inequality (each at most the sum of the others)."""
+    moments = np.linalg.eigvalsh(inertia)
+    scale = max(abs(moments).max(), 1e-300)
+    if moments.min() <= 1e-12 * scale:
+        raise RobotDescriptionError(source, field, f"inertia is not positive definite (principal moments {moments.tolist()})")
+    a, b, c = sorted(moments)
+    if c > a + b + 1e-9 * scale:
+        raise RobotDescriptionError(
+            source, field,
+            f"principal moments {[a, b, c]} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")
+
+
+def _parse_link(row, source: str, field: str) -> Link:
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+    mass = _number(_require(row, "mass", source, field + "."), source, f"{field}.mass")
+    if mass <= 0:
+        raise RobotDescriptionError(source, f"{field}.mass", f"mass must be positive, got {mass}")
+    com = _vector(_require(row, "com", source, field + "."), 3, source, f"{field}.com")
+    inertia = _vector(_require(row, "inertia", source, field + "."), 6, source, f"{field}.inertia")
+    link = Link(mass=mass, com=com, inertia=inertia)
+    check_inertia(link.inertia_matrix(), source, f"{field}.inertia")
+    return link
+
+
+def parse_robot(data, source: str = "<memory>") -> RobotModel:
+    """Build a :class:`RobotModel` from already-parsed YAML data."""
+    if not isinstance(data, dict):
+        raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
+    name = _require(data, "name", source, "")
+    if not isinstance(name, str) or not name.strip():
+        raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
+    convention = _require(data, "dh", source, "")
+    if convention not in CONVENTIONS:
+        raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS}, got {convention!r}")
+    gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
+    rows = _require(data, "joints", source, "")
+    if not isinstance(rows, list) or not rows:
+        raise RobotDescriptionError(source, "joints", "expected a non-empty list of DH rows")
+    joints = tuple(_parse_joint(row, source, f"joints[{k}]") for k, row in enumerate(rows))
+    links_data = _require(data, "links", source, "")
+    if not isinstance(links_data, list):
+        raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
+    if len(links_data) != len(joints):
+        raise RobotDescriptionError(source, "links", f"expected {len(joints)} entries (one per joint), got {len(links_data)}")
+    links = tuple(_parse_link(row, source, f"links[{k}]") for k, row in enumerate(links_data))
+    return RobotModel(name=name.strip(), convention=convention, gravity=gravity, joints=joints,
+                      links=links, source=source)
+
+
+def load_robot(path: str | Path) -> RobotModel:
+    """Read and validate a robot description file."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise RobotDescriptionError(source, "<file>", f"cannot read: {exc.strerror}") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise RobotDescriptionError(source, "<yaml>", f"malformed YAML{where}: {problem}") from exc
+    return parse_robot(data, source)
