@@ -33,12 +33,13 @@ def _cos_sin_exact(angle) -> tuple[se.Basic, se.Basic]:
 
 
 def joint_cos_sin(q: se.Symbol, offset) -> tuple[se.Basic, se.Basic]:
-    """cos and sin of ``q + offset``. A multiple of pi/2 as offset becomes a sign or a swap;
-    any other offset stays inside the call (one addition instead of a rotation)."""
+    """cos and sin of ``q + offset``. A multiple of pi/4 as offset becomes exact constants
+    (a sign, a swap, or sqrt(2)/2); any other offset stays inside the call (one addition
+    instead of a rotation)."""
     offset = sympy.sympify(offset)
     if offset == 0:
         return se.cos(q), se.sin(q)
-    if (2 * offset / sympy.pi).is_integer:
+    if (4 * offset / sympy.pi).is_integer:
         co, so = _cos_sin_exact(offset)
         c, s = se.cos(q), se.sin(q)
         return c * co - s * so, s * co + c * so

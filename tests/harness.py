@@ -1,0 +1,64 @@
+"""Evaluate derived or generated functions on batches of numpy inputs, uniformly.
+
+``evaluate(robot_name, lang, function_name, **inputs) -> dict of outputs`` where every input
+carries a leading batch dimension and outputs come back with their port shapes after it.
+
+lang "symbolic" evaluates the SymbolicFunction straight from the derivation (symengine
+Lambdify), the others run the committed generated code under ``generated/`` through
+:mod:`generator.evaluate`.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import symengine as se
+
+from generator.catalog import derive_all
+from generator.robot import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+GENERATED = ROOT / "generated"
+LANGS = ("python", "c", "casadi")
+
+
+@lru_cache(maxsize=None)
+def robot(name: str):
+    return load_robot(ROOT / "robots" / f"{name}.yaml")
+
+
+@lru_cache(maxsize=None)
+def symbolic_function(robot_name: str, function_name: str, params: str = "numeric"):
+    found = derive_all(robot(robot_name), params, only={function_name})
+    if not found:
+        raise KeyError(f"{robot_name} has no function {function_name}")
+    return found[0]
+
+
+@lru_cache(maxsize=None)
+def _lambdified(robot_name: str, function_name: str, params: str):
+    f = symbolic_function(robot_name, function_name, params)
+    args = [s for syms in f.input_symbols for s in syms]
+    outs = [e for exprs in f.output_exprs for e in exprs]
+    return f, se.Lambdify(args, outs, cse=True, backend="llvm" if False else "lambda")
+
+
+def evaluate_symbolic(robot_name: str, function_name: str, params: str = "numeric", **inputs):
+    f, fn = _lambdified(robot_name, function_name, params)
+    arrays = [np.asarray(inputs[p.name], float).reshape(-1, p.size) for p in f.inputs]
+    batch = arrays[0].shape[0]
+    flat = np.concatenate(arrays, axis=1)
+    out = np.array([fn(row) for row in flat]).reshape(batch, -1)
+    result, start = {}, 0
+    for p in f.outputs:
+        result[p.name] = out[:, start:start + p.size].reshape((batch,) + p.shape)
+        start += p.size
+    return result
+
+
+def evaluate(robot_name: str, lang: str, function_name: str, **inputs):
+    if lang == "symbolic":
+        return evaluate_symbolic(robot_name, function_name, **inputs)
+    from generator.evaluate import load_generated
+    return load_generated(GENERATED / robot_name, lang).call(function_name, inputs)
