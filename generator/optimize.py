@@ -43,6 +43,7 @@ def optimize(function: SymbolicFunction) -> Program:
     rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
     assignments = tuple((rename[sym], expr.xreplace(rename)) for sym, expr in replacements)
     reduced = [e.xreplace(rename) for e in reduced]
+    assignments, reduced = _hoist_power_bases(assignments, reduced)
     outputs, start = [], 0
     for port in function.outputs:
         outputs.append(tuple(reduced[start:start + port.size]))
@@ -54,3 +55,46 @@ def optimize(function: SymbolicFunction) -> Program:
         before=tree_count(flat),
         after=program_count(assignments, reduced),
     )
+
+
+_REBUILD = {se.StrictLessThan: se.Lt, se.LessThan: se.Le, se.Equality: se.Eq,
+            se.Unequality: se.Ne, se.And: se.And, se.Or: se.Or, se.Not: se.Not}
+
+
+def _hoist_power_bases(assignments, outputs):
+    """Give every compound base of an integer power its own temporary, so that ``b**3``
+    prints as ``t*t*t`` and ``b`` is evaluated once, as counted."""
+    counter = [len(assignments)]
+    hoisted: dict = {}
+    program: list = []
+
+    def visit(e, pending):
+        if e.is_Symbol or e.is_Number or not e.args:
+            return e
+        if isinstance(e, se.Pow) and e.args[1].is_Integer and abs(int(e.args[1])) >= 2 \
+                and not e.args[0].is_Symbol and e.args[0].free_symbols:
+            base = visit(e.args[0], pending)
+            if base not in hoisted:
+                sym = se.Symbol(f"t{counter[0]}")
+                counter[0] += 1
+                hoisted[base] = sym
+                pending.append((sym, base))
+            return se.Pow(hoisted[base], e.args[1])
+        new_args = [visit(a, pending) for a in e.args]
+        if all(a is b for a, b in zip(new_args, e.args)):
+            return e
+        if isinstance(e, se.Piecewise):
+            return se.Piecewise(*zip(new_args[0::2], new_args[1::2]))
+        return _REBUILD.get(type(e), lambda *a: e.func(*a))(*new_args)
+
+    for sym, expr in assignments:
+        pending: list = []
+        expr = visit(expr, pending)
+        program.extend(pending)
+        program.append((sym, expr))
+    new_outputs = []
+    for expr in outputs:
+        pending = []
+        new_outputs.append(visit(expr, pending))
+        program.extend(pending)
+    return tuple(program), new_outputs

@@ -1,0 +1,105 @@
+"""Robot description -> derivations -> CSE and counts -> rendered sources, written to disk.
+
+``generate(model, out_root)`` writes ``out_root/<robot>/`` with ``functions.json`` (the
+interface: names, ports, costs), ``opcounts.json``, ``opcounts.md`` and one folder per
+language. Output is deterministic: the same description gives the same bytes.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from .catalog import derive_all
+from .optimize import Program, optimize
+from .render import RENDERERS
+from .report import opcounts_json, opcounts_markdown
+from .robot import RobotModel
+
+LANGUAGES = ("c", "python", "casadi")
+
+
+class Progress:
+    """One line per step on stderr, redrawn in place on a terminal, with elapsed time."""
+
+    def __init__(self, label: str, total: int, stream=sys.stderr):
+        self.label, self.total, self.stream, self.done = label, total, stream, 0
+        self.start = time.perf_counter()
+        self.tty = stream.isatty()
+
+    def step(self, what: str) -> None:
+        self.done += 1
+        width = 20
+        filled = width * self.done // max(self.total, 1)
+        line = (f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
+                f"{what} ({time.perf_counter() - self.start:.1f} s)")
+        self.stream.write(("\r" + line.ljust(100)) if self.tty else line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
+    """Derive and optimise every applicable function of ``model``."""
+    functions = derive_all(model, params, only)
+    bar = Progress(f"{model.identifier}", len(functions)) if progress else None
+    programs = []
+    for f in functions:
+        programs.append(optimize(f))
+        if bar:
+            bar.step(f.name)
+    if bar:
+        bar.close()
+    return programs
+
+
+def manifest(model: RobotModel, programs: list[Program], params: str) -> dict:
+    return {
+        "robot": model.identifier,
+        "name": model.name,
+        "n": model.n,
+        "convention": model.convention,
+        "gravity": list(model.gravity),
+        "params": params,
+        "functions": [{
+            "name": p.function.name,
+            "summary": p.function.summary,
+            "conventions": p.function.conventions,
+            "c_symbol": f"{model.identifier}_{p.function.name}",
+            "inputs": [port.to_json() for port in p.function.inputs],
+            "outputs": [port.to_json() for port in p.function.outputs],
+            "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
+        } for p in programs],
+    }
+
+
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def save_casadi_functions(module_source: str, directory: Path) -> None:
+    """Build every Function of the rendered CasADi module and save it as <name>.casadi."""
+    namespace: dict = {}
+    exec(compile(module_source, str(directory / "module"), "exec"), namespace)
+    for name, build in namespace["BUILDERS"].items():
+        build().save(str(directory / f"{name}.casadi"))
+
+
+def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
+             progress: bool = True) -> Path:
+    """Write all generated files of ``model`` under ``out_root/<robot>/``; returns that folder."""
+    out = Path(out_root) / model.identifier
+    programs = build_programs(model, params, progress=progress)
+    _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
+    _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
+    _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
+    for lang in languages:
+        for filename, text in RENDERERS[lang](model, programs).items():
+            _write(out / lang / filename, text)
+            if lang == "casadi":
+                save_casadi_functions(text, out / lang)
+    return out

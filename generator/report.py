@@ -1,0 +1,52 @@
+"""The operation-count table of a robot, as JSON (for tools) and Markdown (for people).
+
+For the KUKA LWR the forward- and inverse-kinematics rows stand beside the kinematics
+paper's Table II (Hartl-Nesic and Meiringer: Maple 2018, with and without optimisation).
+"""
+from __future__ import annotations
+
+from .optimize import Program
+
+# Kinematics paper, Table II: (add, mult, calls); "derived" = without code optimisation.
+PAPER_TABLE_II = {
+    "fk_hom": {"derived": (88, 238, 327), "optimised": (40, 87, 14)},
+    "fk_dq": {"derived": (312, 1576, 880), "optimised": (38, 88, 14)},
+    "ik_hom": {"optimised": (1461, 2570, 52)},
+    "ik_dq": {"optimised": (1070, 2258, 184)},
+}
+
+
+def opcounts_json(programs: list[Program]) -> dict:
+    """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order."""
+    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json()} for p in programs}
+
+
+def _row(values) -> str:
+    return " | ".join(str(v) for v in values)
+
+
+def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool) -> str:
+    lines = [f"# Operation counts: {robot_name}", "",
+             "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
+             "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
+             "after = the generated straight-line code after CSE.", "",
+             "| function | add before | mul before | call before | add after | mul after | call after |",
+             "|---|---|---|---|---|---|---|"]
+    for p in programs:
+        b, a = p.before, p.after
+        lines.append(f"| {p.function.name} | {_row([b.add, b.mul, b.call, a.add, a.mul, a.call])} |")
+    if compare_with_paper:
+        lines += ["", "## Beside the kinematics paper (Table II, Maple 2018)", "",
+                  "| function | KinDynGen after CSE (add / mul / call) | paper optimised | "
+                  "KinDynGen as derived | paper without optimisation |", "|---|---|---|---|---|"]
+        by_name = {p.function.name: p for p in programs}
+        for name, paper in PAPER_TABLE_II.items():
+            if name not in by_name:
+                continue
+            p = by_name[name]
+            ours_after = f"{p.after.add} / {p.after.mul} / {p.after.call}"
+            ours_before = f"{p.before.add} / {p.before.mul} / {p.before.call}"
+            opt = " / ".join(map(str, paper["optimised"]))
+            der = " / ".join(map(str, paper["derived"])) if "derived" in paper else "-"
+            lines.append(f"| {name} | {ours_after} | {opt} | {ours_before} | {der} |")
+    return "\n".join(lines) + "\n"
