@@ -19,7 +19,7 @@ from __future__ import annotations
 import sympy
 import symengine as se
 
-from .geometry import exact, joint_cos_sin
+from .geometry import exact
 from .kinematics_homogeneous import FRAME_CONVENTION, q_port
 from .robot import Joint, RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
@@ -48,12 +48,18 @@ def dq_mul(a: tuple[Quat, Quat], b: tuple[Quat, Quat]) -> tuple[Quat, Quat]:
     return quat_mul(ra, rb), dual
 
 
-def _half_angle_rotation(angle, axis: int) -> Quat:
+def dq_conjugate(u: tuple[Quat, Quat]) -> tuple[Quat, Quat]:
+    """Inverse of a unit dual quaternion: the quaternion conjugate of both parts."""
+    (w, x, y, z), (dw, dx, dy, dz) = u
+    return (w, -x, -y, -z), (dw, -dx, -dy, -dz)
+
+
+def _rotation(angle, axis: int) -> tuple[Quat, Quat]:
+    """Exact constant rotation about x (axis 0) or z (axis 2)."""
     half = sympy.sympify(angle) / 2
-    c, s = se.sympify(sympy.cos(half)), se.sympify(sympy.sin(half))
-    v = [c, 0, 0, 0]
-    v[1 + axis] = s
-    return tuple(v)
+    v = [se.sympify(sympy.cos(half)), 0, 0, 0]
+    v[1 + axis] = se.sympify(sympy.sin(half))
+    return tuple(v), (0, 0, 0, 0)
 
 
 def _translation(t) -> tuple[Quat, Quat]:
@@ -62,35 +68,107 @@ def _translation(t) -> tuple[Quat, Quat]:
     return (1, 0, 0, 0), (0, half * t[0], half * t[1], half * t[2])
 
 
-def joint_dual_quaternion(joint: Joint, convention: str, q: se.Symbol) -> tuple[Quat, Quat]:
-    """Frame i in frame i-1 as a unit dual quaternion."""
-    ch, sh = joint_cos_sin(q / 2, sympy.sympify(joint.offset) / 2)
-    rz = ((ch, 0, 0, sh), (0, 0, 0, 0))
-    rx = (_half_angle_rotation(joint.alpha, 0), (0, 0, 0, 0))
-    a, d = exact(joint.a), exact(joint.d)
-    if convention == "standard":  # Rz(theta) Tz(d) Tx(a) Rx(alpha)
-        factors = [rz, _translation((a, 0, d)), rx]
-    else:                         # Rx(alpha) Tx(a) Rz(theta) Tz(d)
-        factors = [rx, _translation((a, 0, 0)), rz, _translation((0, 0, d))]
-    factors = [f for f in factors if not _is_identity(f)]
-    u = factors[0]
-    for f in factors[1:]:
+def _product(factors):
+    u = ((1, 0, 0, 0), (0, 0, 0, 0))
+    for f in factors:
         u = dq_mul(u, f)
     return u
 
 
-def _is_identity(u) -> bool:
-    r, d = u
-    return tuple(se.sympify(v) for v in r) == (1, 0, 0, 0) and all(se.sympify(v) == 0 for v in d)
+def joint_factors(joint: Joint, convention: str):
+    """Constant dual quaternions (A, B) with frame i in frame i-1 = A Rz(q_i) B.
+
+    The offset is a constant rotation folded into A, so it costs nothing at run time."""
+    a, d = exact(joint.a), exact(joint.d)
+    offset = _rotation(joint.offset, 2)
+    if convention == "standard":   # Rz(offset) Rz(q) Tz(d) Tx(a) Rx(alpha)
+        return offset, _product([_translation((a, 0, d)), _rotation(joint.alpha, 0)])
+    # modified: Rx(alpha) Tx(a) Rz(offset) Rz(q) Tz(d)
+    return _product([_rotation(joint.alpha, 0), _translation((a, 0, 0)), offset]), _translation((0, 0, d))
+
+
+def _vector_part(quat) -> tuple:
+    return tuple(se.expand(v) for v in quat[1:])
+
+
+def joint_lines(model: RobotModel):
+    """Each joint's line in the zero configuration, and the constant flange offset.
+
+    Returns ``(lines, C)`` with ``lines[i] = (u, m)``: direction u and moment m (Plücker
+    coordinates, exact constants) such that frame n in frame 0 is
+    ``S_1(q_1) ... S_n(q_n) C`` with ``S_i = cos(q_i/2) + sin(q_i/2) (u_i + e m_i)``.
+
+    This is the product of the DH dual quaternions A_1 Rz_1 B_1 A_2 Rz_2 ... regrouped
+    exactly: each joint rotation is conjugated by the constant product to its left and the
+    constants collect in C, so it is the same dual quaternion, sign included."""
+    constant = ((1, 0, 0, 0), (0, 0, 0, 0))
+    lines = []
+    for joint in model.joints:
+        before, after = joint_factors(joint, model.convention)
+        constant = dq_mul(constant, before)
+        # C (0 + k) C^-1: the joint axis k = (0, 0, 1) carried to the zero configuration
+        real, dual = dq_mul(dq_mul(constant, ((0, 0, 0, 1), (0, 0, 0, 0))), dq_conjugate(constant))
+        lines.append((_vector_part(real), _vector_part(dual)))
+        constant = dq_mul(constant, after)
+    return lines, constant
+
+
+def _screw(u, m, angle) -> tuple[Quat, Quat]:
+    c, s = se.cos(angle / 2), se.sin(angle / 2)
+    return (c, s * u[0], s * u[1], s * u[2]), (0, s * m[0], s * m[1], s * m[2])
+
+
+def _spherical_triple(lines, q, i) -> tuple[Quat, Quat] | None:
+    """Joints i, i+1, i+2 about axes u, v, u through one point at the origin (a spherical
+    shoulder or wrist, as the LWR's) in closed form:
+    cos(b) cos(a+c) + cos(b) sin(a+c) u + sin(b) cos(a-c) v + sin(b) sin(a-c) (u x v),
+    with half angles a, b, c: two sums and four products instead of two quaternion
+    products."""
+    if i + 2 >= len(lines):
+        return None
+    (u, mu), (v, mv), (w, mw) = lines[i], lines[i + 1], lines[i + 2]
+    if any(x != 0 for x in mu + mv + mw):
+        return None
+    if tuple(w) == tuple(u):
+        sign_c = 1
+    elif tuple(w) == tuple(-x for x in u):
+        sign_c = -1
+    else:
+        return None
+    if sum(a * b for a, b in zip(u, v)) != 0:
+        return None
+    half = se.Rational(1, 2)
+    plus, minus = half * (q[i] + sign_c * q[i + 2]), half * (q[i] - sign_c * q[i + 2])
+    cb, sb = se.cos(q[i + 1] / 2), se.sin(q[i + 1] / 2)
+    cp, sp, cm, sm = se.cos(plus), se.sin(plus), se.cos(minus), se.sin(minus)
+    uxv = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+    vector = [cb * sp * u[k] + sb * cm * v[k] + sb * sm * uxv[k] for k in range(3)]
+    return (cb * cp, *vector), (0, 0, 0, 0)
+
+
+def joint_screw_factors(model: RobotModel, q) -> list[tuple[Quat, Quat]]:
+    """The factors whose product is the flange dual quaternion: one screw per joint, or one
+    closed-form factor per spherical triple, then the constant C."""
+    lines, constant = joint_lines(model)
+    factors, i = [], 0
+    while i < len(lines):
+        triple = _spherical_triple(lines, q, i)
+        if triple is not None:
+            factors.append(triple)
+            i += 3
+        else:
+            factors.append(_screw(*lines[i], q[i]))
+            i += 1
+    return factors + [constant]
 
 
 def fk_dq(model: RobotModel) -> SymbolicFunction:
     """Flange pose as a unit dual quaternion, ``fk_dq(q) -> x``."""
     q = port_symbols("q", (model.n,))
-    u = None
-    for joint, qi in zip(model.joints, q):
-        ui = joint_dual_quaternion(joint, model.convention, qi)
-        u = ui if u is None else dq_mul(u, ui)
+    factors = joint_screw_factors(model, q)
+    u = factors[0]
+    for factor in factors[1:]:
+        u = dq_mul(u, factor)
     real, dual = u
     return SymbolicFunction(
         name="fk_dq",

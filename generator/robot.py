@@ -8,11 +8,12 @@ sees a traceback from the YAML parser or from sympy.
 Example:
 
 >>> model = load_robot("robots/lwr4.yaml")      # doctest: +SKIP
->>> model.n, model.convention
+>>> model.n, model.convention                 # doctest: +SKIP
 (7, 'standard')
 """
 from __future__ import annotations
 
+import ast
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,7 +91,36 @@ class RobotModel:
         return ident if not ident[0].isdigit() else "r_" + ident
 
 
-_SYMPY_NAMESPACE = {"pi": sympy.pi, "sqrt": sympy.sqrt}
+_SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
+                    "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan,
+                    "atan2": sympy.atan2}
+_SYMPY_NAMESPACE = {"pi": sympy.pi, **_SYMPY_FUNCTIONS}
+# Only arithmetic on numbers, pi and the functions above: sympify evaluates its input as
+# Python, so anything else (attributes, subscripts, other calls) is refused before it runs.
+_EXPRESSION_NODES = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Add, ast.Sub, ast.Mult,
+                     ast.Div, ast.Pow, ast.UAdd, ast.USub, ast.Constant, ast.Name, ast.Load,
+                     ast.Call)
+
+
+def _check_expression(text: str, source: str, field: str) -> None:
+    """Refuse a string that is not an arithmetic expression in numbers, pi and a few functions."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except (SyntaxError, ValueError) as exc:
+        raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number") from exc
+    for node in ast.walk(tree):
+        if not isinstance(node, _EXPRESSION_NODES):
+            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
+        if isinstance(node, ast.Constant) and (isinstance(node.value, bool)
+                                               or not isinstance(node.value, (int, float))):
+            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
+        if isinstance(node, ast.Name) and node.id not in _SYMPY_NAMESPACE:
+            raise RobotDescriptionError(
+                source, field, f"{text!r} is not a real constant (unknown name {node.id!r}; "
+                f"allowed: {', '.join(sorted(_SYMPY_NAMESPACE))})")
+        if isinstance(node, ast.Call) and (node.keywords or not isinstance(node.func, ast.Name)
+                                           or node.func.id not in _SYMPY_FUNCTIONS):
+            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
 
 
 def _number(value, source: str, field: str, *, exact: bool = False):
@@ -102,16 +132,27 @@ def _number(value, source: str, field: str, *, exact: bool = False):
     if isinstance(value, bool) or value is None or isinstance(value, (list, dict)):
         raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
     if isinstance(value, (int, float)):
-        if not math.isfinite(value):
+        try:
+            finite = math.isfinite(float(value))
+        except OverflowError:
+            finite = False
+        if not finite:
             raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
         return sympy.nsimplify(value, rational=True) if exact else float(value)
     if isinstance(value, str):
+        _check_expression(value, source, field)
         try:
             expr = sympy.sympify(value, locals=_SYMPY_NAMESPACE, rational=True)
-        except (sympy.SympifyError, SyntaxError, TypeError) as exc:
+        except Exception as exc:  # sympify raises many kinds (SympifyError, TypeError, ...)
             raise RobotDescriptionError(source, field, f"cannot parse {value!r} as a number") from exc
-        if not expr.is_number or not expr.is_real:
+        if not isinstance(expr, sympy.Expr) or not expr.is_number or not expr.is_real:
             raise RobotDescriptionError(source, field, f"{value!r} is not a real constant")
+        try:
+            finite = math.isfinite(float(expr))
+        except (OverflowError, TypeError, ValueError):
+            finite = False
+        if not finite:
+            raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
         return expr if exact else float(expr)
     raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
 
