@@ -118,17 +118,30 @@ def _screw(u, m, angle) -> tuple[Quat, Quat]:
     return (c, s * u[0], s * u[1], s * u[2]), (0, s * m[0], s * m[1], s * m[2])
 
 
-def _spherical_triple(lines, q, i) -> tuple[Quat, Quat] | None:
-    """Joints i, i+1, i+2 about axes u, v, u through one point at the origin (a spherical
-    shoulder or wrist, as the LWR's) in closed form:
+def _common_point(lines):
+    """The point p shared by lines (u, m) (moment m = p x u), exactly, or None."""
+    rows, rhs = [], []
+    for u, m in lines:
+        ux, uy, uz = (sympy.sympify(str(x)) for x in u)
+        # p x u = m  <=>  [[0, uz, -uy], [-uz, 0, ux], [uy, -ux, 0]] p = m
+        rows += [[0, uz, -uy], [-uz, 0, ux], [uy, -ux, 0]]
+        rhs += [sympy.sympify(str(x)) for x in m]
+    try:
+        solution, free = sympy.Matrix(rows).gauss_jordan_solve(sympy.Matrix(rhs))
+    except ValueError:
+        return None
+    solution = solution.subs({t: 0 for t in free})
+    return tuple(se.sympify(x) for x in solution)
+
+
+def _spherical_triple(lines, q, i):
+    """Joints i, i+1, i+2 about axes u, v, +-u through one point p (a spherical shoulder or
+    wrist, as the LWR's), as the factors T(p), r, T(-p) with r in closed form:
     cos(b) cos(a+c) + cos(b) sin(a+c) u + sin(b) cos(a-c) v + sin(b) sin(a-c) (u x v),
-    with half angles a, b, c: two sums and four products instead of two quaternion
-    products."""
+    for half angles a, b, c: two sums and four products instead of two quaternion products."""
     if i + 2 >= len(lines):
         return None
-    (u, mu), (v, mv), (w, mw) = lines[i], lines[i + 1], lines[i + 2]
-    if any(x != 0 for x in mu + mv + mw):
-        return None
+    (u, _), (v, _), (w, _) = lines[i:i + 3]
     if tuple(w) == tuple(u):
         sign_c = 1
     elif tuple(w) == tuple(-x for x in u):
@@ -137,29 +150,47 @@ def _spherical_triple(lines, q, i) -> tuple[Quat, Quat] | None:
         return None
     if sum(a * b for a, b in zip(u, v)) != 0:
         return None
+    point = _common_point(lines[i:i + 3])
+    if point is None:
+        return None
     half = se.Rational(1, 2)
     plus, minus = half * (q[i] + sign_c * q[i + 2]), half * (q[i] - sign_c * q[i + 2])
     cb, sb = se.cos(q[i + 1] / 2), se.sin(q[i + 1] / 2)
     cp, sp, cm, sm = se.cos(plus), se.sin(plus), se.cos(minus), se.sin(minus)
     uxv = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
     vector = [cb * sp * u[k] + sb * cm * v[k] + sb * sm * uxv[k] for k in range(3)]
-    return (cb * cp, *vector), (0, 0, 0, 0)
+    rotation = ((cb * cp, *vector), (0, 0, 0, 0))
+    return [_translation(point), rotation, _translation(tuple(-x for x in point))]
 
 
 def joint_screw_factors(model: RobotModel, q) -> list[tuple[Quat, Quat]]:
-    """The factors whose product is the flange dual quaternion: one screw per joint, or one
-    closed-form factor per spherical triple, then the constant C."""
+    """The factors whose product is the flange dual quaternion: one screw per joint, or
+    closed-form factors per spherical triple, with runs of constants multiplied out."""
     lines, constant = joint_lines(model)
     factors, i = [], 0
     while i < len(lines):
         triple = _spherical_triple(lines, q, i)
         if triple is not None:
-            factors.append(triple)
+            factors += triple
             i += 3
         else:
             factors.append(_screw(*lines[i], q[i]))
             i += 1
-    return factors + [constant]
+    merged = []
+    for factor in factors + [constant]:
+        if merged and _is_constant(factor) and _is_constant(merged[-1]):
+            merged[-1] = tuple(tuple(se.expand(v) for v in part) for part in dq_mul(merged[-1], factor))
+        else:
+            merged.append(factor)
+    return [f for f in merged if not _is_identity(f)]
+
+
+def _is_constant(u) -> bool:
+    return all(not se.sympify(v).free_symbols for part in u for v in part)
+
+
+def _is_identity(u) -> bool:
+    return tuple(se.sympify(v) for v in u[0]) == (1, 0, 0, 0) and all(se.sympify(v) == 0 for v in u[1])
 
 
 def fk_dq(model: RobotModel) -> SymbolicFunction:
