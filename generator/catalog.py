@@ -6,12 +6,19 @@ a SymbolicFunction, or None where the derivation does not apply to that arm.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable, Optional
 
+import symengine as se
+
+from .dynamics_lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
+from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
+from .forward_dynamics import forward_dynamics
 from .kinematics_dualquat import fk_dq
 from .kinematics_homogeneous import fk_hom, jacobian
+from .regressors import regressor
 from .robot import RobotModel
-from .symbolic import SymbolicFunction
+from .symbolic import Port, SymbolicFunction
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -19,7 +26,22 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("fk_hom", lambda model, params: fk_hom(model)),
     ("fk_dq", lambda model, params: fk_dq(model)),
     ("jacobian", lambda model, params: jacobian(model)),
+    # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
+    # the other route under a suffixed name (generator/dynamics_*.py, forward_dynamics.py)
+    ("M", lambda model, params: mass_matrix_crba(model, params, "M")),
+    ("g", lambda model, params: gravity_rnea(model, params, "g")),
+    ("c", lambda model, params: coriolis_rnea(model, params, "c")),
+    ("S", lambda model, params: coriolis_matrix(model, params, "S")),
+    ("tau", lambda model, params: inverse_dynamics(model, params, "tau")),
+    ("fd", lambda model, params: forward_dynamics(model, params, "fd")),
+    ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
+    ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
+    ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),
     # further derivations (dynamics, regressors, IK) register here
+    # regressors on base parameters (generator/regressors.py): same functions in both params modes
+    ("Y_g", lambda model, params: regressor(model, "Y_g")),
+    ("Y_m", lambda model, params: regressor(model, "Y_m")),
+    ("Y", lambda model, params: regressor(model, "Y")),
 )
 
 
@@ -31,5 +53,16 @@ def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[Sy
             continue
         function = build(model, params)
         if function is not None:
-            out.append(function)
+            out.append(with_lengths_port(function, model))
     return out
+
+
+def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:
+    """Give a function of a robot with symbolic DH lengths the extra last input ``lengths``
+    (all of the robot's length symbols, in order of appearance), so every function of that
+    robot has the same signature whether or not a particular length reaches it."""
+    symbols = tuple(se.Symbol(str(s)) for s in model.length_symbols)
+    if not symbols:
+        return function
+    port = Port("lengths", (len(symbols),), "symbolic DH lengths: " + ", ".join(map(str, symbols)), "m")
+    return replace(function, inputs=function.inputs + (port,), input_symbols=function.input_symbols + (symbols,))

@@ -44,6 +44,7 @@ def optimize(function: SymbolicFunction) -> Program:
     assignments = tuple((rename[sym], expr.xreplace(rename)) for sym, expr in replacements)
     reduced = [e.xreplace(rename) for e in reduced]
     assignments, reduced = _hoist_power_bases(assignments, reduced)
+    assignments = _live(assignments, reduced)
     outputs, start = [], 0
     for port in function.outputs:
         outputs.append(tuple(reduced[start:start + port.size]))
@@ -55,6 +56,20 @@ def optimize(function: SymbolicFunction) -> Program:
         before=tree_count(flat),
         after=program_count(assignments, reduced),
     )
+
+
+def _live(assignments, outputs):
+    """Drop temporaries no output depends on (symengine's cse can leave a replacement whose
+    only uses it later folded into a larger one)."""
+    needed = set()
+    for e in outputs:
+        needed |= e.free_symbols
+    kept = []
+    for sym, expr in reversed(assignments):
+        if sym in needed:
+            kept.append((sym, expr))
+            needed |= expr.free_symbols
+    return tuple(reversed(kept))
 
 
 _REBUILD = {se.StrictLessThan: se.Lt, se.LessThan: se.Le, se.Equality: se.Eq,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,7 +37,8 @@ class RobotDescriptionError(ValueError):
 @dataclass(frozen=True)
 class Joint:
     """One DH row. ``alpha`` is kept exact (a sympy number such as pi/2) so that its
-    cosine and sine are exact and zeros never reach generated code."""
+    cosine and sine are exact and zeros never reach generated code; ``a`` and ``d`` are
+    exact numbers or symbols (symbolic lengths)."""
 
     a: sympy.Expr
     alpha: sympy.Expr
@@ -83,6 +85,16 @@ class RobotModel:
     @property
     def upper(self) -> np.ndarray:
         return np.array([j.upper for j in self.joints])
+
+    @property
+    def length_symbols(self) -> tuple:
+        """Symbolic DH lengths (plain names in the YAML), in order of first appearance."""
+        seen = []
+        for joint in self.joints:
+            for value in (joint.a, joint.d):
+                if isinstance(value, sympy.Symbol) and value not in seen:
+                    seen.append(value)
+        return tuple(seen)
 
     @property
     def identifier(self) -> str:
@@ -171,11 +183,30 @@ def _require(mapping: dict, key: str, source: str, prefix: str):
     return mapping[key]
 
 
+_LENGTH_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*")
+_RESERVED = re.compile(r"t[0-9]+")  # names of CSE temporaries in generated code
+
+
+def _length(value, source: str, field: str):
+    """A DH length: a number, a constant expression, or a plain name (``l1``) that stays a
+    symbol, so that one generated function serves a family of arms.
+
+    >>> _length("l1", "f.yaml", "d"), _length(0.4, "f.yaml", "d")
+    (l1, 2/5)
+    """
+    if isinstance(value, str) and _LENGTH_NAME.fullmatch(value.strip()) and value.strip() not in _SYMPY_NAMESPACE:
+        name = value.strip()
+        if _RESERVED.fullmatch(name):
+            raise RobotDescriptionError(source, field, f"the name {name!r} is reserved for generated temporaries")
+        return sympy.Symbol(name, real=True)
+    return _number(value, source, field, exact=True)
+
+
 def _parse_joint(row, source: str, field: str) -> Joint:
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
-    exact = {k: _number(_require(row, k, source, field + "."), source, f"{field}.{k}", exact=True)
-             for k in ("a", "alpha", "d")}
+    exact = {k: _length(_require(row, k, source, field + "."), source, f"{field}.{k}") for k in ("a", "d")}
+    exact["alpha"] = _number(_require(row, "alpha", source, field + "."), source, f"{field}.alpha", exact=True)
     offset = _number(row.get("offset", 0), source, f"{field}.offset", exact=True)
     lower = _number(_require(row, "lower", source, field + "."), source, f"{field}.lower")
     upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")

@@ -177,7 +177,8 @@ def test_links_count_differs_from_joints(tmp_path):
 
 
 @pytest.mark.parametrize("field, value, reason", [
-    ("joints[0].a", "abc", "not a real constant"),
+    ("joints[0].a", "2*abc", "not a real constant"),   # a plain name is a symbolic length; an expression in it is not
+    ("joints[0].offset", "abc", "not a real constant"),
     ("joints[0].alpha", "pi/x", "not a real constant"),
     ("joints[1].d", "sqrt(-1)", "not a real constant"),
     ("joints[0].alpha", "pi/", "cannot parse"),

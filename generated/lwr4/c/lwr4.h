@@ -43,8 +43,8 @@ void lwr4_fk_hom(const double *q, double *T);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out x[8]: 8 double, flange pose: rotation quaternion (w,x,y,z), then dual part 1/2 t (x) r (w,x,y,z); t = flange position in the base frame [1 (real), m (dual)]
  *
- * Cost: 38 add, 79 mul, 14 call
- * (as derived, before CSE: 376 add, 1388 mul, 768 call).
+ * Cost: 36 add, 69 mul, 14 call
+ * (as derived, before CSE: 184 add, 560 mul, 304 call).
  */
 void lwr4_fk_dq(const double *q, double *x);
 
@@ -61,6 +61,157 @@ void lwr4_fk_dq(const double *q, double *x);
  * (as derived, before CSE: 226 add, 613 mul, 795 call).
  */
 void lwr4_jacobian(const double *q, double *J);
+
+/*
+ * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
+ *
+ * Cost: 157 add, 172 mul, 12 call
+ * (as derived, before CSE: 5919 add, 8715 mul, 6724 call).
+ */
+void lwr4_M(const double *q, double *M);
+
+/*
+ * g: Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out g[7]: 7 double, gravity torques [N m]
+ *
+ * Cost: 32 add, 50 mul, 12 call
+ * (as derived, before CSE: 114 add, 212 mul, 200 call).
+ */
+void lwr4_g(const double *q, double *g);
+
+/*
+ * c: Newton-Euler route (joint frames, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ *
+ * Cost: 241 add, 311 mul, 12 call
+ * (as derived, before CSE: 42081 add, 81748 mul, 70825 call).
+ */
+void lwr4_c(const double *q, const double *qd, double *c);
+
+/*
+ * S: Christoffel route: Coriolis/centrifugal matrix S from the Christoffel symbols (paper eq. 16) of the composite-rigid-body M, differentiated on the DAG; c = S qd, Mdot - 2 S is skew-symmetric.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
+ *
+ * Cost: 768 add, 870 mul, 12 call
+ * (as derived, before CSE: 55151 add, 91314 mul, 68639 call).
+ */
+void lwr4_S(const double *q, const double *qd, double *S);
+
+/*
+ * tau: Newton-Euler route (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out tau[7]: 7 double, joint torques [N m]
+ *
+ * Cost: 263 add, 331 mul, 12 call
+ * (as derived, before CSE: 49900 add, 87783 mul, 76848 call).
+ */
+void lwr4_tau(const double *q, const double *qd, const double *qdd, double *tau);
+
+/*
+ * fd: Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  tau[7]: 7 double, applied joint torques [N m]
+ * out qdd[7]: 7 double, joint accelerations [rad/s^2]
+ *
+ * Cost: 512 add, 648 mul, 12 call
+ * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call).
+ */
+void lwr4_fd(const double *q, const double *qd, const double *tau, double *qdd);
+
+/*
+ * M_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, M = Hessian of T in qd.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
+ *
+ * Cost: 750 add, 1042 mul, 12 call
+ * (as derived, before CSE: 5133 add, 14904 mul, 16343 call).
+ */
+void lwr4_M_lagrange(const double *q, double *M);
+
+/*
+ * g_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, g = gradient of the potential energy U.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out g[7]: 7 double, gravity torques [N m]
+ *
+ * Cost: 81 add, 134 mul, 12 call
+ * (as derived, before CSE: 146 add, 544 mul, 500 call).
+ */
+void lwr4_g_lagrange(const double *q, double *g);
+
+/*
+ * c_christoffel: Christoffel route: Coriolis and centrifugal torques c = S qd (paper eq. 15), S from the Christoffel symbols (eq. 16) of the composite-rigid-body M.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ *
+ * Cost: 809 add, 916 mul, 12 call
+ * (as derived, before CSE: 55193 add, 91363 mul, 68639 call).
+ */
+void lwr4_c_christoffel(const double *q, const double *qd, double *c);
 
 #ifdef __cplusplus
 }

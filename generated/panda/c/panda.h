@@ -43,8 +43,8 @@ void panda_fk_hom(const double *q, double *T);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out x[8]: 8 double, flange pose: rotation quaternion (w,x,y,z), then dual part 1/2 t (x) r (w,x,y,z); t = flange position in the base frame [1 (real), m (dual)]
  *
- * Cost: 58 add, 107 mul, 14 call
- * (as derived, before CSE: 696 add, 4924 mul, 2740 call).
+ * Cost: 52 add, 93 mul, 14 call
+ * (as derived, before CSE: 664 add, 2332 mul, 1284 call).
  */
 void panda_fk_dq(const double *q, double *x);
 
@@ -61,6 +61,157 @@ void panda_fk_dq(const double *q, double *x);
  * (as derived, before CSE: 845 add, 2007 mul, 2601 call).
  */
 void panda_jacobian(const double *q, double *J);
+
+/*
+ * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
+ *
+ * Cost: 198 add, 214 mul, 12 call
+ * (as derived, before CSE: 7832 add, 11019 mul, 8564 call).
+ */
+void panda_M(const double *q, double *M);
+
+/*
+ * g: Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out g[7]: 7 double, gravity torques [N m]
+ *
+ * Cost: 32 add, 50 mul, 12 call
+ * (as derived, before CSE: 114 add, 212 mul, 200 call).
+ */
+void panda_g(const double *q, double *g);
+
+/*
+ * c: Newton-Euler route (joint frames, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ *
+ * Cost: 269 add, 350 mul, 12 call
+ * (as derived, before CSE: 65491 add, 128314 mul, 109167 call).
+ */
+void panda_c(const double *q, const double *qd, double *c);
+
+/*
+ * S: Christoffel route: Coriolis/centrifugal matrix S from the Christoffel symbols (paper eq. 16) of the composite-rigid-body M, differentiated on the DAG; c = S qd, Mdot - 2 S is skew-symmetric.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
+ *
+ * Cost: 1020 add, 1009 mul, 12 call
+ * (as derived, before CSE: 77815 add, 122234 mul, 93654 call).
+ */
+void panda_S(const double *q, const double *qd, double *S);
+
+/*
+ * tau: Newton-Euler route (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out tau[7]: 7 double, joint torques [N m]
+ *
+ * Cost: 288 add, 364 mul, 12 call
+ * (as derived, before CSE: 78018 add, 137165 mul, 117612 call).
+ */
+void panda_tau(const double *q, const double *qd, const double *qdd, double *tau);
+
+/*
+ * fd: Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  tau[7]: 7 double, applied joint torques [N m]
+ * out qdd[7]: 7 double, joint accelerations [rad/s^2]
+ *
+ * Cost: 577 add, 719 mul, 12 call
+ * (as derived, before CSE: 409012967 add, 629618682 mul, 497749580 call).
+ */
+void panda_fd(const double *q, const double *qd, const double *tau, double *qdd);
+
+/*
+ * M_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, M = Hessian of T in qd.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
+ *
+ * Cost: 838 add, 1133 mul, 12 call
+ * (as derived, before CSE: 6812 add, 18193 mul, 19610 call).
+ */
+void panda_M_lagrange(const double *q, double *M);
+
+/*
+ * g_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, g = gradient of the potential energy U.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out g[7]: 7 double, gravity torques [N m]
+ *
+ * Cost: 81 add, 132 mul, 12 call
+ * (as derived, before CSE: 146 add, 544 mul, 500 call).
+ */
+void panda_g_lagrange(const double *q, double *g);
+
+/*
+ * c_christoffel: Christoffel route: Coriolis and centrifugal torques c = S qd (paper eq. 15), S from the Christoffel symbols (eq. 16) of the composite-rigid-body M.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (modified DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ *
+ * Cost: 1061 add, 1059 mul, 12 call
+ * (as derived, before CSE: 77857 add, 122283 mul, 93654 call).
+ */
+void panda_c_christoffel(const double *q, const double *qd, double *c);
 
 #ifdef __cplusplus
 }
