@@ -140,22 +140,26 @@ def children(e: se.Basic) -> tuple:
 def tree_count(exprs) -> OpCount:
     """Operations of the expressions as trees (a shared node paid at every occurrence).
 
-    Memoised on the DAG, so tens of millions of operations are counted in milliseconds."""
+    Memoised on the DAG (plain integer triples inside), so tens of millions of operations
+    are counted in milliseconds."""
     memo: dict = {}
 
-    def visit(e) -> OpCount:
+    def visit(e) -> tuple[int, int, int]:
         hit = memo.get(e)
         if hit is None:
-            hit = own_cost(e)
+            own = own_cost(e)
+            add, mul, call = own.add, own.mul, own.call
             for child in children(e):
-                hit = hit + visit(child)
-            memo[e] = hit
+                a, m, c = visit(child)
+                add, mul, call = add + a, mul + m, call + c
+            hit = memo[e] = (add, mul, call)
         return hit
 
-    total = ZERO
+    total = [0, 0, 0]
     for e in exprs:
-        total = total + visit(se.sympify(e))
-    return total
+        for k, v in enumerate(visit(se.sympify(e))):
+            total[k] += v
+    return OpCount(*total)
 
 
 def program_count(assignments, outputs) -> OpCount:
