@@ -2,7 +2,7 @@
 zeros (customised symbolic Newton-Euler in the manner of Khalil & Kleinfinger), plus the
 composite-rigid-body inertia matrix and a composite-first-moment gravity vector.
 
-Everything runs on the grouped barycentric parameters of :mod:`generator.dynamics_lagrange`
+Everything runs on the grouped barycentric parameters of :mod:`generator.rigid_bodies`
 (every link's mass, MZ and YY moved towards the base), so that the link forces of
 Newton-Euler reduce to ``w' x h + w x (w x h)`` and the gravity torques to rotated first
 moments.  All quantities are expressed in the joint frames, where every joint axis is e_z.
@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import symengine as se
 
-from .dynamics_lagrange import (ZERO, Body, _function, cross, dynamic_bodies, flat, gravity, joint_frames,
-                                qd_port, qdd_port, tau_port, vadd, vscale)
 from .kinematics_homogeneous import q_port
+from .rigid_bodies import (ZERO, Body, cross, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
+                           qd_port, qdd_port, tau_port, vadd, vscale)
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -159,9 +159,9 @@ def inverse_dynamics(model: RobotModel, params: str = "numeric", name: str = "ta
     q, joints, bodies, ports, syms = setup(model, params)
     qd, qdd = port_symbols("qd", (model.n,)), port_symbols("qdd", (model.n,))
     tau = rnea(joints, bodies, qd, qdd, gravity(model))
-    return _function(name, NE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.", model, params,
-                     (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
-                     (tau_port(model, "joint torques"),), (tau,), ports, syms)
+    return dynamics_function(name, NE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.",
+                             model, params, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
+                             (tau_port(model, "joint torques"),), (tau,), ports, syms)
 
 
 def coriolis_rnea(model: RobotModel, params: str = "numeric", name: str = "c") -> SymbolicFunction:
@@ -169,9 +169,9 @@ def coriolis_rnea(model: RobotModel, params: str = "numeric", name: str = "c") -
     q, joints, bodies, ports, syms = setup(model, params)
     qd = port_symbols("qd", (model.n,))
     c = rnea(joints, bodies, qd, None, None)
-    return _function(name, NE + "Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.",
-                     model, params, (q_port(model), qd_port(model)), (q, qd),
-                     (Port("c", (model.n,), "Coriolis and centrifugal torques", "N m"),), (c,), ports, syms)
+    return dynamics_function(name, NE + "Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, "
+                             "by recursive Newton-Euler.", model, params, (q_port(model), qd_port(model)), (q, qd),
+                             (Port("c", (model.n,), "Coriolis and centrifugal torques", "N m"),), (c,), ports, syms)
 
 
 def gravity_rnea(model: RobotModel, params: str = "numeric", name: str = "g", composite: bool = True) -> SymbolicFunction:
@@ -180,16 +180,17 @@ def gravity_rnea(model: RobotModel, params: str = "numeric", name: str = "g", co
     gam = gravity(model)
     g = gravity_composite(joints, bodies, gam) if composite else rnea(joints, bodies, None, None, gam)
     how = "by composite first moments" if composite else "by a Newton-Euler pass"
-    return _function(name, NE + f"gravity torques g = tau(q, 0, 0), {how}.",
-                     model, params, (q_port(model),), (q,),
-                     (Port("g", (model.n,), "gravity torques", "N m"),), (g,), ports, syms)
+    return dynamics_function(name, NE + f"gravity torques g = tau(q, 0, 0), {how}.",
+                             model, params, (q_port(model),), (q,),
+                             (Port("g", (model.n,), "gravity torques", "N m"),), (g,), ports, syms)
 
 
 def mass_matrix_crba(model: RobotModel, params: str = "numeric", name: str = "M") -> SymbolicFunction:
     """``M(q) -> M`` by the composite-rigid-body algorithm."""
     q, joints, bodies, ports, syms = setup(model, params)
     M = crba(joints, bodies)
-    return _function(name, NE + "inertia matrix M(q) by the composite-rigid-body algorithm.", model, params,
-                     (q_port(model),), (q,),
-                     (Port("M", (model.n, model.n), "joint-space inertia matrix (symmetric, row-major)", "kg m^2"),),
-                     (flat(M),), ports, syms)
+    return dynamics_function(name, NE + "inertia matrix M(q) by the composite-rigid-body algorithm.", model, params,
+                             (q_port(model),), (q,),
+                             (Port("M", (model.n, model.n), "joint-space inertia matrix (symmetric, row-major)",
+                                   "kg m^2"),),
+                             (flat(M),), ports, syms)

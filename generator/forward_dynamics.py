@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import symengine as se
 
-from .dynamics_lagrange import _function, gravity, qd_port, tau_port
 from .dynamics_newton_euler import crba, rnea, setup
 from .kinematics_homogeneous import q_port
+from .rigid_bodies import dynamics_function, gravity, qd_port, tau_port
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -54,7 +54,7 @@ def forward_dynamics(model: RobotModel, params: str = "numeric", name: str = "fd
     M = crba(joints, bodies)
     bias = rnea(joints, bodies, qd, None, gravity(model))
     qdd = ldlt_solve(M, [t - b for t, b in zip(tau, bias)])
-    return _function(
+    return dynamics_function(
         name, "Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one "
         "Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).",
         model, params, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),

@@ -33,6 +33,7 @@ class Dialect:
     logic_or: str
     logic_not: str
     select_is_call: bool  # numpy/casadi selects are calls (no precedence issue)
+    booleans: tuple = ("0", "1")  # spelling of (false, true)
 
     def literal(self, value: float) -> str:
         text = repr(float(value))
@@ -47,6 +48,8 @@ class Dialect:
     def _print(self, e, names):
         if e in names:
             return names[e], ATOM
+        if e == se.true or e == se.false:
+            return self.booleans[e == se.true], ATOM
         if is_literal(e) or e.is_Number:
             v = float(e)
             return (self.literal(v), ATOM) if v >= 0 else ("-" + self.literal(-v), NEG)
@@ -164,6 +167,7 @@ NUMPY = Dialect(
                "abs": "np.abs", "max": "np.maximum", "min": "np.minimum", "pow": "np.power"},
     select="np.where({c}, {a}, {b})", logic_and="np.logical_and({}, {})",
     logic_or="np.logical_or({}, {})", logic_not="np.logical_not({})", select_is_call=True,
+    booleans=("False", "True"),
 )
 
 CASADI = Dialect(
