@@ -1,0 +1,218 @@
+// Times Pinocchio's C++ algorithms on a DH arm read from a data file, in the same way the
+// C harness times the generated code (cycle over precomputed inputs, CLOCK_MONOTONIC,
+// outputs summed into a volatile sink).  The model is read at run time, not compiled in,
+// so that one (slow, ~70 s) header-only build serves every robot; benchmarks/pinocchio_cpp.py
+// writes the model file and the inputs and parses the output.
+//
+// usage: pinocchio_bench MODEL.txt INPUTS.bin K REPEATS TARGET_NS
+//   MODEL.txt: n; gx gy gz; per joint: R(9, row-major) p(3) mass com(3) Ixx Ixy Ixz Iyy Iyz Izz
+//              (joint placement in the parent joint frame, inertia in the joint frame, about
+//              the CoM); then the flange placement R(9) p(3) in the last joint frame.
+//   INPUTS.bin: doubles q[K][n], qd[K][n], qdd[K][n], tau[K][n].
+// output: one line per algorithm "time name t1 ... tR" (ns per call in each repetition), then
+// "check name values..." lines with the results for input 0, so that Python can confirm this
+// is the same robot.
+#include <pinocchio/multibody.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/regressor.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <time.h>
+#include <vector>
+
+using namespace pinocchio;
+
+static volatile double sink;
+
+static double now_ns()
+{
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e9 + ts.tv_nsec;
+}
+
+// One timed repetition runs `iters` calls cycling over the K inputs; the iteration count is
+// calibrated once so that a repetition lasts about target_ns (long enough to swamp the
+// clock's resolution, short enough that a noisy neighbour spoils few of them).
+template<typename Body>
+static void measure(const char * name, long K, int repeats, double target_ns, Body body)
+{
+  long iters = 16;
+  for (;;)
+  {
+    double t0 = now_ns();
+    double acc = 0;
+    for (long i = 0; i < iters; ++i)
+      acc += body(i % K);
+    sink = sink + acc;
+    double dt = now_ns() - t0;
+    if (dt > 0.2 * target_ns || iters > (1L << 30))
+    {
+      iters = std::max(1L, (long)(iters * target_ns / std::max(dt, 1.0)));
+      break;
+    }
+    iters *= 4;
+  }
+  std::vector<double> per_call;
+  for (int r = 0; r < repeats; ++r)
+  {
+    double acc = 0;
+    long k = 0;
+    double t0 = now_ns();
+    for (long i = 0; i < iters; ++i)
+    {
+      acc += body(k);
+      if (++k == K)
+        k = 0;
+    }
+    double dt = now_ns() - t0;
+    sink = sink + acc;
+    per_call.push_back(dt / iters);
+  }
+  // Every repetition is printed: Python pools them over interleaved runs.
+  std::printf("time %s", name);
+  for (double t : per_call)
+    std::printf(" %.3f", t);
+  std::printf("\n");
+}
+
+int main(int argc, char ** argv)
+{
+  if (argc != 6)
+  {
+    std::fprintf(stderr, "usage: %s MODEL.txt INPUTS.bin K REPEATS TARGET_NS\n", argv[0]);
+    return 2;
+  }
+  const long K = std::atol(argv[3]);
+  const int repeats = std::atoi(argv[4]);
+  const double target_ns = std::atof(argv[5]);
+
+  std::ifstream mf(argv[1]);
+  int n;
+  double gx, gy, gz;
+  mf >> n >> gx >> gy >> gz;
+  Model model;
+  model.gravity.linear() = Eigen::Vector3d(gx, gy, gz);
+  JointIndex parent = 0;
+  for (int i = 0; i < n; ++i)
+  {
+    Eigen::Matrix3d R, I;
+    Eigen::Vector3d p, c;
+    double m;
+    for (int k = 0; k < 9; ++k)
+      mf >> R(k / 3, k % 3);
+    mf >> p[0] >> p[1] >> p[2] >> m >> c[0] >> c[1] >> c[2];
+    mf >> I(0, 0) >> I(0, 1) >> I(0, 2) >> I(1, 1) >> I(1, 2) >> I(2, 2);
+    I(1, 0) = I(0, 1);
+    I(2, 0) = I(0, 2);
+    I(2, 1) = I(1, 2);
+    parent = model.addJoint(parent, JointModelRZ(), SE3(R, p), "joint" + std::to_string(i + 1));
+    model.appendBodyToJoint(parent, Inertia(m, c, Symmetric3(I)), SE3::Identity());
+  }
+  Eigen::Matrix3d Rf;
+  Eigen::Vector3d pf;
+  for (int k = 0; k < 9; ++k)
+    mf >> Rf(k / 3, k % 3);
+  mf >> pf[0] >> pf[1] >> pf[2];
+  if (!mf)
+  {
+    std::fprintf(stderr, "cannot read model file %s\n", argv[1]);
+    return 1;
+  }
+  const FrameIndex flange =
+    model.addFrame(Frame("flange", parent, 0, SE3(Rf, pf), FrameType::OP_FRAME));
+  Data data(model);
+
+  std::vector<double> raw(4 * K * n);
+  std::FILE * f = std::fopen(argv[2], "rb");
+  if (!f || std::fread(raw.data(), sizeof(double), raw.size(), f) != raw.size())
+  {
+    std::fprintf(stderr, "cannot read %ld inputs from %s\n", K, argv[2]);
+    return 1;
+  }
+  std::fclose(f);
+  // Inputs as Eigen vectors built once: the timed loops only call the algorithm.
+  std::vector<Eigen::VectorXd> q(K), qd(K), qdd(K), tau(K);
+  for (long k = 0; k < K; ++k)
+  {
+    q[k] = Eigen::Map<Eigen::VectorXd>(&raw[(0 * K + k) * n], n);
+    qd[k] = Eigen::Map<Eigen::VectorXd>(&raw[(1 * K + k) * n], n);
+    qdd[k] = Eigen::Map<Eigen::VectorXd>(&raw[(2 * K + k) * n], n);
+    tau[k] = Eigen::Map<Eigen::VectorXd>(&raw[(3 * K + k) * n], n);
+  }
+  Data::Matrix6x J(6, n);
+  J.setZero();
+
+  measure("fk", K, repeats, target_ns, [&](long k) {
+    forwardKinematics(model, data, q[k]);
+    return updateFramePlacement(model, data, flange).translation()[0];
+  });
+  // LOCAL_WORLD_ALIGNED: flange-point linear velocity and angular velocity, both in the
+  // base frame, as the generated geometric Jacobian.  computeFrameJacobian runs the
+  // kinematics it needs itself, as the generated function does.
+  measure("jacobian", K, repeats, target_ns, [&](long k) {
+    computeFrameJacobian(model, data, q[k], flange, LOCAL_WORLD_ALIGNED, J);
+    return J(0, 0);
+  });
+  measure("tau", K, repeats, target_ns, [&](long k) {
+    return rnea(model, data, q[k], qd[k], qdd[k])[0];
+  });
+  // crba fills the upper triangle only (the generated M is full): a small head start.
+  measure("M", K, repeats, target_ns, [&](long k) { return crba(model, data, q[k])(0, 0); });
+  measure("g", K, repeats, target_ns, [&](long k) {
+    return computeGeneralizedGravity(model, data, q[k])[0];
+  });
+  // nonLinearEffects = c + g: Pinocchio has no Coriolis-only vector, so this costs it
+  // slightly more than the generated c.
+  measure("c", K, repeats, target_ns, [&](long k) {
+    return nonLinearEffects(model, data, q[k], qd[k])[0];
+  });
+  measure("S", K, repeats, target_ns, [&](long k) {
+    return computeCoriolisMatrix(model, data, q[k], qd[k])(0, 0);
+  });
+  measure("fd", K, repeats, target_ns, [&](long k) {
+    return aba(model, data, q[k], qd[k], tau[k])[0];
+  });
+  // Full 10n-column regressor (the generated Y has the base-parameter columns only).
+  measure("Y", K, repeats, target_ns, [&](long k) {
+    return computeJointTorqueRegressor(model, data, q[k], qd[k], qdd[k])(0, 0);
+  });
+
+  // Results for input 0, compared with the generated code by Python.
+  forwardKinematics(model, data, q[0]);
+  const SE3 & T = updateFramePlacement(model, data, flange);
+  std::printf("check fk");
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      std::printf(" %.17g", c < 3 ? T.rotation()(r, c) : T.translation()[r]);
+  std::printf("\n");
+  auto print = [](const char * name, const Eigen::MatrixXd & m) {
+    std::printf("check %s", name);
+    for (Eigen::Index r = 0; r < m.rows(); ++r) // row-major, as the generated code
+      for (Eigen::Index c = 0; c < m.cols(); ++c)
+        std::printf(" %.17g", m(r, c));
+    std::printf("\n");
+  };
+  print("tau", rnea(model, data, q[0], qd[0], qdd[0]));
+  J.setZero();
+  computeFrameJacobian(model, data, q[0], flange, LOCAL_WORLD_ALIGNED, J);
+  print("jacobian", J);
+  Eigen::MatrixXd M = crba(model, data, q[0]);
+  M.triangularView<Eigen::StrictlyLower>() = M.transpose().triangularView<Eigen::StrictlyLower>();
+  print("M", M);
+  const Eigen::VectorXd g = computeGeneralizedGravity(model, data, q[0]);
+  print("g", g);
+  print("c", nonLinearEffects(model, data, q[0], qd[0]) - g); // Coriolis/centrifugal alone
+  print("fd", aba(model, data, q[0], qd[0], tau[0]));
+  return sink == 12345.678 ? 3 : 0; // read the sink so it cannot be optimised out
+}

@@ -1,0 +1,275 @@
+"""`make bench`: time every generated function of lwr4 (and panda) in every implementation,
+plus Pinocchio C++ for the same computations; write results/timings.json.
+
+    python -m benchmarks.run [--quick] [--out DIR] [--generated DIR]
+
+Implementations: "c" (-O3), "c_native" (-O3 -march=native), "casadi_codegen" (CasADi's C,
+-O3), "python" (numpy, one configuration per call), "python_batch" / "python_batch_<N>"
+(numpy on N configurations, time per configuration), "casadi" (saved Function called from
+Python), "pinocchio_cpp". All comparisons are ratios within one run on one machine; nothing
+here asserts on a time. --quick is the smoke-test setting: tiny counts, lwr4 only, and no
+Pinocchio C++ (its build alone takes about a minute).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from generator.robot import load_robot
+
+from . import casadi_codegen, compiled, inputs, pinocchio_cpp, python_timing, scaling
+from .build import BUILD
+from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
+
+FULL = dict(K=1000, repeats=15, rounds=3, c_target_ns=2e7, py_target_s=0.05, batch_sizes=(1000, 100_000),
+            batch_repeats=5, robots=("lwr4", "panda"), pinocchio=True, c_native=True,
+            scaling_max_n=12, scaling_budget_s=60.0)
+QUICK = dict(K=50, repeats=3, rounds=1, c_target_ns=2e5, py_target_s=0.002, batch_sizes=(200,),
+             batch_repeats=2, robots=("lwr4",), pinocchio=False, c_native=False,
+             scaling_max_n=3, scaling_budget_s=5.0)
+PRIMARY = "lwr4"          # the robot of the paper: every implementation
+SECONDARY_IMPLS = ("c", "c_native", "pinocchio_cpp")  # other robots: the ratio comparison only
+
+
+def log(message: str) -> None:
+    print(message, flush=True)
+
+
+def _flat(value) -> np.ndarray:
+    return np.asarray(value, dtype=float).ravel()
+
+
+def reference_outputs(module, function: dict, sample: dict) -> list[np.ndarray]:
+    """Outputs of the generated numpy code for input 0: the yardstick of the wiring checks."""
+    result = getattr(module, function["name"])(*(sample[p["name"]][0] for p in function["inputs"]))
+    if len(function["outputs"]) == 1:
+        result = (result,)
+    return [_flat(r) for r in result]
+
+
+def _seconds(built) -> float | None:
+    return None if built.seconds is None else round(built.seconds, 2)
+
+
+def _max_error(got: list, want: list) -> float | None:
+    """Largest relative difference; None when the outputs do not even have the same sizes
+    or are not finite (kept JSON-valid: no Infinity/NaN in timings.json)."""
+    if len(got) != len(want) or any(g.size != w.size for g, w in zip(got, want)):
+        return None
+    error = max((float(np.max(np.abs(g - w) / (1 + np.abs(w)))) for g, w in zip(got, want) if w.size),
+                default=0.0)
+    return error if np.isfinite(error) else None
+
+
+class Bench:
+    """The timings, checks and notes of one run, filled robot by robot."""
+
+    def __init__(self, settings: dict, generated: Path, workdir: Path):
+        self.settings, self.generated, self.workdir = settings, generated, workdir
+        self.notes: list[str] = []
+        self.robots: dict = {}
+        self.pinocchio_build: dict | None = None
+
+    def note(self, text: str) -> None:
+        log("note: " + text)
+        self.notes.append(text)
+
+    def robot(self, name: str, impls: tuple | None) -> None:
+        robot_dir = self.generated / name
+        spec = manifest(robot_dir)
+        if spec is None:
+            self.note(f"{name}: no {robot_dir}/functions.json, skipped")
+            return
+        model = load_robot(ROBOTS / f"{name}.yaml")
+        py_path = robot_dir / "python" / f"{name}.py"
+        module = python_timing.load_module(py_path) if py_path.exists() else None
+        functions = [f for f in spec["functions"] if module is None or hasattr(module, f["name"])]
+        samples = {f["name"]: inputs.sample(f, model, self.settings["K"], module) for f in functions}
+        refs = {f["name"]: reference_outputs(module, f, samples[f["name"]]) for f in functions} if module else {}
+        entry = {"n": spec.get("n", model.n), "functions": {f["name"]: {} for f in functions},
+                 "opcounts": {f["name"]: f.get("opcount") for f in functions}, "checks": {}, "build_seconds": {}}
+        self.robots[name] = entry
+        wanted = (lambda impl: impls is None or impl in impls)
+
+        self._compiled(name, model, module, robot_dir, functions, samples, refs, entry, wanted)
+        if module is not None and wanted("python"):
+            self._guarded(name, "python", self._python, name, module, model, functions, samples, entry)
+        if wanted("casadi"):
+            self._guarded(name, "casadi", self._casadi_python, name, robot_dir, functions, samples, refs, entry)
+        entry["ratios"] = ratios(entry["functions"])
+
+    def _guarded(self, robot, impl, method, *args):
+        """One implementation failing (a build error, a crash) costs its column, not the run."""
+        try:
+            return method(*args)
+        except Exception as exc:  # noqa: BLE001 - reported in the results and on the console
+            self._failed(robot, impl, exc)
+            return None
+
+    def _failed(self, robot, impl, exc):
+        detail = getattr(exc, "stderr", None) or ""
+        self.note(f"{robot}: {impl} failed and was skipped: {type(exc).__name__}: {exc} {detail}"[:3000])
+
+    # -- compiled implementations, timed interleaved -----------------------------------------
+    def _compiled(self, name, model, module, robot_dir, functions, samples, refs, entry, wanted):
+        s, work = self.settings, self.workdir / name
+        timers = {}
+        for impl in ("c", "c_native"):
+            if wanted(impl) and (impl != "c_native" or s["c_native"]):
+                log(f"{name}: {impl}: building")
+                timers[impl] = self._guarded(name, impl, compiled.generated_c, name, impl, robot_dir,
+                                             functions, samples, work)
+        if wanted("casadi_codegen"):
+            log(f"{name}: casadi_codegen: generating and building")
+            timers["casadi_codegen"] = self._guarded(name, "casadi_codegen", compiled.casadi_c, name, robot_dir,
+                                                     functions, samples, work)
+        data = inputs.dynamics_inputs(model, s["K"])
+        if wanted("pinocchio_cpp"):
+            timers["pinocchio_cpp"] = self._guarded(name, "pinocchio_cpp", self._pinocchio_timer, name, model,
+                                                    functions, data, work)
+        timers = {impl: t for impl, t in timers.items() if t is not None}
+        if not timers:
+            return
+        log(f"{name}: timing {', '.join(timers)} in {s['rounds']} interleaved rounds")
+        pooled, outputs = compiled.interleave(timers, s["repeats"], s["rounds"], s["c_target_ns"],
+                                              lambda impl, exc: self._failed(name, impl, exc))
+        for impl, per_function in pooled.items():
+            for fname, values in per_function.items():
+                entry["functions"][fname][impl] = summary(values)
+                if impl == "pinocchio_cpp":
+                    entry["functions"][fname][impl]["note"] = pinocchio_cpp.note_for(fname)
+            if timers[impl].build_seconds is not None:
+                entry["build_seconds"][impl] = round(timers[impl].build_seconds, 2)
+        # Wiring checks: every output for input 0 against the generated numpy code (Pinocchio:
+        # on its own inputs, for the functions where it computes the very same array).
+        for impl, got in outputs.items():
+            if impl == "pinocchio_cpp":
+                want = {f["name"]: reference_outputs(module, f, data) for f in functions
+                        if f["name"] in got and module is not None and {p["name"] for p in f["inputs"]} <= data.keys()}
+                if "fk_hom" in want:
+                    want["fk_hom"] = [want["fk_hom"][0][:12]]  # Pinocchio prints the top 3 rows
+            else:
+                want = refs
+            entry["checks"][impl] = {f: _max_error(got.get(f, []), w) for f, w in want.items()}
+
+    def _pinocchio_timer(self, name, model, functions, data, work):
+        if not self.settings["pinocchio"]:
+            self.note("Pinocchio C++ skipped (--quick: its header-only build takes about a minute)")
+            return None
+        if model.length_symbols:
+            self.note(f"{name}: symbolic DH lengths, no Pinocchio model, pinocchio_cpp skipped")
+            return None
+        log("pinocchio_cpp: building (header-only, about two minutes unless cached)")
+        built = pinocchio_cpp.build_binary()
+        if self.pinocchio_build is None:
+            self.pinocchio_build = {"binary": built.path.name, "cached": built.cached, "seconds": _seconds(built)}
+            log(f"pinocchio_cpp: {'cached' if built.cached else 'new'} build, {_seconds(built)} s to compile")
+        return compiled.pinocchio(model, functions, data, built.path, work)
+
+    # -- from Python -------------------------------------------------------------------------
+    def _python(self, name, module, model, functions, samples, entry):
+        s = self.settings
+        for f in functions:
+            fn = getattr(module, f["name"])
+            ports = [p["name"] for p in f["inputs"]]
+            args = list(zip(*(samples[f["name"]][p] for p in ports)))
+            log(f"{name}: python: {f['name']}")
+            entry["functions"][f["name"]]["python"] = python_timing.per_call(fn, args, s["repeats"], s["py_target_s"])
+            # Large outputs (regressors) are capped at ~256 MB per batch, so a big N does not
+            # turn into a memory-bandwidth test; the N used is stored with the figure.
+            out_size = sum(int(np.prod(p["shape"])) for p in f["outputs"])
+            for count in s["batch_sizes"]:
+                key = "python_batch" if count == max(s["batch_sizes"]) else f"python_batch_{count}"
+                count = min(count, max(1000, 2**28 // (8 * out_size)))
+                batch = inputs.sample(f, model, count, module, seed=1)
+                stats = python_timing.per_configuration(
+                    fn, tuple(batch[p] for p in ports), count, s["batch_repeats"] if count > 10_000 else s["repeats"])
+                entry["functions"][f["name"]][key] = dict(stats, n=count)
+
+    def _casadi_python(self, name, robot_dir, functions, samples, refs, entry):
+        s = self.settings
+        for f in functions:
+            cf = casadi_codegen.load(robot_dir, f["name"])
+            if cf is None:
+                continue
+            args = list(zip(*(samples[f["name"]][p["name"]] for p in f["inputs"])))
+            log(f"{name}: casadi: {f['name']}")
+            entry["functions"][f["name"]]["casadi"] = python_timing.per_call(cf, args, s["repeats"], s["py_target_s"])
+            if f["name"] in refs:
+                out = cf(*args[0])
+                out = out if isinstance(out, (list, tuple)) else [out]
+                got = [_flat(np.array(o)) for o in out]
+                entry["checks"].setdefault("casadi", {})[f["name"]] = _max_error(got, refs[f["name"]])
+
+    def warn_on_checks(self) -> None:
+        for robot, entry in self.robots.items():
+            for impl, per_function in entry["checks"].items():
+                for fname, error in per_function.items():
+                    if error is None or error > 1e-6:
+                        self.note(f"{robot}: {impl} {fname} disagrees with the generated Python "
+                                  f"code on input 0 (relative error {error}): its time may be meaningless")
+
+
+def ratios(functions: dict) -> dict:
+    """t(pinocchio_cpp) / t(impl): above 1 means the generated implementation is faster."""
+    out = {}
+    for fname, impls in functions.items():
+        pin = impls.get("pinocchio_cpp")
+        if not pin:
+            continue
+        out[fname] = {f"pinocchio_cpp/{impl}": pin["median_ns"] / st["median_ns"]
+                      for impl, st in impls.items()
+                      if impl in ("c", "c_native", "casadi_codegen") and st["median_ns"] > 0}
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="tiny smoke-test setting, no Pinocchio C++")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="directory for timings.json and scaling.json")
+    parser.add_argument("--generated", type=Path, default=GENERATED, help="generated code (default generated/)")
+    parser.add_argument("--no-scaling", action="store_true", help="skip the generation-time scaling study")
+    args = parser.parse_args(argv)
+    settings = dict(QUICK if args.quick else FULL)
+    started = time.perf_counter()
+    bench = Bench(settings, args.generated, BUILD / ("work-quick" if args.quick else "work"))
+    if args.quick:
+        bench.note("quick mode: few repeats, small N, lwr4 only, no c_native, Pinocchio C++ skipped")
+    for robot in settings["robots"]:
+        bench.robot(robot, None if robot == PRIMARY else SECONDARY_IMPLS)
+    bench.warn_on_checks()
+
+    primary = bench.robots.get(PRIMARY, {"functions": {}, "ratios": {}, "opcounts": {}, "checks": {}})
+    result = {
+        "machine": machine(),
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()} | {"quick": args.quick},
+        "robot": PRIMARY,
+        "functions": primary["functions"],
+        "ratios": primary["ratios"],
+        "opcounts": primary["opcounts"],
+        "checks": primary["checks"],
+        "build_seconds": primary.get("build_seconds", {}),
+        "robots": {k: v for k, v in bench.robots.items() if k != PRIMARY},
+        "pinocchio_build": bench.pinocchio_build,
+        "notes": bench.notes,
+    }
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "timings.json").write_text(json.dumps(result, indent=1) + "\n")
+    log(f"wrote {args.out / 'timings.json'} ({time.perf_counter() - started:.0f} s)")
+
+    if not args.no_scaling:
+        study = scaling.study(range(2, settings["scaling_max_n"] + 1), settings["scaling_budget_s"], log=log)
+        (args.out / "scaling.json").write_text(json.dumps(study, indent=1) + "\n")
+        log(f"wrote {args.out / 'scaling.json'} ({time.perf_counter() - started:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
