@@ -14,6 +14,8 @@ import symengine as se
 from .dynamics_lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
 from .forward_dynamics import forward_dynamics
+from .ik_lwr_dualquat import ik_dq
+from .ik_lwr_homogeneous import ik_hom
 from .kinematics_dualquat import fk_dq
 from .kinematics_homogeneous import fk_hom, jacobian
 from .regressors import regressor
@@ -37,7 +39,9 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
     ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
     ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),
-    # further derivations (dynamics, regressors, IK) register here
+    # closed-form IK of LWR-like arms (None for other arms): generator/ik_lwr_*.py
+    ("ik_hom", lambda model, params: ik_hom(model)),
+    ("ik_dq", lambda model, params: ik_dq(model)),
     # regressors on base parameters (generator/regressors.py): same functions in both params modes
     ("Y_g", lambda model, params: regressor(model, "Y_g")),
     ("Y_m", lambda model, params: regressor(model, "Y_m")),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from .catalog import derive_all
 from .optimize import Program, optimize
+from .regressors import write_base_params
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .robot import RobotModel
@@ -95,6 +96,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
+    write_base_params(model, out)
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     for lang in languages:

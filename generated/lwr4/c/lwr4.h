@@ -213,6 +213,116 @@ void lwr4_g_lagrange(const double *q, double *g);
  */
 void lwr4_c_christoffel(const double *q, const double *qd, double *c);
 
+/*
+ * ik_hom: Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
+ * Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+ * = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+ * q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+ * 0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+ * theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+ * reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+ * shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+ * snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+ * axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+ * are within the joint limits [[-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706,
+ * 2.96706], [-2.0944, 2.0944], [-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706,
+ * 2.96706]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+ * squares >= 1e+300 count as the zero pose: status 2).
+ *
+ * in  T[16]: 4 x 4 double, target flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
+ * in  theta3[1]: 1 double, redundancy parameter: the angle of joint 3 [rad]
+ * out q[56]: 8 x 7 double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+ * out status[8]: 8 int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+ *
+ * Cost: 234 add, 216 mul, 89 call
+ * (as derived, before CSE: 53666888 add, 54617352 mul, 5069232 call).
+ */
+void lwr4_ik_hom(const double *T, const double *theta3, double *q, int *status);
+
+/*
+ * ik_dq: Closed-form inverse kinematics (all eight branches) from a unit dual quaternion, with theta3 = q3 as the redundancy parameter.
+ * Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+ * = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+ * q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+ * 0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+ * theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+ * reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+ * shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+ * snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+ * axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+ * are within the joint limits [[-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706,
+ * 2.96706], [-2.0944, 2.0944], [-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706,
+ * 2.96706]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+ * squares >= 1e+149 count as the zero pose: status 2). Input x in fk_dq's layout; x and -x
+ * give the same result.
+ *
+ * in  x[8]: 8 double, target flange pose as in fk_dq: (rw, rx, ry, rz, dw, dx, dy, dz), d = 1/2 t (x) r; either sign [1 (real), m (dual)]
+ * in  theta3[1]: 1 double, redundancy parameter: the angle of joint 3 [rad]
+ * out q[56]: 8 x 7 double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+ * out status[8]: 8 int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+ *
+ * Cost: 246 add, 211 mul, 90 call
+ * (as derived, before CSE: 5130962184 add, 5224650480 mul, 565628768 call).
+ */
+void lwr4_ik_dq(const double *x, const double *theta3, double *q, int *status);
+
+/*
+ * Y_g: Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: g0, g1, g2, g3, g4, g5, g6. Columns: the 12 base parameters
+ * (rank of the full 70-column regressor), named after the barycentric parameter each is
+ * led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per link, inertia about the link
+ * frame origin in link-frame axes; suffix R: other parameters grouped into it); their
+ * expressions and the robot's values are in base_params.json. Y times those values equals
+ * the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out Y[84]: 7 x 12 double, regressor of the gravity torques g on the base parameters (row-major; columns: mx2, mz2R, mx3, mz3R, mx4, mz4R, mx5, mz5R, mx6, mz6R, mx7, my7) [N m per base parameter]
+ *
+ * Cost: 31 add, 70 mul, 12 call
+ * (as derived, before CSE: 110 add, 500 mul, 500 call).
+ */
+void lwr4_Y_g(const double *q, double *Y);
+
+/*
+ * Y_m: Inertia-stack regressor on base parameters: the lower triangle of M row by row (M00, M10, M11, M20, ...) = Y_m(q) pi_m (identification paper eq. 18).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: M00, M10, M11, M20, M21, M22, M30, M31, M32, M33, M40, M41,
+ * M42, M43, M44, M50, M51, M52, M53, M54, M55, M60, M61, M62, M63, M64, M65, M66. Columns:
+ * the 39 base parameters (rank of the full 70-column regressor), named after the
+ * barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per
+ * link, inertia about the link frame origin in link-frame axes; suffix R: other parameters
+ * grouped into it); their expressions and the robot's values are in base_params.json. Y
+ * times those values equals the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out Y[1092]: 28 x 39 double, regressor of the inertia stack (lower triangle of M, row by row) on the base parameters (row-major; columns: Iyy1R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3R, mz3R, Ixx3R, Iyy3R, Ixz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [kg m^2 per base parameter]
+ *
+ * Cost: 328 add, 764 mul, 12 call
+ * (as derived, before CSE: 2057 add, 6856 mul, 8366 call).
+ */
+void lwr4_Y_m(const double *q, double *Y);
+
+/*
+ * Y: Torque regressor on base parameters: tau = M(q) qdd + c(q, qd) + g(q) = Y(q, qd, qdd) pi.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: tau0, tau1, tau2, tau3, tau4, tau5, tau6. Columns: the 43
+ * base parameters (rank of the full 70-column regressor), named after the barycentric
+ * parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per link, inertia
+ * about the link frame origin in link-frame axes; suffix R: other parameters grouped into
+ * it); their expressions and the robot's values are in base_params.json. Y times those
+ * values equals the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
+ *
+ * Cost: 512 add, 719 mul, 12 call
+ * (as derived, before CSE: 53080 add, 94170 mul, 83708 call).
+ */
+void lwr4_Y(const double *q, const double *qd, const double *qdd, double *Y);
+
 #ifdef __cplusplus
 }
 #endif

@@ -213,6 +213,63 @@ void lwr4_hartl_g_lagrange(const double *q, double *g);
  */
 void lwr4_hartl_c_christoffel(const double *q, const double *qd, double *c);
 
+/*
+ * Y_g: Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: g0, g1, g2, g3, g4, g5, g6. Columns: the 12 base parameters
+ * (rank of the full 70-column regressor), named after the barycentric parameter each is
+ * led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per link, inertia about the link
+ * frame origin in link-frame axes; suffix R: other parameters grouped into it); their
+ * expressions and the robot's values are in base_params.json. Y times those values equals
+ * the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out Y[84]: 7 x 12 double, regressor of the gravity torques g on the base parameters (row-major; columns: mx2, mz2R, mx3, mz3R, mx4, mz4R, mx5, mz5R, mx6, mz6R, mx7, my7) [N m per base parameter]
+ *
+ * Cost: 32 add, 70 mul, 12 call
+ * (as derived, before CSE: 110 add, 500 mul, 500 call).
+ */
+void lwr4_hartl_Y_g(const double *q, double *Y);
+
+/*
+ * Y_m: Inertia-stack regressor on base parameters: the lower triangle of M row by row (M00, M10, M11, M20, ...) = Y_m(q) pi_m (identification paper eq. 18).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: M00, M10, M11, M20, M21, M22, M30, M31, M32, M33, M40, M41,
+ * M42, M43, M44, M50, M51, M52, M53, M54, M55, M60, M61, M62, M63, M64, M65, M66. Columns:
+ * the 39 base parameters (rank of the full 70-column regressor), named after the
+ * barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per
+ * link, inertia about the link frame origin in link-frame axes; suffix R: other parameters
+ * grouped into it); their expressions and the robot's values are in base_params.json. Y
+ * times those values equals the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out Y[1092]: 28 x 39 double, regressor of the inertia stack (lower triangle of M, row by row) on the base parameters (row-major; columns: Iyy1R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3R, mz3R, Ixx3R, Iyy3R, Ixz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [kg m^2 per base parameter]
+ *
+ * Cost: 331 add, 778 mul, 12 call
+ * (as derived, before CSE: 2089 add, 6947 mul, 8479 call).
+ */
+void lwr4_hartl_Y_m(const double *q, double *Y);
+
+/*
+ * Y: Torque regressor on base parameters: tau = M(q) qdd + c(q, qd) + g(q) = Y(q, qd, qdd) pi.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: tau0, tau1, tau2, tau3, tau4, tau5, tau6. Columns: the 43
+ * base parameters (rank of the full 70-column regressor), named after the barycentric
+ * parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per link, inertia
+ * about the link frame origin in link-frame axes; suffix R: other parameters grouped into
+ * it); their expressions and the robot's values are in base_params.json. Y times those
+ * values equals the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
+ *
+ * Cost: 585 add, 718 mul, 12 call
+ * (as derived, before CSE: 53044 add, 94126 mul, 83664 call).
+ */
+void lwr4_hartl_Y(const double *q, const double *qd, const double *qdd, double *Y);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,0 +1,433 @@
+"""Closed-form inverse kinematics of LWR-like arms: the pieces shared by the homogeneous
+form (:mod:`generator.ik_lwr_homogeneous`, ``ik_hom``) and the dual-quaternion form
+(:mod:`generator.ik_lwr_dualquat`, ``ik_dq``), plus pure-numpy helpers that work on their
+outputs (closest branch, admissible intervals of the redundancy parameter).
+
+Applicability ("LWR-like"): 7 joints, standard DH, alpha = (+pi/2, -pi/2, -pi/2, +pi/2, +pi/2,
+-pi/2, 0) exactly, every a_i = 0, d_1 = d_2 = d_4 = d_6 = d_7 = 0, d_3 != 0, d_5 != 0 (joint
+offsets are allowed). Then, with R_y the rotation about y,
+
+    R_04 = Rz(th1) Ry(-th2) Rz(th3) Ry(th4),   R_47 = Rz(th5) Ry(-th6) Rz(th7),
+    wrist centre = flange origin = Rz(th1) Ry(-th2) (d5 c3 s4, d5 s3 s4, d3 + d5 c4).
+
+Method (both forms): ||p|| gives cos th4 (law of cosines); with th3 given the wrist centre
+in frame 2 is p2 = (u, v, w) = (d5 c3 s4, d5 s3 s4, d3 + d5 c4); Rz(th1) maps (r, v) to
+(px, py) and Ry(-th2) maps (u, w) to (r, pz), so r = +-sqrt(px^2 + py^2 - v^2) (shoulder
+branch) and th1, th2 are two planar angles; the wrist rotation R_47 = R_04^T R* is a ZYZ
+rotation (with -th6). Only the two shoulder solutions with th4 >= 0 and th6 >= 0 are
+computed; the other six branches follow from two exact identities of this geometry:
+
+    elbow twin:  (th1 + pi, -th2, th3, -th4, th5 + pi, th6, th7)   same flange pose,
+    wrist twin:  (th1, th2, th3, th4, th5 + pi, -th6, th7 + pi)     same flange pose,
+
+(R_04 of the elbow twin is R_04 Rz(-pi)), angles wrapped to (-pi, pi]. At a wrist
+singularity (th6 = 0, only th5 + th7 matters) the rotation about the common axis is split
+equally, th5 = th7, in every row, and the wrist twin is the same row.
+
+Branch order: row k = 4 s + 2 e + w of ``q``:
+    e (elbow) = 0: q4 >= 0, e = 1: q4 <= 0 (the elbow twin of row k - 2);
+    w (wrist) = 0: q6 >= 0, w = 1: q6 <= 0 (the wrist twin of row k - 1);
+    s (shoulder) = 0 / 1: r = c1 px + s1 py (the wrist centre seen along the heading of
+    joint 1) has the sign of +q4 / -q4, i.e. for e = 0 rows, s = 0 has r >= 0.
+
+Status codes (one per row, first match wins):
+
+    2  unreachable: the target is outside the workspace (||p|| beyond |d3| + |d5| or below
+       ||d3| - |d5||), or not reachable with this theta3 (horizontal distance of the wrist
+       centre from the z0 axis below |v| = |d5 sin q3 sin q4|); q is then a finite
+       best effort (clamped), FK(q) != target.
+    1  outside joint limits (reachable; some q_i outside [lower_i, upper_i] of the YAML).
+    5  shoulder singular: r^2 < 1e-12 m^2 (both shoulder branches coincide; on the z0
+       axis, reachable only with sin q3 sin q4 = 0, q1 is free: within 1e-12 m of the axis
+       the wrist centre is put on it and q1 = 0 (or pi in the elbow twins) is returned).
+    4  elbow singular: |sin q4| < ~1e-6 (arm stretched or folded; q4 is snapped to 0 / pi).
+    3  wrist singular: |q6| < 1e-12 (joints 5 and 7 aligned; the rotation about the
+       common axis is split equally, q5 = q7, within +-135 deg (ik_dq: +-90 deg), so that
+       the limits of joints 5 and 7 rarely exclude it; q6 = 0 exactly and the wrist twin
+       is the same row). q6 = +-pi (anti-aligned, beyond any joint limit) is not
+       flagged; a valid member is returned there too.
+    0  valid.
+
+Statuses 0, 1, 3, 4, 5 all satisfy FK(q) = target (to rounding); 0, 3, 4, 5 are
+admissible (within limits). Every output is finite for every finite input: inputs whose
+sum of squares reaches 1e300 (ik_hom) or 1e149 (ik_dq), too large for the squares and
+products inside, are replaced by the zero pose (status 2).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+import sympy
+import symengine as se
+
+from .geometry import exact
+from .robot import RobotModel
+
+# --- status codes ------------------------------------------------------------------------
+VALID, LIMITS, UNREACHABLE, WRIST_SINGULAR, ELBOW_SINGULAR, SHOULDER_SINGULAR = 0, 1, 2, 3, 4, 5
+STATUS_NAMES = {VALID: "valid", LIMITS: "outside joint limits", UNREACHABLE: "unreachable",
+                WRIST_SINGULAR: "wrist singular", ELBOW_SINGULAR: "elbow singular",
+                SHOULDER_SINGULAR: "shoulder singular"}
+ADMISSIBLE = (VALID, WRIST_SINGULAR, ELBOW_SINGULAR, SHOULDER_SINGULAR)
+N_BRANCHES = 8
+
+# --- tolerances (lengths in m) -----------------------------------------------------------
+REACH_C4 = 1e-12        # |cos q4| may exceed 1 by this (about 2e-13 m in ||p||) and still reach
+ELBOW_C4 = 5e-13        # 1 - |cos q4| below this: elbow singular, q4 snapped (|sin q4| < 1e-6)
+SHOULDER_REACH = 1e-10  # m: |v| may exceed the horizontal distance by this and still reach
+SHOULDER_R2 = 1e-12     # m^2: r^2 below this (r < 1e-6 m): shoulder singular
+SHOULDER_AXIS = 1e-12   # m: a wrist centre this close to the z0 axis is put on it (th1 = 0)
+WRIST_S6 = 1e-12        # |sin q6| below this (and cos q6 > 0): wrist singular
+TINY = 1e-150           # guards 0/0 (q1 = 0 on the z0 axis); above any underflowed product
+
+CONVENTIONS = (
+    "Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). "
+    "Row k = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, "
+    "-q2, -q4, q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, "
+    "q7 + pi); s = 0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in "
+    "(-pi, pi] (q3 = theta3 as given). status (first match wins): 2 unreachable (outside "
+    "the workspace or not reachable with this theta3; q finite but not a solution), "
+    "1 outside joint limits, 5 shoulder singular (r ~ 0; q1 = 0 on the z0 axis), "
+    "4 elbow singular (|sin q4| < 1e-6, q4 snapped), 3 wrist singular (|q6| < 1e-12, "
+    "q6 = 0, q5 = q7: the rotation about the common axis split equally), 0 valid. "
+    "Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5 are within the joint limits "
+    "{limits}. Branch-free; no NaN/Inf for any finite input (inputs with a sum of squares "
+    ">= {bound} count as the zero pose: status 2).")
+
+
+# --- applicability -----------------------------------------------------------------------
+@dataclass(frozen=True)
+class LwrGeometry:
+    """What the closed form needs from an LWR-like model: the two link lengths (exact),
+    the joint offsets (exact) and the joint limits (floats)."""
+
+    d3: se.Basic
+    d5: se.Basic
+    offsets: tuple
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+
+    def limits_text(self) -> str:
+        return "[" + ", ".join(f"[{lo:.6g}, {up:.6g}]" for lo, up in zip(self.lower, self.upper)) + "] rad"
+
+
+LWR_ALPHAS = (sympy.pi / 2, -sympy.pi / 2, -sympy.pi / 2, sympy.pi / 2, sympy.pi / 2, -sympy.pi / 2, 0)
+
+
+def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
+    """The LWR geometry of ``model``, or None when its DH table is not LWR-like.
+
+    >>> from generator.robot import load_robot
+    >>> lwr_geometry(load_robot("robots/lwr4.yaml")).d5           # doctest: +SKIP
+    39/100
+    """
+    if model.n != 7 or model.convention != "standard":
+        return None
+    joints = model.joints
+    for joint, alpha in zip(joints, LWR_ALPHAS):
+        if sympy.simplify(sympy.sympify(joint.alpha) - alpha) != 0:
+            return None
+        if sympy.sympify(joint.a) != 0:
+            return None
+    d = [sympy.sympify(j.d) for j in joints]
+    if any(d[i] != 0 for i in (0, 1, 3, 5, 6)) or d[2] == 0 or d[4] == 0:
+        return None
+    return LwrGeometry(d3=exact(d[2]), d5=exact(d[4]), offsets=tuple(j.offset for j in joints),
+                       lower=tuple(float(j.lower) for j in joints),
+                       upper=tuple(float(j.upper) for j in joints))
+
+
+# --- small symbolic helpers --------------------------------------------------------------
+PI = se.pi
+
+
+def select(*pairs) -> se.Basic:
+    """Piecewise with a final default: select((a, cond), ..., default).
+
+    Every condition built here is used by exactly one select: a comparison shared by two
+    selects would become a common subexpression of its own (a boolean temporary tested as
+    ``t == True``). A flag needed in several places is turned into a 0/1 number once
+    (:func:`indicator`) and used arithmetically. No And/Or/Not either: symengine's CSE does
+    not look inside them."""
+    *guarded, default = pairs
+    return se.Piecewise(*guarded, (default, True))
+
+
+def indicator(condition) -> se.Basic:
+    """1 where ``condition`` holds, else 0 (one select)."""
+    return select((1, condition), 0)
+
+
+def half_angle(c, s):
+    """(cos th/2, sin th/2) up to a factor in [sqrt 2, 2] and a sign, from cos th, sin th:
+    (1 + c, s) when c >= 0, else (s, 1 - c) (blended by a 0/1 indicator: absolute rounding
+    errors of a few ulp in a vector of length >= sqrt 2)."""
+    f = indicator(0 <= c)
+    return f * (1 + c - s) + s, f * (s + c - 1) + 1 - c
+
+
+def sanitize(entries, bound: float) -> tuple:
+    """The input entries, or all zeros when their sum of squares is not below ``bound``
+    (entries too large for the squares and products downstream; the zero pose is then
+    reported unreachable). A sum of squares of finite numbers is never NaN, so this turns
+    every finite input into one for which no intermediate overflows."""
+    drop = select((0, sum(e ** 2 for e in entries) < bound), 1)
+    # e - e drop, not keep * e: symengine would rewrite (keep e)^2 as keep^2 e^2 (0 * inf)
+    return tuple(e - e * drop for e in entries)
+
+
+def plus_pi(x) -> se.Basic:
+    """x + pi wrapped to (-pi, pi], for x in [-pi, pi]: one select."""
+    return select((x - PI, 0 < x), x + PI)
+
+
+def wrap_up(x) -> se.Basic:
+    """x wrapped to (-pi, pi], for x in (-pi, 2 pi]: one select."""
+    return select((x - 2 * PI, PI < x), x)
+
+
+# --- position sub-problem ------------------------------------------------------------------
+@dataclass(frozen=True)
+class Shoulder:
+    """One shoulder solution (with th4 >= 0): the DH angles th1, th2 and their (unit)
+    cosines and sines."""
+
+    th1: se.Basic
+    c1: se.Basic
+    s1: se.Basic
+    th2: se.Basic
+    c2: se.Basic
+    s2: se.Basic
+
+
+def elbow_cosine(p, d3, d5):
+    """cos th4 from ||p|| by the law of cosines, clamped and snapped to +-1 near the elbow
+    singularity. Returns (c4, unreachable, singular), the flags as single comparisons."""
+    px, py, pz = p
+    k = se.Integer(1) / (2 * d3 * d5)
+    c4raw = (px ** 2 + py ** 2 + pz ** 2) * k - (d3 ** 2 + d5 ** 2) * k
+    c4 = select((1, 1 - ELBOW_C4 < c4raw), (-1, c4raw < -1 + ELBOW_C4), c4raw)
+    size = se.Abs(c4raw)
+    return c4, 1 + REACH_C4 < size, 1 - ELBOW_C4 < size
+
+
+def solve_position(p, c3, s3, c4, s4, d3, d5, scale=1) -> tuple[tuple[Shoulder, Shoulder], se.Basic, se.Basic]:
+    """Shoulder angles for wrist centre ``p`` given th3 (c3, s3) and th4 (c4, s4 >= 0).
+
+    ``scale`` multiplies every length (the DQ form works with p/2 and d/2).
+    Returns the two shoulder solutions (r >= 0 first), the shoulder-reach failure flag and
+    the shoulder-singular flag."""
+    px, py, pz = p
+    # on the z0 axis (within SHOULDER_AXIS) the wrist centre is put exactly on it, so that
+    # both shoulder solutions coincide with th1 = 0 instead of following rounding noise
+    rho2 = px ** 2 + py ** 2
+    keep = select((0, rho2 < (SHOULDER_AXIS * scale) ** 2), 1)
+    px, py, rho2 = keep * px, keep * py, keep * rho2
+    rho = se.sqrt(rho2)
+    d5s4 = d5 * s4
+    u, v, w = d5s4 * c3, d5s4 * s3, d3 + d5 * c4
+    v2 = v ** 2
+    r2 = rho2 - v2
+    rr = se.Max(r2, 0)
+    r = se.sqrt(rr)
+    tol = SHOULDER_REACH * scale
+    unreachable = (rho + tol) ** 2 < v2                 # |v| > rho + tol
+    singular = r2 < SHOULDER_R2 * scale ** 2
+    # (px, py) = Rz(th1) (r, v):  cos th1 ~ r px + v py, sin th1 ~ r py - v px
+    rpx, vpy, rpy, vpx = r * px, v * py, r * py, v * px
+    # (r, pz) = Rot(th2) (u, w):  cos th2 ~ u r + w pz, sin th2 ~ u pz - w r
+    ur, wpz, upz, wr = u * r, w * pz, u * pz, w * r
+    # norms: |(A1, B1)| = sqrt((r^2 + v^2) rho2), |(A2, B2)| = sqrt((u^2 + w^2)(r^2 + pz^2))
+    inv1 = 1 / se.Max(se.sqrt(se.Max(rho2, v2)) * rho, TINY)
+    inv2 = 1 / se.Max(se.sqrt((u ** 2 + w ** 2) * (rr + pz ** 2)), TINY)
+    shoulders = []
+    for sign in (1, -1):
+        a1, b1 = sign * rpx + vpy + TINY, sign * rpy - vpx
+        a2, b2 = sign * ur + wpz + TINY, upz - sign * wr
+        shoulders.append(Shoulder(th1=se.atan2(b1, a1), c1=a1 * inv1, s1=b1 * inv1,
+                                  th2=se.atan2(b2, a2), c2=a2 * inv2, s2=b2 * inv2))
+    return tuple(shoulders), unreachable, singular
+
+
+# --- the eight branches ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class Wrist:
+    """The wrist angles of one shoulder solution (th4 >= 0, th6 >= 0) and its
+    singularity indicator (1 singular, 0 not)."""
+
+    th5: se.Basic
+    th6: se.Basic
+    th7: se.Basic
+    singular: se.Basic
+
+
+def _joint(theta, offset) -> se.Basic:
+    """Joint angle q = theta - offset, wrapped to (-pi, pi] when there is an offset."""
+    offset = exact(offset)
+    if offset == 0:
+        return theta
+    x = theta - offset
+    return select((x - 2 * PI, PI < x), (x + 2 * PI, x <= -PI), x)
+
+
+def _outside(x, lower: float, upper: float, symmetric: bool) -> se.Basic:
+    """1 if x is outside [lower, upper], else 0 (one select on one comparison)."""
+    if symmetric:
+        return select((1, upper ** 2 < x ** 2), 0)
+    return select((1, 0 < (x - lower) * (x - upper)), 0)
+
+
+def assemble(geometry: LwrGeometry, theta3: se.Symbol, th4: se.Basic, shoulders, wrists,
+             unreachable, shoulder_singular, elbow_singular):
+    """Rows of q (8 x 7, flat) and status (8) from the two computed (shoulder, wrist)
+    solutions, by the elbow and wrist twins.
+
+    ``unreachable`` is a sequence of comparisons (any true: unreachable), the singular
+    flags are comparisons, each wrist's ``singular`` a 0/1 indicator. A row's limit check is
+    the sum of per-value 0/1 indicators (shared between rows); unreachability is folded into
+    joint 3's indicator as -8, so one select per row decides between 1 and the row's code."""
+    lower, upper = geometry.lower, geometry.upper
+    symmetric = [abs(lo + up) <= 1e-15 * max(1.0, abs(up)) for lo, up in zip(lower, upper)]
+    offsets = geometry.offsets
+
+    def outside(i, q):
+        return _outside(q, lower[i], upper[i], symmetric[i])
+
+    def joint(i, theta):
+        return _joint(theta, offsets[i])
+
+    q3 = theta3
+    unreach = select(*[(1, cond) for cond in unreachable], 0)
+    global_code = select((UNREACHABLE, 0.5 < unreach), (SHOULDER_SINGULAR, shoulder_singular),
+                         (ELBOW_SINGULAR, elbow_singular), VALID)
+    wrist_code = select((WRIST_SINGULAR, global_code < 0.5), 0)   # 3 where nothing global
+    outside3 = outside(2, q3) - 8 * unreach
+    q4 = (joint(3, th4), joint(3, -th4))
+    outside4 = tuple(outside(3, x) for x in q4)
+
+    q_rows, statuses = [], []
+    for sh, wr in zip(shoulders, wrists):
+        # wrist twin: th5 + pi, th7 + pi; at a wrist singularity (th6 = 0, q5 = q7 = phi/2)
+        # the twin is the same configuration (delta = 0)
+        singular, regular = wr.singular, 1 - wr.singular
+        delta = PI * regular
+        # elbow twin: th5 + pi; at a wrist singularity phi + pi is split equally again,
+        # th5 = th7 = phi/2 -+ pi/2 (in (-pi/2, pi/2] instead of th5 up to 135 + 180 deg)
+        resplit = singular * select((-PI / 2, 0 < wr.th7), PI / 2)
+        th5_e = wrap_up(wr.th5 + (delta + resplit))
+        th7_e = wr.th7 + resplit
+        th5 = {(0, 0): wr.th5, (0, 1): wrap_up(wr.th5 + delta), (1, 0): th5_e, (1, 1): wrap_up(th5_e + delta)}
+        th7 = {(0, 0): wr.th7, (0, 1): wrap_up(wr.th7 + delta), (1, 0): th7_e, (1, 1): wrap_up(th7_e + delta)}
+        th1 = {0: sh.th1, 1: plus_pi(sh.th1)}
+        th2 = {0: sh.th2, 1: -sh.th2}
+        th6 = {0: wr.th6, 1: -wr.th6}
+        q1 = {e: joint(0, th1[e]) for e in (0, 1)}
+        q2 = {e: joint(1, th2[e]) for e in (0, 1)}
+        q5 = {k: joint(4, t) for k, t in th5.items()}
+        q6 = {w: joint(5, th6[w]) for w in (0, 1)}
+        q7 = {k: joint(6, t) for k, t in th7.items()}
+        out1 = {e: outside(0, q1[e]) for e in (0, 1)}
+        out2 = {e: outside(1, q2[e]) for e in (0, 1)}
+        out5 = {k: outside(4, x) for k, x in q5.items()}
+        out6 = {w: outside(5, q6[w]) for w in (0, 1)}
+        out7 = {k: outside(6, x) for k, x in q7.items()}
+        code = global_code + wrist_code * wr.singular
+        for elbow in (0, 1):
+            for wrist in (0, 1):
+                k = (elbow, wrist)
+                q_rows.append((q1[elbow], q2[elbow], q3, q4[elbow], q5[k], q6[wrist], q7[k]))
+                count = (outside3 + out1[elbow] + out2[elbow] + outside4[elbow] + out5[k]
+                         + out6[wrist] + out7[k])
+                statuses.append(select((LIMITS, 0.5 < count), code))
+    return tuple(e for row in q_rows for e in row), tuple(statuses)
+
+
+# --- numpy helpers on the outputs ---------------------------------------------------------------
+def admissible(status, accept: Sequence[int] = ADMISSIBLE) -> np.ndarray:
+    """Boolean mask of the rows whose status is in ``accept``."""
+    return np.isin(np.asarray(status), np.asarray(accept))
+
+
+def closest_solution(q, status, q_ref, weights=None, accept: Sequence[int] = ADMISSIBLE):
+    """The admissible branch closest to ``q_ref`` (weighted Euclidean distance in joint
+    space; no wrap-around, joints cannot pass through their limits).
+
+    ``q``: (..., 8, n), ``status``: (..., 8), ``q_ref``: (..., n). Returns
+    ``(index, q_best, found)``: index (...) of the row (-1 if none admissible), the row
+    (q_ref where none) and a boolean mask.
+
+    >>> q = np.zeros((8, 7)); q[3] = 1.0
+    >>> closest_solution(q, np.array([1, 0, 0, 0, 1, 1, 1, 1]), np.full(7, 0.9))[0]
+    array(3)
+    """
+    q = np.asarray(q, float)
+    status = np.asarray(status)
+    q_ref = np.asarray(q_ref, float)
+    w = np.ones(q.shape[-1]) if weights is None else np.asarray(weights, float)
+    dist = np.sqrt(np.sum(w * (q - q_ref[..., None, :]) ** 2, axis=-1))
+    ok = admissible(status, accept)
+    dist = np.where(ok, dist, np.inf)
+    index = np.argmin(dist, axis=-1)
+    found = np.take_along_axis(ok, index[..., None], axis=-1)[..., 0]
+    best = np.take_along_axis(q, index[..., None, None], axis=-2)[..., 0, :]
+    best = np.where(found[..., None], best, q_ref)
+    return np.where(found, index, -1), best, found
+
+
+Solver = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def theta3_intervals(solve: Solver, target, lower: float, upper: float, samples: int = 721,
+                     tol: float = 1e-10, accept: Sequence[int] = ADMISSIBLE):
+    """Admissible intervals of theta3 in [lower, upper] for one target, per branch.
+
+    ``solve(targets, theta3)`` evaluates the IK on a batch: ``targets`` (m, ...) repeated
+    target, ``theta3`` (m,) -> ``(q (m, 8, 7), status (m, 8))`` (e.g. generated code or
+    :func:`tests.harness.evaluate_symbolic`). theta3 is sampled on ``samples`` points, every
+    change of admissibility between neighbours is refined by bisection to ``tol``.
+
+    Returns ``(per_branch, union)``: per_branch[k] is a list of (start, end) intervals where
+    row k is admissible, ``union`` those where some row is. Intervals narrower than the
+    sampling step can be missed (raise ``samples``).
+    """
+    target = np.asarray(target, float)
+    grid = np.linspace(lower, upper, samples)
+
+    def admissible_at(theta):
+        theta = np.atleast_1d(np.asarray(theta, float))
+        targets = np.broadcast_to(target, (theta.size,) + target.shape)
+        _, status = solve(targets, theta)
+        return admissible(np.asarray(status).reshape(theta.size, N_BRANCHES), accept)
+
+    ok = admissible_at(grid)                                     # (samples, 8)
+    ok = np.concatenate([ok, ok.any(axis=1, keepdims=True)], axis=1)  # column 8: union
+
+    # every sign change between neighbours: bisect all of them at once
+    ks, cols = np.nonzero(ok[1:] != ok[:-1])
+    lo, hi = grid[ks].copy(), grid[ks + 1].copy()
+    left_ok = ok[ks, cols]
+    while lo.size and np.max(hi - lo) > tol:
+        mid = 0.5 * (lo + hi)
+        at = admissible_at(mid)
+        at = np.concatenate([at, at.any(axis=1, keepdims=True)], axis=1)
+        same = at[np.arange(mid.size), cols] == left_ok
+        lo = np.where(same, mid, lo)
+        hi = np.where(same, hi, mid)
+    # a boundary: the admissible side's last point
+    edge = np.where(left_ok, lo, hi)
+
+    result = []
+    for col in range(N_BRANCHES + 1):
+        intervals, start = [], (grid[0] if ok[0, col] else None)
+        for k, e, lok in zip(ks[cols == col], edge[cols == col], left_ok[cols == col]):
+            if lok:      # admissible -> not: an interval ends
+                intervals.append((float(start), float(e)))
+                start = None
+            else:        # not -> admissible: one starts
+                start = e
+        if start is not None:
+            intervals.append((float(start), float(grid[-1])))
+        result.append(intervals)
+    return result[:N_BRANCHES], result[N_BRANCHES]

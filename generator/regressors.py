@@ -1,0 +1,304 @@
+"""Linear parametrisation of the dynamics: regressors on base parameters (identification
+paper, Sect. V, eqs. 17, 18, 23).
+
+The dynamics is linear in the standard barycentric parameters ``p`` (10 per link, see
+:mod:`generator.inertial_parameters`), so each regressor column is the derivative of a
+symbolic dynamics function with respect to one parameter, taken on the DAG with ``se.diff``
+(nothing is expanded):
+
+* ``Y_g(q) -> Y``, shape ``(n, p_g)``: ``g(q) = Y_g(q) pi_g`` (eq. 17);
+* ``Y_m(q) -> Y``, shape ``(n(n+1)/2, p_m)``: the inertia stack ``m~(q) = Y_m(q) pi_m``
+  (eq. 18), the lower triangle of M row by row: ``M00, M10, M11, M20, M21, M22, ...``
+  (row ``i(i+1)/2 + j`` holds ``M_ij``, ``j <= i``, 0-based);
+* ``Y(q, qd, qdd) -> Y``, shape ``(n, p)``: ``tau = Y(q, qd, qdd) pi``.
+
+The columns are those of the base parameters of each (found by
+:mod:`generator.base_parameters`: independent columns kept in parameter order, the others
+grouped into them, paper eq. 23), so ``Y`` times the base values equals the dynamics.  The
+symbolic dynamics comes from the catalog in symbolic mode (``g_lagrange``, ``M_lagrange`` and
+``tau``: the routes whose derivatives are cheapest after CSE, see :data:`SOURCES`); the
+regressor does not depend on the inertial values, so numeric and symbolic mode register the
+same functions.
+
+The paper's parameters (mass, CoM, inertia about the CoM) map to the barycentric ones by
+:func:`barycentric_in_paper` (parallel-axis theorem) and back by :func:`paper_in_barycentric`.
+
+Example:
+
+>>> from generator.robot import load_robot
+>>> b = base_parameters(load_robot("robots/lwr4.yaml"), "Y_g")    # doctest: +SKIP
+>>> b.rank, b.names[:2]                                            # doctest: +SKIP
+(12, ('mx2', 'mz2R'))
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache, reduce
+
+import numpy as np
+import symengine as se
+import sympy
+
+from .base_parameters import BaseParameters, find_base_parameters
+from .inertial_parameters import NAMES, parameter_symbols, parameter_vector
+from .robot import RobotModel
+from .symbolic import Port, SymbolicFunction
+
+KINDS = ("Y_g", "Y_m", "Y")
+# catalog functions each regressor is differentiated from, first available wins: the routes
+# whose parameter derivatives cost least after CSE (LWR4: Y_g 31/70 add/mul from g_lagrange
+# against 47/107 from g; Y_m 328/764 from M_lagrange against 708/1086 from the composite-body
+# M; Y 512/719 from Newton-Euler tau against 3666/4792 from the Lagrange energy)
+SOURCES = {"Y_g": ("g_lagrange", "g"), "Y_m": ("M_lagrange", "M"), "Y": ("tau",)}
+QUANTITY = {"Y_g": "g", "Y_m": "M", "Y": "tau"}
+SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random samples for the rank analysis
+SEEDS = (20140, 20141)                             # analysis, verification
+
+SUMMARIES = {
+    "Y_g": "Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).",
+    "Y_m": ("Inertia-stack regressor on base parameters: the lower triangle of M row by row "
+            "(M00, M10, M11, M20, ...) = Y_m(q) pi_m (identification paper eq. 18)."),
+    "Y": "Torque regressor on base parameters: tau = M(q) qdd + c(q, qd) + g(q) = Y(q, qd, qdd) pi.",
+}
+
+
+@dataclass(frozen=True)
+class FullRegressor:
+    """A dynamics quantity as rows of expressions linear in the 10 n barycentric symbols
+    ``p``; the full regressor's column k is ``d rows / d p_k``."""
+
+    kind: str
+    inputs: tuple[Port, ...]
+    input_symbols: tuple[tuple[se.Symbol, ...], ...]
+    p: tuple[se.Symbol, ...]
+    rows: tuple[se.Basic, ...]
+    row_names: tuple[str, ...]
+    gravity: tuple[float, float, float]
+
+    def columns(self, indices) -> tuple[se.Basic, ...]:
+        """Row-major entries of the regressor restricted to columns ``indices``."""
+        return tuple(se.diff(row, self.p[k]) for row in self.rows for k in indices)
+
+
+def _catalog_function(model: RobotModel, kind: str) -> SymbolicFunction:
+    from .catalog import BUILDERS      # late: the catalog imports this module
+    builders = dict(BUILDERS)
+    for name in SOURCES[kind]:
+        if name in builders:
+            f = builders[name](model, "symbolic")
+            if f is not None:
+                return f
+    raise LookupError(f"{kind}: none of the catalog functions {SOURCES[kind]} is available")
+
+
+@lru_cache(maxsize=None)
+def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
+    """The rows (g, the inertia stack, or tau) of ``model`` as functions of q (qd, qdd) and p."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    f = _catalog_function(model, kind)
+    names = [port.name for port in f.inputs]
+    k = names.index("p")
+    p = f.input_symbols[k]
+    assert tuple(map(str, p)) == tuple(map(str, parameter_symbols(model.n))), "catalog p is not the barycentric vector"
+    inputs = tuple(port for port in f.inputs if port.name != "p")
+    input_symbols = tuple(s for port, s in zip(f.inputs, f.input_symbols) if port.name != "p")
+    exprs = f.output_exprs[0]
+    n = model.n
+    if kind == "Y_m":
+        rows = tuple(exprs[i * n + j] for i in range(n) for j in range(i + 1))
+        row_names = tuple(f"M{i}{j}" if n <= 10 else f"M{i}_{j}" for i in range(n) for j in range(i + 1))
+    else:
+        rows = tuple(exprs)
+        row_names = tuple(f"{QUANTITY[kind]}{i}" for i in range(n))
+    return FullRegressor(kind, inputs, input_symbols, tuple(p), rows, row_names,
+                         tuple(float(g) for g in model.gravity))
+
+
+def random_inputs(model: RobotModel, inputs: tuple[Port, ...], count: int, seed: int) -> dict:
+    """Random samples for each input port: q uniform within the joint limits, others
+    (velocities, accelerations) standard normal."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for port in inputs:
+        if port.name == "q":
+            out[port.name] = rng.uniform(model.lower, model.upper, size=(count, model.n))
+        else:
+            out[port.name] = rng.normal(size=(count, port.size))
+    return out
+
+
+@lru_cache(maxsize=None)
+def _numeric(model: RobotModel, kind: str):
+    full = full_regressor(model, kind)
+    args = [s for syms in full.input_symbols for s in syms] + list(full.p)
+    return se.Lambdify(args, list(full.rows), cse=True)
+
+
+def evaluate_full(model: RobotModel, kind: str, inputs: dict) -> np.ndarray:
+    """The full regressor (samples x rows x 10 n) at numeric inputs, by evaluating the
+    dynamics at every unit parameter vector (the dynamics is linear and homogeneous in p)."""
+    full = full_regressor(model, kind)
+    fn = _numeric(model, kind)
+    x = np.concatenate([np.asarray(inputs[port.name], float).reshape(-1, port.size) for port in full.inputs], axis=1)
+    count, P = x.shape[0], len(full.p)
+    batch = np.concatenate([np.repeat(x, P, axis=0), np.tile(np.eye(P), (count, 1))], axis=1)
+    out = np.asarray(fn(batch), float).reshape(count, P, len(full.rows))
+    return out.transpose(0, 2, 1)
+
+
+def common_denominator(model: RobotModel) -> int | None:
+    """A common denominator of every grouping coefficient: the squared lcm of the DH
+    lengths' denominators when all lengths are rational and every constant rotation is a
+    signed permutation (cos and sin of each alpha and offset in {0, 1, -1}); else None."""
+    dens = []
+    for joint in model.joints:
+        for angle in (joint.alpha, joint.offset):
+            for v in (sympy.cos(angle), sympy.sin(angle)):
+                if v not in (0, 1, -1):
+                    return None
+        for length in (joint.a, joint.d):
+            length = sympy.nsimplify(length) if isinstance(length, float) else sympy.sympify(length)
+            if not length.is_Rational:
+                return None
+            dens.append(int(length.q))
+    lcm = reduce(math.lcm, dens, 1)
+    return lcm * lcm
+
+
+@lru_cache(maxsize=None)
+def base_parameters(model: RobotModel, kind: str) -> BaseParameters:
+    """Rank analysis and grouping of the full regressor ``kind`` of ``model``."""
+    full = full_regressor(model, kind)
+    names = tuple(map(str, full.p))
+
+    def evaluate(seed):
+        return evaluate_full(model, kind, random_inputs(model, full.inputs, SAMPLES[kind], seed))
+
+    return find_base_parameters(evaluate, names, SEEDS, common_denominator(model))
+
+
+def supported(model: RobotModel) -> bool:
+    """Regressors need numeric DH lengths (the grouping coefficients are found numerically)."""
+    return not model.length_symbols
+
+
+def regressor(model: RobotModel, kind: str, name: str | None = None) -> SymbolicFunction | None:
+    """``Y_g(q)``, ``Y_m(q)`` or ``Y(q, qd, qdd)`` on base parameters (output port ``Y``);
+    None for a robot with symbolic DH lengths."""
+    if not supported(model):
+        return None
+    full = full_regressor(model, kind)
+    base = base_parameters(model, kind)
+    rows, cols = len(full.rows), len(base.base)
+    exprs = full.columns(base.base)
+    what = {"Y_g": "gravity torques g", "Y_m": "inertia stack (lower triangle of M, row by row)",
+            "Y": "joint torques tau"}[kind]
+    unit = {"Y_g": "N m per base parameter", "Y_m": "kg m^2 per base parameter", "Y": "N m per base parameter"}[kind]
+    port = Port("Y", (rows, cols), f"regressor of the {what} on the base parameters (row-major; "
+                f"columns: {', '.join(base.names)})", unit)
+    gx, gy, gz = full.gravity
+    conventions = (
+        f"Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame: "
+        f"({gx:g}, {gy:g}, {gz:g}) m/s^2. Rows: {', '.join(full.row_names)}. "
+        f"Columns: the {cols} base parameters (rank of the full {10 * model.n}-column regressor), "
+        f"named after the barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, "
+        f"Izz per link, inertia about the link frame origin in link-frame axes; suffix R: other "
+        f"parameters grouped into it); their expressions and the robot's values are in "
+        f"base_params.json. Y times those values equals the modelled quantity.")
+    return SymbolicFunction(
+        name=name or kind, summary=SUMMARIES[kind],
+        inputs=full.inputs, outputs=(port,), input_symbols=full.input_symbols, output_exprs=(exprs,),
+        conventions=conventions,
+        metadata={"params": "none", "base_parameters": base.names})
+
+
+def base_params_document(model: RobotModel) -> dict | None:
+    """Content of ``base_params.json``: per regressor the base parameters in column order,
+    their expressions in the barycentric symbols and their values for the robot's YAML
+    parameters (``Y @ values`` is the modelled quantity), plus rank and condition number."""
+    if not supported(model):
+        return None
+    full_values = parameter_vector(model)
+    out = {}
+    for kind in KINDS:
+        b = base_parameters(model, kind)
+        out[kind] = {
+            "names": list(b.names),
+            "expressions": list(b.expression_strings()),
+            "values": [float(v) for v in b.values(full_values)],
+            "rank": b.rank,
+            "full_columns": len(b.full_names),
+            "exact": b.exact,
+        }
+    return out
+
+
+# ----------------------------------------------------------------------------- paper parameters
+
+PAPER_NAMES = ("m", "cx", "cy", "cz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+
+
+def paper_symbols(n: int) -> tuple[sympy.Symbol, ...]:
+    """The paper's parameters per link: ``m1, c1x, c1y, c1z, I1xx, I1yy, I1zz, I1xy, I1xz,
+    I1yz`` (mass, CoM in link frame i, inertia about the CoM in link-frame axes)."""
+    out = []
+    for i in range(1, n + 1):
+        out.append(sympy.Symbol(f"m{i}"))
+        out += [sympy.Symbol(f"c{i}{a}") for a in "xyz"]
+        out += [sympy.Symbol(f"I{i}{a}") for a in ("xx", "yy", "zz", "xy", "xz", "yz")]
+    return tuple(out)
+
+
+def barycentric_symbols(n: int) -> tuple[sympy.Symbol, ...]:
+    """sympy twins of :func:`generator.inertial_parameters.parameter_symbols`."""
+    return tuple(sympy.Symbol(f"{name}{i + 1}") for i in range(n) for name in NAMES)
+
+
+def barycentric_in_paper(n: int) -> tuple[sympy.Expr, ...]:
+    """The 10 n barycentric parameters as expressions of the paper's (parallel-axis theorem):
+    ``mx = m cx``, ``Ixx = I_xx + m (cy^2 + cz^2)``, ``Ixy = I_xy - m cx cy``, ..."""
+    s = paper_symbols(n)
+    out = []
+    for i in range(n):
+        m, cx, cy, cz, ixx, iyy, izz, ixy, ixz, iyz = s[10 * i:10 * i + 10]
+        out += [m, m * cx, m * cy, m * cz,
+                ixx + m * (cy ** 2 + cz ** 2), ixy - m * cx * cy, iyy + m * (cx ** 2 + cz ** 2),
+                ixz - m * cx * cz, iyz - m * cy * cz, izz + m * (cx ** 2 + cy ** 2)]
+    return tuple(out)
+
+
+def paper_in_barycentric(n: int) -> tuple[sympy.Expr, ...]:
+    """Inverse of :func:`barycentric_in_paper`: ``cx = mx / m``, ``I_xx = Ixx - (my^2 + mz^2)
+    / m``, ``I_xy = Ixy + mx my / m``, ... (in :func:`paper_symbols` order)."""
+    s = barycentric_symbols(n)
+    out = []
+    for i in range(n):
+        m, hx, hy, hz, ixx, ixy, iyy, ixz, iyz, izz = s[10 * i:10 * i + 10]
+        out += [m, hx / m, hy / m, hz / m,
+                ixx - (hy ** 2 + hz ** 2) / m, iyy - (hx ** 2 + hz ** 2) / m, izz - (hx ** 2 + hy ** 2) / m,
+                ixy + hx * hy / m, ixz + hx * hz / m, iyz + hy * hz / m]
+    return tuple(out)
+
+
+def base_expressions_in_paper(model: RobotModel, kind: str) -> tuple[sympy.Expr, ...]:
+    """The base parameters of ``kind`` as polynomials in the paper's parameters."""
+    b = base_parameters(model, kind)
+    subs = dict(zip(barycentric_symbols(model.n), barycentric_in_paper(model.n)))
+    return tuple(sympy.expand(e.xreplace(subs)) for e in b.expressions(barycentric_symbols(model.n)))
+
+
+def write_base_params(model: RobotModel, folder) -> None:
+    """Write ``folder/base_params.json`` (see :func:`base_params_document`); nothing for a
+    robot with symbolic DH lengths.  Deterministic: fixed seeds, exact coefficients, floats
+    by ``repr`` (``json``)."""
+    import json
+    from pathlib import Path
+
+    document = base_params_document(model)
+    if document is None:
+        return
+    path = Path(folder) / "base_params.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=1) + "\n")
