@@ -41,6 +41,8 @@ import symengine as se
 import sympy
 
 from .base_parameters import BaseParameters, find_base_parameters
+from .dynamics_lagrange import gravity_lagrange, mass_matrix_lagrange
+from .dynamics_newton_euler import inverse_dynamics
 from .inertial_parameters import NAMES, parameter_symbols, parameter_vector
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
@@ -50,7 +52,8 @@ KINDS = ("Y_g", "Y_m", "Y")
 # whose parameter derivatives cost least after CSE (LWR4: Y_g 31/70 add/mul from g_lagrange
 # against 47/107 from g; Y_m 328/764 from M_lagrange against 708/1086 from the composite-body
 # M; Y 512/719 from Newton-Euler tau against 3666/4792 from the Lagrange energy)
-SOURCES = {"Y_g": ("g_lagrange", "g"), "Y_m": ("M_lagrange", "M"), "Y": ("tau",)}
+# the dynamics each regressor differentiates: the routes whose derivatives are cheapest after CSE
+SOURCES = {"Y_g": gravity_lagrange, "Y_m": mass_matrix_lagrange, "Y": inverse_dynamics}
 QUANTITY = {"Y_g": "g", "Y_m": "M", "Y": "tau"}
 SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random samples for the rank analysis
 SEEDS = (20140, 20141)                             # analysis, verification
@@ -81,23 +84,12 @@ class FullRegressor:
         return tuple(se.diff(row, self.p[k]) for row in self.rows for k in indices)
 
 
-def _catalog_function(model: RobotModel, kind: str) -> SymbolicFunction:
-    from .catalog import BUILDERS      # late: the catalog imports this module
-    builders = dict(BUILDERS)
-    for name in SOURCES[kind]:
-        if name in builders:
-            f = builders[name](model, "symbolic")
-            if f is not None:
-                return f
-    raise LookupError(f"{kind}: none of the catalog functions {SOURCES[kind]} is available")
-
-
 @lru_cache(maxsize=None)
 def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
     """The rows (g, the inertia stack, or tau) of ``model`` as functions of q (qd, qdd) and p."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    f = _catalog_function(model, kind)
+    f = SOURCES[kind](model, "symbolic")
     names = [port.name for port in f.inputs]
     k = names.index("p")
     p = f.input_symbols[k]
