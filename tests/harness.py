@@ -41,7 +41,7 @@ def _lambdified(robot_name: str, function_name: str, params: str):
     f = symbolic_function(robot_name, function_name, params)
     args = [s for syms in f.input_symbols for s in syms]
     outs = [e for exprs in f.output_exprs for e in exprs]
-    return f, se.Lambdify(args, outs, cse=True, backend="llvm" if False else "lambda")
+    return f, se.Lambdify(args, outs, cse=True)
 
 
 def evaluate_symbolic(robot_name: str, function_name: str, params: str = "numeric", **inputs):
