@@ -47,6 +47,8 @@ class GeneratedLibrary:
         if name not in self.functions:
             raise EvaluationError(f"no function '{name}' in {self.directory}; available: {', '.join(self.functions)}")
         spec = self.functions[name]
+        if self.lang not in spec.get("languages", (self.lang,)):
+            raise EvaluationError(f"{name} is not generated for {self.lang} (it exists in {', '.join(spec['languages'])})")
         arrays, batch = _check_inputs(name, spec, inputs)
         outputs = self._impl.call(spec, arrays, batch)
         if batch is None:

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from .catalog import derive_all
+from .ik_dls import applies as dls_applies, dls_manifest_entry
 from .optimize import Program, optimize
 from .regressors import write_base_params
 from .render import RENDERERS
@@ -73,7 +74,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str) -> dict:
             "inputs": [port.to_json() for port in p.function.inputs],
             "outputs": [port.to_json() for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
-        } for p in programs],
+        } for p in programs] + ([dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []),
     }
 
 

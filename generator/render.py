@@ -12,6 +12,7 @@ from pathlib import Path
 import jinja2
 
 from . import __version__
+from .ik_dls import dls_view
 from .optimize import Program
 from .printer import C, CASADI, NUMPY, Dialect
 from .robot import RobotModel
@@ -104,6 +105,7 @@ def _context(model: RobotModel, programs, dialect: Dialect) -> dict:
         "gravity": model.gravity,
         "version": __version__,
         "functions": [function_view(p, dialect, model.identifier) for p in programs],
+        "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None
     }
 
 

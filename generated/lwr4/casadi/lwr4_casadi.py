@@ -3968,4 +3968,233 @@ def Y():
                        ["q", "qd", "qdd"], ["Y"])
 
 
-BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = [-2.9670597283903604, -2.0943951023931953, -2.9670597283903604, -2.0943951023931953, -2.9670597283903604, -2.0943951023931953, -2.9670597283903604]
+_IK_DLS_UPPER = [2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953, 2.9670597283903604]
+_IK_DLS_RESTART = [
+    [2.730872227051397, 1.1688473073286816, 1.1884758964286801, -1.7550090418209419, 1.6907094288485087, -1.3405132169627074, 1.237220870260992],
+    [-1.177343628408912, -1.616357550840912, 0.2846273822665464, 0.8841816144622938, 1.8768568602008653, -0.2840632545360129, 2.6953663590773695],
+    [-0.2763433809003848, -0.5067090553829958, 0.7047629601308252, -0.2719968900357188, -1.3869453013498365, 1.8347324174596018, 2.3652636364236814],
+    [-0.15853700615435296, 1.9983557528498879, 0.4986097448701474, -1.806575023152179, -2.043841625876192, 1.529611426375519, -1.3394515705019983],
+    [-0.01099302581543471, -0.5153168518422773, 0.25147044052137035, 0.4976951310928084, 1.6435430720590967, -1.7225896992018752, 2.9579972526562077],
+    [2.6247729807508566, -0.49139101562830745, 2.5274138389005536, -1.2977369958350857, -2.5615886792315985, -1.7781169136759831, -2.864954911503848],
+    [-2.955182041752997, 2.0257487058604675, 0.9896739623673096, 0.18794415156837507, 0.6556895924957375, 1.600115638769544, -0.8377988979735518],
+    [0.9067546717993187, 1.3029257700408534, 1.1791422247288965, 0.6685371816788597, -1.3546905792271489, -0.7973225809172488, 0.27899484724299173],
+    [0.7110703108197023, 0.08874884275045103, 0.5264508631968323, 1.7347908946094237, 2.770140844123657, -0.517032154497455, -0.751666977763247],
+    [1.6525336067569265, -1.380868130257815, 1.050478832884881, -1.2665968269255332, 1.6063307431193072, -0.9654186376222202, -0.9066145072352616],
+    [-0.7672381000764767, -0.7784709900822189, 0.9156330996637911, 0.5918494062925177, 0.7544057718585027, 1.9237623031012867, 0.21893596701057438],
+    [1.6569815177143727, -0.08193514613377761, 2.1818071291553354, -0.96792135217984, 0.08496251043306113, -1.4805678276574592, 1.673030913051936],
+    [2.0743995009523752, -0.7079858600411331, -0.6465400482983781, -0.4375089688442688, 1.3530878804844289, -0.8561366036310472, -1.438257971491618],
+    [-1.4746474113106842, -0.8747151643908195, -1.045852083874855, 0.6153499898484305, 2.9234557708258047, 0.9147025429694811, -1.424570728891286],
+    [-1.774410006130736, -1.179154295036181, 2.6328711350133265, 0.658227301601169, -0.2451523708393082, -0.14758332945324804, -2.3978961808166535],
+    [1.169354800414868, 1.4046768413902138, 1.753886314597123, -2.0145636092415966, 1.3711691653366609, 0.9687833422242385, -1.282551548727822],
+    [-2.030176256786962, 0.7906776452959052, -0.011235527155053937, 0.06977521538460207, 0.970048807049245, 1.5499871295716448, -1.8342927977787076],
+    [0.25088894134953765, 1.3469370816816633, -2.21368762965146, -0.8386594153015283, -0.5872321126769879, 1.9181952034854892, 1.7761185955076364],
+    [1.212780027876656, 2.091577355547505, 0.7525693487831422, 1.369783028906567, -2.7579594638456744, 0.2940479426260514, -1.5319128996436322],
+    [2.948660975309515, 0.7407711310802565, -2.193096129117163, -0.6140384201049915, -1.7923194677437, -0.7557818891776367, 0.19644507808701572],
+    [-2.287728894986402, -0.881348133514452, -0.3806124147615306, 1.2288142277780802, 0.768786975945321, -0.0769016984225912, 2.573777750716161],
+    [2.006915510990237, -1.9890459666931255, 2.8096483853533245, -1.2849577455775885, 1.6946227483472018, -0.10338383537823814, 1.5450043657449317],
+    [-0.031287112018373975, 1.272710122369031, -0.8683803864070185, -1.9732831975242462, -1.1854698857922796, -1.2085909831280097, 2.7138914018276656],
+    [0.04517866337277798, -0.9836436598322629, -1.9229022012967842, 0.12429593679072148, 0.056340543756112194, 1.3797498859298085, 1.083401446731294],
+    [-0.5916714437363413, 1.3776063946539128, 0.6010332970514289, -2.0496761222161792, -1.6190671701677795, -0.2572249372191704, 2.7605820476271763],
+]
+# state vector of one sample: accepted iterate qc, candidate qn, best iterate, pose error e
+# at qc, then the scalars below (flags and counters as 0/1 and integer-valued doubles)
+_IK_DLS_SCALARS = ("en", "best_en", "ref", "lam2", "last", "restarts", "start", "active", "status", "it")
+
+
+def _ik_dls_clamp(x, i):
+    return ca.if_else(x < _IK_DLS_LOWER[i], _IK_DLS_LOWER[i], ca.if_else(x > _IK_DLS_UPPER[i], _IK_DLS_UPPER[i], x))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] (list of 6 SX), |e_p|^2, |e_r|^2."""
+    e = [T[i, 3] - F[i, 3] for i in range(3)]
+    Re = [[T[i, 0] * F[j, 0] + T[i, 1] * F[j, 1] + T[i, 2] * F[j, 2] for j in range(3)] for i in range(3)]
+    cosa = 0.5 * (Re[0][0] + Re[1][1] + Re[2][2] - 1.0)
+    cosa = ca.if_else(cosa > 1.0, 1.0, ca.if_else(cosa < -1.0, -1.0, cosa))
+    v = [0.5 * (Re[2][1] - Re[1][2]), 0.5 * (Re[0][2] - Re[2][0]), 0.5 * (Re[1][0] - Re[0][1])]
+    s = ca.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    angle = ca.atan2(s, cosa)
+    f = ca.if_else(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: the column of sym(Re) - cos(angle) I with the largest diagonal entry
+    is1 = Re[1][1] > Re[0][0]
+    is2 = Re[2][2] > ca.if_else(is1, Re[1][1], Re[0][0])
+    cols = [[0.5 * (Re[i][k] + Re[k][i]) - (cosa if i == k else 0.0) for i in range(3)] for k in range(3)]
+    col = [ca.if_else(is2, cols[2][i], ca.if_else(is1, cols[1][i], cols[0][i])) for i in range(3)]
+    ckk = ca.if_else(is2, cols[2][2], ca.if_else(is1, cols[1][1], cols[0][0]))
+    g = angle / ca.sqrt(ckk * (1.0 - cosa))
+    g = ca.if_else(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0.0, -g, g)
+    generic = cosa > -0.9
+    e += [ca.if_else(generic, f * v[i], col[i] * g) for i in range(3)]
+    ep = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    er = e[3] * e[3] + e[4] * e[4] + e[5] * e[5]
+    return e, ep, er
+
+
+def _ik_dls_solve6(J, weight, e, lam2):
+    """dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky (0 where a pivot is not positive),
+    Jm = J with column i scaled by weight[i]."""
+    Jm = [[J[r, i] * weight[i] for i in range(7)] for r in range(6)]
+    L = [[None] * 6 for _ in range(6)]
+    solved = 1
+    for r in range(6):
+        for k in range(r, 6):
+            acc = 0.0
+            for i in range(7):
+                acc = acc + Jm[k][i] * Jm[r][i]
+            if k == r:
+                acc = acc + lam2
+            for j in range(r):
+                acc = acc - L[k][j] * L[r][j]
+            if k == r:
+                solved = ca.logic_and(solved, acc > 0.0)
+                L[r][r] = ca.sqrt(ca.if_else(acc > 0.0, acc, 1.0))
+            else:
+                L[k][r] = acc / L[r][r]
+    y = [None] * 6
+    for r in range(6):
+        acc = e[r]
+        for j in range(r):
+            acc = acc - L[r][j] * y[j]
+        y[r] = acc / L[r][r]
+    for r in range(5, -1, -1):
+        acc = y[r]
+        for j in range(r + 1, 6):
+            acc = acc - L[j][r] * y[j]
+        y[r] = acc / L[r][r]
+    dq = []
+    for i in range(7):
+        acc = 0.0
+        for r in range(6):
+            acc = acc + Jm[r][i] * y[r]
+        dq.append(ca.if_else(solved, acc, 0.0))
+    return dq
+
+
+def _ik_dls_iteration(fk, jac):
+    """One iteration as an SX Function (state, T) -> state."""
+    n = 7
+    x = ca.SX.sym("x", 3 * n + 6 + len(_IK_DLS_SCALARS))
+    T = ca.SX.sym("T", 4, 4)
+    qc, qn, best, e = [x[k] for k in range(n)], [x[n + k] for k in range(n)], [x[2 * n + k] for k in range(n)], [x[3 * n + k] for k in range(6)]
+    en, best_en, ref, lam2, last, restarts, start, active, status, it = [x[3 * n + 6 + k] for k in range(len(_IK_DLS_SCALARS))]
+
+    # evaluate the candidate, accept or reject
+    F = fk(ca.vertcat(*qn))
+    ec, ep, er = _ik_dls_pose_error(T, F)
+    enc = ep + er
+    accept = ca.logic_and(active, ca.logic_or(start, enc < en))
+    reject = ca.logic_and(active, ca.logic_not(accept))
+    qc = [ca.if_else(accept, qn[i], qc[i]) for i in range(n)]
+    e = [ca.if_else(accept, ec[i], e[i]) for i in range(6)]
+    en_new = ca.if_else(accept, enc, en)
+    down = lam2 * 0.1
+    up = lam2 * 10.0
+    lam2 = ca.if_else(accept, ca.if_else(start, 0.01, ca.if_else(down < 1e-12, 1e-12, down)),
+                      ca.if_else(reject, ca.if_else(up > 100.0, 100.0, up), lam2))
+    progress = ca.logic_and(accept, ca.logic_or(start, en_new < 0.5 * ref))
+    ref = ca.if_else(progress, en_new, ref)
+    last = ca.if_else(progress, it, last)
+    start = ca.if_else(accept, 0, start)
+    better = ca.logic_and(accept, ca.logic_or(it == 0, en_new < best_en))
+    best_en = ca.if_else(better, en_new, best_en)
+    best = [ca.if_else(better, qc[i], best[i]) for i in range(n)]
+    en = en_new
+    converged = ca.logic_and(accept, ca.logic_and(ep < 1e-10 * 1e-10, er < 1e-10 * 1e-10))
+    within = 1
+    for i in range(n):
+        within = ca.logic_and(within, ca.logic_and(qc[i] >= _IK_DLS_LOWER[i], qc[i] <= _IK_DLS_UPPER[i]))
+    status = ca.if_else(converged, ca.if_else(within, 0, 1), status)
+    active = ca.if_else(converged, 0, active)
+
+    # stalled: restart from the next table configuration; otherwise a damped step
+    stalled = it - last >= 8
+    index = ca.fmod(restarts, 25)
+    restart = [0.0] * n
+    for row, values in enumerate(_IK_DLS_RESTART):
+        restart = [restart[i] + ca.if_else(index == row, values[i], 0.0) for i in range(n)]
+    J = jac(ca.vertcat(*qc))
+    dq1 = _ik_dls_solve6(J, [1.0] * n, e, lam2)
+    blocked = [ca.logic_or(ca.logic_and(qc[i] <= _IK_DLS_LOWER[i], dq1[i] < 0.0),
+                           ca.logic_and(qc[i] >= _IK_DLS_UPPER[i], dq1[i] > 0.0)) for i in range(n)]
+    any_blocked = 0
+    for b in blocked:
+        any_blocked = ca.logic_or(any_blocked, b)
+    dq2 = _ik_dls_solve6(J, [ca.if_else(b, 0.0, 1.0) for b in blocked], e, lam2)
+    dq = [ca.if_else(any_blocked, dq2[i], dq1[i]) for i in range(n)]
+    largest = 0.0
+    for i in range(n):
+        largest = ca.if_else(ca.fabs(dq[i]) > largest, ca.fabs(dq[i]), largest)
+    f = ca.if_else(largest > 0.5, 0.5 / largest, 1.0)
+    step = [_ik_dls_clamp(qc[i] + f * dq[i], i) for i in range(n)]
+    move = ca.logic_and(active, ca.logic_not(stalled))
+    jump = ca.logic_and(active, stalled)
+    qn = [ca.if_else(jump, restart[i], ca.if_else(move, step[i], qn[i])) for i in range(n)]
+    restarts = ca.if_else(jump, restarts + 1, restarts)
+    start = ca.if_else(jump, 1, start)
+    state = ca.vertcat(*qc, *qn, *best, *e, en, best_en, ref, lam2, last, restarts, start, active, status, it + 1)
+    return ca.Function("ik_dls_iteration", [x, T], [state])
+
+
+def ik_dls():
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    in  T: 4 x 4, target flange pose in the base frame (last row unused) [m (translation), 1 (rotation)]
+    in  q0: 7, start configuration, DH order [rad]
+    out q: 7, joint angles reaching T (status 0), otherwise see status [rad]
+    out status: 1, outcome (integer-valued):
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+    Constants: as in the C header (MAX_ITERATIONS = 200, TOL_POSITION = 1e-10, TOL_ROTATION = 1e-10, MAX_STEP = 0.5, LAMBDA2_INITIAL = 0.01, LAMBDA2_MIN = 1e-12, LAMBDA2_MAX = 100.0, LAMBDA2_DOWN = 0.1, LAMBDA2_UP = 10.0, STALL_ITERATIONS = 8, STALL_RATIO = 0.5, ORTHONORMAL_TOL = 1e-06, NEAR_PI_COS = -0.9, SMALL_SIN = 0.0001).
+
+    Branch-free: always MAX_ITERATIONS + 1 = 201 evaluations of one iteration (Function.fold),
+    each one fk_hom + one jacobian + two 6x6 solves; converged samples are frozen.
+    """
+    n = 7
+    T = ca.SX.sym("T", 4, 4)
+    q0 = ca.SX.sym("q0", n)
+    # input check; q = q0 clamped to the limits where finite, else 0
+    valid = 1
+    for k in range(16):
+        valid = ca.logic_and(valid, ca.fabs(T[k // 4, k % 4]) < ca.inf)
+    q = []
+    for i in range(n):
+        finite = ca.fabs(q0[i]) < ca.inf
+        valid = ca.logic_and(valid, finite)
+        q.append(ca.if_else(finite, _ik_dls_clamp(q0[i], i), 0.0))
+    for i in range(3):
+        for j in range(3):
+            gram = T[0, i] * T[0, j] + T[1, i] * T[1, j] + T[2, i] * T[2, j] - (1.0 if i == j else 0.0)
+            valid = ca.logic_and(valid, ca.logic_not(ca.fabs(gram) > 1e-06))
+    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))
+    valid = ca.logic_and(valid, det > 0.0)
+    state0 = ca.vertcat(*q, *q, *q, *([0.0] * 6), 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 1.0,
+                        valid, ca.if_else(valid, 2.0, 3.0), 0.0)
+    initial = ca.Function("ik_dls_initial", [T, q0], [state0])
+    x = ca.SX.sym("x", state0.numel())
+    final = ca.Function("ik_dls_final", [x], [ca.vertcat(*[ca.if_else(x[3 * n + 6 + 7], x[2 * n + i], x[i]) for i in range(n)]),
+                                             x[3 * n + 6 + 8]])
+    loop = _ik_dls_iteration(fk_hom(), jacobian()).fold(200 + 1)
+    T_, q0_ = ca.MX.sym("T", 4, 4), ca.MX.sym("q0", n)
+    steps = 200 + 1
+    xN = loop(initial(T_, q0_), ca.repmat(T_, 1, steps))
+    q_out, status_out = final(xN)
+    return ca.Function("ik_dls", [T_, q0_], [q_out, status_out],
+                       ["T", "q0"], ["q", "status"])
+
+
+BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

@@ -6030,4 +6030,250 @@ def Y(q, qd, qdd):
     return Y
 
 
-FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = np.array([-2.9670597283903604, -2.0943951023931953, -2.9670597283903604, -2.0943951023931953, -2.9670597283903604, -2.0943951023931953, -2.9670597283903604])
+_IK_DLS_UPPER = np.array([2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953, 2.9670597283903604])
+_IK_DLS_RESTART = np.array([
+    [2.730872227051397, 1.1688473073286816, 1.1884758964286801, -1.7550090418209419, 1.6907094288485087, -1.3405132169627074, 1.237220870260992],
+    [-1.177343628408912, -1.616357550840912, 0.2846273822665464, 0.8841816144622938, 1.8768568602008653, -0.2840632545360129, 2.6953663590773695],
+    [-0.2763433809003848, -0.5067090553829958, 0.7047629601308252, -0.2719968900357188, -1.3869453013498365, 1.8347324174596018, 2.3652636364236814],
+    [-0.15853700615435296, 1.9983557528498879, 0.4986097448701474, -1.806575023152179, -2.043841625876192, 1.529611426375519, -1.3394515705019983],
+    [-0.01099302581543471, -0.5153168518422773, 0.25147044052137035, 0.4976951310928084, 1.6435430720590967, -1.7225896992018752, 2.9579972526562077],
+    [2.6247729807508566, -0.49139101562830745, 2.5274138389005536, -1.2977369958350857, -2.5615886792315985, -1.7781169136759831, -2.864954911503848],
+    [-2.955182041752997, 2.0257487058604675, 0.9896739623673096, 0.18794415156837507, 0.6556895924957375, 1.600115638769544, -0.8377988979735518],
+    [0.9067546717993187, 1.3029257700408534, 1.1791422247288965, 0.6685371816788597, -1.3546905792271489, -0.7973225809172488, 0.27899484724299173],
+    [0.7110703108197023, 0.08874884275045103, 0.5264508631968323, 1.7347908946094237, 2.770140844123657, -0.517032154497455, -0.751666977763247],
+    [1.6525336067569265, -1.380868130257815, 1.050478832884881, -1.2665968269255332, 1.6063307431193072, -0.9654186376222202, -0.9066145072352616],
+    [-0.7672381000764767, -0.7784709900822189, 0.9156330996637911, 0.5918494062925177, 0.7544057718585027, 1.9237623031012867, 0.21893596701057438],
+    [1.6569815177143727, -0.08193514613377761, 2.1818071291553354, -0.96792135217984, 0.08496251043306113, -1.4805678276574592, 1.673030913051936],
+    [2.0743995009523752, -0.7079858600411331, -0.6465400482983781, -0.4375089688442688, 1.3530878804844289, -0.8561366036310472, -1.438257971491618],
+    [-1.4746474113106842, -0.8747151643908195, -1.045852083874855, 0.6153499898484305, 2.9234557708258047, 0.9147025429694811, -1.424570728891286],
+    [-1.774410006130736, -1.179154295036181, 2.6328711350133265, 0.658227301601169, -0.2451523708393082, -0.14758332945324804, -2.3978961808166535],
+    [1.169354800414868, 1.4046768413902138, 1.753886314597123, -2.0145636092415966, 1.3711691653366609, 0.9687833422242385, -1.282551548727822],
+    [-2.030176256786962, 0.7906776452959052, -0.011235527155053937, 0.06977521538460207, 0.970048807049245, 1.5499871295716448, -1.8342927977787076],
+    [0.25088894134953765, 1.3469370816816633, -2.21368762965146, -0.8386594153015283, -0.5872321126769879, 1.9181952034854892, 1.7761185955076364],
+    [1.212780027876656, 2.091577355547505, 0.7525693487831422, 1.369783028906567, -2.7579594638456744, 0.2940479426260514, -1.5319128996436322],
+    [2.948660975309515, 0.7407711310802565, -2.193096129117163, -0.6140384201049915, -1.7923194677437, -0.7557818891776367, 0.19644507808701572],
+    [-2.287728894986402, -0.881348133514452, -0.3806124147615306, 1.2288142277780802, 0.768786975945321, -0.0769016984225912, 2.573777750716161],
+    [2.006915510990237, -1.9890459666931255, 2.8096483853533245, -1.2849577455775885, 1.6946227483472018, -0.10338383537823814, 1.5450043657449317],
+    [-0.031287112018373975, 1.272710122369031, -0.8683803864070185, -1.9732831975242462, -1.1854698857922796, -1.2085909831280097, 2.7138914018276656],
+    [0.04517866337277798, -0.9836436598322629, -1.9229022012967842, 0.12429593679072148, 0.056340543756112194, 1.3797498859298085, 1.083401446731294],
+    [-0.5916714437363413, 1.3776063946539128, 0.6010332970514289, -2.0496761222161792, -1.6190671701677795, -0.2572249372191704, 2.7605820476271763],
+])
+for _array in (_IK_DLS_LOWER, _IK_DLS_UPPER, _IK_DLS_RESTART):
+    _array.flags.writeable = False
+
+
+def ik_dls(T, q0):
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    T: (..., 4, 4) target flange pose in the base frame (row-major; last row unused) [m (translation), 1 (rotation)]
+    q0: (..., 7) start configuration, DH order [rad]
+    Returns q: (..., 7) double, joint angles reaching T (status 0), otherwise see status [rad];
+    status: (..., 1) int, outcome:
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+
+    Constants:
+        MAX_ITERATIONS = 200: iteration limit (one FK evaluation each; restarts included)
+        TOL_POSITION = 1e-10: convergence: |p* - p| below this [m]
+        TOL_ROTATION = 1e-10: convergence: rotation-error angle below this [rad]
+        MAX_STEP = 0.5: largest joint change per iteration; longer steps are scaled down [rad]
+        LAMBDA2_INITIAL = 0.01: damping lambda^2 at the start of each attempt [m^2, rad^2]
+        LAMBDA2_MIN = 1e-12: smallest damping (keeps J J^T + lambda^2 I positive definite)
+        LAMBDA2_MAX = 100.0: largest damping
+        LAMBDA2_DOWN = 0.1: damping factor after an accepted step
+        LAMBDA2_UP = 10.0: damping factor after a rejected step
+        STALL_ITERATIONS = 8: restart after this many iterations without enough progress
+        STALL_RATIO = 0.5: enough progress: |e|^2 below this times its value at the last progress
+        ORTHONORMAL_TOL = 1e-06: invalid input: max |R^T R - I| above this (or det R <= 0)
+        NEAR_PI_COS = -0.9: rotation log: cos(angle) below this takes the axis from the symmetric part
+        SMALL_SIN = 0.0001: rotation log: sin(angle) below this uses angle/sin(angle) = 1 + s^2/6
+    Restarts start from a fixed table of 25 configurations uniform within the limits.
+
+    Cost per iteration: one fk_hom + one jacobian + a 6x6 solve (see the C header for counts);
+    at most MAX_ITERATIONS = 200 iterations.
+    """
+    T, batch_T = _input(T, (4, 4), "T")
+    q0, batch_q0 = _input(q0, (7,), "q0")
+    batch = np.broadcast_shapes(batch_T, batch_q0)
+    T = np.broadcast_to(T, batch + (4, 4)).reshape(-1, 4, 4)
+    q0 = np.broadcast_to(q0, batch + (7,)).reshape(-1, 7)
+    with np.errstate(all="ignore"):  # branches are evaluated on every sample, then selected
+        q, status = _ik_dls_solve(T, q0)
+    return q.reshape(batch + (7,)), status.reshape(batch + (1,))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] per sample (rotation vector in base axes), |e_p|^2, |e_r|^2."""
+    e = np.empty((T.shape[0], 6))
+    for i in range(3):
+        e[:, i] = T[:, i, 3] - F[:, i, 3]
+    Re = np.empty((T.shape[0], 3, 3))
+    for i in range(3):
+        for j in range(3):
+            Re[:, i, j] = T[:, i, 0] * F[:, j, 0] + T[:, i, 1] * F[:, j, 1] + T[:, i, 2] * F[:, j, 2]
+    cosa = 0.5 * (Re[:, 0, 0] + Re[:, 1, 1] + Re[:, 2, 2] - 1.0)
+    cosa = np.where(cosa > 1.0, 1.0, np.where(cosa < -1.0, -1.0, cosa))
+    v = np.stack([0.5 * (Re[:, 2, 1] - Re[:, 1, 2]), 0.5 * (Re[:, 0, 2] - Re[:, 2, 0]),
+                  0.5 * (Re[:, 1, 0] - Re[:, 0, 1])], axis=1)
+    s = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+    angle = np.arctan2(s, cosa)
+    # rotation vector = v angle / sin(angle), v = sin(angle) axis
+    f = np.where(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: sym(Re) - cos(angle) I = (1 - cos(angle)) a a^T; the column of its largest
+    # diagonal entry gives the axis a, the sign of v picks its direction
+    rows = np.arange(T.shape[0])
+    k = np.argmax(np.stack([Re[:, 0, 0], Re[:, 1, 1], Re[:, 2, 2]], axis=1), axis=1)
+    col = np.stack([0.5 * (Re[rows, i, k] + Re[rows, k, i]) - np.where(k == i, cosa, 0.0) for i in range(3)], axis=1)
+    g = angle / np.sqrt(col[rows, k] * (1.0 - cosa))
+    g = np.where(col[:, 0] * v[:, 0] + col[:, 1] * v[:, 1] + col[:, 2] * v[:, 2] < 0.0, -g, g)
+    generic = (cosa > -0.9)[:, None]
+    e[:, 3:] = np.where(generic, f[:, None] * v, col * g[:, None])
+    ep = e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2]
+    er = e[:, 3] * e[:, 3] + e[:, 4] * e[:, 4] + e[:, 5] * e[:, 5]
+    return e, ep, er
+
+
+def _ik_dls_step(q, J, e, lam2):
+    """Next candidates: q + dq scaled to max |dq_i| <= MAX_STEP, clamped to the limits, with
+    dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky; Jm = J without the joints a limit blocks
+    (second pass only for the samples where the first step pushes such a joint outward)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    weight = np.ones(q.shape)
+    dq = np.zeros(q.shape)
+    todo = np.arange(q.shape[0])
+    for _ in range(2):
+        Jm = J[todo] * weight[todo][:, None, :]
+        lam = lam2[todo]
+        L = np.zeros((todo.size, 6, 6))
+        solved = np.ones(todo.size, dtype=bool)
+        for r in range(6):
+            for k in range(r, 6):
+                acc = np.zeros(todo.size)
+                for i in range(7):
+                    acc = acc + Jm[:, k, i] * Jm[:, r, i]
+                if k == r:
+                    acc = acc + lam
+                for j in range(r):
+                    acc = acc - L[:, k, j] * L[:, r, j]
+                if k == r:
+                    solved &= acc > 0.0
+                    L[:, r, r] = np.sqrt(np.where(acc > 0.0, acc, 1.0))
+                else:
+                    L[:, k, r] = acc / L[:, r, r]
+        y = np.zeros((todo.size, 6))
+        for r in range(6):
+            acc = e[todo, r]
+            for j in range(r):
+                acc = acc - L[:, r, j] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        for r in range(5, -1, -1):
+            acc = y[:, r]
+            for j in range(r + 1, 6):
+                acc = acc - L[:, j, r] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        step = np.zeros((todo.size, 7))
+        for r in range(6):
+            step = step + Jm[:, r, :] * y[:, r:r + 1]
+        step = np.where(solved[:, None], step, 0.0)
+        dq[todo] = step
+        qt = q[todo]
+        blocked = ((qt <= lower) & (step < 0.0)) | ((qt >= upper) & (step > 0.0))
+        weight[todo] = np.where(blocked, 0.0, weight[todo])
+        todo = todo[blocked.any(axis=1)]
+        if todo.size == 0:
+            break
+    largest = np.abs(dq).max(axis=1)
+    f = np.where(largest > 0.5, 0.5 / largest, 1.0)
+    return np.clip(q + f[:, None] * dq, lower, upper)
+
+
+def _ik_dls_solve(T, q0):
+    """The iteration on flat batches: T (N, 4, 4), q0 (N, 7); returns q, status (N,)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    count = T.shape[0]
+    finite_q0 = np.isfinite(q0)
+    q = np.where(finite_q0, np.clip(np.where(finite_q0, q0, 0.0), lower, upper), 0.0)
+    valid = np.isfinite(T).reshape(count, -1).all(axis=1) & finite_q0.all(axis=1)
+    for i in range(3):
+        for j in range(3):
+            gram = T[:, 0, i] * T[:, 0, j] + T[:, 1, i] * T[:, 1, j] + T[:, 2, i] * T[:, 2, j] - (1.0 if i == j else 0.0)
+            valid &= ~(np.abs(gram) > 1e-06)
+    det = (T[:, 0, 0] * (T[:, 1, 1] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 1])
+           - T[:, 0, 1] * (T[:, 1, 0] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 0])
+           + T[:, 0, 2] * (T[:, 1, 0] * T[:, 2, 1] - T[:, 1, 1] * T[:, 2, 0]))
+    valid &= det > 0.0
+    status = np.full(count, 3, dtype=np.int64)
+    out = q.copy()
+
+    # per-sample state: accepted iterate qc with error e, en = |e|^2 and Jacobian J; candidate qn
+    qc, qn, best = q.copy(), q.copy(), q.copy()
+    e = np.zeros((count, 6))
+    J = np.zeros((count, 6, 7))
+    en, best_en, ref = np.zeros(count), np.zeros(count), np.zeros(count)
+    lam2 = np.full(count, 0.01)
+    last = np.zeros(count, dtype=np.int64)
+    restarts = np.zeros(count, dtype=np.int64)
+    start = np.ones(count, dtype=bool)
+    active = valid.copy()
+    for it in range(200 + 1):
+        a = np.flatnonzero(active)
+        if a.size == 0:
+            break
+        F = fk_hom(qn[a])
+        ec, ep, er = _ik_dls_pose_error(T[a], F)
+        enc = ep + er
+        accept = start[a] | (enc < en[a])
+        # accepted: move, update damping, progress reference and best iterate
+        ia, was_start = a[accept], start[a][accept]
+        qc[ia], e[ia], en[ia] = qn[ia], ec[accept], enc[accept]
+        down = lam2[ia] * 0.1
+        lam2[ia] = np.where(was_start, 0.01, np.where(down < 1e-12, 1e-12, down))
+        progress = was_start | (en[ia] < 0.5 * ref[ia])
+        ref[ia] = np.where(progress, en[ia], ref[ia])
+        last[ia] = np.where(progress, it, last[ia])
+        start[ia] = False
+        better = ia[(it == 0) | (en[ia] < best_en[ia])]
+        best_en[better], best[better] = en[better], qc[better]
+        converged = (ep[accept] < 1e-10 * 1e-10) & (er[accept] < 1e-10 * 1e-10)
+        done = ia[converged]
+        within = ((qc[done] >= lower) & (qc[done] <= upper)).all(axis=1)
+        status[done], out[done] = np.where(within, 0, 1), qc[done]
+        active[done] = False
+        moved = ia[~converged]
+        if moved.size:
+            J[moved] = jacobian(qc[moved])
+        # rejected: more damping
+        ir = a[~accept]
+        up = lam2[ir] * 10.0
+        lam2[ir] = np.where(up > 100.0, 100.0, up)
+        a = np.flatnonzero(active)
+        if it == 200:
+            status[a], out[a] = 2, best[a]
+            break
+        # stalled: restart from the next table configuration; others: a damped step
+        stalled = it - last[a] >= 8
+        rs = a[stalled]
+        qn[rs] = _IK_DLS_RESTART[restarts[rs] % 25]
+        restarts[rs] += 1
+        start[rs] = True
+        st = a[~stalled]
+        if st.size:
+            qn[st] = _ik_dls_step(qc[st], J[st], e[st], lam2[st])
+    return out, status
+
+
+FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

@@ -3682,4 +3682,233 @@ def Y():
                        ["q", "qd", "qdd"], ["Y"])
 
 
-BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = [-2.9670597283903604, 1.0471975511965979, -2.9670597283903604, 1.0471975511965979, -2.9670597283903604, 1.0471975511965979, 0.17453292519943275]
+_IK_DLS_UPPER = [2.9670597283903604, 5.235987755982988, 2.9670597283903604, 5.235987755982988, 2.9670597283903604, 5.235987755982988, 6.1086523819801535]
+_IK_DLS_RESTART = [
+    [2.730872227051397, 4.310439960918474, 1.1884758964286801, 1.386583611768851, 1.6907094288485087, 1.8010794366270857, 4.378813523850785],
+    [-1.177343628408912, 1.5252351027488809, 0.2846273822665464, 4.0257742680520865, 1.8768568602008653, 2.85752939905378, 5.836959012667163],
+    [-0.2763433809003848, 2.634883598206797, 0.7047629601308252, 2.869595763554074, -1.3869453013498365, 4.976325071049394, 5.5068562900134745],
+    [-0.15853700615435296, 5.1399484064396805, 0.4986097448701474, 1.335017630437614, -2.043841625876192, 4.671204079965311, 1.8021410830877949],
+    [-0.01099302581543471, 2.6262758017475156, 0.25147044052137035, 3.639287784682601, 1.6435430720590967, 1.419002954387918, 6.099589906246001],
+    [2.6247729807508566, 2.6502016379614854, 2.5274138389005536, 1.8438556577547072, -2.5615886792315985, 1.36347573991381, 0.2766377420859452],
+    [-2.955182041752997, 5.16734135945026, 0.9896739623673096, 3.3295368051581677, 0.6556895924957375, 4.741708292359336, 2.3037937556162413],
+    [0.9067546717993187, 4.444518423630646, 1.1791422247288965, 3.810129835268652, -1.3546905792271489, 2.3442700726725443, 3.420587500832785],
+    [0.7110703108197023, 3.2303414963402437, 0.5264508631968323, 4.876383548199216, 2.770140844123657, 2.624560499092338, 2.389925675826546],
+    [1.6525336067569265, 1.760724523331978, 1.050478832884881, 1.87499582666426, 1.6063307431193072, 2.1761740159675727, 2.2349781463545315],
+    [-0.7672381000764767, 2.363121663507574, 0.9156330996637911, 3.7334420598823104, 0.7544057718585027, 5.065354956691079, 3.3605286206003675],
+    [1.6569815177143727, 3.059657507456015, 2.1818071291553354, 2.1736713014099527, 0.08496251043306113, 1.6610248259323337, 4.814623566641729],
+    [2.0743995009523752, 2.43360679354866, -0.6465400482983781, 2.704083684745524, 1.3530878804844289, 2.2854560499587455, 1.7033346820981752],
+    [-1.4746474113106842, 2.2668774891989734, -1.045852083874855, 3.756942643438223, 2.9234557708258047, 4.056295196559274, 1.717021924698507],
+    [-1.774410006130736, 1.9624383585536118, 2.6328711350133265, 3.7998199551909617, -0.2451523708393082, 2.994009324136545, 0.7436964727731394],
+    [1.169354800414868, 4.546269494980006, 1.753886314597123, 1.1270290443481963, 1.3711691653366609, 4.110375995814032, 1.859041104861971],
+    [-2.030176256786962, 3.932270298885698, -0.011235527155053937, 3.2113678689743947, 0.970048807049245, 4.691579783161437, 1.3072998558110855],
+    [0.25088894134953765, 4.488529735271456, -2.21368762965146, 2.3029332382882646, -0.5872321126769879, 5.059787857075282, 4.9177112490974295],
+    [1.212780027876656, 5.233170009137297, 0.7525693487831422, 4.511375682496359, -2.7579594638456744, 3.435640596215844, 1.609679753946161],
+    [2.948660975309515, 3.882363784670049, -2.193096129117163, 2.5275542334848016, -1.7923194677437, 2.385810764412156, 3.338037731676809],
+    [-2.287728894986402, 2.260244520075341, -0.3806124147615306, 4.370406881367872, 0.768786975945321, 3.0646909551672015, 5.715370404305954],
+    [2.006915510990237, 1.1525466868966676, 2.8096483853533245, 1.8566349080122042, 1.6946227483472018, 3.0382088182115545, 4.686597019334725],
+    [-0.031287112018373975, 4.414302775958824, -0.8683803864070185, 1.168309456065547, -1.1854698857922796, 1.9330016704617834, 5.855484055417459],
+    [0.04517866337277798, 2.15794899375753, -1.9229022012967842, 3.265888590380514, 0.056340543756112194, 4.521342539519601, 4.224994100321087],
+    [-0.5916714437363413, 4.519199048243705, 0.6010332970514289, 1.091916531373614, -1.6190671701677795, 2.8843677163706225, 5.902174701216969],
+]
+# state vector of one sample: accepted iterate qc, candidate qn, best iterate, pose error e
+# at qc, then the scalars below (flags and counters as 0/1 and integer-valued doubles)
+_IK_DLS_SCALARS = ("en", "best_en", "ref", "lam2", "last", "restarts", "start", "active", "status", "it")
+
+
+def _ik_dls_clamp(x, i):
+    return ca.if_else(x < _IK_DLS_LOWER[i], _IK_DLS_LOWER[i], ca.if_else(x > _IK_DLS_UPPER[i], _IK_DLS_UPPER[i], x))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] (list of 6 SX), |e_p|^2, |e_r|^2."""
+    e = [T[i, 3] - F[i, 3] for i in range(3)]
+    Re = [[T[i, 0] * F[j, 0] + T[i, 1] * F[j, 1] + T[i, 2] * F[j, 2] for j in range(3)] for i in range(3)]
+    cosa = 0.5 * (Re[0][0] + Re[1][1] + Re[2][2] - 1.0)
+    cosa = ca.if_else(cosa > 1.0, 1.0, ca.if_else(cosa < -1.0, -1.0, cosa))
+    v = [0.5 * (Re[2][1] - Re[1][2]), 0.5 * (Re[0][2] - Re[2][0]), 0.5 * (Re[1][0] - Re[0][1])]
+    s = ca.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    angle = ca.atan2(s, cosa)
+    f = ca.if_else(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: the column of sym(Re) - cos(angle) I with the largest diagonal entry
+    is1 = Re[1][1] > Re[0][0]
+    is2 = Re[2][2] > ca.if_else(is1, Re[1][1], Re[0][0])
+    cols = [[0.5 * (Re[i][k] + Re[k][i]) - (cosa if i == k else 0.0) for i in range(3)] for k in range(3)]
+    col = [ca.if_else(is2, cols[2][i], ca.if_else(is1, cols[1][i], cols[0][i])) for i in range(3)]
+    ckk = ca.if_else(is2, cols[2][2], ca.if_else(is1, cols[1][1], cols[0][0]))
+    g = angle / ca.sqrt(ckk * (1.0 - cosa))
+    g = ca.if_else(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0.0, -g, g)
+    generic = cosa > -0.9
+    e += [ca.if_else(generic, f * v[i], col[i] * g) for i in range(3)]
+    ep = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    er = e[3] * e[3] + e[4] * e[4] + e[5] * e[5]
+    return e, ep, er
+
+
+def _ik_dls_solve6(J, weight, e, lam2):
+    """dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky (0 where a pivot is not positive),
+    Jm = J with column i scaled by weight[i]."""
+    Jm = [[J[r, i] * weight[i] for i in range(7)] for r in range(6)]
+    L = [[None] * 6 for _ in range(6)]
+    solved = 1
+    for r in range(6):
+        for k in range(r, 6):
+            acc = 0.0
+            for i in range(7):
+                acc = acc + Jm[k][i] * Jm[r][i]
+            if k == r:
+                acc = acc + lam2
+            for j in range(r):
+                acc = acc - L[k][j] * L[r][j]
+            if k == r:
+                solved = ca.logic_and(solved, acc > 0.0)
+                L[r][r] = ca.sqrt(ca.if_else(acc > 0.0, acc, 1.0))
+            else:
+                L[k][r] = acc / L[r][r]
+    y = [None] * 6
+    for r in range(6):
+        acc = e[r]
+        for j in range(r):
+            acc = acc - L[r][j] * y[j]
+        y[r] = acc / L[r][r]
+    for r in range(5, -1, -1):
+        acc = y[r]
+        for j in range(r + 1, 6):
+            acc = acc - L[j][r] * y[j]
+        y[r] = acc / L[r][r]
+    dq = []
+    for i in range(7):
+        acc = 0.0
+        for r in range(6):
+            acc = acc + Jm[r][i] * y[r]
+        dq.append(ca.if_else(solved, acc, 0.0))
+    return dq
+
+
+def _ik_dls_iteration(fk, jac):
+    """One iteration as an SX Function (state, T) -> state."""
+    n = 7
+    x = ca.SX.sym("x", 3 * n + 6 + len(_IK_DLS_SCALARS))
+    T = ca.SX.sym("T", 4, 4)
+    qc, qn, best, e = [x[k] for k in range(n)], [x[n + k] for k in range(n)], [x[2 * n + k] for k in range(n)], [x[3 * n + k] for k in range(6)]
+    en, best_en, ref, lam2, last, restarts, start, active, status, it = [x[3 * n + 6 + k] for k in range(len(_IK_DLS_SCALARS))]
+
+    # evaluate the candidate, accept or reject
+    F = fk(ca.vertcat(*qn))
+    ec, ep, er = _ik_dls_pose_error(T, F)
+    enc = ep + er
+    accept = ca.logic_and(active, ca.logic_or(start, enc < en))
+    reject = ca.logic_and(active, ca.logic_not(accept))
+    qc = [ca.if_else(accept, qn[i], qc[i]) for i in range(n)]
+    e = [ca.if_else(accept, ec[i], e[i]) for i in range(6)]
+    en_new = ca.if_else(accept, enc, en)
+    down = lam2 * 0.1
+    up = lam2 * 10.0
+    lam2 = ca.if_else(accept, ca.if_else(start, 0.01, ca.if_else(down < 1e-12, 1e-12, down)),
+                      ca.if_else(reject, ca.if_else(up > 100.0, 100.0, up), lam2))
+    progress = ca.logic_and(accept, ca.logic_or(start, en_new < 0.5 * ref))
+    ref = ca.if_else(progress, en_new, ref)
+    last = ca.if_else(progress, it, last)
+    start = ca.if_else(accept, 0, start)
+    better = ca.logic_and(accept, ca.logic_or(it == 0, en_new < best_en))
+    best_en = ca.if_else(better, en_new, best_en)
+    best = [ca.if_else(better, qc[i], best[i]) for i in range(n)]
+    en = en_new
+    converged = ca.logic_and(accept, ca.logic_and(ep < 1e-10 * 1e-10, er < 1e-10 * 1e-10))
+    within = 1
+    for i in range(n):
+        within = ca.logic_and(within, ca.logic_and(qc[i] >= _IK_DLS_LOWER[i], qc[i] <= _IK_DLS_UPPER[i]))
+    status = ca.if_else(converged, ca.if_else(within, 0, 1), status)
+    active = ca.if_else(converged, 0, active)
+
+    # stalled: restart from the next table configuration; otherwise a damped step
+    stalled = it - last >= 8
+    index = ca.fmod(restarts, 25)
+    restart = [0.0] * n
+    for row, values in enumerate(_IK_DLS_RESTART):
+        restart = [restart[i] + ca.if_else(index == row, values[i], 0.0) for i in range(n)]
+    J = jac(ca.vertcat(*qc))
+    dq1 = _ik_dls_solve6(J, [1.0] * n, e, lam2)
+    blocked = [ca.logic_or(ca.logic_and(qc[i] <= _IK_DLS_LOWER[i], dq1[i] < 0.0),
+                           ca.logic_and(qc[i] >= _IK_DLS_UPPER[i], dq1[i] > 0.0)) for i in range(n)]
+    any_blocked = 0
+    for b in blocked:
+        any_blocked = ca.logic_or(any_blocked, b)
+    dq2 = _ik_dls_solve6(J, [ca.if_else(b, 0.0, 1.0) for b in blocked], e, lam2)
+    dq = [ca.if_else(any_blocked, dq2[i], dq1[i]) for i in range(n)]
+    largest = 0.0
+    for i in range(n):
+        largest = ca.if_else(ca.fabs(dq[i]) > largest, ca.fabs(dq[i]), largest)
+    f = ca.if_else(largest > 0.5, 0.5 / largest, 1.0)
+    step = [_ik_dls_clamp(qc[i] + f * dq[i], i) for i in range(n)]
+    move = ca.logic_and(active, ca.logic_not(stalled))
+    jump = ca.logic_and(active, stalled)
+    qn = [ca.if_else(jump, restart[i], ca.if_else(move, step[i], qn[i])) for i in range(n)]
+    restarts = ca.if_else(jump, restarts + 1, restarts)
+    start = ca.if_else(jump, 1, start)
+    state = ca.vertcat(*qc, *qn, *best, *e, en, best_en, ref, lam2, last, restarts, start, active, status, it + 1)
+    return ca.Function("ik_dls_iteration", [x, T], [state])
+
+
+def ik_dls():
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    in  T: 4 x 4, target flange pose in the base frame (last row unused) [m (translation), 1 (rotation)]
+    in  q0: 7, start configuration, DH order [rad]
+    out q: 7, joint angles reaching T (status 0), otherwise see status [rad]
+    out status: 1, outcome (integer-valued):
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+    Constants: as in the C header (MAX_ITERATIONS = 200, TOL_POSITION = 1e-10, TOL_ROTATION = 1e-10, MAX_STEP = 0.5, LAMBDA2_INITIAL = 0.01, LAMBDA2_MIN = 1e-12, LAMBDA2_MAX = 100.0, LAMBDA2_DOWN = 0.1, LAMBDA2_UP = 10.0, STALL_ITERATIONS = 8, STALL_RATIO = 0.5, ORTHONORMAL_TOL = 1e-06, NEAR_PI_COS = -0.9, SMALL_SIN = 0.0001).
+
+    Branch-free: always MAX_ITERATIONS + 1 = 201 evaluations of one iteration (Function.fold),
+    each one fk_hom + one jacobian + two 6x6 solves; converged samples are frozen.
+    """
+    n = 7
+    T = ca.SX.sym("T", 4, 4)
+    q0 = ca.SX.sym("q0", n)
+    # input check; q = q0 clamped to the limits where finite, else 0
+    valid = 1
+    for k in range(16):
+        valid = ca.logic_and(valid, ca.fabs(T[k // 4, k % 4]) < ca.inf)
+    q = []
+    for i in range(n):
+        finite = ca.fabs(q0[i]) < ca.inf
+        valid = ca.logic_and(valid, finite)
+        q.append(ca.if_else(finite, _ik_dls_clamp(q0[i], i), 0.0))
+    for i in range(3):
+        for j in range(3):
+            gram = T[0, i] * T[0, j] + T[1, i] * T[1, j] + T[2, i] * T[2, j] - (1.0 if i == j else 0.0)
+            valid = ca.logic_and(valid, ca.logic_not(ca.fabs(gram) > 1e-06))
+    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))
+    valid = ca.logic_and(valid, det > 0.0)
+    state0 = ca.vertcat(*q, *q, *q, *([0.0] * 6), 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 1.0,
+                        valid, ca.if_else(valid, 2.0, 3.0), 0.0)
+    initial = ca.Function("ik_dls_initial", [T, q0], [state0])
+    x = ca.SX.sym("x", state0.numel())
+    final = ca.Function("ik_dls_final", [x], [ca.vertcat(*[ca.if_else(x[3 * n + 6 + 7], x[2 * n + i], x[i]) for i in range(n)]),
+                                             x[3 * n + 6 + 8]])
+    loop = _ik_dls_iteration(fk_hom(), jacobian()).fold(200 + 1)
+    T_, q0_ = ca.MX.sym("T", 4, 4), ca.MX.sym("q0", n)
+    steps = 200 + 1
+    xN = loop(initial(T_, q0_), ca.repmat(T_, 1, steps))
+    q_out, status_out = final(xN)
+    return ca.Function("ik_dls", [T_, q0_], [q_out, status_out],
+                       ["T", "q0"], ["q", "status"])
+
+
+BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

@@ -5582,4 +5582,250 @@ def Y(q, qd, qdd):
     return Y
 
 
-FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = np.array([-2.9670597283903604, 1.0471975511965979, -2.9670597283903604, 1.0471975511965979, -2.9670597283903604, 1.0471975511965979, 0.17453292519943275])
+_IK_DLS_UPPER = np.array([2.9670597283903604, 5.235987755982988, 2.9670597283903604, 5.235987755982988, 2.9670597283903604, 5.235987755982988, 6.1086523819801535])
+_IK_DLS_RESTART = np.array([
+    [2.730872227051397, 4.310439960918474, 1.1884758964286801, 1.386583611768851, 1.6907094288485087, 1.8010794366270857, 4.378813523850785],
+    [-1.177343628408912, 1.5252351027488809, 0.2846273822665464, 4.0257742680520865, 1.8768568602008653, 2.85752939905378, 5.836959012667163],
+    [-0.2763433809003848, 2.634883598206797, 0.7047629601308252, 2.869595763554074, -1.3869453013498365, 4.976325071049394, 5.5068562900134745],
+    [-0.15853700615435296, 5.1399484064396805, 0.4986097448701474, 1.335017630437614, -2.043841625876192, 4.671204079965311, 1.8021410830877949],
+    [-0.01099302581543471, 2.6262758017475156, 0.25147044052137035, 3.639287784682601, 1.6435430720590967, 1.419002954387918, 6.099589906246001],
+    [2.6247729807508566, 2.6502016379614854, 2.5274138389005536, 1.8438556577547072, -2.5615886792315985, 1.36347573991381, 0.2766377420859452],
+    [-2.955182041752997, 5.16734135945026, 0.9896739623673096, 3.3295368051581677, 0.6556895924957375, 4.741708292359336, 2.3037937556162413],
+    [0.9067546717993187, 4.444518423630646, 1.1791422247288965, 3.810129835268652, -1.3546905792271489, 2.3442700726725443, 3.420587500832785],
+    [0.7110703108197023, 3.2303414963402437, 0.5264508631968323, 4.876383548199216, 2.770140844123657, 2.624560499092338, 2.389925675826546],
+    [1.6525336067569265, 1.760724523331978, 1.050478832884881, 1.87499582666426, 1.6063307431193072, 2.1761740159675727, 2.2349781463545315],
+    [-0.7672381000764767, 2.363121663507574, 0.9156330996637911, 3.7334420598823104, 0.7544057718585027, 5.065354956691079, 3.3605286206003675],
+    [1.6569815177143727, 3.059657507456015, 2.1818071291553354, 2.1736713014099527, 0.08496251043306113, 1.6610248259323337, 4.814623566641729],
+    [2.0743995009523752, 2.43360679354866, -0.6465400482983781, 2.704083684745524, 1.3530878804844289, 2.2854560499587455, 1.7033346820981752],
+    [-1.4746474113106842, 2.2668774891989734, -1.045852083874855, 3.756942643438223, 2.9234557708258047, 4.056295196559274, 1.717021924698507],
+    [-1.774410006130736, 1.9624383585536118, 2.6328711350133265, 3.7998199551909617, -0.2451523708393082, 2.994009324136545, 0.7436964727731394],
+    [1.169354800414868, 4.546269494980006, 1.753886314597123, 1.1270290443481963, 1.3711691653366609, 4.110375995814032, 1.859041104861971],
+    [-2.030176256786962, 3.932270298885698, -0.011235527155053937, 3.2113678689743947, 0.970048807049245, 4.691579783161437, 1.3072998558110855],
+    [0.25088894134953765, 4.488529735271456, -2.21368762965146, 2.3029332382882646, -0.5872321126769879, 5.059787857075282, 4.9177112490974295],
+    [1.212780027876656, 5.233170009137297, 0.7525693487831422, 4.511375682496359, -2.7579594638456744, 3.435640596215844, 1.609679753946161],
+    [2.948660975309515, 3.882363784670049, -2.193096129117163, 2.5275542334848016, -1.7923194677437, 2.385810764412156, 3.338037731676809],
+    [-2.287728894986402, 2.260244520075341, -0.3806124147615306, 4.370406881367872, 0.768786975945321, 3.0646909551672015, 5.715370404305954],
+    [2.006915510990237, 1.1525466868966676, 2.8096483853533245, 1.8566349080122042, 1.6946227483472018, 3.0382088182115545, 4.686597019334725],
+    [-0.031287112018373975, 4.414302775958824, -0.8683803864070185, 1.168309456065547, -1.1854698857922796, 1.9330016704617834, 5.855484055417459],
+    [0.04517866337277798, 2.15794899375753, -1.9229022012967842, 3.265888590380514, 0.056340543756112194, 4.521342539519601, 4.224994100321087],
+    [-0.5916714437363413, 4.519199048243705, 0.6010332970514289, 1.091916531373614, -1.6190671701677795, 2.8843677163706225, 5.902174701216969],
+])
+for _array in (_IK_DLS_LOWER, _IK_DLS_UPPER, _IK_DLS_RESTART):
+    _array.flags.writeable = False
+
+
+def ik_dls(T, q0):
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    T: (..., 4, 4) target flange pose in the base frame (row-major; last row unused) [m (translation), 1 (rotation)]
+    q0: (..., 7) start configuration, DH order [rad]
+    Returns q: (..., 7) double, joint angles reaching T (status 0), otherwise see status [rad];
+    status: (..., 1) int, outcome:
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+
+    Constants:
+        MAX_ITERATIONS = 200: iteration limit (one FK evaluation each; restarts included)
+        TOL_POSITION = 1e-10: convergence: |p* - p| below this [m]
+        TOL_ROTATION = 1e-10: convergence: rotation-error angle below this [rad]
+        MAX_STEP = 0.5: largest joint change per iteration; longer steps are scaled down [rad]
+        LAMBDA2_INITIAL = 0.01: damping lambda^2 at the start of each attempt [m^2, rad^2]
+        LAMBDA2_MIN = 1e-12: smallest damping (keeps J J^T + lambda^2 I positive definite)
+        LAMBDA2_MAX = 100.0: largest damping
+        LAMBDA2_DOWN = 0.1: damping factor after an accepted step
+        LAMBDA2_UP = 10.0: damping factor after a rejected step
+        STALL_ITERATIONS = 8: restart after this many iterations without enough progress
+        STALL_RATIO = 0.5: enough progress: |e|^2 below this times its value at the last progress
+        ORTHONORMAL_TOL = 1e-06: invalid input: max |R^T R - I| above this (or det R <= 0)
+        NEAR_PI_COS = -0.9: rotation log: cos(angle) below this takes the axis from the symmetric part
+        SMALL_SIN = 0.0001: rotation log: sin(angle) below this uses angle/sin(angle) = 1 + s^2/6
+    Restarts start from a fixed table of 25 configurations uniform within the limits.
+
+    Cost per iteration: one fk_hom + one jacobian + a 6x6 solve (see the C header for counts);
+    at most MAX_ITERATIONS = 200 iterations.
+    """
+    T, batch_T = _input(T, (4, 4), "T")
+    q0, batch_q0 = _input(q0, (7,), "q0")
+    batch = np.broadcast_shapes(batch_T, batch_q0)
+    T = np.broadcast_to(T, batch + (4, 4)).reshape(-1, 4, 4)
+    q0 = np.broadcast_to(q0, batch + (7,)).reshape(-1, 7)
+    with np.errstate(all="ignore"):  # branches are evaluated on every sample, then selected
+        q, status = _ik_dls_solve(T, q0)
+    return q.reshape(batch + (7,)), status.reshape(batch + (1,))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] per sample (rotation vector in base axes), |e_p|^2, |e_r|^2."""
+    e = np.empty((T.shape[0], 6))
+    for i in range(3):
+        e[:, i] = T[:, i, 3] - F[:, i, 3]
+    Re = np.empty((T.shape[0], 3, 3))
+    for i in range(3):
+        for j in range(3):
+            Re[:, i, j] = T[:, i, 0] * F[:, j, 0] + T[:, i, 1] * F[:, j, 1] + T[:, i, 2] * F[:, j, 2]
+    cosa = 0.5 * (Re[:, 0, 0] + Re[:, 1, 1] + Re[:, 2, 2] - 1.0)
+    cosa = np.where(cosa > 1.0, 1.0, np.where(cosa < -1.0, -1.0, cosa))
+    v = np.stack([0.5 * (Re[:, 2, 1] - Re[:, 1, 2]), 0.5 * (Re[:, 0, 2] - Re[:, 2, 0]),
+                  0.5 * (Re[:, 1, 0] - Re[:, 0, 1])], axis=1)
+    s = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+    angle = np.arctan2(s, cosa)
+    # rotation vector = v angle / sin(angle), v = sin(angle) axis
+    f = np.where(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: sym(Re) - cos(angle) I = (1 - cos(angle)) a a^T; the column of its largest
+    # diagonal entry gives the axis a, the sign of v picks its direction
+    rows = np.arange(T.shape[0])
+    k = np.argmax(np.stack([Re[:, 0, 0], Re[:, 1, 1], Re[:, 2, 2]], axis=1), axis=1)
+    col = np.stack([0.5 * (Re[rows, i, k] + Re[rows, k, i]) - np.where(k == i, cosa, 0.0) for i in range(3)], axis=1)
+    g = angle / np.sqrt(col[rows, k] * (1.0 - cosa))
+    g = np.where(col[:, 0] * v[:, 0] + col[:, 1] * v[:, 1] + col[:, 2] * v[:, 2] < 0.0, -g, g)
+    generic = (cosa > -0.9)[:, None]
+    e[:, 3:] = np.where(generic, f[:, None] * v, col * g[:, None])
+    ep = e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2]
+    er = e[:, 3] * e[:, 3] + e[:, 4] * e[:, 4] + e[:, 5] * e[:, 5]
+    return e, ep, er
+
+
+def _ik_dls_step(q, J, e, lam2):
+    """Next candidates: q + dq scaled to max |dq_i| <= MAX_STEP, clamped to the limits, with
+    dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky; Jm = J without the joints a limit blocks
+    (second pass only for the samples where the first step pushes such a joint outward)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    weight = np.ones(q.shape)
+    dq = np.zeros(q.shape)
+    todo = np.arange(q.shape[0])
+    for _ in range(2):
+        Jm = J[todo] * weight[todo][:, None, :]
+        lam = lam2[todo]
+        L = np.zeros((todo.size, 6, 6))
+        solved = np.ones(todo.size, dtype=bool)
+        for r in range(6):
+            for k in range(r, 6):
+                acc = np.zeros(todo.size)
+                for i in range(7):
+                    acc = acc + Jm[:, k, i] * Jm[:, r, i]
+                if k == r:
+                    acc = acc + lam
+                for j in range(r):
+                    acc = acc - L[:, k, j] * L[:, r, j]
+                if k == r:
+                    solved &= acc > 0.0
+                    L[:, r, r] = np.sqrt(np.where(acc > 0.0, acc, 1.0))
+                else:
+                    L[:, k, r] = acc / L[:, r, r]
+        y = np.zeros((todo.size, 6))
+        for r in range(6):
+            acc = e[todo, r]
+            for j in range(r):
+                acc = acc - L[:, r, j] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        for r in range(5, -1, -1):
+            acc = y[:, r]
+            for j in range(r + 1, 6):
+                acc = acc - L[:, j, r] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        step = np.zeros((todo.size, 7))
+        for r in range(6):
+            step = step + Jm[:, r, :] * y[:, r:r + 1]
+        step = np.where(solved[:, None], step, 0.0)
+        dq[todo] = step
+        qt = q[todo]
+        blocked = ((qt <= lower) & (step < 0.0)) | ((qt >= upper) & (step > 0.0))
+        weight[todo] = np.where(blocked, 0.0, weight[todo])
+        todo = todo[blocked.any(axis=1)]
+        if todo.size == 0:
+            break
+    largest = np.abs(dq).max(axis=1)
+    f = np.where(largest > 0.5, 0.5 / largest, 1.0)
+    return np.clip(q + f[:, None] * dq, lower, upper)
+
+
+def _ik_dls_solve(T, q0):
+    """The iteration on flat batches: T (N, 4, 4), q0 (N, 7); returns q, status (N,)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    count = T.shape[0]
+    finite_q0 = np.isfinite(q0)
+    q = np.where(finite_q0, np.clip(np.where(finite_q0, q0, 0.0), lower, upper), 0.0)
+    valid = np.isfinite(T).reshape(count, -1).all(axis=1) & finite_q0.all(axis=1)
+    for i in range(3):
+        for j in range(3):
+            gram = T[:, 0, i] * T[:, 0, j] + T[:, 1, i] * T[:, 1, j] + T[:, 2, i] * T[:, 2, j] - (1.0 if i == j else 0.0)
+            valid &= ~(np.abs(gram) > 1e-06)
+    det = (T[:, 0, 0] * (T[:, 1, 1] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 1])
+           - T[:, 0, 1] * (T[:, 1, 0] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 0])
+           + T[:, 0, 2] * (T[:, 1, 0] * T[:, 2, 1] - T[:, 1, 1] * T[:, 2, 0]))
+    valid &= det > 0.0
+    status = np.full(count, 3, dtype=np.int64)
+    out = q.copy()
+
+    # per-sample state: accepted iterate qc with error e, en = |e|^2 and Jacobian J; candidate qn
+    qc, qn, best = q.copy(), q.copy(), q.copy()
+    e = np.zeros((count, 6))
+    J = np.zeros((count, 6, 7))
+    en, best_en, ref = np.zeros(count), np.zeros(count), np.zeros(count)
+    lam2 = np.full(count, 0.01)
+    last = np.zeros(count, dtype=np.int64)
+    restarts = np.zeros(count, dtype=np.int64)
+    start = np.ones(count, dtype=bool)
+    active = valid.copy()
+    for it in range(200 + 1):
+        a = np.flatnonzero(active)
+        if a.size == 0:
+            break
+        F = fk_hom(qn[a])
+        ec, ep, er = _ik_dls_pose_error(T[a], F)
+        enc = ep + er
+        accept = start[a] | (enc < en[a])
+        # accepted: move, update damping, progress reference and best iterate
+        ia, was_start = a[accept], start[a][accept]
+        qc[ia], e[ia], en[ia] = qn[ia], ec[accept], enc[accept]
+        down = lam2[ia] * 0.1
+        lam2[ia] = np.where(was_start, 0.01, np.where(down < 1e-12, 1e-12, down))
+        progress = was_start | (en[ia] < 0.5 * ref[ia])
+        ref[ia] = np.where(progress, en[ia], ref[ia])
+        last[ia] = np.where(progress, it, last[ia])
+        start[ia] = False
+        better = ia[(it == 0) | (en[ia] < best_en[ia])]
+        best_en[better], best[better] = en[better], qc[better]
+        converged = (ep[accept] < 1e-10 * 1e-10) & (er[accept] < 1e-10 * 1e-10)
+        done = ia[converged]
+        within = ((qc[done] >= lower) & (qc[done] <= upper)).all(axis=1)
+        status[done], out[done] = np.where(within, 0, 1), qc[done]
+        active[done] = False
+        moved = ia[~converged]
+        if moved.size:
+            J[moved] = jacobian(qc[moved])
+        # rejected: more damping
+        ir = a[~accept]
+        up = lam2[ir] * 10.0
+        lam2[ir] = np.where(up > 100.0, 100.0, up)
+        a = np.flatnonzero(active)
+        if it == 200:
+            status[a], out[a] = 2, best[a]
+            break
+        # stalled: restart from the next table configuration; others: a damped step
+        stalled = it - last[a] >= 8
+        rs = a[stalled]
+        qn[rs] = _IK_DLS_RESTART[restarts[rs] % 25]
+        restarts[rs] += 1
+        start[rs] = True
+        st = a[~stalled]
+        if st.size:
+            qn[st] = _ik_dls_step(qc[st], J[st], e[st], lam2[st])
+    return out, status
+
+
+FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

@@ -270,6 +270,55 @@ void panda_Y_m(const double *q, double *Y);
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
 
+/*
+ * ik_dls: Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T
+ * within the joint limits.
+ * Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+ * p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+ * I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+ * clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+ * a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+ * and q0 give the same q. T's last row is only checked to be finite.
+ *
+ * in  T[16]: 4 x 4 double, target flange pose in the base frame (row-major; last row unused) [m (translation), 1 (rotation)]
+ * in  q0[7]: 7 double, start configuration, DH order [rad]
+ * out q[7]: 7 double, joint angles reaching T (status 0), otherwise see status [rad]
+ * out status[1]: 1 int, outcome:
+ *     0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+ *       the joint limits
+ *     1: converged but outside the joint limits (cannot happen here: every iterate is
+ *       clamped)
+ *     2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+ *       (smallest |e|^2)
+ *     3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+ *       ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else
+ *       0
+ *
+ * Constants:
+ *   MAX_ITERATIONS = 200: iteration limit (one FK evaluation each; restarts included)
+ *   TOL_POSITION = 1e-10: convergence: |p* - p| below this [m]
+ *   TOL_ROTATION = 1e-10: convergence: rotation-error angle below this [rad]
+ *   MAX_STEP = 0.5: largest joint change per iteration; longer steps are scaled down [rad]
+ *   LAMBDA2_INITIAL = 0.01: damping lambda^2 at the start of each attempt [m^2, rad^2]
+ *   LAMBDA2_MIN = 1e-12: smallest damping (keeps J J^T + lambda^2 I positive definite)
+ *   LAMBDA2_MAX = 100.0: largest damping
+ *   LAMBDA2_DOWN = 0.1: damping factor after an accepted step
+ *   LAMBDA2_UP = 10.0: damping factor after a rejected step
+ *   STALL_ITERATIONS = 8: restart after this many iterations without enough progress
+ *   STALL_RATIO = 0.5: enough progress: |e|^2 below this times its value at the last progress
+ *   ORTHONORMAL_TOL = 1e-06: invalid input: max |R^T R - I| above this (or det R <= 0)
+ *   NEAR_PI_COS = -0.9: rotation log: cos(angle) below this takes the axis from the symmetric part
+ *   SMALL_SIN = 0.0001: rotation log: sin(angle) below this uses angle/sin(angle) = 1 + s^2/6
+ * Restarts start from a fixed table of 25 configurations uniform within the limits.
+ *
+ * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
+ * fk_hom (41 add, 76 mul, 14 call) + jacobian (66 add, 97 mul, 12 call, only after
+ * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 380 add, 505 mul, 34 call;
+ * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
+ */
+void panda_ik_dls(const double *T, const double *q0, double *q, int *status);
+
 #ifdef __cplusplus
 }
 #endif

@@ -4293,4 +4293,233 @@ def Y():
                        ["q", "qd", "qdd"], ["Y"])
 
 
-BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973]
+_IK_DLS_UPPER = [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]
+_IK_DLS_RESTART = [
+    [2.666665597503284, 0.9837895586198608, 1.1605331641203107, -2.8285705938880126, 1.6509584830165296, 0.6610096815842741, 1.20813207537006],
+    [-1.1496626313079594, -1.3604477432966409, 0.2779353940030864, -0.9371293989794927, 1.8327293276330505, 1.611837047871945, 2.6319945221970387],
+    [-0.26984616110746096, -0.42648434472009833, 0.6881929962005793, -1.7657332919452975, -1.3543362754550528, 3.518798077883906, 2.3096529767292693],
+    [-0.15480957917223792, 1.681966080372566, 0.4868867316654897, -2.8655266285396137, -1.9957880476722287, 3.244182716371511, -1.3079591887153492],
+    [-0.010734564387195, -0.4337293118139778, 0.24555801838132396, -1.2141144868813494, 1.604901073312782, 0.31713274633081256, 2.8884505957587163],
+    [2.563060893032666, -0.41359153359353007, 2.467990800919653, -2.5008552835148725, -2.5013621429063724, 0.2671570759503328, -2.797595810315291],
+    [-2.885701574405412, 1.705022044126431, 0.9664053418710146, -1.4361051799148212, 0.6402734121461418, 3.307638002439969, -0.8181010728812055],
+    [0.8854355999194521, 1.0966400488635322, 1.1514189401102493, -1.0916763100365678, -1.3228399070092578, 1.1498927713965525, 0.27243528776403947],
+    [0.6943520522438487, 0.07469768231492169, 0.5140732663200058, -0.3275192408761214, 2.7050109544082432, 1.4021600982240392, -0.7339942347082182],
+    [1.6136802279522322, -1.1622421849807631, 1.0257806047499094, -2.4785379120314173, 1.5685636583272937, 0.998602756190346, -0.8852987308205402],
+    [-0.7491992581347584, -0.6552195713926503, 0.8941052835141576, -1.1466364991257079, 0.7366686359197128, 3.5989268626785282, 0.21378847589423478],
+    [1.6180235622955546, -0.068962764207948, 2.1305097888039843, -2.2644847531594285, 0.08296492285689583, 0.5349575623552231, 1.6336956138779972],
+    [2.0256274643213357, -0.5958939994915087, -0.6313389865431254, -1.8843516128188313, 1.3212748899579156, 1.0969589039095495, -1.4044425128790081],
+    [-1.4399763860191275, -0.7362258869046268, -1.0212626370870137, -1.1297942252504882, 2.854721232527623, 2.6907516832794682, -1.391077076515698],
+    [-1.7326911425377975, -0.9924646925093638, 2.570968648350211, -1.09906514033842, -0.23938849536340712, 1.7346718742554885, -2.3415182843147857],
+    [1.141861631845201, 1.1822813819480569, 1.71264999172733, -3.014586787897075, 1.3389310584876912, 2.7394255492939235, -1.2523969661187193],
+    [-1.9824439705431494, 0.6654936079324125, -0.010971364180793586, -1.5207938678367736, 0.947241601431628, 3.262521281277822, -1.7911660059123182],
+    [0.24499019106917697, 1.1336832696348988, -2.1616407340976034, -2.171845992195634, -0.5734254635251466, 3.59391635498407, 1.7343595605862538],
+    [1.184265871409767, 1.7604283729207029, 0.7348753897220273, -0.5891111467175492, -2.6931159754357283, 2.1321493831162748, -1.4958954825440431],
+    [2.8793338273641518, 0.6234885425276953, -2.1415333685709967, -2.010865805885637, -1.7501795276332304, 1.1872802747571618, 0.19182637925872914],
+    [-2.2339411856194555, -0.7418086911987061, -0.37166368399561245, -0.6901399212081296, 0.7507117177633478, 1.798286840858755, 2.513264632254432],
+    [1.959730117447441, -1.6741302660993242, 2.743589618029151, -2.4916967180586296, 1.6547797948947758, 1.7744523560930325, 1.5086791499479584],
+    [-0.03055150820978314, 1.07120829357771, -0.8479635477045049, -2.9850021608527597, -1.1575978290026832, 0.7797424892069877, 2.650084015255391],
+    [0.04411644974230455, -0.8279082784193712, -1.8776920782917912, -1.4817202457025955, 0.05501589869009438, 3.109304152428455, 1.0579291618498905],
+    [-0.5777604196957933, 1.159496863662933, 0.5869021627319264, -3.039751037906362, -1.5810006341436034, 1.6359921025149016, 2.695676898600652],
+]
+# state vector of one sample: accepted iterate qc, candidate qn, best iterate, pose error e
+# at qc, then the scalars below (flags and counters as 0/1 and integer-valued doubles)
+_IK_DLS_SCALARS = ("en", "best_en", "ref", "lam2", "last", "restarts", "start", "active", "status", "it")
+
+
+def _ik_dls_clamp(x, i):
+    return ca.if_else(x < _IK_DLS_LOWER[i], _IK_DLS_LOWER[i], ca.if_else(x > _IK_DLS_UPPER[i], _IK_DLS_UPPER[i], x))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] (list of 6 SX), |e_p|^2, |e_r|^2."""
+    e = [T[i, 3] - F[i, 3] for i in range(3)]
+    Re = [[T[i, 0] * F[j, 0] + T[i, 1] * F[j, 1] + T[i, 2] * F[j, 2] for j in range(3)] for i in range(3)]
+    cosa = 0.5 * (Re[0][0] + Re[1][1] + Re[2][2] - 1.0)
+    cosa = ca.if_else(cosa > 1.0, 1.0, ca.if_else(cosa < -1.0, -1.0, cosa))
+    v = [0.5 * (Re[2][1] - Re[1][2]), 0.5 * (Re[0][2] - Re[2][0]), 0.5 * (Re[1][0] - Re[0][1])]
+    s = ca.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    angle = ca.atan2(s, cosa)
+    f = ca.if_else(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: the column of sym(Re) - cos(angle) I with the largest diagonal entry
+    is1 = Re[1][1] > Re[0][0]
+    is2 = Re[2][2] > ca.if_else(is1, Re[1][1], Re[0][0])
+    cols = [[0.5 * (Re[i][k] + Re[k][i]) - (cosa if i == k else 0.0) for i in range(3)] for k in range(3)]
+    col = [ca.if_else(is2, cols[2][i], ca.if_else(is1, cols[1][i], cols[0][i])) for i in range(3)]
+    ckk = ca.if_else(is2, cols[2][2], ca.if_else(is1, cols[1][1], cols[0][0]))
+    g = angle / ca.sqrt(ckk * (1.0 - cosa))
+    g = ca.if_else(col[0] * v[0] + col[1] * v[1] + col[2] * v[2] < 0.0, -g, g)
+    generic = cosa > -0.9
+    e += [ca.if_else(generic, f * v[i], col[i] * g) for i in range(3)]
+    ep = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    er = e[3] * e[3] + e[4] * e[4] + e[5] * e[5]
+    return e, ep, er
+
+
+def _ik_dls_solve6(J, weight, e, lam2):
+    """dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky (0 where a pivot is not positive),
+    Jm = J with column i scaled by weight[i]."""
+    Jm = [[J[r, i] * weight[i] for i in range(7)] for r in range(6)]
+    L = [[None] * 6 for _ in range(6)]
+    solved = 1
+    for r in range(6):
+        for k in range(r, 6):
+            acc = 0.0
+            for i in range(7):
+                acc = acc + Jm[k][i] * Jm[r][i]
+            if k == r:
+                acc = acc + lam2
+            for j in range(r):
+                acc = acc - L[k][j] * L[r][j]
+            if k == r:
+                solved = ca.logic_and(solved, acc > 0.0)
+                L[r][r] = ca.sqrt(ca.if_else(acc > 0.0, acc, 1.0))
+            else:
+                L[k][r] = acc / L[r][r]
+    y = [None] * 6
+    for r in range(6):
+        acc = e[r]
+        for j in range(r):
+            acc = acc - L[r][j] * y[j]
+        y[r] = acc / L[r][r]
+    for r in range(5, -1, -1):
+        acc = y[r]
+        for j in range(r + 1, 6):
+            acc = acc - L[j][r] * y[j]
+        y[r] = acc / L[r][r]
+    dq = []
+    for i in range(7):
+        acc = 0.0
+        for r in range(6):
+            acc = acc + Jm[r][i] * y[r]
+        dq.append(ca.if_else(solved, acc, 0.0))
+    return dq
+
+
+def _ik_dls_iteration(fk, jac):
+    """One iteration as an SX Function (state, T) -> state."""
+    n = 7
+    x = ca.SX.sym("x", 3 * n + 6 + len(_IK_DLS_SCALARS))
+    T = ca.SX.sym("T", 4, 4)
+    qc, qn, best, e = [x[k] for k in range(n)], [x[n + k] for k in range(n)], [x[2 * n + k] for k in range(n)], [x[3 * n + k] for k in range(6)]
+    en, best_en, ref, lam2, last, restarts, start, active, status, it = [x[3 * n + 6 + k] for k in range(len(_IK_DLS_SCALARS))]
+
+    # evaluate the candidate, accept or reject
+    F = fk(ca.vertcat(*qn))
+    ec, ep, er = _ik_dls_pose_error(T, F)
+    enc = ep + er
+    accept = ca.logic_and(active, ca.logic_or(start, enc < en))
+    reject = ca.logic_and(active, ca.logic_not(accept))
+    qc = [ca.if_else(accept, qn[i], qc[i]) for i in range(n)]
+    e = [ca.if_else(accept, ec[i], e[i]) for i in range(6)]
+    en_new = ca.if_else(accept, enc, en)
+    down = lam2 * 0.1
+    up = lam2 * 10.0
+    lam2 = ca.if_else(accept, ca.if_else(start, 0.01, ca.if_else(down < 1e-12, 1e-12, down)),
+                      ca.if_else(reject, ca.if_else(up > 100.0, 100.0, up), lam2))
+    progress = ca.logic_and(accept, ca.logic_or(start, en_new < 0.5 * ref))
+    ref = ca.if_else(progress, en_new, ref)
+    last = ca.if_else(progress, it, last)
+    start = ca.if_else(accept, 0, start)
+    better = ca.logic_and(accept, ca.logic_or(it == 0, en_new < best_en))
+    best_en = ca.if_else(better, en_new, best_en)
+    best = [ca.if_else(better, qc[i], best[i]) for i in range(n)]
+    en = en_new
+    converged = ca.logic_and(accept, ca.logic_and(ep < 1e-10 * 1e-10, er < 1e-10 * 1e-10))
+    within = 1
+    for i in range(n):
+        within = ca.logic_and(within, ca.logic_and(qc[i] >= _IK_DLS_LOWER[i], qc[i] <= _IK_DLS_UPPER[i]))
+    status = ca.if_else(converged, ca.if_else(within, 0, 1), status)
+    active = ca.if_else(converged, 0, active)
+
+    # stalled: restart from the next table configuration; otherwise a damped step
+    stalled = it - last >= 8
+    index = ca.fmod(restarts, 25)
+    restart = [0.0] * n
+    for row, values in enumerate(_IK_DLS_RESTART):
+        restart = [restart[i] + ca.if_else(index == row, values[i], 0.0) for i in range(n)]
+    J = jac(ca.vertcat(*qc))
+    dq1 = _ik_dls_solve6(J, [1.0] * n, e, lam2)
+    blocked = [ca.logic_or(ca.logic_and(qc[i] <= _IK_DLS_LOWER[i], dq1[i] < 0.0),
+                           ca.logic_and(qc[i] >= _IK_DLS_UPPER[i], dq1[i] > 0.0)) for i in range(n)]
+    any_blocked = 0
+    for b in blocked:
+        any_blocked = ca.logic_or(any_blocked, b)
+    dq2 = _ik_dls_solve6(J, [ca.if_else(b, 0.0, 1.0) for b in blocked], e, lam2)
+    dq = [ca.if_else(any_blocked, dq2[i], dq1[i]) for i in range(n)]
+    largest = 0.0
+    for i in range(n):
+        largest = ca.if_else(ca.fabs(dq[i]) > largest, ca.fabs(dq[i]), largest)
+    f = ca.if_else(largest > 0.5, 0.5 / largest, 1.0)
+    step = [_ik_dls_clamp(qc[i] + f * dq[i], i) for i in range(n)]
+    move = ca.logic_and(active, ca.logic_not(stalled))
+    jump = ca.logic_and(active, stalled)
+    qn = [ca.if_else(jump, restart[i], ca.if_else(move, step[i], qn[i])) for i in range(n)]
+    restarts = ca.if_else(jump, restarts + 1, restarts)
+    start = ca.if_else(jump, 1, start)
+    state = ca.vertcat(*qc, *qn, *best, *e, en, best_en, ref, lam2, last, restarts, start, active, status, it + 1)
+    return ca.Function("ik_dls_iteration", [x, T], [state])
+
+
+def ik_dls():
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    in  T: 4 x 4, target flange pose in the base frame (last row unused) [m (translation), 1 (rotation)]
+    in  q0: 7, start configuration, DH order [rad]
+    out q: 7, joint angles reaching T (status 0), otherwise see status [rad]
+    out status: 1, outcome (integer-valued):
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+    Constants: as in the C header (MAX_ITERATIONS = 200, TOL_POSITION = 1e-10, TOL_ROTATION = 1e-10, MAX_STEP = 0.5, LAMBDA2_INITIAL = 0.01, LAMBDA2_MIN = 1e-12, LAMBDA2_MAX = 100.0, LAMBDA2_DOWN = 0.1, LAMBDA2_UP = 10.0, STALL_ITERATIONS = 8, STALL_RATIO = 0.5, ORTHONORMAL_TOL = 1e-06, NEAR_PI_COS = -0.9, SMALL_SIN = 0.0001).
+
+    Branch-free: always MAX_ITERATIONS + 1 = 201 evaluations of one iteration (Function.fold),
+    each one fk_hom + one jacobian + two 6x6 solves; converged samples are frozen.
+    """
+    n = 7
+    T = ca.SX.sym("T", 4, 4)
+    q0 = ca.SX.sym("q0", n)
+    # input check; q = q0 clamped to the limits where finite, else 0
+    valid = 1
+    for k in range(16):
+        valid = ca.logic_and(valid, ca.fabs(T[k // 4, k % 4]) < ca.inf)
+    q = []
+    for i in range(n):
+        finite = ca.fabs(q0[i]) < ca.inf
+        valid = ca.logic_and(valid, finite)
+        q.append(ca.if_else(finite, _ik_dls_clamp(q0[i], i), 0.0))
+    for i in range(3):
+        for j in range(3):
+            gram = T[0, i] * T[0, j] + T[1, i] * T[1, j] + T[2, i] * T[2, j] - (1.0 if i == j else 0.0)
+            valid = ca.logic_and(valid, ca.logic_not(ca.fabs(gram) > 1e-06))
+    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))
+    valid = ca.logic_and(valid, det > 0.0)
+    state0 = ca.vertcat(*q, *q, *q, *([0.0] * 6), 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 1.0,
+                        valid, ca.if_else(valid, 2.0, 3.0), 0.0)
+    initial = ca.Function("ik_dls_initial", [T, q0], [state0])
+    x = ca.SX.sym("x", state0.numel())
+    final = ca.Function("ik_dls_final", [x], [ca.vertcat(*[ca.if_else(x[3 * n + 6 + 7], x[2 * n + i], x[i]) for i in range(n)]),
+                                             x[3 * n + 6 + 8]])
+    loop = _ik_dls_iteration(fk_hom(), jacobian()).fold(200 + 1)
+    T_, q0_ = ca.MX.sym("T", 4, 4), ca.MX.sym("q0", n)
+    steps = 200 + 1
+    xN = loop(initial(T_, q0_), ca.repmat(T_, 1, steps))
+    q_out, status_out = final(xN)
+    return ca.Function("ik_dls", [T_, q0_], [q_out, status_out],
+                       ["T", "q0"], ["q", "status"])
+
+
+BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

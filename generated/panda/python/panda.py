@@ -6193,4 +6193,250 @@ def Y(q, qd, qdd):
     return Y
 
 
-FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y}
+_IK_DLS_LOWER = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+_IK_DLS_UPPER = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+_IK_DLS_RESTART = np.array([
+    [2.666665597503284, 0.9837895586198608, 1.1605331641203107, -2.8285705938880126, 1.6509584830165296, 0.6610096815842741, 1.20813207537006],
+    [-1.1496626313079594, -1.3604477432966409, 0.2779353940030864, -0.9371293989794927, 1.8327293276330505, 1.611837047871945, 2.6319945221970387],
+    [-0.26984616110746096, -0.42648434472009833, 0.6881929962005793, -1.7657332919452975, -1.3543362754550528, 3.518798077883906, 2.3096529767292693],
+    [-0.15480957917223792, 1.681966080372566, 0.4868867316654897, -2.8655266285396137, -1.9957880476722287, 3.244182716371511, -1.3079591887153492],
+    [-0.010734564387195, -0.4337293118139778, 0.24555801838132396, -1.2141144868813494, 1.604901073312782, 0.31713274633081256, 2.8884505957587163],
+    [2.563060893032666, -0.41359153359353007, 2.467990800919653, -2.5008552835148725, -2.5013621429063724, 0.2671570759503328, -2.797595810315291],
+    [-2.885701574405412, 1.705022044126431, 0.9664053418710146, -1.4361051799148212, 0.6402734121461418, 3.307638002439969, -0.8181010728812055],
+    [0.8854355999194521, 1.0966400488635322, 1.1514189401102493, -1.0916763100365678, -1.3228399070092578, 1.1498927713965525, 0.27243528776403947],
+    [0.6943520522438487, 0.07469768231492169, 0.5140732663200058, -0.3275192408761214, 2.7050109544082432, 1.4021600982240392, -0.7339942347082182],
+    [1.6136802279522322, -1.1622421849807631, 1.0257806047499094, -2.4785379120314173, 1.5685636583272937, 0.998602756190346, -0.8852987308205402],
+    [-0.7491992581347584, -0.6552195713926503, 0.8941052835141576, -1.1466364991257079, 0.7366686359197128, 3.5989268626785282, 0.21378847589423478],
+    [1.6180235622955546, -0.068962764207948, 2.1305097888039843, -2.2644847531594285, 0.08296492285689583, 0.5349575623552231, 1.6336956138779972],
+    [2.0256274643213357, -0.5958939994915087, -0.6313389865431254, -1.8843516128188313, 1.3212748899579156, 1.0969589039095495, -1.4044425128790081],
+    [-1.4399763860191275, -0.7362258869046268, -1.0212626370870137, -1.1297942252504882, 2.854721232527623, 2.6907516832794682, -1.391077076515698],
+    [-1.7326911425377975, -0.9924646925093638, 2.570968648350211, -1.09906514033842, -0.23938849536340712, 1.7346718742554885, -2.3415182843147857],
+    [1.141861631845201, 1.1822813819480569, 1.71264999172733, -3.014586787897075, 1.3389310584876912, 2.7394255492939235, -1.2523969661187193],
+    [-1.9824439705431494, 0.6654936079324125, -0.010971364180793586, -1.5207938678367736, 0.947241601431628, 3.262521281277822, -1.7911660059123182],
+    [0.24499019106917697, 1.1336832696348988, -2.1616407340976034, -2.171845992195634, -0.5734254635251466, 3.59391635498407, 1.7343595605862538],
+    [1.184265871409767, 1.7604283729207029, 0.7348753897220273, -0.5891111467175492, -2.6931159754357283, 2.1321493831162748, -1.4958954825440431],
+    [2.8793338273641518, 0.6234885425276953, -2.1415333685709967, -2.010865805885637, -1.7501795276332304, 1.1872802747571618, 0.19182637925872914],
+    [-2.2339411856194555, -0.7418086911987061, -0.37166368399561245, -0.6901399212081296, 0.7507117177633478, 1.798286840858755, 2.513264632254432],
+    [1.959730117447441, -1.6741302660993242, 2.743589618029151, -2.4916967180586296, 1.6547797948947758, 1.7744523560930325, 1.5086791499479584],
+    [-0.03055150820978314, 1.07120829357771, -0.8479635477045049, -2.9850021608527597, -1.1575978290026832, 0.7797424892069877, 2.650084015255391],
+    [0.04411644974230455, -0.8279082784193712, -1.8776920782917912, -1.4817202457025955, 0.05501589869009438, 3.109304152428455, 1.0579291618498905],
+    [-0.5777604196957933, 1.159496863662933, 0.5869021627319264, -3.039751037906362, -1.5810006341436034, 1.6359921025149016, 2.695676898600652],
+])
+for _array in (_IK_DLS_LOWER, _IK_DLS_UPPER, _IK_DLS_RESTART):
+    _array.flags.writeable = False
+
+
+def ik_dls(T, q0):
+    """Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits.
+
+    Iterative and generic (any arm): the generated fk_hom and jacobian, pose error e = [p* -
+    p; log(R* R^T)] (rotation vector, base-frame axes), step dq = J^T (J J^T + lambda^2
+    I)^-1 e with adaptive damping, steps scaled to max |dq_i| <= MAX_STEP, every iterate
+    clamped to the joint limits (joints held at a limit drop out of the step), restarts from
+    a fixed table of in-limit configurations when progress stalls. Deterministic: the same T
+    and q0 give the same q. T's last row is only checked to be finite.
+
+    T: (..., 4, 4) target flange pose in the base frame (row-major; last row unused) [m (translation), 1 (rotation)]
+    q0: (..., 7) start configuration, DH order [rad]
+    Returns q: (..., 7) double, joint angles reaching T (status 0), otherwise see status [rad];
+    status: (..., 1) int, outcome:
+        0: converged (|p* - p| < TOL_POSITION m, rotation error < TOL_ROTATION rad) within
+          the joint limits
+        1: converged but outside the joint limits (cannot happen here: every iterate is
+          clamped)
+        2: not converged within MAX_ITERATIONS iterations; q = the iterate closest to T
+          (smallest |e|^2)
+        3: invalid input (non-finite T or q0, or T's rotation not orthonormal to
+          ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0
+
+    Constants:
+        MAX_ITERATIONS = 200: iteration limit (one FK evaluation each; restarts included)
+        TOL_POSITION = 1e-10: convergence: |p* - p| below this [m]
+        TOL_ROTATION = 1e-10: convergence: rotation-error angle below this [rad]
+        MAX_STEP = 0.5: largest joint change per iteration; longer steps are scaled down [rad]
+        LAMBDA2_INITIAL = 0.01: damping lambda^2 at the start of each attempt [m^2, rad^2]
+        LAMBDA2_MIN = 1e-12: smallest damping (keeps J J^T + lambda^2 I positive definite)
+        LAMBDA2_MAX = 100.0: largest damping
+        LAMBDA2_DOWN = 0.1: damping factor after an accepted step
+        LAMBDA2_UP = 10.0: damping factor after a rejected step
+        STALL_ITERATIONS = 8: restart after this many iterations without enough progress
+        STALL_RATIO = 0.5: enough progress: |e|^2 below this times its value at the last progress
+        ORTHONORMAL_TOL = 1e-06: invalid input: max |R^T R - I| above this (or det R <= 0)
+        NEAR_PI_COS = -0.9: rotation log: cos(angle) below this takes the axis from the symmetric part
+        SMALL_SIN = 0.0001: rotation log: sin(angle) below this uses angle/sin(angle) = 1 + s^2/6
+    Restarts start from a fixed table of 25 configurations uniform within the limits.
+
+    Cost per iteration: one fk_hom + one jacobian + a 6x6 solve (see the C header for counts);
+    at most MAX_ITERATIONS = 200 iterations.
+    """
+    T, batch_T = _input(T, (4, 4), "T")
+    q0, batch_q0 = _input(q0, (7,), "q0")
+    batch = np.broadcast_shapes(batch_T, batch_q0)
+    T = np.broadcast_to(T, batch + (4, 4)).reshape(-1, 4, 4)
+    q0 = np.broadcast_to(q0, batch + (7,)).reshape(-1, 7)
+    with np.errstate(all="ignore"):  # branches are evaluated on every sample, then selected
+        q, status = _ik_dls_solve(T, q0)
+    return q.reshape(batch + (7,)), status.reshape(batch + (1,))
+
+
+def _ik_dls_pose_error(T, F):
+    """e = [p* - p; log(R* R^T)] per sample (rotation vector in base axes), |e_p|^2, |e_r|^2."""
+    e = np.empty((T.shape[0], 6))
+    for i in range(3):
+        e[:, i] = T[:, i, 3] - F[:, i, 3]
+    Re = np.empty((T.shape[0], 3, 3))
+    for i in range(3):
+        for j in range(3):
+            Re[:, i, j] = T[:, i, 0] * F[:, j, 0] + T[:, i, 1] * F[:, j, 1] + T[:, i, 2] * F[:, j, 2]
+    cosa = 0.5 * (Re[:, 0, 0] + Re[:, 1, 1] + Re[:, 2, 2] - 1.0)
+    cosa = np.where(cosa > 1.0, 1.0, np.where(cosa < -1.0, -1.0, cosa))
+    v = np.stack([0.5 * (Re[:, 2, 1] - Re[:, 1, 2]), 0.5 * (Re[:, 0, 2] - Re[:, 2, 0]),
+                  0.5 * (Re[:, 1, 0] - Re[:, 0, 1])], axis=1)
+    s = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+    angle = np.arctan2(s, cosa)
+    # rotation vector = v angle / sin(angle), v = sin(angle) axis
+    f = np.where(s < 0.0001, 1.0 + s * s / 6.0, angle / s)
+    # near pi: sym(Re) - cos(angle) I = (1 - cos(angle)) a a^T; the column of its largest
+    # diagonal entry gives the axis a, the sign of v picks its direction
+    rows = np.arange(T.shape[0])
+    k = np.argmax(np.stack([Re[:, 0, 0], Re[:, 1, 1], Re[:, 2, 2]], axis=1), axis=1)
+    col = np.stack([0.5 * (Re[rows, i, k] + Re[rows, k, i]) - np.where(k == i, cosa, 0.0) for i in range(3)], axis=1)
+    g = angle / np.sqrt(col[rows, k] * (1.0 - cosa))
+    g = np.where(col[:, 0] * v[:, 0] + col[:, 1] * v[:, 1] + col[:, 2] * v[:, 2] < 0.0, -g, g)
+    generic = (cosa > -0.9)[:, None]
+    e[:, 3:] = np.where(generic, f[:, None] * v, col * g[:, None])
+    ep = e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2]
+    er = e[:, 3] * e[:, 3] + e[:, 4] * e[:, 4] + e[:, 5] * e[:, 5]
+    return e, ep, er
+
+
+def _ik_dls_step(q, J, e, lam2):
+    """Next candidates: q + dq scaled to max |dq_i| <= MAX_STEP, clamped to the limits, with
+    dq = Jm^T (Jm Jm^T + lam2 I)^-1 e by Cholesky; Jm = J without the joints a limit blocks
+    (second pass only for the samples where the first step pushes such a joint outward)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    weight = np.ones(q.shape)
+    dq = np.zeros(q.shape)
+    todo = np.arange(q.shape[0])
+    for _ in range(2):
+        Jm = J[todo] * weight[todo][:, None, :]
+        lam = lam2[todo]
+        L = np.zeros((todo.size, 6, 6))
+        solved = np.ones(todo.size, dtype=bool)
+        for r in range(6):
+            for k in range(r, 6):
+                acc = np.zeros(todo.size)
+                for i in range(7):
+                    acc = acc + Jm[:, k, i] * Jm[:, r, i]
+                if k == r:
+                    acc = acc + lam
+                for j in range(r):
+                    acc = acc - L[:, k, j] * L[:, r, j]
+                if k == r:
+                    solved &= acc > 0.0
+                    L[:, r, r] = np.sqrt(np.where(acc > 0.0, acc, 1.0))
+                else:
+                    L[:, k, r] = acc / L[:, r, r]
+        y = np.zeros((todo.size, 6))
+        for r in range(6):
+            acc = e[todo, r]
+            for j in range(r):
+                acc = acc - L[:, r, j] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        for r in range(5, -1, -1):
+            acc = y[:, r]
+            for j in range(r + 1, 6):
+                acc = acc - L[:, j, r] * y[:, j]
+            y[:, r] = acc / L[:, r, r]
+        step = np.zeros((todo.size, 7))
+        for r in range(6):
+            step = step + Jm[:, r, :] * y[:, r:r + 1]
+        step = np.where(solved[:, None], step, 0.0)
+        dq[todo] = step
+        qt = q[todo]
+        blocked = ((qt <= lower) & (step < 0.0)) | ((qt >= upper) & (step > 0.0))
+        weight[todo] = np.where(blocked, 0.0, weight[todo])
+        todo = todo[blocked.any(axis=1)]
+        if todo.size == 0:
+            break
+    largest = np.abs(dq).max(axis=1)
+    f = np.where(largest > 0.5, 0.5 / largest, 1.0)
+    return np.clip(q + f[:, None] * dq, lower, upper)
+
+
+def _ik_dls_solve(T, q0):
+    """The iteration on flat batches: T (N, 4, 4), q0 (N, 7); returns q, status (N,)."""
+    lower, upper = _IK_DLS_LOWER, _IK_DLS_UPPER
+    count = T.shape[0]
+    finite_q0 = np.isfinite(q0)
+    q = np.where(finite_q0, np.clip(np.where(finite_q0, q0, 0.0), lower, upper), 0.0)
+    valid = np.isfinite(T).reshape(count, -1).all(axis=1) & finite_q0.all(axis=1)
+    for i in range(3):
+        for j in range(3):
+            gram = T[:, 0, i] * T[:, 0, j] + T[:, 1, i] * T[:, 1, j] + T[:, 2, i] * T[:, 2, j] - (1.0 if i == j else 0.0)
+            valid &= ~(np.abs(gram) > 1e-06)
+    det = (T[:, 0, 0] * (T[:, 1, 1] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 1])
+           - T[:, 0, 1] * (T[:, 1, 0] * T[:, 2, 2] - T[:, 1, 2] * T[:, 2, 0])
+           + T[:, 0, 2] * (T[:, 1, 0] * T[:, 2, 1] - T[:, 1, 1] * T[:, 2, 0]))
+    valid &= det > 0.0
+    status = np.full(count, 3, dtype=np.int64)
+    out = q.copy()
+
+    # per-sample state: accepted iterate qc with error e, en = |e|^2 and Jacobian J; candidate qn
+    qc, qn, best = q.copy(), q.copy(), q.copy()
+    e = np.zeros((count, 6))
+    J = np.zeros((count, 6, 7))
+    en, best_en, ref = np.zeros(count), np.zeros(count), np.zeros(count)
+    lam2 = np.full(count, 0.01)
+    last = np.zeros(count, dtype=np.int64)
+    restarts = np.zeros(count, dtype=np.int64)
+    start = np.ones(count, dtype=bool)
+    active = valid.copy()
+    for it in range(200 + 1):
+        a = np.flatnonzero(active)
+        if a.size == 0:
+            break
+        F = fk_hom(qn[a])
+        ec, ep, er = _ik_dls_pose_error(T[a], F)
+        enc = ep + er
+        accept = start[a] | (enc < en[a])
+        # accepted: move, update damping, progress reference and best iterate
+        ia, was_start = a[accept], start[a][accept]
+        qc[ia], e[ia], en[ia] = qn[ia], ec[accept], enc[accept]
+        down = lam2[ia] * 0.1
+        lam2[ia] = np.where(was_start, 0.01, np.where(down < 1e-12, 1e-12, down))
+        progress = was_start | (en[ia] < 0.5 * ref[ia])
+        ref[ia] = np.where(progress, en[ia], ref[ia])
+        last[ia] = np.where(progress, it, last[ia])
+        start[ia] = False
+        better = ia[(it == 0) | (en[ia] < best_en[ia])]
+        best_en[better], best[better] = en[better], qc[better]
+        converged = (ep[accept] < 1e-10 * 1e-10) & (er[accept] < 1e-10 * 1e-10)
+        done = ia[converged]
+        within = ((qc[done] >= lower) & (qc[done] <= upper)).all(axis=1)
+        status[done], out[done] = np.where(within, 0, 1), qc[done]
+        active[done] = False
+        moved = ia[~converged]
+        if moved.size:
+            J[moved] = jacobian(qc[moved])
+        # rejected: more damping
+        ir = a[~accept]
+        up = lam2[ir] * 10.0
+        lam2[ir] = np.where(up > 100.0, 100.0, up)
+        a = np.flatnonzero(active)
+        if it == 200:
+            status[a], out[a] = 2, best[a]
+            break
+        # stalled: restart from the next table configuration; others: a damped step
+        stalled = it - last[a] >= 8
+        rs = a[stalled]
+        qn[rs] = _IK_DLS_RESTART[restarts[rs] % 25]
+        restarts[rs] += 1
+        start[rs] = True
+        st = a[~stalled]
+        if st.size:
+            qn[st] = _ik_dls_step(qc[st], J[st], e[st], lam2[st])
+    return out, status
+
+
+FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}
