@@ -342,3 +342,19 @@ def test_fully_reduced_paper_collection_reaches_the_base_parameter_count():
     assert len(full.coefficients) == full.numeric_rank() == 39
     with27 = collect_inertia(rob, reduce_squares=True, numeric_lengths=True, use_eq27=True)
     assert len(with27.coefficients) == with27.numeric_rank() == 37
+
+
+def test_paper_column_count_table_backs_the_readme():
+    """The README quotes this table to explain why the paper's 108 -> 74 is not reproduced:
+    92 columns -> rank 64 (merging coefficients equal up to a number, no sin^2 -> 1 - cos^2,
+    symbolic lengths), 90 -> 62 with eq. 27, 43 with sin^2 -> 1 - cos^2; numeric lengths with
+    the reduction give exactly the base rank, 39 (37 with eq. 27)."""
+    from generator.paper_coefficients import inertia_column_counts
+    table = {(r["lengths"], r["merge"], r["reduce_squares"], r["eq27"]): (r["columns"], r["rank"])
+             for r in inertia_column_counts(robot("lwr4"))}
+    assert all(rank <= columns for columns, rank in table.values())
+    assert table[("symbolic", "factor", False, False)] == (92, 64)
+    assert table[("symbolic", "factor", False, True)] == (90, 62)
+    assert table[("symbolic", "factor", True, False)] == (43, 43)
+    assert table[("numeric", "factor", True, False)] == (39, 39)
+    assert table[("numeric", "factor", True, True)] == (37, 37)
