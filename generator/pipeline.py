@@ -14,7 +14,7 @@ from pathlib import Path
 from .catalog import derive_all
 from .ik_dls import applies as dls_applies, dls_manifest_entry
 from .optimize import Program, optimize
-from .regressors import write_base_params
+from .regressors import base_params_document
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .robot import RobotModel
@@ -97,7 +97,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
-    write_base_params(model, out)
+    base_params = base_params_document(model)   # None for robots with symbolic lengths
+    if base_params is not None:
+        _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     for lang in languages:

@@ -279,18 +279,3 @@ def base_expressions_in_paper(model: RobotModel, kind: str) -> tuple[sympy.Expr,
     b = base_parameters(model, kind)
     subs = dict(zip(barycentric_symbols(model.n), barycentric_in_paper(model.n)))
     return tuple(sympy.expand(e.xreplace(subs)) for e in b.expressions(barycentric_symbols(model.n)))
-
-
-def write_base_params(model: RobotModel, folder) -> None:
-    """Write ``folder/base_params.json`` (see :func:`base_params_document`); nothing for a
-    robot with symbolic DH lengths.  Deterministic: fixed seeds, exact coefficients, floats
-    by ``repr`` (``json``)."""
-    import json
-    from pathlib import Path
-
-    document = base_params_document(model)
-    if document is None:
-        return
-    path = Path(folder) / "base_params.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(document, indent=1) + "\n")
