@@ -202,7 +202,9 @@ def test_energy_conservation(case, source):
     E = np.array(T) + np.array(U)
     scale = max(np.max(T), np.max(np.abs(U)))
     assert np.max(T) > 1.0          # the arm actually moves
-    assert np.abs(E - E[0]).max() / scale < 1e-6
+    drift = np.abs(E - E[0]).max() / scale
+    print(f"\nenergy drift {name} ({source} fd), 5 s unforced: {drift:.2e}")   # quoted in the README
+    assert drift < 1e-6
 
 
 # ----------------------------------------------------------------------------- interface
