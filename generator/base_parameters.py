@@ -46,6 +46,12 @@ import sympy
 
 RANK_TOL = 1e-9          # numeric rank: |R_kk| > RANK_TOL * |R_00| (pivoted QR)
 DEPENDENT_TOL = 1e-8     # a column is dependent when |R_kk| <= DEPENDENT_TOL * its norm
+# The rank and the choice of columns are structural (they decide the generated regressors),
+# so they are taken only when no ratio lies within a factor DECISION_MARGIN of its threshold:
+# a last-bit difference between processors then cannot change them.  On the shipped robots
+# the dependent ratios are below 1e-14 and the independent ones above 1e-4.
+DECISION_MARGIN = 1e3
+NUMERIC_DIGITS = 12      # significant digits kept of a grouping coefficient that is not rational
 RATIONAL_TOL = 1e-12     # a rational replaces a float when it reproduces it to this (relative)
 MAX_DENOMINATOR = 10 ** 4   # without a known denominator
 VERIFY_TOL = 1e-12       # relations must hold at fresh samples to this, relative to max |Y|
@@ -124,6 +130,19 @@ class BaseParameters:
         return tuple(self.full_names[k] for j, k in enumerate(self.dependent)
                      if all(row[j] == 0 for row in self.T))
 
+    def exact_values(self, full_values) -> tuple:
+        """Base parameters of one full parameter vector computed without rounding: exact
+        rationals when the grouping and the values are exact (sympy numbers)."""
+        out = []
+        for i, k in enumerate(self.base):
+            value = sympy.sympify(full_values[k])
+            for j, d in enumerate(self.dependent):
+                t = self.T[i][j]
+                if t != 0:
+                    value += (t if isinstance(t, sympy.Rational) else sympy.Rational(t)) * sympy.sympify(full_values[d])
+            out.append(value)
+        return tuple(out)
+
     def map_matrix(self) -> np.ndarray:
         """P (rank x full) with ``base values = P @ full values``."""
         P = np.zeros((len(self.base), len(self.full_names)))
@@ -184,6 +203,22 @@ def _coefficient(t) -> str:
     return f"{float(t)!r}*"
 
 
+def check_margin(ratios, threshold: float, what: str, margin: float = DECISION_MARGIN) -> None:
+    """Refuse a structural decision that a rounding difference could flip: every ratio must be
+    below ``threshold / margin`` or above ``threshold * margin``.
+
+    >>> check_margin([1e-15, 0.3], 1e-8, "rank")
+    >>> check_margin([1e-9, 0.3], 1e-8, "rank")
+    Traceback (most recent call last):
+    ...
+    generator.base_parameters.BaseParameterError: rank: ratio 1e-09 within a factor 1000 of the threshold 1e-08; the decision would depend on rounding
+    """
+    for r in np.asarray(ratios, float).ravel():
+        if threshold / margin <= r <= threshold * margin:
+            raise BaseParameterError(f"{what}: ratio {r:.3g} within a factor {margin:g} of the threshold "
+                                     f"{threshold:g}; the decision would depend on rounding")
+
+
 def numeric_rank(A: np.ndarray, tol: float = RANK_TOL) -> tuple[int, np.ndarray]:
     """Rank of ``A`` by QR with column pivoting, and the |diagonal of R| (descending)."""
     if A.size == 0:
@@ -195,15 +230,21 @@ def numeric_rank(A: np.ndarray, tol: float = RANK_TOL) -> tuple[int, np.ndarray]
     return int(np.sum(diag > tol * diag[0])), diag
 
 
-def independent_columns(A: np.ndarray, tol: float = DEPENDENT_TOL) -> tuple[int, ...]:
-    """Columns of ``A`` not in the span of the columns before them (unpivoted QR)."""
+def independent_columns(A: np.ndarray, tol: float = DEPENDENT_TOL, margin: float | None = None) -> tuple[int, ...]:
+    """Columns of ``A`` not in the span of the columns before them (unpivoted QR).  With
+    ``margin``, refuse (:func:`check_margin`) when a column's ratio is near ``tol``."""
     norms = np.linalg.norm(A, axis=0)
     scale = norms.max() if norms.size else 0.0
     if scale == 0:
         return ()
     R = scipy.linalg.qr(A, mode="r")[0]
-    diag = np.abs(np.diag(R))
-    return tuple(k for k in range(A.shape[1]) if k < diag.size and norms[k] > tol * scale and diag[k] > tol * norms[k])
+    diag = np.zeros(A.shape[1])
+    diag[:min(A.shape)] = np.abs(np.diag(R))
+    if margin is not None:
+        check_margin(norms / scale, tol, "zero columns", margin)
+        nonzero = norms > tol * scale
+        check_margin(diag[nonzero] / norms[nonzero], tol, "independent columns", margin)
+    return tuple(k for k in range(A.shape[1]) if norms[k] > tol * scale and diag[k] > tol * norms[k])
 
 
 def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seeds=(0, 1),
@@ -215,8 +256,10 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
     full_names = tuple(full_names)
     A3 = np.asarray(evaluate(seeds[0]), float)
     A = A3.reshape(-1, A3.shape[-1])
-    rank, _ = numeric_rank(A)
-    base = independent_columns(A)
+    rank, diag = numeric_rank(A)
+    if diag.size and diag[0] > 0:
+        check_margin(diag / diag[0], RANK_TOL, "rank")
+    base = independent_columns(A, margin=DECISION_MARGIN)
     if len(base) != rank:
         raise BaseParameterError(f"pivoted QR gives rank {rank} but {len(base)} columns are independent in order")
     dependent = tuple(k for k in range(len(full_names)) if k not in base)
@@ -233,8 +276,11 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
             if r is None:
                 r = rationalize(v)
             if r is None:
+                # not rational: kept as a float rounded to NUMERIC_DIGITS, so that the
+                # processor's last bits do not reach base_params.json (base_params.json
+                # says "exact": false)
                 exact = False
-                out.append(float(v))
+                out.append(float(f"{v:.{NUMERIC_DIGITS}g}"))
             else:
                 out.append(r)
         T.append(tuple(out))

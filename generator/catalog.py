@@ -49,6 +49,9 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
 )
 
 
+NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
+
+
 def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
     """All applicable functions for ``model`` (optionally only the named ones)."""
     out = []

@@ -1,23 +1,42 @@
-"""Command line: ``python -m generator {generate,count,eval} --help``."""
+"""Command line: ``kindyngen {generate,count,eval} --help`` (also ``python -m kindyngen``).
+
+Bad input of any kind (robot description, arguments, JSON on standard input) is one line on
+standard error starting with ``error:`` and exit code 2; never a traceback.
+"""
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from .base_parameters import BaseParameterError
+from .evaluate import EvaluationError
 from .robot import RobotDescriptionError, load_robot
 
 LANGS = ("c", "python", "casadi")
+EXIT_BAD_INPUT = 2
+
+
+class UsageError(ValueError):
+    """A command-line request that cannot be served (unknown function name, ...)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line (and exit 2), like every other bad input."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"error: {self.prog}: {message} (see --help)\n")
 
 
 def _languages(text: str) -> tuple[str, ...]:
     langs = tuple(x.strip() for x in text.split(",") if x.strip())
     bad = [x for x in langs if x not in LANGS]
     if bad or not langs:
-        raise argparse.ArgumentTypeError(f"unknown language(s) {bad}; choose from {','.join(LANGS)}")
+        raise argparse.ArgumentTypeError(f"unknown language(s) {', '.join(bad) or '(none)'}; choose from {','.join(LANGS)}")
     return langs
 
 
@@ -32,16 +51,57 @@ def _cmd_generate(args) -> int:
 
 
 def _cmd_count(args) -> int:
+    from .catalog import NAMES
     from .pipeline import build_programs
     from .report import opcounts_json, opcounts_markdown
+    only = None
+    if args.only is not None:
+        if not args.only:
+            raise UsageError("--only needs at least one function name")
+        unknown = [name for name in args.only if name not in NAMES]
+        if unknown:
+            raise UsageError(f"--only: unknown function(s) {', '.join(unknown)}; known: {', '.join(NAMES)}")
+        only = set(args.only)
     for path in args.robots:
         model = load_robot(path)
-        programs = build_programs(model, args.params, only=set(args.only) if args.only else None, progress=False)
+        programs = build_programs(model, args.params, only=only, progress=False)
+        missing = sorted(only - {p.function.name for p in programs}) if only else []
+        if missing:
+            raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
+                             f"(does not apply to this arm; see the README's function table)")
         if args.format == "json":
             print(json.dumps({model.identifier: opcounts_json(programs)}, indent=1))
         else:
             print(opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     return 0
+
+
+def _strict_numbers(value, where: str):
+    """Refuse anything in a numeric input that is not a finite number (null, booleans,
+    strings, NaN, Infinity), naming the input; nested lists are walked."""
+    if isinstance(value, list):
+        for k, item in enumerate(value):
+            _strict_numbers(item, f"{where}[{k}]")
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise EvaluationError(f"input {where} must be a number, got {json.dumps(value)}")
+    if not math.isfinite(value):
+        raise EvaluationError(f"input {where} must be finite, got {value}")
+
+
+def json_number(value):
+    """A float as JSON: finite numbers as they are, NaN and the infinities as the strings
+    ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (protobuf's JSON mapping of doubles), since
+    JSON itself has no spelling for them.
+
+    >>> [json_number(v) for v in (1.5, float("nan"), float("-inf"))]
+    [1.5, 'NaN', '-Infinity']
+    """
+    if isinstance(value, list):
+        return [json_number(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+    return value
 
 
 def _cmd_eval(args) -> int:
@@ -50,19 +110,22 @@ def _cmd_eval(args) -> int:
     try:
         inputs = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise SystemExit(f"error: standard input is not JSON: {exc}")
+        raise EvaluationError(f"standard input is not JSON: {exc}") from None
     if not isinstance(inputs, dict):
-        raise SystemExit("error: standard input must be a JSON object of named inputs, e.g. {\"q\": [...]}")
+        raise EvaluationError("standard input must be a JSON object of named inputs, e.g. {\"q\": [...]}")
+    for name, value in inputs.items():
+        _strict_numbers(value, name)
     outputs = load_generated(args.generated_dir, args.lang).call(args.function, inputs)
-    print(json.dumps({k: np.asarray(v).tolist() for k, v in outputs.items()}))
+    print(json.dumps({k: json_number(np.asarray(v).tolist()) for k, v in outputs.items()}, allow_nan=False))
     return 0
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m generator", description=(
+    p = _Parser(prog="kindyngen", description=(
         "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML description "
-        "and generate C, Python and CasADi code with operation counts."))
-    sub = p.add_subparsers(dest="command", required=True)
+        "and generate C, Python and CasADi code with operation counts. Bad input: one line on "
+        "standard error and exit code 2."))
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     g = sub.add_parser("generate", help="derive and write generated code for one or more robots",
                        description="Derive, optimise and render every function of each robot into OUT/<robot>/.")
@@ -78,14 +141,17 @@ def parser() -> argparse.ArgumentParser:
                        description="Derive each robot's functions and print their operation counts.")
     c.add_argument("robots", nargs="+", metavar="ROBOT.yaml")
     c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric")
-    c.add_argument("--only", nargs="*", metavar="FUNCTION", help="restrict to these function names")
+    c.add_argument("--only", nargs="*", metavar="FUNCTION",
+                   help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")
     c.set_defaults(run=_cmd_count)
 
     e = sub.add_parser("eval", help="evaluate a generated function on JSON inputs from stdin",
-                       description=("Read a JSON object of named inputs from standard input (each an array, "
-                                    "optionally with a leading batch dimension), evaluate FUNCTION with the "
-                                    "generated code in the chosen language, print a JSON object of outputs."))
+                       description=("Read a JSON object of named inputs from standard input (each an array of "
+                                    "finite numbers, optionally with a leading batch dimension), evaluate FUNCTION "
+                                    "with the generated code in the chosen language, print a JSON object of "
+                                    "outputs. A NaN or infinite output is written as the string \"NaN\", "
+                                    "\"Infinity\" or \"-Infinity\" (JSON has no number for them)."))
     e.add_argument("generated_dir", metavar="GENERATED_DIR", help="a robot folder, e.g. generated/lwr4")
     e.add_argument("function", metavar="FUNCTION", help="e.g. fk_hom, fk_dq, jacobian")
     e.add_argument("--lang", choices=LANGS, default="c")
@@ -94,10 +160,12 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from .evaluate import EvaluationError
     args = parser().parse_args(argv)
     try:
         return args.run(args)
-    except (RobotDescriptionError, EvaluationError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+        message = str(exc)
+    except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
+        message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
+    print(f"error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT

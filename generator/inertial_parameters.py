@@ -5,14 +5,17 @@ Per link, 10 numbers in Pinocchio's order (so regressors compare column by colum
 ``m, m*cx, m*cy, m*cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz`` with the inertia taken about the link
 frame origin (not the CoM), in link-frame axes.  The YAML (and the identification paper)
 gives the CoM and the inertia about the CoM; :func:`barycentric` maps one to the other
-(parallel-axis theorem), :func:`from_barycentric` back.
+(parallel-axis theorem).
+
+The numbers are computed exactly (sympy rationals from the description's decimals): they
+are baked into generated code, which must not depend on the processor's rounding.
 
 Example:
 
+>>> from sympy import Rational as R
 >>> from generator.robot import Link
->>> p = barycentric(Link(mass=2.0, com=(0.0, 0.0, 0.5), inertia=(1, 1, 1, 0, 0, 0)))
->>> [round(float(v), 6) for v in p]
-[2.0, 0.0, 0.0, 1.0, 1.5, 0.0, 1.5, 0.0, 0.0, 1.0]
+>>> barycentric(Link(mass=R(2), com=(R(0), R(0), R(1, 2)), inertia=(R(1), R(1), R(1), 0, 0, 0)))
+(2, 0, 0, 1, 3/2, 0, 3/2, 0, 0, 1)
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import symengine as se
+import sympy
 
 from .robot import Link, RobotModel
 
@@ -42,27 +46,21 @@ class LinkInertials:
         return (self.mass,) + tuple(self.first_moment) + tuple(self.inertia)
 
 
-def barycentric(link: Link) -> np.ndarray:
-    """The 10 barycentric numbers of a YAML link (inertia moved from the CoM to the origin)."""
-    m, c = link.mass, np.array(link.com)
-    I = link.inertia_matrix() + m * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.array([m, *(m * c), I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])
-
-
-def from_barycentric(p) -> Link:
-    """Inverse of :func:`barycentric` (mass must be non-zero)."""
-    m = float(p[0])
-    c = np.array(p[1:4], float) / m
-    I = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]], float)
-    Ic = I - m * (c @ c * np.eye(3) - np.outer(c, c))
-    return Link(mass=m, com=tuple(c), inertia=(Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2]))
+def barycentric(link: Link) -> tuple[sympy.Rational, ...]:
+    """The 10 barycentric numbers of a YAML link (inertia moved from the CoM to the origin
+    by the parallel-axis theorem), exact."""
+    m = sympy.Rational(link.mass)
+    c = sympy.Matrix(link.com)
+    ixx, iyy, izz, ixy, ixz, iyz = link.inertia
+    I = sympy.Matrix([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]) + m * ((c.T * c)[0] * sympy.eye(3) - c * c.T)
+    return (m, m * c[0], m * c[1], m * c[2], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2])
 
 
 def numeric_inertials(model: RobotModel) -> tuple[LinkInertials, ...]:
     """Each link's YAML parameters as numeric LinkInertials."""
     out = []
     for link in model.links:
-        v = [se.RealDouble(float(x)) for x in barycentric(link)]
+        v = [se.sympify(x) for x in barycentric(link)]
         out.append(LinkInertials(mass=v[0], first_moment=tuple(v[1:4]), inertia=tuple(v[4:10])))
     return tuple(out)
 
@@ -79,6 +77,11 @@ def symbolic_inertials(n: int, symbols=None) -> tuple[LinkInertials, ...]:
                                inertia=tuple(s[10 * i + 4:10 * i + 10])) for i in range(n))
 
 
+def exact_parameter_vector(model: RobotModel) -> tuple[sympy.Rational, ...]:
+    """All links' barycentric numbers stacked (10 n), exact."""
+    return tuple(v for link in model.links for v in barycentric(link))
+
+
 def parameter_vector(model: RobotModel) -> np.ndarray:
-    """All links' barycentric numbers stacked (10 n), the values for symbolic mode."""
-    return np.concatenate([barycentric(link) for link in model.links])
+    """All links' barycentric numbers stacked (10 n) as floats, the values for symbolic mode."""
+    return np.array([float(v) for v in exact_parameter_vector(model)])

@@ -64,7 +64,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str) -> dict:
         "name": model.name,
         "n": model.n,
         "convention": model.convention,
-        "gravity": list(model.gravity),
+        "gravity": [float(v) for v in model.gravity],
         "params": params,
         "functions": [{
             "name": p.function.name,

@@ -43,7 +43,7 @@ import sympy
 from .base_parameters import BaseParameters, find_base_parameters
 from .dynamics_lagrange import gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import inverse_dynamics
-from .inertial_parameters import NAMES, parameter_symbols, parameter_vector
+from .inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
 
@@ -212,14 +212,15 @@ def base_params_document(model: RobotModel) -> dict | None:
     parameters (``Y @ values`` is the modelled quantity), plus rank and condition number."""
     if not supported(model):
         return None
-    full_values = parameter_vector(model)
+    full_values = exact_parameter_vector(model)
     out = {}
     for kind in KINDS:
         b = base_parameters(model, kind)
         out[kind] = {
             "names": list(b.names),
             "expressions": list(b.expression_strings()),
-            "values": [float(v) for v in b.values(full_values)],
+            # exact sums of the description's rationals, rounded once to a double
+            "values": [float(v) for v in b.exact_values(full_values)],
             "rank": b.rank,
             "full_columns": len(b.full_names),
             "exact": b.exact,

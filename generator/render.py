@@ -102,7 +102,7 @@ def _context(model: RobotModel, programs, dialect: Dialect) -> dict:
         "source": Path(model.source).name,
         "n": model.n,
         "convention": model.convention,
-        "gravity": model.gravity,
+        "gravity": [float(v) for v in model.gravity],
         "version": __version__,
         "functions": [function_view(p, dialect, model.identifier) for p in programs],
         "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None

@@ -294,7 +294,7 @@ def dynamic_bodies(model: RobotModel, params: str, joints, group: bool = True):
 
 def gravity(model: RobotModel):
     """Gravity acceleration in the base frame (exact zeros kept)."""
-    return [se.RealDouble(float(v)) if float(v) != 0 else ZERO for v in model.gravity]
+    return [se.sympify(v) for v in model.gravity]
 
 
 # ----------------------------------------------------------------------------- function assembly

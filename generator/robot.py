@@ -14,6 +14,7 @@ Example:
 from __future__ import annotations
 
 import ast
+import difflib
 import math
 import re
 from dataclasses import dataclass
@@ -52,14 +53,17 @@ class Joint:
 class Link:
     """Inertial parameters of one link, in that link's DH frame (SI units).
 
-    ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about the centre of mass."""
+    ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about the centre of mass.  Loaded values
+    are exact rationals (sympy), the decimals as written, so that everything derived from
+    them and baked into generated code is computed exactly, whatever the processor."""
 
-    mass: float
-    com: tuple[float, float, float]
-    inertia: tuple[float, float, float, float, float, float]
+    mass: sympy.Rational
+    com: tuple[sympy.Rational, sympy.Rational, sympy.Rational]
+    inertia: tuple[sympy.Rational, ...]
 
     def inertia_matrix(self) -> np.ndarray:
-        ixx, iyy, izz, ixy, ixz, iyz = self.inertia
+        """The inertia about the CoM as a float 3x3 array."""
+        ixx, iyy, izz, ixy, ixz, iyz = (float(v) for v in self.inertia)
         return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
 
 
@@ -69,7 +73,7 @@ class RobotModel:
 
     name: str
     convention: str  # "standard" or "modified" DH
-    gravity: tuple[float, float, float]
+    gravity: tuple[sympy.Rational, sympy.Rational, sympy.Rational]  # exact, m/s^2
     joints: tuple[Joint, ...]
     links: tuple[Link, ...]
     source: str = "<memory>"
@@ -150,7 +154,9 @@ def _number(value, source: str, field: str, *, exact: bool = False):
             finite = False
         if not finite:
             raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
-        return sympy.nsimplify(value, rational=True) if exact else float(value)
+        # the shortest decimal that gives this double (Python's repr, the same on every
+        # machine): the value as written in the file, as an exact rational
+        return sympy.Rational(repr(float(value))) if exact else float(value)
     if isinstance(value, str):
         _check_expression(value, source, field)
         try:
@@ -169,12 +175,46 @@ def _number(value, source: str, field: str, *, exact: bool = False):
     raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
 
 
-def _vector(value, length: int, source: str, field: str) -> tuple[float, ...]:
+def _rational(value, source: str, field: str) -> sympy.Rational:
+    """A number as an exact rational: decimals and fractions exactly as written; a constant
+    expression with no rational value (``sqrt(2)``) as the rational of its double.
+
+    >>> _rational(0.0012, "f.yaml", "mass"), _rational("1/3", "f.yaml", "mass")
+    (3/2500, 1/3)
+    """
+    value = _number(value, source, field, exact=True)
+    return value if value.is_Rational else sympy.Rational(repr(float(value)))
+
+
+def _vector(value, length: int, source: str, field: str) -> tuple[sympy.Rational, ...]:
     if not isinstance(value, (list, tuple)):
         raise RobotDescriptionError(source, field, f"expected a list of {length} numbers, got {value!r}")
     if len(value) != length:
         raise RobotDescriptionError(source, field, f"expected {length} numbers, got {len(value)}")
-    return tuple(_number(v, source, f"{field}[{k}]") for k, v in enumerate(value))
+    return tuple(_rational(v, source, f"{field}[{k}]") for k, v in enumerate(value))
+
+
+# every key a description may hold; anything else is refused with the closest known key
+TOP_KEYS = ("name", "dh", "gravity", "joints", "links")
+JOINT_KEYS = ("a", "alpha", "d", "offset", "lower", "upper")
+LINK_KEYS = ("mass", "com", "inertia")
+
+
+def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
+    """Refuse unknown keys (a typo such as ``ofset`` would otherwise be ignored silently).
+
+    >>> _check_keys({"a": 0, "ofset": 1}, JOINT_KEYS, "f.yaml", "joints[0].")
+    Traceback (most recent call last):
+    ...
+    generator.robot.RobotDescriptionError: f.yaml: field 'joints[0].ofset': unknown key; did you mean 'offset'? (known: a, alpha, d, offset, lower, upper)
+    """
+    for key in mapping:
+        if key in allowed:
+            continue
+        close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.5)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise RobotDescriptionError(source, f"{prefix}{key}",
+                                    f"unknown key; {hint}(known: {', '.join(allowed)})")
 
 
 def _require(mapping: dict, key: str, source: str, prefix: str):
@@ -205,13 +245,14 @@ def _length(value, source: str, field: str):
 def _parse_joint(row, source: str, field: str) -> Joint:
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+    _check_keys(row, JOINT_KEYS, source, field + ".")
     exact = {k: _length(_require(row, k, source, field + "."), source, f"{field}.{k}") for k in ("a", "d")}
     exact["alpha"] = _number(_require(row, "alpha", source, field + "."), source, f"{field}.alpha", exact=True)
     offset = _number(row.get("offset", 0), source, f"{field}.offset", exact=True)
     lower = _number(_require(row, "lower", source, field + "."), source, f"{field}.lower")
     upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")
     if not lower < upper:
-        raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower} >= upper {upper}")
+        raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     return Joint(a=exact["a"], alpha=exact["alpha"], d=exact["d"], offset=offset, lower=lower, upper=upper)
 
 
@@ -221,20 +262,22 @@ def check_inertia(inertia: np.ndarray, source: str, field: str) -> None:
     moments = np.linalg.eigvalsh(inertia)
     scale = max(abs(moments).max(), 1e-300)
     if moments.min() <= 1e-12 * scale:
-        raise RobotDescriptionError(source, field, f"inertia is not positive definite (principal moments {moments.tolist()})")
-    a, b, c = sorted(moments)
+        listed = ", ".join(f"{v:.6g}" for v in moments)
+        raise RobotDescriptionError(source, field, f"inertia is not positive definite (principal moments {listed})")
+    a, b, c = (float(v) for v in sorted(moments))
     if c > a + b + 1e-9 * scale:
         raise RobotDescriptionError(
             source, field,
-            f"principal moments {[a, b, c]} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")
+            f"principal moments {a:.6g}, {b:.6g}, {c:.6g} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")
 
 
 def _parse_link(row, source: str, field: str) -> Link:
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
-    mass = _number(_require(row, "mass", source, field + "."), source, f"{field}.mass")
+    _check_keys(row, LINK_KEYS, source, field + ".")
+    mass = _rational(_require(row, "mass", source, field + "."), source, f"{field}.mass")
     if mass <= 0:
-        raise RobotDescriptionError(source, f"{field}.mass", f"mass must be positive, got {mass}")
+        raise RobotDescriptionError(source, f"{field}.mass", f"mass must be positive, got {float(mass):g}")
     com = _vector(_require(row, "com", source, field + "."), 3, source, f"{field}.com")
     inertia = _vector(_require(row, "inertia", source, field + "."), 6, source, f"{field}.inertia")
     link = Link(mass=mass, com=com, inertia=inertia)
@@ -246,6 +289,7 @@ def parse_robot(data, source: str = "<memory>") -> RobotModel:
     """Build a :class:`RobotModel` from already-parsed YAML data."""
     if not isinstance(data, dict):
         raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
+    _check_keys(data, TOP_KEYS, source, "")
     name = _require(data, "name", source, "")
     if not isinstance(name, str) or not name.strip():
         raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")

@@ -71,7 +71,7 @@ def pinocchio_model(robot: RobotModel):
             body_to_link = _se3(np.eye(3), [0, 0, d[i]])
         jid = model.addJoint(parent, pin.JointModelRZ(), joint_placement, f"joint{i + 1}")
         link = robot.links[i]
-        inertia = pin.Inertia(link.mass, np.array(link.com, float), link.inertia_matrix())
+        inertia = pin.Inertia(float(link.mass), np.array(link.com, float), link.inertia_matrix())
         model.appendBodyToJoint(jid, body_to_link.act(inertia), pin.SE3.Identity())
         model.lowerPositionLimit[i] = robot.joints[i].lower
         model.upperPositionLimit[i] = robot.joints[i].upper

@@ -270,7 +270,7 @@ def test_base_params_json_is_consistent(name):
     assert set(document) == set(KINDS)
     values = {}
     for i, link in enumerate(rob.links, start=1):
-        p = pin.Inertia(link.mass, np.array(link.com), link.inertia_matrix()).toDynamicParameters()
+        p = pin.Inertia(float(link.mass), np.array(link.com, float), link.inertia_matrix()).toDynamicParameters()
         for key, v in zip(("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"), p):
             values[sympy.Symbol(f"{key}{i}")] = v
     for kind in KINDS:

@@ -30,7 +30,7 @@ def test_shipped_robot_loads(name, convention):
     assert robot.lower.shape == (7,) and robot.upper.shape == (7,)
     assert np.all(robot.lower < robot.upper)
     assert np.all(np.isfinite(robot.lower)) and np.all(np.isfinite(robot.upper))
-    assert robot.gravity == (0.0, 0.0, -9.81)
+    assert robot.gravity == (0, 0, sympy.Rational(-981, 100))   # exact, as written
     for link in robot.links:
         assert link.mass > 0
         assert np.all(np.linalg.eigvalsh(link.inertia_matrix()) > 0)

@@ -123,7 +123,7 @@ void lwr4_hartl_c(const double *q, const double *qd, double *c);
  * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
- * Cost: 788 add, 879 mul, 12 call
+ * Cost: 786 add, 868 mul, 12 call
  * (as derived, before CSE: 55151 add, 91314 mul, 68639 call).
  */
 void lwr4_hartl_S(const double *q, const double *qd, double *S);
@@ -141,7 +141,7 @@ void lwr4_hartl_S(const double *q, const double *qd, double *S);
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
- * Cost: 263 add, 330 mul, 12 call
+ * Cost: 263 add, 331 mul, 12 call
  * (as derived, before CSE: 49900 add, 87783 mul, 76848 call).
  */
 void lwr4_hartl_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -159,7 +159,7 @@ void lwr4_hartl_tau(const double *q, const double *qd, const double *qdd, double
  * in  tau[7]: 7 double, applied joint torques [N m]
  * out qdd[7]: 7 double, joint accelerations [rad/s^2]
  *
- * Cost: 512 add, 647 mul, 12 call
+ * Cost: 512 add, 648 mul, 12 call
  * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call).
  */
 void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -175,7 +175,7 @@ void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double 
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
  *
- * Cost: 753 add, 1043 mul, 12 call
+ * Cost: 753 add, 1044 mul, 12 call
  * (as derived, before CSE: 5133 add, 14904 mul, 16343 call).
  */
 void lwr4_hartl_M_lagrange(const double *q, double *M);
@@ -191,7 +191,7 @@ void lwr4_hartl_M_lagrange(const double *q, double *M);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out g[7]: 7 double, gravity torques [N m]
  *
- * Cost: 81 add, 134 mul, 12 call
+ * Cost: 81 add, 131 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call).
  */
 void lwr4_hartl_g_lagrange(const double *q, double *g);
@@ -208,7 +208,7 @@ void lwr4_hartl_g_lagrange(const double *q, double *g);
  * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
- * Cost: 829 add, 917 mul, 12 call
+ * Cost: 827 add, 918 mul, 12 call
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call).
  */
 void lwr4_hartl_c_christoffel(const double *q, const double *qd, double *c);

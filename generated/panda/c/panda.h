@@ -123,7 +123,7 @@ void panda_c(const double *q, const double *qd, double *c);
  * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
- * Cost: 1020 add, 1009 mul, 12 call
+ * Cost: 1018 add, 1004 mul, 12 call
  * (as derived, before CSE: 77815 add, 122234 mul, 93654 call).
  */
 void panda_S(const double *q, const double *qd, double *S);
@@ -175,7 +175,7 @@ void panda_fd(const double *q, const double *qd, const double *tau, double *qdd)
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
  *
- * Cost: 838 add, 1133 mul, 12 call
+ * Cost: 838 add, 1126 mul, 12 call
  * (as derived, before CSE: 6812 add, 18193 mul, 19610 call).
  */
 void panda_M_lagrange(const double *q, double *M);
@@ -191,7 +191,7 @@ void panda_M_lagrange(const double *q, double *M);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out g[7]: 7 double, gravity torques [N m]
  *
- * Cost: 81 add, 132 mul, 12 call
+ * Cost: 81 add, 133 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call).
  */
 void panda_g_lagrange(const double *q, double *g);
@@ -208,7 +208,7 @@ void panda_g_lagrange(const double *q, double *g);
  * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
- * Cost: 1061 add, 1059 mul, 12 call
+ * Cost: 1058 add, 1047 mul, 12 call
  * (as derived, before CSE: 77857 add, 122283 mul, 93654 call).
  */
 void panda_c_christoffel(const double *q, const double *qd, double *c);
@@ -265,7 +265,7 @@ void panda_Y_m(const double *q, double *Y);
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
- * Cost: 685 add, 787 mul, 12 call
+ * Cost: 685 add, 783 mul, 12 call
  * (as derived, before CSE: 79704 add, 141096 mul, 122494 call).
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
