@@ -2,18 +2,20 @@
 PYTHON_SYS ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-ROBOTS := lwr4 lwr4_hartl panda
+# every robot description in robots/ (a user's robots/my_arm.yaml included)
+ROBOTS := $(sort $(wildcard robots/*.yaml))
 
 .PHONY: generate test bench report clean
 
 $(VENV)/.installed: pyproject.toml
+	@echo "Setting up $(VENV): installing KinDynGen and its pinned dependencies (first run only, about a minute)..."
 	$(PYTHON_SYS) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	touch $@
 
 generate: $(VENV)/.installed
-	$(PY) -m generator generate $(addprefix robots/,$(addsuffix .yaml,$(ROBOTS))) --out generated
+	$(PY) -m kindyngen generate $(ROBOTS) --out generated
 
 test: $(VENV)/.installed
 	$(PY) -m pytest

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from generator.robot import load_robot
+from kindyngen.robot import load_robot
 
 from . import casadi_codegen, compiled, inputs, pinocchio_cpp, python_timing, scaling
 from .build import BUILD

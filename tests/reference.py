@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from generator.robot import RobotModel
+from kindyngen.robot import RobotModel
 
 
 def _rz(t):

@@ -11,17 +11,17 @@ import pytest
 import symengine as se
 from scipy.integrate import solve_ivp
 
-from generator.evaluate import load_generated
+from kindyngen.evaluate import load_generated
 from harness import GENERATED, evaluate_symbolic, robot, symbolic_function
 from reference import pinocchio_model, random_configurations
 
-from generator.catalog import derive_all
-from generator.dynamics_lagrange import coriolis_christoffel, gravity_lagrange, mass_matrix_lagrange
-from generator.dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
-from generator.forward_dynamics import forward_dynamics
-from generator.inertial_parameters import parameter_symbols, parameter_vector
-from generator.optimize import optimize
-from generator.robot import parse_robot
+from kindyngen.catalog import derive_all
+from kindyngen.dynamics_lagrange import coriolis_christoffel, gravity_lagrange, mass_matrix_lagrange
+from kindyngen.dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
+from kindyngen.forward_dynamics import forward_dynamics
+from kindyngen.inertial_parameters import parameter_symbols, parameter_vector
+from kindyngen.optimize import optimize
+from kindyngen.robot import parse_robot
 
 ROBOTS = ("lwr4", "panda")
 SAMPLES = 200

@@ -8,8 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from generator.evaluate import load_generated
-from generator.inertial_parameters import parameter_vector
+from kindyngen.evaluate import load_generated
+from kindyngen.inertial_parameters import parameter_vector
 from harness import GENERATED, LANGS, ROOT, evaluate, robot
 from reference import pinocchio_model, random_configurations
 
@@ -69,7 +69,7 @@ def test_paper_routes_match_pinocchio(states, lang):
 @pytest.fixture(scope="module")
 def symbolic_build(tmp_path_factory):
     out = tmp_path_factory.mktemp("symbolic_params")
-    subprocess.run([sys.executable, "-m", "generator", "generate", str(ROOT / "robots" / "lwr4.yaml"), "--out",
+    subprocess.run([sys.executable, "-m", "kindyngen", "generate", str(ROOT / "robots" / "lwr4.yaml"), "--out",
                     str(out), "--params", "symbolic", "--lang", "c,python", "--quiet"], check=True, cwd=ROOT)
     return out / "lwr4"
 

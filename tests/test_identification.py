@@ -10,7 +10,7 @@ import sympy
 
 from harness import GENERATED, robot
 from reference import pinocchio_model, random_configurations
-from generator.identification import (IdentificationDataError, RankDeficientError, identify, identify_samples,
+from kindyngen.identification import (IdentificationDataError, RankDeficientError, identify, identify_samples,
                                       stacked_regressor)
 
 

@@ -14,14 +14,14 @@ import symengine as se
 from harness import evaluate_symbolic, robot
 from reference import dh_numbers, fk_numpy, random_configurations
 
-from generator.catalog import derive_all
-from generator.ik_common import (ADMISSIBLE, ELBOW_SINGULAR, LIMITS, SHOULDER_SINGULAR, UNREACHABLE,
+from kindyngen.catalog import derive_all
+from kindyngen.ik_common import (ADMISSIBLE, ELBOW_SINGULAR, LIMITS, SHOULDER_SINGULAR, UNREACHABLE,
                                  WRIST_SINGULAR, closest_solution, lwr_geometry, theta3_intervals)
-from generator.ik_lwr_dualquat import ik_dq
-from generator.ik_lwr_homogeneous import ik_hom
-from generator.optimize import optimize
-from generator.printer import C, CASADI, NUMPY
-from generator.robot import parse_robot
+from kindyngen.ik_lwr_dualquat import ik_dq
+from kindyngen.ik_lwr_homogeneous import ik_hom
+from kindyngen.optimize import optimize
+from kindyngen.printer import C, CASADI, NUMPY
+from kindyngen.robot import parse_robot
 
 N = 10_000          # random targets per test (the brief's 10,000)
 TOL = 1e-10         # FK(q) = target, position (m) and rotation entries

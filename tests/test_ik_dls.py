@@ -1,4 +1,4 @@
-"""Generic damped least-squares IK (``ik_dls``, generator/ik_dls.py): the generated code in
+"""Generic damped least-squares IK (``ik_dls``, kindyngen/ik_dls.py): the generated code in
 every language, on reachable targets (FK of random in-limit configurations, independent
 numpy DH product), from random and from nearby starts; unreachable and invalid input;
 agreement between C, Python and CasADi; its functions.json entry and header.
@@ -13,8 +13,8 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from generator.evaluate import EvaluationError, load_generated
-from generator.ik_dls import CONSTANTS
+from kindyngen.evaluate import EvaluationError, load_generated
+from kindyngen.ik_dls import CONSTANTS
 from harness import GENERATED, ROOT, evaluate, robot
 from reference import fk_numpy, random_configurations
 
@@ -219,7 +219,7 @@ def test_eval_command_and_language_guard(tmp_path):
     payload = json.dumps({"T": T[0].tolist(), "q0": starts["near"][0].tolist()})
     results = {}
     for lang in LANGS:
-        done = subprocess.run([sys.executable, "-m", "generator", "eval", str(GENERATED / "panda"), "ik_dls",
+        done = subprocess.run([sys.executable, "-m", "kindyngen", "eval", str(GENERATED / "panda"), "ik_dls",
                                "--lang", lang], input=payload, capture_output=True, text=True, cwd=ROOT, check=True)
         results[lang] = json.loads(done.stdout)
     assert all(r["status"] == [0] for r in results.values()), results
@@ -232,7 +232,7 @@ def test_eval_command_and_language_guard(tmp_path):
     with pytest.raises(EvaluationError, match="ik_dls is not generated for casadi"):
         load_generated(copy, "casadi").call("ik_dls", {"T": T[0], "q0": starts["near"][0]})
     (copy / "casadi" / "ik_dls.casadi").unlink()
-    done = subprocess.run([sys.executable, "-m", "generator", "eval", str(copy), "ik_dls", "--lang", "casadi"],
+    done = subprocess.run([sys.executable, "-m", "kindyngen", "eval", str(copy), "ik_dls", "--lang", "casadi"],
                           input=payload, capture_output=True, text=True, cwd=ROOT)
     assert done.returncode == 2 and "not generated for casadi" in done.stderr
 
@@ -243,7 +243,7 @@ def symbolic_lengths_lwr(tmp_path_factory):
     text = (ROOT / "robots" / "lwr4.yaml").read_text()
     text = text.replace("d: 0.40,", "d: l1,").replace("d: 0.39,", "d: l2,").replace("name: lwr4", "name: lwr4_len")
     (root / "lwr4_len.yaml").write_text(text)
-    subprocess.run([sys.executable, "-m", "generator", "generate", str(root / "lwr4_len.yaml"), "--out", str(root),
+    subprocess.run([sys.executable, "-m", "kindyngen", "generate", str(root / "lwr4_len.yaml"), "--out", str(root),
                     "--quiet", "--lang", "c,python"], check=True, cwd=ROOT)
     return root / "lwr4_len"
 

@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from generator.robot import load_robot
+from kindyngen.robot import load_robot
 from reference import fk_numpy, pinocchio_model, random_configurations
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"

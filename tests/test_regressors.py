@@ -14,7 +14,7 @@ import sympy
 
 from harness import GENERATED, evaluate, robot
 from reference import pinocchio_model, random_configurations
-from generator.regressors import (barycentric_in_paper, base_parameters, base_params_document, paper_in_barycentric,
+from kindyngen.regressors import (barycentric_in_paper, base_parameters, base_params_document, paper_in_barycentric,
                                   paper_symbols, regressor)
 
 ROBOTS = ("lwr4", "lwr4_hartl", "panda")
@@ -128,7 +128,7 @@ def match_entries(found, expected):
 
 
 def test_paper_collection_of_g_is_eq28():
-    from generator.paper_coefficients import collect_gravity
+    from kindyngen.paper_coefficients import collect_gravity
     col = collect_gravity(robot("lwr4"))
     assert col.rows == ("g2", "g3", "g4", "g5", "g6", "g7")      # g1 vanishes and is dropped
     assert len(col.coefficients) == 12
@@ -140,7 +140,7 @@ def test_paper_collection_of_g_is_eq28():
 def test_base_parameters_of_gravity_are_eq28():
     """Our pi_g (barycentric base parameters of Y_g, mapped to the paper's parameters) is
     eq. 28 entry by entry, up to sign, at the LWR's d1, d2."""
-    from generator.regressors import base_expressions_in_paper
+    from kindyngen.regressors import base_expressions_in_paper
     found = base_expressions_in_paper(robot("lwr4"), "Y_g")
     lengths = {d1: sympy.Rational(2, 5), d2: sympy.Rational(39, 100)}
     match_entries(found, [sympy.expand(e.xreplace(lengths)) for e in EQ28])
@@ -149,7 +149,7 @@ def test_base_parameters_of_gravity_are_eq28():
 def test_paper_collections_reproduce_g_and_the_inertia_stack():
     """Y(q) pi from the paper's collection equals Pinocchio's g and M stack (validates the
     expansion and collection), and spans our base regressor."""
-    from generator.paper_coefficients import collect_gravity, collect_inertia
+    from kindyngen.paper_coefficients import collect_gravity, collect_inertia
     rob = robot("lwr4")
     model, data, _ = pinocchio_model(rob)
     values = {}
@@ -178,7 +178,7 @@ def test_paper_collections_reproduce_g_and_the_inertia_stack():
 
 def test_eq27_m76_as_in_the_paper():
     """M_76 = c7y c7z m7 cos q7 - I7xz sin q7 - I7yz cos q7 + c7x c7z m7 sin q7 (paper, Sect. VI)."""
-    from generator.paper_coefficients import paper_dynamics
+    from kindyngen.paper_coefficients import paper_dynamics
     _, M = paper_dynamics(robot("lwr4"))
     C7, S7, m7, c7x, c7y, c7z, I7xz, I7yz = sympy.symbols("C7 S7 m7 c7x c7y c7z I7xz I7yz")
     paper = c7y * c7z * m7 * C7 - I7xz * S7 - I7yz * C7 + c7x * c7z * m7 * S7
@@ -223,7 +223,7 @@ def test_generated_languages_agree(name, lang):
 
 def random_links(rob, seed):
     """Random physical links (mass, CoM, inertia about the CoM)."""
-    from generator.robot import Link
+    from kindyngen.robot import Link
     rng = np.random.default_rng(seed)
     links = []
     for _ in rob.links:
@@ -317,13 +317,13 @@ def test_paper_parameter_maps_round_trip():
         I = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
         np.testing.assert_allclose(bary[10 * i:10 * i + 10],
                                    pin.Inertia(mm, np.array([cx, cy, cz]), I).toDynamicParameters(), atol=1e-14)
-    from generator.regressors import barycentric_symbols
+    from kindyngen.regressors import barycentric_symbols
     back = [float(e.xreplace(dict(zip(barycentric_symbols(n), bary)))) for e in paper_in_barycentric(n)]
     np.testing.assert_allclose(back, [vals[s] for s in paper], atol=1e-12)
 
 
 def test_regressors_are_the_same_in_both_parameter_modes():
-    from generator.catalog import derive_all
+    from kindyngen.catalog import derive_all
     numeric = derive_all(robot("lwr4"), "numeric", only=set(KINDS))
     symbolic = derive_all(robot("lwr4"), "symbolic", only=set(KINDS))
     assert [f.name for f in numeric] == list(KINDS)
@@ -336,7 +336,7 @@ def test_fully_reduced_paper_collection_reaches_the_base_parameter_count():
     stack has exactly as many columns as the inertia stack has base parameters (39, checked
     independently against Pinocchio above), and eq. 27 removes exactly two (barycentric
     Ixz7 = Iyz7 = 0 is what M_76 = 0 means)."""
-    from generator.paper_coefficients import collect_inertia
+    from kindyngen.paper_coefficients import collect_inertia
     rob = robot("lwr4")
     full = collect_inertia(rob, reduce_squares=True, numeric_lengths=True)
     assert len(full.coefficients) == full.numeric_rank() == 39
@@ -349,7 +349,7 @@ def test_paper_column_count_table_backs_the_readme():
     92 columns -> rank 64 (merging coefficients equal up to a number, no sin^2 -> 1 - cos^2,
     symbolic lengths), 90 -> 62 with eq. 27, 43 with sin^2 -> 1 - cos^2; numeric lengths with
     the reduction give exactly the base rank, 39 (37 with eq. 27)."""
-    from generator.paper_coefficients import inertia_column_counts
+    from kindyngen.paper_coefficients import inertia_column_counts
     table = {(r["lengths"], r["merge"], r["reduce_squares"], r["eq27"]): (r["columns"], r["rank"])
              for r in inertia_column_counts(robot("lwr4"))}
     assert all(rank <= columns for columns, rank in table.values())

@@ -12,7 +12,7 @@ import pytest
 import sympy
 import yaml
 
-from generator.robot import RobotDescriptionError, load_robot
+from kindyngen.robot import RobotDescriptionError, load_robot
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 
@@ -283,3 +283,64 @@ def test_joint_or_link_not_a_mapping(tmp_path):
     data = _good()
     data["joints"] = []
     _expect(_write(tmp_path, data), "joints", "non-empty list")
+
+
+# --------------------------------------------------------------------------- unknown keys
+
+@pytest.mark.parametrize("where, typo, field, closest", [
+    ("joints", "ofset", "joints[0].ofset", "offset"),
+    ("joints", "alfa", "joints[0].alfa", "alpha"),
+    ("links", "mas", "links[0].mas", "mass"),
+    ("links", "inertial", "links[0].inertial", "inertia"),
+    ("top", "gravty", "gravity", "gravity"),
+    ("top", "joint", "joint", "joints"),
+])
+def test_unknown_key_is_refused_with_the_closest_known_key(tmp_path, where, typo, field, closest):
+    """A typo used to be ignored silently (``ofset: 0.5`` gave a different arm, exit code 0)."""
+    data = _good()
+    if where == "top":
+        data[typo] = 1
+        field = typo
+    else:
+        data[where][0][typo] = 0.5
+    err = _expect(_write(tmp_path, data), field, "unknown key")
+    assert f"did you mean '{closest}'" in err.reason
+
+
+def test_unknown_key_without_a_close_match_lists_the_known_ones(tmp_path):
+    data = _good()
+    data["links"][1]["colour"] = "red"
+    err = _expect(_write(tmp_path, data), "links[1].colour", "unknown key")
+    assert "did you mean" not in err.reason and "(known: mass, com, inertia)" in err.reason
+
+
+@pytest.mark.parametrize("field, value, shown", [
+    ("links[0].inertia", [1.0, 1.0, 5.0, 0, 0, 0], "principal moments 1, 1, 5 violate"),
+    ("links[0].inertia", [1.0, -1.0, 1.0, 0, 0, 0], "principal moments -1, 1, 1"),
+])
+def test_messages_print_plain_numbers(tmp_path, field, value, shown):
+    data = _good()
+    _set(data, field, value)
+    err = _expect(_write(tmp_path, data), field, "")
+    assert shown in err.reason and "np." not in str(err) and "float64" not in str(err)
+
+
+def test_reversed_limits_message_prints_plain_numbers(tmp_path):
+    data = _good()
+    data["joints"][0]["lower"], data["joints"][0]["upper"] = 2.5, -1
+    err = _expect(_write(tmp_path, data), "joints[0].lower", "limits reversed")
+    assert "lower 2.5 >= upper -1" in err.reason
+
+
+def test_inertial_values_are_exact_rationals(tmp_path):
+    """The decimals as written, exactly: what the generated code bakes in cannot depend on
+    how a processor rounds (the barycentric numbers are computed from these exactly)."""
+    robot = load_robot(_write(tmp_path, _good()))
+    link = robot.links[1]
+    assert link.mass == 1 and link.com[0] == sympy.Rational(1, 20)
+    assert link.inertia[5] == sympy.Rational(1, 2000)
+    from kindyngen.inertial_parameters import barycentric
+    p = barycentric(link)
+    # Iyy about the origin = 0.012 + m (cx^2 + cz^2) = 0.012 + 0.0025, exactly
+    assert p[6] == sympy.Rational(29, 2000)
+    assert all(isinstance(v, sympy.Rational) for v in p)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from harness import GENERATED, ROOT
-from generator.evaluate import load_generated
-from generator.robot import RobotDescriptionError, load_robot
+from kindyngen.evaluate import load_generated
+from kindyngen.robot import RobotDescriptionError, load_robot
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def symbolic_lwr(tmp_path_factory):
     text = text.replace("d: 0.40,", "d: l1,").replace("d: 0.39,", "d: l2,").replace("name: lwr4", "name: lwr4_sym")
     path = root / "lwr4_sym.yaml"
     path.write_text(text)
-    subprocess.run([sys.executable, "-m", "generator", "generate", str(path), "--out", str(root), "--quiet",
+    subprocess.run([sys.executable, "-m", "kindyngen", "generate", str(path), "--out", str(root), "--quiet",
                     "--lang", "c,python"], check=True, cwd=ROOT)
     return root / "lwr4_sym", path
 

@@ -3,7 +3,7 @@
 
 theta3 (= q3) is the redundancy parameter. All eight branches (shoulder, elbow, wrist) come
 out of one straight-line, branch-free program (selects only), so it prints to C, numpy and
-CasADi alike. Method, branch order and status codes: see :mod:`generator.ik_common`.
+CasADi alike. Method, branch order and status codes: see :mod:`kindyngen.ik_common`.
 
 Status codes: 0 valid, 1 outside joint limits, 2 unreachable (target outside the workspace
 or not reachable with this theta3), 3 wrist singular, 4 elbow singular, 5 shoulder singular.
@@ -19,7 +19,7 @@ singularity (M = Rz(phi)) th7 = phi/2 and then th5 = phi/2 from the same K.
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> f = ik_hom(load_robot("robots/lwr4.yaml"))       # doctest: +SKIP
 >>> [p.shape for p in f.outputs]                      # doctest: +SKIP
 [(8, 7), (8,)]

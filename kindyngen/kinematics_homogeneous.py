@@ -8,7 +8,7 @@ LOCAL_WORLD_ALIGNED), so that ``[v; w] = J(q) qd``.
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> f = fk_hom(load_robot("robots/lwr4.yaml"))       # doctest: +SKIP
 >>> f.outputs[0].shape                                 # doctest: +SKIP
 (4, 4)

@@ -16,7 +16,7 @@ Rule (also in the README):
 
 "before" counts the expression tree as derived, every shared sub-expression paid at each
 occurrence; "after" counts the straight-line program after common-subexpression
-elimination, every temporary paid once. The printer (:mod:`generator.printer`) prints each
+elimination, every temporary paid once. The printer (:mod:`kindyngen.printer`) prints each
 node exactly as counted here, using :func:`add_parts` and :func:`mul_parts`.
 
 Example:

@@ -3,11 +3,11 @@ kinetic energy by Koenig's theorem, ``M = Hessian of T in qd``, ``g = gradient o
 ``S`` from the Christoffel symbols of ``M`` (paper eqs. 10-16), all on symengine DAGs.
 
 The joint frames, grouped link bodies, gravity, ports and function assembly it runs on are
-shared with the other dynamics routes and live in :mod:`generator.rigid_bodies`.
+shared with the other dynamics routes and live in :mod:`kindyngen.rigid_bodies`.
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> f = mass_matrix_lagrange(load_robot("robots/lwr4.yaml"))     # doctest: +SKIP
 >>> f.outputs[0].shape                                            # doctest: +SKIP
 (7, 7)

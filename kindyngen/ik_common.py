@@ -1,6 +1,6 @@
 """Closed-form inverse kinematics of LWR-like arms: the pieces shared by the homogeneous
-form (:mod:`generator.ik_lwr_homogeneous`, ``ik_hom``) and the dual-quaternion form
-(:mod:`generator.ik_lwr_dualquat`, ``ik_dq``), plus pure-numpy helpers that work on their
+form (:mod:`kindyngen.ik_lwr_homogeneous`, ``ik_hom``) and the dual-quaternion form
+(:mod:`kindyngen.ik_lwr_dualquat`, ``ik_dq``), plus pure-numpy helpers that work on their
 outputs (closest branch, admissible intervals of the redundancy parameter).
 
 Applicability ("LWR-like"): 7 joints, standard DH, alpha = (+pi/2, -pi/2, -pi/2, +pi/2, +pi/2,
@@ -119,7 +119,7 @@ LWR_ALPHAS = (sympy.pi / 2, -sympy.pi / 2, -sympy.pi / 2, sympy.pi / 2, sympy.pi
 def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     """The LWR geometry of ``model``, or None when its DH table is not LWR-like.
 
-    >>> from generator.robot import load_robot
+    >>> from kindyngen.robot import load_robot
     >>> lwr_geometry(load_robot("robots/lwr4.yaml")).d5           # doctest: +SKIP
     39/100
     """

@@ -8,7 +8,7 @@ ones of the LWR's table vanish before any code exists.  Standard DH:
 Example:
 
 >>> import sympy, symengine as se
->>> from generator.robot import Joint
+>>> from kindyngen.robot import Joint
 >>> j = Joint(a=0, alpha=sympy.pi / 2, d=sympy.Rational(2, 5), offset=0, lower=-1, upper=1)
 >>> R, p = joint_transform(j, "standard", se.Symbol("q"))
 >>> R.tolist()[2], p.tolist()

@@ -115,7 +115,8 @@ def _cmd_eval(args) -> int:
         raise EvaluationError("standard input must be a JSON object of named inputs, e.g. {\"q\": [...]}")
     for name, value in inputs.items():
         _strict_numbers(value, name)
-    outputs = load_generated(args.generated_dir, args.lang).call(args.function, inputs)
+    with np.errstate(all="ignore"):   # overflow is reported in the output itself (see json_number)
+        outputs = load_generated(args.generated_dir, args.lang).call(args.function, inputs)
     print(json.dumps({k: json_number(np.asarray(v).tolist()) for k, v in outputs.items()}, allow_nan=False))
     return 0
 

@@ -1,6 +1,6 @@
 """Print straight-line programs as C, numpy or CasADi expressions.
 
-Each node is printed exactly as :mod:`generator.opcount` counts it (sums with
+Each node is printed exactly as :mod:`kindyngen.opcount` counts it (sums with
 subtractions, one literal per product, integer powers as repeated products, divisors
 grouped), so the counts in the generated headers are the operations in the code.
 

@@ -2,7 +2,7 @@
 paper, Sect. V, eqs. 17, 18, 23).
 
 The dynamics is linear in the standard barycentric parameters ``p`` (10 per link, see
-:mod:`generator.inertial_parameters`), so each regressor column is the derivative of a
+:mod:`kindyngen.inertial_parameters`), so each regressor column is the derivative of a
 symbolic dynamics function with respect to one parameter, taken on the DAG with ``se.diff``
 (nothing is expanded):
 
@@ -13,7 +13,7 @@ symbolic dynamics function with respect to one parameter, taken on the DAG with 
 * ``Y(q, qd, qdd) -> Y``, shape ``(n, p)``: ``tau = Y(q, qd, qdd) pi``.
 
 The columns are those of the base parameters of each (found by
-:mod:`generator.base_parameters`: independent columns kept in parameter order, the others
+:mod:`kindyngen.base_parameters`: independent columns kept in parameter order, the others
 grouped into them, paper eq. 23), so ``Y`` times the base values equals the dynamics.  The
 symbolic dynamics comes from the catalog in symbolic mode (``g_lagrange``, ``M_lagrange`` and
 ``tau``: the routes whose derivatives are cheapest after CSE, see :data:`SOURCES`); the
@@ -25,7 +25,7 @@ The paper's parameters (mass, CoM, inertia about the CoM) map to the barycentric
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> b = base_parameters(load_robot("robots/lwr4.yaml"), "Y_g")    # doctest: +SKIP
 >>> b.rank, b.names[:2]                                            # doctest: +SKIP
 (12, ('mx2', 'mz2R'))
@@ -245,7 +245,7 @@ def paper_symbols(n: int) -> tuple[sympy.Symbol, ...]:
 
 
 def barycentric_symbols(n: int) -> tuple[sympy.Symbol, ...]:
-    """sympy twins of :func:`generator.inertial_parameters.parameter_symbols`."""
+    """sympy twins of :func:`kindyngen.inertial_parameters.parameter_symbols`."""
     return tuple(sympy.Symbol(f"{name}{i + 1}") for i in range(n) for name in NAMES)
 
 

@@ -29,7 +29,7 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("fk_dq", lambda model, params: fk_dq(model)),
     ("jacobian", lambda model, params: jacobian(model)),
     # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
-    # the other route under a suffixed name (generator/dynamics_*.py, forward_dynamics.py)
+    # the other route under a suffixed name (kindyngen/dynamics_*.py, forward_dynamics.py)
     ("M", lambda model, params: mass_matrix_crba(model, params, "M")),
     ("g", lambda model, params: gravity_rnea(model, params, "g")),
     ("c", lambda model, params: coriolis_rnea(model, params, "c")),
@@ -39,10 +39,10 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
     ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
     ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),
-    # closed-form IK of LWR-like arms (None for other arms): generator/ik_lwr_*.py
+    # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik_lwr_*.py
     ("ik_hom", lambda model, params: ik_hom(model)),
     ("ik_dq", lambda model, params: ik_dq(model)),
-    # regressors on base parameters (generator/regressors.py): same functions in both params modes
+    # regressors on base parameters (kindyngen/regressors.py): same functions in both params modes
     ("Y_g", lambda model, params: regressor(model, "Y_g")),
     ("Y_m", lambda model, params: regressor(model, "Y_m")),
     ("Y", lambda model, params: regressor(model, "Y")),

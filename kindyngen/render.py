@@ -1,4 +1,5 @@
-"""Render optimised programs into source text through the jinja2 templates in templates/.
+"""Render optimised programs into source text through the jinja2 templates in
+``kindyngen/templates/`` (package data: they travel with an installed package).
 
 One renderer per target language, all fed the same plain context built here: names of
 inputs, temporaries and outputs are decided once per language, the printer supplies the
@@ -17,7 +18,7 @@ from .optimize import Program
 from .printer import C, CASADI, NUMPY, Dialect
 from .robot import RobotModel
 
-TEMPLATES = Path(__file__).resolve().parents[1] / "templates"
+TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 
 @dataclass(frozen=True)

@@ -211,7 +211,7 @@ def check_margin(ratios, threshold: float, what: str, margin: float = DECISION_M
     >>> check_margin([1e-9, 0.3], 1e-8, "rank")
     Traceback (most recent call last):
     ...
-    generator.base_parameters.BaseParameterError: rank: ratio 1e-09 within a factor 1000 of the threshold 1e-08; the decision would depend on rounding
+    kindyngen.base_parameters.BaseParameterError: rank: ratio 1e-09 within a factor 1000 of the threshold 1e-08; the decision would depend on rounding
     """
     for r in np.asarray(ratios, float).ravel():
         if threshold / margin <= r <= threshold * margin:

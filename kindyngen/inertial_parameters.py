@@ -13,7 +13,7 @@ are baked into generated code, which must not depend on the processor's rounding
 Example:
 
 >>> from sympy import Rational as R
->>> from generator.robot import Link
+>>> from kindyngen.robot import Link
 >>> barycentric(Link(mass=R(2), com=(R(0), R(0), R(1, 2)), inertia=(R(1), R(1), R(1), 0, 0, 0)))
 (2, 0, 0, 1, 3/2, 0, 3/2, 0, 0, 1)
 """

@@ -21,7 +21,7 @@ Solved with quaternion algebra throughout, never building a rotation matrix:
 The other six branches, as in ik_hom, from the elbow and wrist twins (:mod:`ik_common`).
 The paper's DQ inverse solved two quartics and was 70 % slower than the homogeneous one;
 here no polynomial is solved and the cost is about that of the homogeneous form.
-Method, branch order and status codes: :mod:`generator.ik_common`
+Method, branch order and status codes: :mod:`kindyngen.ik_common`
 (0 valid, 1 outside joint limits, 2 unreachable, 3 wrist, 4 elbow, 5 shoulder singular).
 """
 from __future__ import annotations

@@ -26,7 +26,7 @@ Collection rule (what counts as one column):
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> c = collect_gravity(load_robot("robots/lwr4.yaml"))      # doctest: +SKIP
 >>> len(c.coefficients)                                      # doctest: +SKIP
 12

@@ -6,7 +6,7 @@ the DAG with symengine, which takes milliseconds where sympy's takes minutes.
 Example:
 
 >>> import symengine as se
->>> from generator.symbolic import Port, SymbolicFunction, port_symbols
+>>> from kindyngen.symbolic import Port, SymbolicFunction, port_symbols
 >>> q = port_symbols("q", (2,))
 >>> s = se.sin(q[0] + q[1])
 >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (2,), ""),), (q,), ((2*s, s*s),))

@@ -13,7 +13,7 @@ identification paper's eqs. 21-25), refusing what cannot be identified.
   unchanged), instead of returning one arbitrary solution silently.
 
 ``identify_samples(model, kind, inputs, measured)`` stacks the base regressor of ``kind``
-("Y_g", "Y_m", "Y", see :mod:`generator.regressors`) at the given samples first.
+("Y_g", "Y_m", "Y", see :mod:`kindyngen.regressors`) at the given samples first.
 
 Example:
 

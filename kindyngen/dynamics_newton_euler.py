@@ -2,7 +2,7 @@
 zeros (customised symbolic Newton-Euler in the manner of Khalil & Kleinfinger), plus the
 composite-rigid-body inertia matrix and a composite-first-moment gravity vector.
 
-Everything runs on the grouped barycentric parameters of :mod:`generator.rigid_bodies`
+Everything runs on the grouped barycentric parameters of :mod:`kindyngen.rigid_bodies`
 (every link's mass, MZ and YY moved towards the base), so that the link forces of
 Newton-Euler reduce to ``w' x h + w x (w x h)`` and the gravity torques to rotated first
 moments.  All quantities are expressed in the joint frames, where every joint axis is e_z.
@@ -17,7 +17,7 @@ moments.  All quantities are expressed in the joint frames, where every joint ax
 
 Example:
 
->>> from generator.robot import load_robot
+>>> from kindyngen.robot import load_robot
 >>> f = inverse_dynamics(load_robot("robots/lwr4.yaml"))     # doctest: +SKIP
 >>> [p.name for p in f.inputs]                                # doctest: +SKIP
 ['q', 'qd', 'qdd']

@@ -1,6 +1,6 @@
 """Joint frames, link bodies with grouped inertial parameters, gravity, ports and the
-function assembly every dynamics route shares (:mod:`generator.dynamics_lagrange`,
-:mod:`generator.dynamics_newton_euler`, :mod:`generator.forward_dynamics`).
+function assembly every dynamics route shares (:mod:`kindyngen.dynamics_lagrange`,
+:mod:`kindyngen.dynamics_newton_euler`, :mod:`kindyngen.forward_dynamics`).
 
 * **Joint frames.** Frame j is attached to link j with its z axis on joint j, so that every
   joint is ``R_{j-1,j} = C_j Rz(q_j)``, ``p_{j-1,j} = t_j`` with an exact constant rotation
@@ -20,8 +20,8 @@ function assembly every dynamics route shares (:mod:`generator.dynamics_lagrange
 
 Example:
 
->>> from generator.robot import load_robot
->>> from generator.symbolic import port_symbols
+>>> from kindyngen.robot import load_robot
+>>> from kindyngen.symbolic import port_symbols
 >>> model = load_robot("robots/lwr4.yaml")                            # doctest: +SKIP
 >>> frames = joint_frames(model, port_symbols("q", (model.n,)))       # doctest: +SKIP
 >>> bodies, ports, syms = dynamic_bodies(model, "symbolic", frames)    # doctest: +SKIP
