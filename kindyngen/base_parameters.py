@@ -268,7 +268,7 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
         T_float = np.linalg.lstsq(B, A[:, list(dependent)], rcond=None)[0]
     else:
         T_float = np.zeros((len(base), 0))
-    T, exact = [], True
+    T, T_check, exact = [], [], True
     for row in T_float:
         out = []
         for v in row:
@@ -284,12 +284,15 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
             else:
                 out.append(r)
         T.append(tuple(out))
+        # the relations are verified with the unrounded floats: rounding to NUMERIC_DIGITS
+        # is a printing choice, the check is whether the grouping holds
+        T_check.append([float(t) if isinstance(t, sympy.Rational) else v for t, v in zip(out, row)])
     T = tuple(T)
     # verification at fresh samples
     A2 = np.asarray(evaluate(seeds[1]), float)
     A2 = A2.reshape(-1, A2.shape[-1])
     scale = max(np.abs(A2).max(), 1e-300)
-    Tn = np.array([[float(t) for t in row] for row in T]).reshape(len(base), len(dependent))
+    Tn = np.array(T_check, float).reshape(len(base), len(dependent))
     residual = A2[:, list(dependent)] - A2[:, list(base)] @ Tn if dependent else np.zeros((A2.shape[0], 0))
     max_residual = float(np.abs(residual).max() / scale) if residual.size else 0.0
     if max_residual > VERIFY_TOL:

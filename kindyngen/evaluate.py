@@ -38,8 +38,11 @@ class GeneratedLibrary:
         manifest_path = self.directory / "functions.json"
         if not manifest_path.is_file():
             raise EvaluationError(f"{manifest_path}: not found (is {directory} a generated robot folder?)")
-        self.manifest = json.loads(manifest_path.read_text())
-        self.functions = {f["name"]: f for f in self.manifest["functions"]}
+        try:
+            self.manifest = json.loads(manifest_path.read_text())
+            self.functions = {f["name"]: f for f in self.manifest["functions"]}
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise EvaluationError(f"{manifest_path}: not a KinDynGen interface file ({exc})") from None
         self._impl = {"python": _PythonBackend, "c": _CBackend, "casadi": _CasadiBackend}[lang](self)
 
     def call(self, name: str, inputs: dict) -> dict:
@@ -151,7 +154,10 @@ class _CasadiBackend:
     def call(self, spec, arrays, batch):
         name = spec["name"]
         if name not in self.loaded:
-            self.loaded[name] = self.casadi.Function.load(str(self.directory / f"{name}.casadi"))
+            path = self.directory / f"{name}.casadi"
+            if not path.is_file():
+                raise EvaluationError(f"{path}: not found (generate the robot with --lang casadi)")
+            self.loaded[name] = self.casadi.Function.load(str(path))
         fn = self.loaded[name]
         count = arrays[0].shape[0]
         outs = {p["name"]: np.zeros((count,) + tuple(p["shape"])) for p in spec["outputs"]}

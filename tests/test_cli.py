@@ -134,3 +134,13 @@ def test_unwritable_output_folder(capsys, monkeypatch, tmp_path):
     blocker.write_text("")
     _refused(["generate", str(ROOT / "robots" / "lwr4.yaml"), "--out", str(blocker / "sub"), "--quiet",
               "--lang", "python"], capsys, monkeypatch, "Not a directory")
+
+
+def test_eval_on_a_broken_or_partial_generated_folder(capsys, monkeypatch, tmp_path):
+    (tmp_path / "functions.json").write_text("{not json")
+    _refused(["eval", str(tmp_path), "fk_hom"], capsys, monkeypatch, "not a KinDynGen interface file", "{}")
+    (tmp_path / "functions.json").write_text((GENERATED / "lwr4" / "functions.json").read_text())
+    _refused(["eval", str(tmp_path), "fk_hom", "--lang", "casadi"], capsys, monkeypatch,
+             "fk_hom.casadi: not found", json.dumps({"q": [0] * 7}))
+    _refused(["eval", str(tmp_path), "fk_hom", "--lang", "python"], capsys, monkeypatch,
+             "No such file or directory", json.dumps({"q": [0] * 7}))
