@@ -11,7 +11,7 @@ $(VENV)/.installed: pyproject.toml
 	@echo "Setting up $(VENV): installing KinDynGen and its pinned dependencies (first run only, about a minute)..."
 	$(PYTHON_SYS) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) -m pip install --quiet -e '.[test]'
 	touch $@
 
 generate: $(VENV)/.installed

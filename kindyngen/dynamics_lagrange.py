@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import symengine as se
 
 from .dynamics_newton_euler import crba, setup
+from .joint_effects import with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import (ZERO, cross, dot, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
                            qd_port, vadd, vscale)
@@ -116,14 +117,16 @@ LAGRANGE = ("Lagrange route (the identification paper's method): velocities by m
             "kinetic energy by Koenig's theorem, ")
 
 
-def mass_matrix_lagrange(model: RobotModel, params: str = "numeric", name: str = "M_lagrange") -> SymbolicFunction:
-    """``M(q) -> M`` as the Hessian of the kinetic energy in qd."""
+def mass_matrix_lagrange(model: RobotModel, params: str = "numeric", name: str = "M_lagrange",
+                         effects: bool = True) -> SymbolicFunction:
+    """``M(q) -> M`` as the Hessian of the kinetic energy in qd (plus the armature)."""
     L = lagrange_model(model, params)
+    M = with_armature(model, L.M) if effects else L.M
     return dynamics_function(name, LAGRANGE + "M = Hessian of T in qd.", model, params,
                              (q_port(model),), (L.q,),
                              (Port("M", (model.n, model.n), "joint-space inertia matrix (symmetric, row-major)",
                                    "kg m^2"),),
-                             (flat(L.M),), L.ports, L.syms)
+                             (flat(M),), L.ports, L.syms)
 
 
 def gravity_lagrange(model: RobotModel, params: str = "numeric", name: str = "g_lagrange") -> SymbolicFunction:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import symengine as se
 
+from .joint_effects import effect_torques, with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import (ZERO, Body, cross, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
                            qd_port, qdd_port, tau_port, vadd, vscale)
@@ -154,11 +155,15 @@ def crba(joints, bodies):
     return M
 
 
-def inverse_dynamics(model: RobotModel, params: str = "numeric", name: str = "tau") -> SymbolicFunction:
-    """``tau(q, qd, qdd) -> tau = M qdd + c + g``."""
+def inverse_dynamics(model: RobotModel, params: str = "numeric", name: str = "tau",
+                     effects: bool = True) -> SymbolicFunction:
+    """``tau(q, qd, qdd) -> tau = M qdd + c + g`` plus the description's friction, offset and
+    armature torques (``effects=False``: rigid bodies only, for the regressor)."""
     q, joints, bodies, ports, syms = setup(model, params)
     qd, qdd = port_symbols("qd", (model.n,)), port_symbols("qdd", (model.n,))
     tau = rnea(joints, bodies, qd, qdd, gravity(model))
+    if effects:
+        tau = [t + e for t, e in zip(tau, effect_torques(model, qd, qdd))]
     return dynamics_function(name, NE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.",
                              model, params, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
                              (tau_port(model, "joint torques"),), (tau,), ports, syms)
@@ -185,10 +190,13 @@ def gravity_rnea(model: RobotModel, params: str = "numeric", name: str = "g", co
                              (Port("g", (model.n,), "gravity torques", "N m"),), (g,), ports, syms)
 
 
-def mass_matrix_crba(model: RobotModel, params: str = "numeric", name: str = "M") -> SymbolicFunction:
-    """``M(q) -> M`` by the composite-rigid-body algorithm."""
+def mass_matrix_crba(model: RobotModel, params: str = "numeric", name: str = "M",
+                     effects: bool = True) -> SymbolicFunction:
+    """``M(q) -> M`` by the composite-rigid-body algorithm (plus the armature)."""
     q, joints, bodies, ports, syms = setup(model, params)
     M = crba(joints, bodies)
+    if effects:
+        M = with_armature(model, M)
     return dynamics_function(name, NE + "inertia matrix M(q) by the composite-rigid-body algorithm.", model, params,
                              (q_port(model),), (q,),
                              (Port("M", (model.n, model.n), "joint-space inertia matrix (symmetric, row-major)",

@@ -15,6 +15,7 @@ from __future__ import annotations
 import symengine as se
 
 from .dynamics_newton_euler import crba, rnea, setup
+from .joint_effects import effect_torques, with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import dynamics_function, gravity, qd_port, tau_port
 from .robot import RobotModel
@@ -51,8 +52,9 @@ def forward_dynamics(model: RobotModel, params: str = "numeric", name: str = "fd
     """``fd(q, qd, tau) -> qdd``."""
     q, joints, bodies, ports, syms = setup(model, params)
     qd, tau = port_symbols("qd", (model.n,)), port_symbols("tau", (model.n,))
-    M = crba(joints, bodies)
-    bias = rnea(joints, bodies, qd, None, gravity(model))
+    # the armature belongs to the inertia, friction and offset to the bias
+    M = with_armature(model, crba(joints, bodies))
+    bias = [b + e for b, e in zip(rnea(joints, bodies, qd, None, gravity(model)), effect_torques(model, qd, None))]
     qdd = ldlt_solve(M, [t - b for t, b in zip(tau, bias)])
     return dynamics_function(
         name, "Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one "

@@ -57,10 +57,12 @@ def barycentric(link: Link) -> tuple[sympy.Rational, ...]:
 
 
 def numeric_inertials(model: RobotModel) -> tuple[LinkInertials, ...]:
-    """Each link's YAML parameters as numeric LinkInertials."""
+    """Each link's YAML parameters (the payload merged into the last link) as numeric
+    LinkInertials."""
+    p = exact_parameter_vector(model)
     out = []
-    for link in model.links:
-        v = [se.sympify(x) for x in barycentric(link)]
+    for i in range(model.n):
+        v = [se.sympify(x) for x in p[10 * i:10 * i + 10]]
         out.append(LinkInertials(mass=v[0], first_moment=tuple(v[1:4]), inertia=tuple(v[4:10])))
     return tuple(out)
 
@@ -78,10 +80,17 @@ def symbolic_inertials(n: int, symbols=None) -> tuple[LinkInertials, ...]:
 
 
 def exact_parameter_vector(model: RobotModel) -> tuple[sympy.Rational, ...]:
-    """All links' barycentric numbers stacked (10 n), exact."""
-    return tuple(v for link in model.links for v in barycentric(link))
+    """All links' barycentric numbers stacked (10 n), exact.  A payload (a rigid body fixed to
+    the flange, given in the flange frame, which is the last link's frame) is part of the last
+    link: barycentric parameters of bodies in one frame add."""
+    values = [v for link in model.links for v in barycentric(link)]
+    if model.payload is not None:
+        for k, v in enumerate(barycentric(model.payload)):
+            values[10 * (model.n - 1) + k] += v
+    return tuple(values)
 
 
 def parameter_vector(model: RobotModel) -> np.ndarray:
-    """All links' barycentric numbers stacked (10 n) as floats, the values for symbolic mode."""
+    """All links' barycentric numbers stacked (10 n; the payload merged into the last link) as
+    floats: the values of the input ``p`` that reproduce the numeric build in symbolic mode."""
     return np.array([float(v) for v in exact_parameter_vector(model)])

@@ -150,7 +150,7 @@ class Dialect:
         return out, (ATOM if fmt.endswith(")") else prec)
 
 
-_MATH = ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "exp", "log")
+_MATH = ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "exp", "log", "tanh")
 
 C = Dialect(
     name="c",
@@ -162,7 +162,7 @@ C = Dialect(
 
 NUMPY = Dialect(
     name="numpy",
-    functions={**{f: f"np.{f}" for f in ("sin", "cos", "tan", "sqrt", "exp", "log")},
+    functions={**{f: f"np.{f}" for f in ("sin", "cos", "tan", "sqrt", "exp", "log", "tanh")},
                "asin": "np.arcsin", "acos": "np.arccos", "atan": "np.arctan", "atan2": "np.arctan2",
                "abs": "np.abs", "max": "np.maximum", "min": "np.minimum", "pow": "np.power"},
     select="np.where({c}, {a}, {b})", logic_and="np.logical_and({}, {})",

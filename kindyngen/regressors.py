@@ -44,6 +44,7 @@ from .base_parameters import BaseParameters, find_base_parameters
 from .dynamics_lagrange import gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import inverse_dynamics
 from .inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
+from .joint_effects import effect_columns, effect_parameter_names, effect_parameter_values
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
 
@@ -53,7 +54,10 @@ KINDS = ("Y_g", "Y_m", "Y")
 # against 47/107 from g; Y_m 328/764 from M_lagrange against 708/1086 from the composite-body
 # M; Y 512/719 from Newton-Euler tau against 3666/4792 from the Lagrange energy)
 # the dynamics each regressor differentiates: the routes whose derivatives are cheapest after CSE
-SOURCES = {"Y_g": gravity_lagrange, "Y_m": mass_matrix_lagrange, "Y": inverse_dynamics}
+# (rigid bodies only: the joint effects are appended as their own columns, see full_regressor)
+SOURCES = {"Y_g": gravity_lagrange,
+           "Y_m": lambda model, params: mass_matrix_lagrange(model, params, effects=False),
+           "Y": lambda model, params: inverse_dynamics(model, params, effects=False)}
 QUANTITY = {"Y_g": "g", "Y_m": "M", "Y": "tau"}
 SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random samples for the rank analysis
 SEEDS = (20140, 20141)                             # analysis, verification
@@ -68,20 +72,46 @@ SUMMARIES = {
 
 @dataclass(frozen=True)
 class FullRegressor:
-    """A dynamics quantity as rows of expressions linear in the 10 n barycentric symbols
-    ``p``; the full regressor's column k is ``d rows / d p_k``."""
+    """A dynamics quantity as rows of expressions linear in the parameters ``p``: the 10 n
+    barycentric symbols, then the description's joint-effect coefficients (``fv1``, ...).
+    Column k is ``d rigid_rows / d p_k`` for a link parameter, ``effect_columns[k - 10 n]``
+    (per row) for an effect coefficient."""
 
     kind: str
     inputs: tuple[Port, ...]
     input_symbols: tuple[tuple[se.Symbol, ...], ...]
     p: tuple[se.Symbol, ...]
-    rows: tuple[se.Basic, ...]
+    rigid_rows: tuple[se.Basic, ...]
+    effect_columns: tuple[tuple[se.Basic, ...], ...]
     row_names: tuple[str, ...]
     gravity: tuple[float, float, float]
 
+    @property
+    def rows(self) -> tuple[se.Basic, ...]:
+        """The modelled quantity, linear in ``p``."""
+        rigid = len(self.p) - len(self.effect_columns)
+        return tuple(se.Add(row, *(self.p[rigid + j] * column[r] for j, column in enumerate(self.effect_columns)))
+                     for r, row in enumerate(self.rigid_rows))
+
     def columns(self, indices) -> tuple[se.Basic, ...]:
         """Row-major entries of the regressor restricted to columns ``indices``."""
-        return tuple(se.diff(row, self.p[k]) for row in self.rows for k in indices)
+        rigid = len(self.p) - len(self.effect_columns)
+        return tuple(se.diff(row, self.p[k]) if k < rigid else self.effect_columns[k - rigid][r]
+                     for r, row in enumerate(self.rigid_rows) for k in indices)
+
+
+def effect_names(model: RobotModel, kind: str) -> tuple[str, ...]:
+    """The effect coefficients that are columns of regressor ``kind``: all of the
+    description's for ``Y``, the armature for ``Y_m`` (only it enters M), none for ``Y_g``."""
+    names = effect_parameter_names(model)
+    return {"Y": names, "Y_m": tuple(n for n in names if n.startswith("Ia")), "Y_g": ()}[kind]
+
+
+def full_values(model: RobotModel, kind: str) -> tuple:
+    """Exact values of the full regressor's parameters: the barycentric link parameters (the
+    payload merged into the last link) followed by the effect coefficients of ``kind``."""
+    effects = dict(zip(effect_parameter_names(model), effect_parameter_values(model)))
+    return exact_parameter_vector(model) + tuple(effects[name] for name in effect_names(model, kind))
 
 
 @lru_cache(maxsize=None)
@@ -98,13 +128,27 @@ def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
     input_symbols = tuple(s for port, s in zip(f.inputs, f.input_symbols) if port.name != "p")
     exprs = f.output_exprs[0]
     n = model.n
+    # the description's joint effects: coefficients appended to p, each a column that acts on
+    # one joint's torque (friction and offset on tau only, the armature on tau and M's diagonal)
+    values = {port.name: syms for port, syms in zip(inputs, input_symbols)}
+    wanted = effect_names(model, kind)
+    effect_symbols = tuple(se.Symbol(name) for name in wanted)
+    zero = se.Integer(0)
+    if kind == "Y":
+        columns = effect_columns(model, values["qd"], values["qdd"])
+    else:   # Y_m: the armature's column is 1 on M_ii
+        columns = effect_columns(model, [zero] * n, [se.Integer(1)] * n)
+    chosen = [c for name, c in zip(effect_parameter_names(model), columns) if name in wanted]
     if kind == "Y_m":
         rows = tuple(exprs[i * n + j] for i in range(n) for j in range(i + 1))
         row_names = tuple(f"M{i}{j}" if n <= 10 else f"M{i}_{j}" for i in range(n) for j in range(i + 1))
+        row_index = {i: i * (i + 1) // 2 + i for i in range(n)}      # M_ii in the stack
     else:
         rows = tuple(exprs)
         row_names = tuple(f"{QUANTITY[kind]}{i}" for i in range(n))
-    return FullRegressor(kind, inputs, input_symbols, tuple(p), rows, row_names,
+        row_index = {i: i for i in range(n)}
+    effect_cols = tuple(tuple(shape if r == row_index[i] else zero for r in range(len(rows))) for i, shape in chosen)
+    return FullRegressor(kind, inputs, input_symbols, tuple(p) + effect_symbols, rows, effect_cols, row_names,
                          tuple(float(g) for g in model.gravity))
 
 
@@ -194,7 +238,7 @@ def regressor(model: RobotModel, kind: str, name: str | None = None) -> Symbolic
     conventions = (
         f"Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame: "
         f"({gx:g}, {gy:g}, {gz:g}) m/s^2. Rows: {', '.join(full.row_names)}. "
-        f"Columns: the {cols} base parameters (rank of the full {10 * model.n}-column regressor), "
+        f"Columns: the {cols} base parameters (rank of the full {len(base.full_names)}-column regressor), "
         f"named after the barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, "
         f"Izz per link, inertia about the link frame origin in link-frame axes; suffix R: other "
         f"parameters grouped into it); their expressions and the robot's values are in "
@@ -212,15 +256,15 @@ def base_params_document(model: RobotModel) -> dict | None:
     parameters (``Y @ values`` is the modelled quantity), plus rank and condition number."""
     if not supported(model):
         return None
-    full_values = exact_parameter_vector(model)
     out = {}
     for kind in KINDS:
         b = base_parameters(model, kind)
+        values = full_values(model, kind)
         out[kind] = {
             "names": list(b.names),
             "expressions": list(b.expression_strings()),
             # exact sums of the description's rationals, rounded once to a double
-            "values": [float(v) for v in b.exact_values(full_values)],
+            "values": [float(v) for v in b.exact_values(values)],
             "rank": b.rank,
             "full_columns": len(b.full_names),
             "exact": b.exact,

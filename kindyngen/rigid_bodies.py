@@ -36,6 +36,7 @@ import sympy
 import symengine as se
 
 from .inertial_parameters import LinkInertials, numeric_inertials, parameter_symbols, symbolic_inertials
+from .joint_effects import description_text
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
 
@@ -78,7 +79,8 @@ def conventions(model: RobotModel, params: str) -> str:
                  "Ixx, Ixy, Iyy, Ixz, Iyz, Izz (inertia about the link frame origin, link-frame axes).")
     else:
         text += "Inertial parameters: the robot description's values, baked in."
-    return text
+    effects = description_text(model)
+    return text + (" " + effects.strip() + " (Coefficients from the robot description, baked in.)" if effects else "")
 
 
 # ----------------------------------------------------------------------------- small algebra

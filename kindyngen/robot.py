@@ -47,6 +47,18 @@ class Joint:
     offset: sympy.Expr
     lower: float
     upper: float
+    friction: "Friction | None" = None       # None: the description declares no friction
+    armature: sympy.Rational | None = None   # kg m^2 (reflected rotor inertia); None: not declared
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Joint friction and torque bias, exact (``tau_f = viscous qd + coulomb sign(qd) + offset``;
+    with ``coulomb_smoothing`` eps, ``tanh(qd / eps)`` replaces ``sign(qd)``)."""
+
+    viscous: sympy.Rational = sympy.Integer(0)   # N m s/rad
+    coulomb: sympy.Rational = sympy.Integer(0)   # N m
+    offset: sympy.Rational = sympy.Integer(0)    # N m, constant bias of the sensor or drive
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,28 @@ class RobotModel:
     joints: tuple[Joint, ...]
     links: tuple[Link, ...]
     source: str = "<memory>"
+    payload: Link | None = None                     # a rigid body fixed to the flange, flange frame
+    coulomb_smoothing: sympy.Rational | None = None  # eps (rad/s) of tanh(qd / eps); None: sign(qd)
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """The joint effects the description declares, in a fixed order: friction (any joint
+        with a ``friction`` entry gives every joint viscous, Coulomb and offset terms, zero
+        where not given) and ``armature``."""
+        out = []
+        if any(j.friction is not None for j in self.joints):
+            out += ["viscous_friction", "coulomb_friction", "torque_offset"]
+        if any(j.armature is not None for j in self.joints):
+            out.append("armature")
+        return tuple(out)
+
+    def friction(self, i: int) -> Friction:
+        """Joint i's friction (zeros where the description gives none)."""
+        return self.joints[i].friction or Friction()
+
+    def armature(self, i: int) -> sympy.Rational:
+        """Joint i's armature (zero where the description gives none)."""
+        return self.joints[i].armature if self.joints[i].armature is not None else sympy.Integer(0)
 
     @property
     def n(self) -> int:
@@ -195,9 +229,10 @@ def _vector(value, length: int, source: str, field: str) -> tuple[sympy.Rational
 
 
 # every key a description may hold; anything else is refused with the closest known key
-TOP_KEYS = ("name", "dh", "gravity", "joints", "links")
-JOINT_KEYS = ("a", "alpha", "d", "offset", "lower", "upper")
+TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing")
+JOINT_KEYS = ("a", "alpha", "d", "offset", "lower", "upper", "friction", "armature")
 LINK_KEYS = ("mass", "com", "inertia")
+FRICTION_KEYS = ("viscous", "coulomb", "offset")
 
 
 def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
@@ -253,13 +288,38 @@ def _parse_joint(row, source: str, field: str) -> Joint:
     upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")
     if not lower < upper:
         raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
-    return Joint(a=exact["a"], alpha=exact["alpha"], d=exact["d"], offset=offset, lower=lower, upper=upper)
+    friction = _parse_friction(row["friction"], source, f"{field}.friction") if "friction" in row else None
+    armature = _nonnegative(row["armature"], source, f"{field}.armature") if "armature" in row else None
+    return Joint(a=exact["a"], alpha=exact["alpha"], d=exact["d"], offset=offset, lower=lower, upper=upper,
+                 friction=friction, armature=armature)
 
 
-def check_inertia(inertia: np.ndarray, source: str, field: str) -> None:
+def _nonnegative(value, source: str, field: str) -> sympy.Rational:
+    """A coefficient that is physically non-negative (viscous and Coulomb friction, armature)."""
+    value = _rational(value, source, field)
+    if value < 0:
+        raise RobotDescriptionError(source, field, f"must be non-negative (a physical coefficient), got {float(value):g}")
+    return value
+
+
+def _parse_friction(row, source: str, field: str) -> Friction:
+    """``{viscous: fv, coulomb: fc, offset: f0}``, each optional (0), fv and fc >= 0."""
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(FRICTION_KEYS)}, got {row!r}")
+    _check_keys(row, FRICTION_KEYS, source, field + ".")
+    zero = sympy.Integer(0)
+    return Friction(viscous=_nonnegative(row.get("viscous", 0), source, f"{field}.viscous"),
+                    coulomb=_nonnegative(row.get("coulomb", 0), source, f"{field}.coulomb"),
+                    offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero)
+
+
+def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:
     """Reject a tensor that no rigid body has: not symmetric positive definite, or
-    principal moments violating the triangle inequality (each at most the sum of the others)."""
+    principal moments violating the triangle inequality (each at most the sum of the others).
+    With ``point_mass_allowed`` an all-zero tensor (a point mass) is accepted."""
     moments = np.linalg.eigvalsh(inertia)
+    if point_mass_allowed and not np.any(inertia):
+        return
     scale = max(abs(moments).max(), 1e-300)
     if moments.min() <= 1e-12 * scale:
         listed = ", ".join(f"{v:.6g}" for v in moments)
@@ -271,7 +331,7 @@ def check_inertia(inertia: np.ndarray, source: str, field: str) -> None:
             f"principal moments {a:.6g}, {b:.6g}, {c:.6g} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")
 
 
-def _parse_link(row, source: str, field: str) -> Link:
+def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) -> Link:
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
     _check_keys(row, LINK_KEYS, source, field + ".")
@@ -281,7 +341,7 @@ def _parse_link(row, source: str, field: str) -> Link:
     com = _vector(_require(row, "com", source, field + "."), 3, source, f"{field}.com")
     inertia = _vector(_require(row, "inertia", source, field + "."), 6, source, f"{field}.inertia")
     link = Link(mass=mass, com=com, inertia=inertia)
-    check_inertia(link.inertia_matrix(), source, f"{field}.inertia")
+    check_inertia(link.inertia_matrix(), source, f"{field}.inertia", point_mass_allowed)
     return link
 
 
@@ -307,8 +367,16 @@ def parse_robot(data, source: str = "<memory>") -> RobotModel:
     if len(links_data) != len(joints):
         raise RobotDescriptionError(source, "links", f"expected {len(joints)} entries (one per joint), got {len(links_data)}")
     links = tuple(_parse_link(row, source, f"links[{k}]") for k, row in enumerate(links_data))
+    # a payload may be a point mass (zero inertia about its CoM), unlike a link
+    payload = _parse_link(data["payload"], source, "payload", point_mass_allowed=True) if "payload" in data else None
+    smoothing = None
+    if "coulomb_smoothing" in data:
+        smoothing = _rational(data["coulomb_smoothing"], source, "coulomb_smoothing")
+        if smoothing <= 0:
+            raise RobotDescriptionError(source, "coulomb_smoothing",
+                                        f"must be a positive velocity (rad/s), got {float(smoothing):g}")
     return RobotModel(name=name.strip(), convention=convention, gravity=gravity, joints=joints,
-                      links=links, source=source)
+                      links=links, source=source, payload=payload, coulomb_smoothing=smoothing)
 
 
 def load_robot(path: str | Path) -> RobotModel:
