@@ -121,6 +121,64 @@ def _cmd_eval(args) -> int:
     return 0
 
 
+def _effects(text: str) -> tuple[str, ...]:
+    from .measured.effects import EFFECTS
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    bad = [x for x in names if x not in EFFECTS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown effect(s) {', '.join(bad)}; choose from {','.join(EFFECTS)}")
+    return names
+
+
+def _cutoff(text: str):
+    if text.strip().lower() == "none":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a frequency in Hz or 'none', got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive frequency in Hz or 'none', got {text!r}")
+    return value
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a fraction between 0 and 1, got {text!r}") from None
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected a fraction between 0 and 1, got {text!r}")
+    return value
+
+
+def _cmd_identify(args) -> int:
+    from .measured.identify import IdentificationRequest, identify, write_outputs
+    from .measured.logs import Preprocessing
+    if not args.validate and args.split is None:
+        raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
+                         "the data it was fitted to says little")
+    settings = Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate)
+    request = IdentificationRequest(robot=args.robot, data=tuple(args.data), validate=tuple(args.validate or ()),
+                                    effects=args.effects, consistent=args.consistent, weighted=args.weighted,
+                                    split=args.split, preprocessing=settings)
+
+    def progress(text):
+        if not args.quiet:
+            print(f"identify: {text}", file=sys.stderr, flush=True)
+
+    result = identify(request, progress)
+    out = write_outputs(result, args.out)
+    summary = {"rms_train": [round(float(v), 4) for v in result.rms_train]}
+    if result.rms_validation is not None:
+        summary["rms_validation"] = [round(float(v), 4) for v in result.rms_validation]
+        summary["rms_validation_sum"] = round(float(np.sum(result.rms_validation)), 4)
+    summary["physically_consistent"] = result.physically_consistent
+    print(json.dumps(summary))
+    progress(f"wrote {out}/identification.json, report.md" + (", model.yaml" if result.model_yaml else ""))
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
         "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML description "
@@ -157,6 +215,34 @@ def parser() -> argparse.ArgumentParser:
     e.add_argument("function", metavar="FUNCTION", help="e.g. fk_hom, fk_dq, jacobian")
     e.add_argument("--lang", choices=LANGS, default="c")
     e.set_defaults(run=_cmd_eval)
+
+    i = sub.add_parser("identify", help="identify the dynamic model from logged motion",
+                       description=("Fit the robot's base parameters (and chosen joint effects) to logged joint "
+                                    "torques; write DIR/identification.json, DIR/report.md with plots, and "
+                                    "DIR/model.yaml (the identified robot description) when the result is "
+                                    "physical. Logs: CSV with header t, q1..qn, tau1..taun (optional qd1.., "
+                                    "qdd1..; s, rad, N m) or npz with times, positions, velocities, "
+                                    "accelerations, torques. Each file is one experiment; files are never "
+                                    "differentiated across."))
+    i.add_argument("--robot", required=True, metavar="ROBOT.yaml", help="the robot description (geometry, prior)")
+    i.add_argument("--data", required=True, action="append", metavar="LOG", help="training log (repeatable)")
+    i.add_argument("--validate", action="append", metavar="LOG", help="validation log (repeatable)")
+    i.add_argument("--split", type=_fraction, metavar="FRACTION",
+                   help="train on the first FRACTION of the --data time span, validate on the rest")
+    i.add_argument("--effects", type=_effects, default=(), metavar="LIST",
+                   help="comma-separated subset of viscous_friction,coulomb_friction,torque_offset,armature")
+    i.add_argument("--consistent", action="store_true",
+                   help="physically consistent identification (semidefinite program): positive definite "
+                        "pseudo-inertias, non-negative friction and armature")
+    i.add_argument("--weighted", action="store_true", help="weighted least squares (per-joint noise levels)")
+    i.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
+                   help="zero-phase low-pass cutoff for q, qd, tau before differentiation (default 5 Hz; "
+                        "'none': use the data as stored)")
+    i.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="uniform resampling rate (default: the log's median rate)")
+    i.add_argument("--out", required=True, metavar="DIR")
+    i.add_argument("--quiet", action="store_true", help="no progress output")
+    i.set_defaults(run=_cmd_identify)
     return p
 
 
@@ -165,6 +251,16 @@ def main(argv=None) -> int:
     try:
         return args.run(args)
     except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+        message = str(exc)
+    except ValueError as exc:   # the measured-data side's errors (logs, estimation, excitation)
+        from .measured.logs import LogError
+        from .measured.estimation import IdentificationDataError
+        if not isinstance(exc, (LogError, IdentificationDataError)) and type(exc).__module__.split(".")[1:2] != ["measured"]:
+            raise
+        message = str(exc)
+    except RuntimeError as exc:  # a solver that fails (consistent identification)
+        if type(exc).__module__.split(".")[1:2] != ["measured"]:
+            raise
         message = str(exc)
     except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
         message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")

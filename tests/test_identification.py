@@ -10,8 +10,8 @@ import sympy
 
 from harness import GENERATED, robot
 from reference import pinocchio_model, random_configurations
-from kindyngen.identification import (IdentificationDataError, RankDeficientError, identify, identify_samples,
-                                      stacked_regressor)
+from kindyngen.measured.estimation import (IdentificationDataError, RankDeficientError, identify,
+                                          identify_samples, stacked_regressor)
 
 
 def pin_data(name, Q, QD=None, QDD=None):

@@ -1,0 +1,290 @@
+"""Identification from logs, end to end: a robot description and logged motion in, identified
+parameters, prediction errors, an identified robot description and a report out.
+
+``identify(request, progress)`` runs it and returns an :class:`Identification`;
+``write_outputs(result, out)`` writes ``identification.json``, ``model.yaml``, ``report.md``
+and the figures.  The steps, each from its own module:
+
+1. logs -> uniformly sampled, filtered segments (:mod:`kindyngen.measured.logs`); several
+   files are several experiments, stacked but never differentiated across their seams;
+2. the rigid-body base regressor along the motion (:mod:`kindyngen.measured.regressor_rows`)
+   plus the chosen effects' columns (:mod:`kindyngen.measured.effects`);
+3. least squares, ordinary or weighted, with standard deviations
+   (:mod:`kindyngen.measured.estimation`), or the physically consistent semidefinite program
+   (:mod:`kindyngen.measured.consistent`) with the description's parameters as the prior;
+4. predictions on the training and validation data, RMS per joint;
+5. the identified model as a robot description (:mod:`kindyngen.measured.model_writer`).
+
+Example:
+
+>>> result = identify(IdentificationRequest("robots/lwr4.yaml", ("run1.npz",)))   # doctest: +SKIP
+>>> result.rms_train                                                               # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import yaml
+
+from ..inertial_parameters import parameter_vector
+from ..robot import load_robot, parse_robot
+from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
+from .effects import NONNEGATIVE, effect_columns, effect_names, effect_of
+from .estimation import least_squares, rms_per_joint
+from .logs import Preprocessing, concatenate_rows, load_segments, split_time
+from .model_writer import ModelWriteError, model_yaml
+from .regressor_rows import TorqueRegressor
+from .report import rms_table, torque_figure
+
+
+@dataclass(frozen=True)
+class IdentificationRequest:
+    """What to identify from what. ``data``/``validate``: log files (CSV or npz), each one
+    experiment; ``split``: when given, the time span of ``data`` is cut and its first
+    ``split`` fraction trains, the rest validates (instead of, or besides, ``validate``);
+    ``effects``: effect names of :data:`kindyngen.measured.effects.EFFECTS`; ``consistent``:
+    the semidefinite program instead of least squares; ``weighted``: weighted least squares."""
+
+    robot: str | Path
+    data: tuple[str | Path, ...]
+    validate: tuple[str | Path, ...] = ()
+    effects: tuple[str, ...] = ()
+    consistent: bool = False
+    weighted: bool = False
+    split: float | None = None
+    preprocessing: Preprocessing = field(default_factory=Preprocessing)
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """The outcome of :func:`identify` (arrays per joint are in N m)."""
+
+    request: IdentificationRequest
+    method: str
+    base_names: tuple[str, ...]
+    base_values: np.ndarray
+    base_std_percent: np.ndarray | None
+    effect_names: tuple[str, ...]
+    effect_values: np.ndarray
+    effect_std_percent: np.ndarray | None
+    condition_number: float
+    rms_train: np.ndarray
+    rms_validation: np.ndarray | None
+    rms_validation_nominal: np.ndarray | None
+    physically_consistent: bool
+    consistency_notes: tuple[str, ...]
+    model_yaml: str | None
+    samples_train: int
+    samples_validation: int
+    preprocessing_notes: tuple[str, ...]
+    validation_t: np.ndarray | None
+    validation_tau: np.ndarray | None
+    validation_predicted: np.ndarray | None
+    validation_nominal: np.ndarray | None
+
+
+def _segments(paths, n, settings, progress, what):
+    out = []
+    for path in paths:
+        progress(f"reading {what} log {path}")
+        out.extend(load_segments(path, n, settings))
+    return tuple(out)
+
+
+def _timeline(segments):
+    """One time axis through several segments, each continuing where the previous ended."""
+    parts, start = [], 0.0
+    for s in segments:
+        parts.append(s.t - s.t[0] + start)
+        start = parts[-1][-1] + s.dt
+    return np.concatenate(parts)
+
+
+def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[str, ...]]:
+    """Whether a full parameter vector and effect coefficients are physical: every link's
+    pseudo-inertia positive definite, non-negative friction and armature."""
+    notes = []
+    eig = min_pseudo_inertia_eigenvalues(full, n)
+    for i, e in enumerate(eig):
+        if not e > 0:
+            notes.append(f"link {i + 1}: pseudo-inertia not positive definite (smallest eigenvalue {e:.3g})")
+    for name, v in zip(names, values):
+        if effect_of(name) in NONNEGATIVE and v < 0:
+            notes.append(f"{name} = {v:.4g} is negative")
+    return not notes, tuple(notes)
+
+
+def identify(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None) -> Identification:
+    """Run the identification of ``request`` (see the module text)."""
+    model = load_robot(request.robot)
+    n = model.n
+    settings = request.preprocessing
+    train = _segments(request.data, n, settings, progress, "training")
+    validation = _segments(request.validate, n, settings, progress, "validation")
+    if request.split is not None:
+        train, held_out = split_time(train, request.split)
+        validation = tuple(held_out) + validation
+    notes = tuple(dict.fromkeys(note for s in train + validation for note in s.notes))
+
+    progress("building the regressor")
+    regressor = TorqueRegressor(model)
+    eps = float(model.coulomb_smoothing) if model.coulomb_smoothing is not None else None
+    enames = effect_names(request.effects, n)
+
+    def rows(segments):
+        q, qd, qdd, tau = concatenate_rows(segments)
+        E = effect_columns(request.effects, qd, qdd, eps) if enames else np.zeros((len(q), n, 0))
+        return regressor(q, qd, qdd), E, tau
+
+    Yb, E, tau = rows(train)
+    k_base = Yb.shape[2]
+    P = regressor.base_map
+    prior = parameter_vector(model)
+    if request.consistent:
+        progress(f"solving the semidefinite program ({len(tau)} samples, {10 * n + len(enames)} unknowns)")
+        fit = identify_consistent(Yb @ P, E, tau, n, enames, prior=prior, base_map=P)
+        full, evalues = fit.full_values, fit.effect_values
+        base = P @ full
+        base_std = effect_std = None
+        Y_all = np.concatenate([Yb, E], axis=2)
+        s = np.linalg.svd(Y_all.reshape(-1, Y_all.shape[2]), compute_uv=False)
+        cond = float(s[0] / s[-1])
+        method = "physically consistent (semidefinite program, CLARABEL)"
+    else:
+        progress(f"least squares ({len(tau)} samples, {k_base + len(enames)} columns)")
+        Y_all = np.concatenate([Yb, E], axis=2)
+        fit = least_squares(Y_all, tau, regressor.names + enames, weighted=request.weighted)
+        base, evalues = fit.values[:k_base], fit.values[k_base:]
+        base_std, effect_std = fit.std_percent[:k_base], fit.std_percent[k_base:]
+        cond = fit.condition_number
+        # the full parameters nearest the description's that reproduce the base values
+        full = prior + np.linalg.pinv(P) @ (base - P @ prior)
+        method = "weighted least squares" if request.weighted else "ordinary least squares"
+
+    def predicted(Y, E_):
+        return Y @ base + (E_ @ evalues if len(enames) else 0.0)
+
+    rms_train = rms_per_joint(tau, predicted(Yb, E))
+    consistent, consistency_notes = _consistency(full, n, enames, evalues)
+
+    text = None
+    if consistent:
+        try:
+            header = (f"Identified by KinDynGen from {', '.join(map(str, request.data))} ({method}).\n"
+                      f"Geometry from {request.robot}; link parameters and joint effects identified.")
+            text = model_yaml(request.robot, links_from_barycentric(full, n), dict(zip(enames, map(float, evalues))),
+                              header=header, name=f"{model.name}_identified")
+            parse_robot(yaml.safe_load(text), "model.yaml")     # the loader must take what we write
+        except (ModelWriteError, ValueError) as exc:
+            consistency_notes += (f"model.yaml not written: {exc}",)
+            text = None
+    else:
+        consistency_notes += ("model.yaml not written: the identified parameters are not physical "
+                              "(use --consistent)",)
+
+    rms_val = rms_nominal = None
+    vt = vtau = vpred = vnom = None
+    if validation:
+        Yv, Ev, vtau = rows(validation)
+        vpred = predicted(Yv, Ev)
+        rms_val = rms_per_joint(vtau, vpred)
+        # the starting description's own prediction (rigid bodies and its declared effects)
+        vnom = Yv @ (P @ prior) + _declared_effects(model, validation, eps)
+        rms_nominal = rms_per_joint(vtau, vnom)
+        vt = _timeline(validation)
+    return Identification(
+        request=request, method=method, base_names=regressor.names, base_values=np.asarray(base),
+        base_std_percent=base_std, effect_names=enames, effect_values=np.asarray(evalues),
+        effect_std_percent=effect_std, condition_number=cond, rms_train=rms_train, rms_validation=rms_val,
+        rms_validation_nominal=rms_nominal, physically_consistent=consistent,
+        consistency_notes=consistency_notes, model_yaml=text,
+        samples_train=int(len(tau)), samples_validation=int(0 if vtau is None else len(vtau)),
+        preprocessing_notes=notes, validation_t=vt, validation_tau=vtau, validation_predicted=vpred,
+        validation_nominal=vnom)
+
+
+def _declared_effects(model, segments, eps) -> np.ndarray:
+    """Torques of the effects the robot description declares, along ``segments``."""
+    from ..joint_effects import effect_parameter_names, effect_parameter_values
+    q, qd, qdd, _ = concatenate_rows(segments)
+    if not model.effects:
+        return np.zeros_like(q)
+    values = np.array([float(v) for v in effect_parameter_values(model)])
+    assert effect_names(model.effects, model.n) == effect_parameter_names(model)
+    return effect_columns(model.effects, qd, qdd, eps) @ values
+
+
+def _numbers(values) -> list:
+    """Floats for JSON; a non-finite one (std of a zero value) as a string, JSON-valid."""
+    out = []
+    for v in np.asarray(values, float):
+        out.append(float(v) if math.isfinite(v) else ("Infinity" if v > 0 else "-Infinity" if v < 0 else "NaN"))
+    return out
+
+
+def result_document(result: Identification) -> dict:
+    """The content of ``identification.json``."""
+    r = result.request
+    doc = {
+        "robot": str(r.robot), "data": [str(p) for p in r.data], "validate": [str(p) for p in r.validate],
+        "split": r.split, "method": result.method, "effects_requested": list(r.effects),
+        "preprocessing": list(result.preprocessing_notes),
+        "samples": {"train": result.samples_train, "validation": result.samples_validation},
+        "base_params": {"names": list(result.base_names), "values": _numbers(result.base_values),
+                        "std_percent": None if result.base_std_percent is None else _numbers(result.base_std_percent)},
+        "effects": {"names": list(result.effect_names), "values": _numbers(result.effect_values),
+                    "std_percent": None if result.effect_std_percent is None else _numbers(result.effect_std_percent)},
+        "condition_number": result.condition_number,
+        "rms_train": _numbers(result.rms_train),
+        "rms_validation": None if result.rms_validation is None else _numbers(result.rms_validation),
+        "rms_validation_description": None if result.rms_validation_nominal is None
+        else _numbers(result.rms_validation_nominal),
+        "physically_consistent": result.physically_consistent,
+        "notes": list(result.consistency_notes),
+        "units": "torques and RMS in N m; std_percent = 100 std / |value|",
+    }
+    return doc
+
+
+def write_outputs(result: Identification, out: str | Path) -> Path:
+    """``identification.json``, ``model.yaml`` (when physical), ``report.md`` and
+    ``validation_torques.png`` under ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "identification.json").write_text(json.dumps(result_document(result), indent=1, allow_nan=False) + "\n")
+    if result.model_yaml is not None:
+        (out / "model.yaml").write_text(result.model_yaml)
+    n = len(result.rms_train)
+    lines = [f"# Identification of {Path(result.request.robot).name}", "",
+             f"Method: {result.method}. Effects: {', '.join(result.request.effects) or 'none'}. "
+             f"Training samples: {result.samples_train}; validation samples: {result.samples_validation}. "
+             f"Condition number of the stacked regressor: {result.condition_number:.4g}.", "",
+             "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "## RMS torque error per joint (N m)", ""]
+    rows = {"identified, training": list(result.rms_train)}
+    if result.rms_validation is not None:
+        rows["identified, validation"] = list(result.rms_validation)
+        rows["starting description, validation"] = list(result.rms_validation_nominal)
+    lines += [rms_table(rows, n), ""]
+    if result.validation_t is not None:
+        figure = torque_figure(out / "validation_torques.png", result.validation_t, result.validation_tau,
+                               {"identified": result.validation_predicted,
+                                "starting description": result.validation_nominal},
+                               "validation: measured and predicted joint torques")
+        lines += ["## Validation torques", "", f"![measured and predicted torques]({figure.name})", ""]
+    lines += ["## Parameters", "", "| parameter | value | std (%) |", "|---|---|---|"]
+    std = result.base_std_percent
+    for k, (name, value) in enumerate(zip(result.base_names, result.base_values)):
+        lines.append(f"| {name} | {value:.6g} | {'-' if std is None else f'{std[k]:.3g}'} |")
+    estd = result.effect_std_percent
+    for k, (name, value) in enumerate(zip(result.effect_names, result.effect_values)):
+        lines.append(f"| {name} | {value:.6g} | {'-' if estd is None else f'{estd[k]:.3g}'} |")
+    lines += ["", f"Physically consistent: {'yes' if result.physically_consistent else 'no'}."]
+    lines += [f"- {note}" for note in result.consistency_notes]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return out

@@ -1,0 +1,968 @@
+"""Robot motion logs: reading them (CSV, npz) and preparing them for dynamic identification.
+
+Identification fits ``tau = Y(q, qd, qdd) @ p`` by least squares, so it needs, on one time
+base, joint positions, velocities, accelerations and torques that went through the *same*
+filter.  Real logs are uneven: the time step jitters, some loggers re-send their last sample
+when no new one arrived, samples go missing, velocities are given or not, accelerations
+almost never.  This module turns such a log into :class:`Segment` objects: uniformly
+sampled, low-pass filtered with zero phase, every derivative present, each one carrying
+``notes`` that say exactly what was done to it.
+
+The steps, each a stated and overridable choice (:class:`Preprocessing`):
+
+1. :func:`read_log` reads and checks the file (:class:`RawLog`); every bad input is a
+   :class:`LogError` naming the file, the column (or key) and the reason.
+2. :func:`preprocess` drops repeated rows, splits the log at gaps, puts each piece on a
+   uniform time grid, low-passes it (4th-order Butterworth, forwards and backwards),
+   differentiates what the log does not give, and trims the filter's edge transients.
+3. :func:`split_time` and :func:`concatenate_rows` prepare training/validation sets and the
+   stacked rows for least squares.
+
+Example (a short synthetic log; real ones are read with :func:`load_segments`):
+
+>>> import numpy as np
+>>> t = np.arange(0.0, 3.0, 0.001)
+>>> q = np.column_stack([np.sin(2 * np.pi * 0.5 * t), 0.1 * t])
+>>> raw = RawLog("demo", t, q, tau=np.cos(q))
+>>> (segment,) = preprocess(raw)
+>>> segment.n, round(segment.dt, 6), round(segment.duration, 3)
+(2, 0.001, 2.199)
+>>> for note in segment.notes:
+...     print(note)
+no repeated rows among 3000
+whole log, t = 0 .. 2.999 s
+q, tau low-pass 5 Hz (4th-order Butterworth, zero phase)
+qd by central differences of the filtered q; qdd by central differences of that qd
+trimmed 0.4 s (400 samples) at each end
+"""
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import re
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import butter, sosfiltfilt
+
+__all__ = [
+    "MIN_SAMPLES", "LogError", "RawLog", "read_log", "repeated_rows", "Preprocessing",
+    "Segment", "preprocess", "load_segments", "split_time", "concatenate_rows",
+]
+
+#: Fewest samples a log (and a segment after trimming) may have.  Below this a
+#: least-squares fit of even one joint's few parameters is not meaningful, and the
+#: zero-phase filter's edge transients would cover the whole record.
+MIN_SAMPLES = 50
+
+#: CSV column groups: prefix -> required?  (``t`` is the time column.)
+_CSV_GROUPS = {"q": True, "qd": False, "qdd": False, "tau": True}
+_CSV_COLUMN = re.compile(r"(q|qd|qdd|tau)(\d+)")
+
+#: npz keys -> the channel they hold; ``times``, ``positions``, ``torques`` are required.
+_NPZ_KEYS = {"times": "t", "positions": "q", "velocities": "qd", "accelerations": "qdd",
+             "torques": "tau"}
+#: keys that real npz logs carry but identification does not use: the *commanded*
+#: trajectory (the LWR4+ logs of the FloBaRoID project store it beside the measurements).
+#: Identification must use what the robot did, not what it was asked to do.
+_NPZ_IGNORED = ("target_positions", "target_velocities", "target_accelerations")
+
+_CHANNELS = ("q", "qd", "qdd", "tau")
+
+
+class LogError(ValueError):
+    """A log that cannot be used, with the file, the field (column, key or row) and the
+    reason; the same shape as :class:`kindyngen.robot.RobotDescriptionError`.
+
+    >>> raise LogError("run1.csv", "q3", "not finite (nan) at data row 17 (file line 18)")
+    Traceback (most recent call last):
+    ...
+    kindyngen.measured.logs.LogError: run1.csv: field 'q3': not finite (nan) at data row 17 (file line 18)
+    """
+
+    def __init__(self, source: str, field: str, reason: str):
+        self.source, self.field, self.reason = source, field, reason
+        super().__init__(f"{source}: field '{field}': {reason}")
+
+
+def _num(x) -> str:
+    """A plain number for messages: ``1.5``, never ``np.float64(1.5)``; time stamps keep
+    all their digits (Unix times have ten before the point)."""
+    return repr(float(x))
+
+
+def _g(x) -> str:
+    return f"{float(x):g}"
+
+
+def _readonly(a) -> np.ndarray:
+    # frozen dataclasses hold arrays: a private read-only copy keeps the promise (neither
+    # the caller's later edits nor the user's writes can change a log after the fact)
+    a = np.array(a, dtype=float, copy=True)
+    a.flags.writeable = False
+    return a
+
+
+# --------------------------------------------------------------------------- raw logs
+
+@dataclass(frozen=True, eq=False)   # eq=False: arrays have no single truth value
+class RawLog:
+    """A log as read: time stamps ``t`` (N,), positions ``q`` and torques ``tau`` (N, n),
+    velocities ``qd`` and accelerations ``qdd`` (N, n) when the log has them, else None.
+    ``notes`` says what the reader left out (e.g. commanded trajectories in an npz).
+
+    Construction checks shapes, finiteness and time order (the same checks
+    :func:`read_log` reports with the file's own column names), so a RawLog built by hand
+    is as trustworthy as one read from a file.
+
+    >>> import numpy as np
+    >>> t = np.arange(60) * 0.01
+    >>> raw = RawLog("demo", t, q=np.zeros((60, 2)), tau=np.ones((60, 2)))
+    >>> raw.n, raw.qd is None
+    (2, True)
+    """
+
+    source: str
+    t: np.ndarray
+    q: np.ndarray
+    tau: np.ndarray
+    qd: np.ndarray | None = None
+    qdd: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        arrays = {"t": self.t, "q": self.q, "tau": self.tau, "qd": self.qd, "qdd": self.qdd}
+        for name, value in arrays.items():
+            if value is None and name in ("t", "q", "tau"):
+                raise LogError(self.source, name, "required (only qd and qdd may be None)")
+            if value is not None:
+                object.__setattr__(self, name, _as_float(self.source, name, value))
+        object.__setattr__(self, "notes", tuple(self.notes))
+        _check_shapes(self.source, self.t, self._channels(), _canonical_names)
+        _check_values(self.source, self.t, self._channels(), _canonical_names)
+
+    def _channels(self) -> dict[str, np.ndarray | None]:
+        return {"q": self.q, "qd": self.qd, "qdd": self.qdd, "tau": self.tau}
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return self.q.shape[1]
+
+    def __repr__(self) -> str:
+        given = [c for c in ("qd", "qdd") if getattr(self, c) is not None]
+        return (f"RawLog({self.source!r}, {len(self.t)} samples, {self.n} joints, "
+                f"{_g(self.t[-1] - self.t[0])} s from t = {_num(self.t[0])} s, given: q, tau"
+                f"{''.join(', ' + c for c in given)})")
+
+
+@dataclass(frozen=True)
+class _Names:
+    """How a log format names things in messages: the time field, a whole channel (for shape
+    errors), one joint of a channel (field, extra words), and what a row is called."""
+
+    time: str
+    channel: Callable[[str], str]
+    column: Callable[[str, int], tuple[str, str]]
+    row: str
+
+
+_NPZ_KEY_OF = {v: k for k, v in _NPZ_KEYS.items()}
+_canonical_names = _Names("t", lambda ch: ch, lambda ch, j: (f"{ch}{j + 1}", ""), "row")
+# CSV: the columns carry the canonical names; rows are counted as data rows from 1
+_csv_names = _Names("t", lambda ch: f"{ch}1", lambda ch, j: (f"{ch}{j + 1}", ""), "data row")
+_npz_names = _Names("times", lambda ch: _NPZ_KEY_OF[ch],
+                    lambda ch, j: (_NPZ_KEY_OF[ch], f" (joint {j + 1})"), "sample")
+
+
+def _as_float(source: str, name: str, value) -> np.ndarray:
+    try:
+        a = np.asarray(value)
+    except Exception as exc:   # e.g. ragged nested lists
+        raise LogError(source, name, f"not an array of numbers: {exc}") from exc
+    if a.dtype.kind not in "fiu":   # bool, complex, strings, objects: not measurements
+        raise LogError(source, name, f"expected real numbers, got dtype {a.dtype}")
+    return _readonly(a)
+
+
+def _check_shapes(source: str, t: np.ndarray, channels: dict, names: _Names) -> None:
+    if t.ndim != 1:
+        raise LogError(source, names.time, f"expected a 1-D array of time stamps, got shape {t.shape}")
+    if len(t) < MIN_SAMPLES:
+        raise LogError(source, names.time, f"only {len(t)} samples; at least MIN_SAMPLES = "
+                                           f"{MIN_SAMPLES} are needed")
+    n = channels["q"].shape[1] if channels["q"].ndim == 2 else None
+    for ch, a in channels.items():
+        if a is None:
+            continue
+        field_name = names.channel(ch)
+        if a.ndim != 2 or a.shape[0] != len(t):
+            raise LogError(source, field_name, f"expected shape (N, n) with N = {len(t)} "
+                                               f"time stamps, got {a.shape}")
+        if a.shape[1] != n:
+            raise LogError(source, field_name, f"has {a.shape[1]} joints but q has {n}")
+    if n is None or n < 1:
+        raise LogError(source, "q", "no joint columns")
+
+
+def _check_values(source: str, t: np.ndarray, channels: dict, names: _Names) -> None:
+    """Non-finite values and time order, each named by field and 1-based row."""
+    bad = ~np.isfinite(t)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise LogError(source, names.time, f"not finite ({_num(t[i])}) at {names.row} {i + 1} "
+                                           f"(first bad {names.row})")
+    for ch, a in channels.items():
+        if a is None:
+            continue
+        bad = ~np.isfinite(a)
+        if bad.any():
+            # the first bad row over all columns; among its bad columns, the first
+            i = int(np.argmax(bad.any(axis=1)))
+            j = int(np.argmax(bad[i]))
+            field_name, extra = names.column(ch, j)
+            raise LogError(source, field_name, f"not finite ({_num(a[i, j])}) at {names.row} "
+                                               f"{i + 1}{extra} (first bad {names.row})")
+    step = np.diff(t)
+    back = np.flatnonzero(step < 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise LogError(source, names.time, f"time goes backwards at {names.row} {i + 1}: "
+                                           f"{_num(t[i])} s after {_num(t[i - 1])} s")
+    same_time = np.flatnonzero(step == 0)
+    if same_time.size:
+        # an equal time stamp is allowed only for an exact repeat of the previous row (a
+        # logger re-sending its sample); preprocess drops those rows
+        given = [a for a in channels.values() if a is not None]
+        stacked = np.concatenate(given, axis=1)
+        for k in same_time:
+            differ = np.flatnonzero(stacked[k + 1] != stacked[k])
+            if differ.size:
+                i = int(k) + 1
+                raise LogError(source, names.time,
+                               f"{names.row}s {i} and {i + 1} have the same time stamp "
+                               f"{_num(t[i])} s but different values; only an exact repeat "
+                               f"of the previous {names.row} may share its time stamp")
+
+
+def read_log(path, n: int) -> RawLog:
+    """Read a motion log of an ``n``-joint robot from a ``.csv`` or ``.npz`` file.
+
+    CSV: a header row, then one row per sample.  Columns ``t`` (s), ``q1..qn`` (rad),
+    ``tau1..taun`` (N m); optional groups ``qd1..qdn`` (rad/s) and ``qdd1..qddn``
+    (rad/s^2), each complete or absent.  Column order is free.
+
+    npz: arrays ``times`` (N,), ``positions`` and ``torques`` (N, n); optional
+    ``velocities`` and ``accelerations`` (N, n).  Commanded trajectories
+    (``target_positions`` ...) are skipped with a note; other keys are refused.
+
+    Refused with a :class:`LogError` (file, column or key, reason): unknown or missing
+    columns, a wrong joint count, non-finite values (column and first bad row), fewer than
+    :data:`MIN_SAMPLES` rows, time going backwards, equal time stamps with different values,
+    unreadable files, other extensions.
+
+    >>> from pathlib import Path
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> rows = ["t,q1,tau1"] + [f"{0.01 * k},{0.1 * k},1.0" for k in range(60)]
+    >>> _ = (folder / "run.csv").write_text("\\n".join(rows))
+    >>> read_log(folder / "run.csv", 1).q.shape
+    (60, 1)
+    >>> _ = (folder / "bad.csv").write_text("t,q1,torque1\\n0,0,0\\n")
+    >>> read_log(folder / "bad.csv", 1)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kindyngen.measured.logs.LogError: ...bad.csv: field 'torque1': unknown column; did you mean 'tau1'? ...
+    """
+    path = Path(path)
+    source = str(path)
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
+        raise ValueError(f"n must be a positive number of joints, got {n!r}")
+    n = int(n)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return _read_csv(path, n, source)
+    if suffix == ".npz":
+        return _read_npz(path, n, source)
+    raise LogError(source, "<file>", f"unknown extension {path.suffix!r}; expected .csv or .npz")
+
+
+def _expected_columns(n: int) -> str:
+    return f"t, q1..q{n}, tau1..tau{n}; optional qd1..qd{n}, qdd1..qdd{n}"
+
+
+def _read_csv(path: Path, n: int, source: str) -> RawLog:
+    try:
+        # utf-8-sig: a spreadsheet's byte-order mark must not become part of the name 't'
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            rows, lines = [], []
+            for row in reader:
+                if row and any(cell.strip() for cell in row):   # blank lines carry nothing
+                    rows.append(row)
+                    lines.append(reader.line_num)
+    except OSError as exc:
+        raise LogError(source, "<file>", f"cannot read: {exc.strerror or exc}") from exc
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise LogError(source, "<file>", f"cannot read as CSV text: {exc}") from exc
+    if not header or not any(cell.strip() for cell in header):
+        raise LogError(source, "<file>", f"empty file; expected a header row ({_expected_columns(n)})")
+    names = [cell.strip() for cell in header]
+    if all(_is_number(name) for name in names):
+        raise LogError(source, "<file>", f"the first row holds numbers, not column names; a "
+                                         f"header row is required ({_expected_columns(n)})")
+    columns = _csv_layout(names, n, source)
+
+    data = _csv_numbers(rows, lines, names, source)
+    t = data[:, columns["t"]]
+    channels = {ch: (data[:, columns[ch]] if ch in columns else None) for ch in _CHANNELS}
+    _check_shapes(source, t, channels, _csv_names)
+    # rows named as the user counts them: data rows from 1, plus the file line
+    line_of = np.asarray(lines)
+    try:
+        _check_values(source, t, channels, _csv_names)
+    except LogError as exc:
+        raise LogError(source, exc.field, _with_line(exc.reason, line_of)) from None
+    return RawLog(source, t, channels["q"], channels["tau"], channels["qd"], channels["qdd"])
+
+
+def _with_line(reason: str, line_of: np.ndarray) -> str:
+    """Add the file line to the first 'data row K' of a message (the header is line 1)."""
+    match = re.search(r"data rows? (\d+)", reason)
+    if not match:
+        return reason
+    k = int(match.group(1))
+    return reason.replace(match.group(0), f"{match.group(0)} (file line {line_of[k - 1]})", 1)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _csv_layout(names: list[str], n: int, source: str) -> dict[str, object]:
+    """Column index of ``t`` and index arrays of each channel, from the header."""
+    known = ["t"] + [f"{ch}{j}" for ch in _CSV_GROUPS for j in range(1, n + 1)]
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if not name:   # e.g. a trailing comma in the header
+            raise LogError(source, f"<column {i + 1}>", "empty column name in the header row")
+        if name in seen:
+            raise LogError(source, name, f"column appears twice (columns {seen[name] + 1} and {i + 1})")
+        seen[name] = i
+    # unknown names first: a misspelt column explains everything that follows from it
+    for name in names:
+        if name != "t" and not _CSV_COLUMN.fullmatch(name):
+            close = difflib.get_close_matches(name, known, n=1, cutoff=0.0)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise LogError(source, name, f"unknown column; {hint}(expected {_expected_columns(n)})")
+    if "t" not in seen:
+        raise LogError(source, "t", f"missing column (expected {_expected_columns(n)})")
+    joints: dict[str, list[int]] = {ch: [] for ch in _CSV_GROUPS}
+    for name in names:
+        match = _CSV_COLUMN.fullmatch(name)
+        if match:
+            joints[match.group(1)].append(int(match.group(2)))
+    # the joint count: more joints than the robot, or fewer in every group present
+    for ch, idx in joints.items():
+        wrong = [j for j in idx if j < 1 or j > n]
+        if wrong:
+            j = max(wrong) if max(wrong) > n else min(wrong)
+            count = max(idx)
+            reason = (f"the file has {_joints(count)} ({_span(ch, count)}) but the robot has {n}"
+                      if j > n else f"joints are numbered from 1 (expected {ch}1..{ch}{n})")
+            raise LogError(source, f"{ch}{j}", reason)
+    present = {ch: sorted(idx) for ch, idx in joints.items() if idx}
+    counts = {ch: max(idx) for ch, idx in present.items()}
+    for ch, required in _CSV_GROUPS.items():
+        idx = present.get(ch)
+        if not idx:
+            if required:
+                raise LogError(source, f"{ch}1", f"missing column (expected {_expected_columns(n)})")
+            continue
+        missing = [j for j in range(1, n + 1) if j not in idx]
+        if not missing:
+            continue
+        first = f"{ch}{missing[0]}"
+        if missing == list(range(counts[ch] + 1, n + 1)) and len(set(counts.values())) == 1:
+            # every group stops at the same joint: a log of a different robot
+            listed = ", ".join(_span(c, counts[c]) for c in present)
+            raise LogError(source, first, f"the file has {_joints(counts[ch])} ({listed}) "
+                                          f"but the robot has {n}")
+        if not required:
+            listed = ", ".join(f"{ch}{j}" for j in missing)
+            raise LogError(source, first, f"optional group {ch} is incomplete: {listed} missing "
+                                          f"(give all of {ch}1..{ch}{n} or none)")
+        raise LogError(source, first, f"missing column (expected {_expected_columns(n)})")
+    layout: dict[str, object] = {"t": seen["t"]}
+    for ch in present:
+        layout[ch] = np.array([seen[f"{ch}{j}"] for j in range(1, n + 1)])
+    return layout
+
+
+def _span(ch: str, count: int) -> str:
+    return f"{ch}1" if count == 1 else f"{ch}1..{ch}{count}"
+
+
+def _joints(count: int) -> str:
+    return "1 joint" if count == 1 else f"{count} joints"
+
+
+def _csv_numbers(rows: list[list[str]], lines: list[int], names: list[str], source: str) -> np.ndarray:
+    """All cells as floats; the first bad cell is reported by column and row."""
+    width = len(names)
+    for k, row in enumerate(rows):
+        if len(row) != width:
+            raise LogError(source, "<file>", f"data row {k + 1} (file line {lines[k]}) has "
+                                             f"{len(row)} values, the header has {width}")
+    if not rows:
+        return np.empty((0, width))
+    try:
+        return np.array(rows, dtype=float)   # fast path: numpy parses the strings
+    except ValueError:
+        pass
+    for k, row in enumerate(rows):            # slow path only to name the bad cell
+        for i, cell in enumerate(row):
+            try:
+                float(cell)
+            except ValueError:
+                shown = repr(cell.strip()) if cell.strip() else "an empty cell"
+                raise LogError(source, names[i], f"cannot read {shown} as a number at data row "
+                                                 f"{k + 1} (file line {lines[k]})") from None
+    raise LogError(source, "<file>", "cannot read the values as numbers")   # not reached
+
+
+def _read_npz(path: Path, n: int, source: str) -> RawLog:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            keys = list(archive.files)
+            arrays = {}
+            for key in keys:
+                if key in _NPZ_IGNORED:
+                    continue
+                try:
+                    arrays[key] = archive[key]
+                except ValueError as exc:   # object arrays need pickle, which stays off
+                    raise LogError(source, key, f"cannot read the array ({exc})") from None
+    except LogError:
+        raise
+    except OSError as exc:
+        raise LogError(source, "<file>", f"cannot read: {exc.strerror or exc}") from exc
+    except (ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+        # np.load on a non-zip file tries pickle, refused: the file is no npz archive
+        raise LogError(source, "<file>", f"cannot read as an .npz archive of arrays ({exc})") from exc
+    known = list(_NPZ_KEYS) + list(_NPZ_IGNORED)
+    for key in keys:
+        if key not in known:
+            close = difflib.get_close_matches(key, known, n=1, cutoff=0.0)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise LogError(source, key, f"unknown key; {hint}(expected times, positions, torques; "
+                                        f"optional velocities, accelerations)")
+    for key in ("times", "positions", "torques"):
+        if key not in arrays:
+            raise LogError(source, key, "missing key")
+    values = {key: _as_float(source, key, arrays[key]) for key in arrays}
+    t = values["times"]
+    if t.ndim != 1:
+        raise LogError(source, "times", f"expected shape (N,), got {t.shape}")
+    for key in values:
+        if key == "times":
+            continue
+        a = values[key]
+        if a.ndim != 2 or a.shape[0] != len(t):
+            raise LogError(source, key, f"expected shape (N, {n}) with N = {len(t)} time stamps, "
+                                        f"got {a.shape}")
+        if a.shape[1] != n:
+            raise LogError(source, key, f"the file has {_joints(a.shape[1])} (shape {a.shape}) "
+                                        f"but the robot has {n}")
+    channels = {ch: values.get(key) for key, ch in _NPZ_KEYS.items() if ch != "t"}
+    _check_shapes(source, t, channels, _npz_names)
+    _check_values(source, t, channels, _npz_names)
+    skipped = [key for key in keys if key in _NPZ_IGNORED]
+    notes = (f"ignored {', '.join(skipped)} (commanded, not measured)",) if skipped else ()
+    return RawLog(source, t, channels["q"], channels["tau"], channels["qd"], channels["qdd"], notes)
+
+
+def repeated_rows(raw: RawLog) -> np.ndarray:
+    """Boolean mask (N,) of the rows whose every measured channel (q and tau, and qd and
+    qdd when given) equals the previous row's exactly: a logger that re-sent its last sample
+    under a new time stamp.  The first row is never repeated.
+
+    Exact equality is the right test: a real new measurement of seven joints' positions,
+    velocities and torques never reproduces all of its digits, while a re-sent one always
+    does.  (A robot at rest still moves its torques and velocities in the last digits.)
+
+    >>> import numpy as np
+    >>> q = np.arange(60.0)[:, None]; q[5] = q[4]
+    >>> tau = np.zeros((60, 1))
+    >>> np.flatnonzero(repeated_rows(RawLog("demo", np.arange(60.0), q, tau)))
+    array([5])
+    """
+    given = [a for a in (raw.q, raw.tau, raw.qd, raw.qdd) if a is not None]
+    stacked = np.concatenate(given, axis=1)
+    mask = np.zeros(len(raw.t), dtype=bool)
+    mask[1:] = np.all(stacked[1:] == stacked[:-1], axis=1)
+    return mask
+
+
+# --------------------------------------------------------------------------- preprocessing
+
+@dataclass(frozen=True)
+class Preprocessing:
+    """The choices :func:`preprocess` makes, each stated and overridable.
+
+    ``cutoff_hz`` = 5.0
+        Low-pass cutoff (Hz) of the zero-phase Butterworth filter applied to q, tau (and to
+        the given qd, qdd if ``filter_given``), built with ``scipy.signal.butter(...,
+        output="sos")`` and run forwards and backwards (``sosfiltfilt``), so no channel is
+        delayed.  5 Hz keeps the motion of typical excitation trajectories (fundamentals
+        below ~1 Hz, harmonics to a few Hz) and removes encoder and torque-sensor noise,
+        which twice differentiation would amplify.  ``None``: no filtering, the data as
+        stored (for logs filtered before saving).
+    ``order`` = 4
+        Butterworth order; forwards-backwards filtering doubles it in effect (magnitude
+        ``1 / (1 + (f/fc)^(2 order))``, -6 dB at the cutoff).
+    ``rate_hz`` = None
+        Rate of the uniform grid.  None: the log's own rate, 1 / (median time step) rounded
+        to 2 significant digits when that is within 1 %, else 3 (1000 Hz, 200 Hz, 125 Hz);
+        for a log whose stamps only jitter
+        around a uniform clock (see ``jitter_tolerance``) that clock's exact rate.
+    ``gap_factor`` = 5.0
+        A time step longer than ``gap_factor`` x median step is a gap: the log is split
+        there, and nothing is interpolated, filtered or differentiated across it.
+    ``trim_s`` = None
+        Seconds dropped at both ends of each segment after filtering, where the
+        forwards-backwards filter's edge transients live.  None: ``2 / cutoff_hz`` (0.4 s at
+        5 Hz; on sines the qdd error there is ~0.4 % of the amplitude, and it falls by about
+        3x per further 0.1 s), 0 when ``cutoff_hz`` is None.
+    ``filter_given`` = True
+        Low-pass the qd / qdd the log provides as well.  All channels of the identification
+        equation then see the same filter.  False for logs whose qd / qdd were filtered
+        before saving (only q and tau are then filtered here).
+    ``jitter_tolerance`` = 0.5
+        Time stamps that all lie within this fraction of a step of a uniform clock are
+        taken as a uniform clock read with jitter (e.g. stamps taken on reception by a
+        non-real-time PC): the samples stay on that clock, not interpolated.  0: always
+        interpolate at the stamps as given.
+
+    >>> Preprocessing().cutoff_hz, Preprocessing().effective_trim_s
+    (5.0, 0.4)
+    >>> Preprocessing(cutoff_hz=None).effective_trim_s
+    0.0
+    """
+
+    cutoff_hz: float | None = 5.0
+    order: int = 4
+    rate_hz: float | None = None
+    gap_factor: float = 5.0
+    trim_s: float | None = None
+    filter_given: bool = True
+    jitter_tolerance: float = 0.5
+
+    def __post_init__(self):
+        def positive(name, value, allow_none):
+            if value is None and allow_none:
+                return
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"Preprocessing.{name} must be a positive number"
+                                 f"{' or None' if allow_none else ''}, got {value!r}")
+        positive("cutoff_hz", self.cutoff_hz, True)
+        positive("rate_hz", self.rate_hz, True)
+        positive("gap_factor", self.gap_factor, False)
+        if isinstance(self.order, bool) or not isinstance(self.order, int) or self.order < 1:
+            raise ValueError(f"Preprocessing.order must be a positive integer, got {self.order!r}")
+        if self.gap_factor <= 1:
+            raise ValueError(f"Preprocessing.gap_factor must exceed 1 (a multiple of the median "
+                             f"step), got {self.gap_factor!r}")
+        if self.trim_s is not None and (not isinstance(self.trim_s, (int, float))
+                                        or not math.isfinite(self.trim_s) or self.trim_s < 0):
+            raise ValueError(f"Preprocessing.trim_s must be >= 0 or None, got {self.trim_s!r}")
+        if not isinstance(self.jitter_tolerance, (int, float)) or not 0 <= self.jitter_tolerance < 1:
+            raise ValueError(f"Preprocessing.jitter_tolerance must be in [0, 1), "
+                             f"got {self.jitter_tolerance!r}")
+
+    @property
+    def effective_trim_s(self) -> float:
+        """The trim actually applied: ``trim_s``, or its stated default."""
+        if self.trim_s is not None:
+            return float(self.trim_s)
+        return 0.0 if self.cutoff_hz is None else 2.0 / self.cutoff_hz
+
+
+@dataclass(frozen=True, eq=False)   # eq=False: arrays have no single truth value
+class Segment:
+    """A uniformly sampled piece of a log, ready for identification: time ``t`` (N,) with
+    step ``dt``; ``q``, ``qd``, ``qdd``, ``tau`` (N, n), all present and all through the
+    same filter; ``notes`` say what was done, in order.
+
+    >>> import numpy as np
+    >>> z = np.zeros((3, 1))
+    >>> s = Segment("demo", np.array([0.0, 0.1, 0.2]), 0.1, z, z, z, z, ("as stored",))
+    >>> s.n, round(s.duration, 12)
+    (1, 0.2)
+    """
+
+    source: str
+    t: np.ndarray
+    dt: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    notes: tuple[str, ...] = field(default=())
+
+    def __post_init__(self):
+        for name in ("t", "q", "qd", "qdd", "tau"):
+            object.__setattr__(self, name, _as_float(self.source, name, getattr(self, name)))
+        object.__setattr__(self, "dt", float(self.dt))
+        object.__setattr__(self, "notes", tuple(self.notes))
+        if self.t.ndim != 1 or len(self.t) < 1:
+            raise LogError(self.source, "t", f"expected a non-empty 1-D array, got shape {self.t.shape}")
+        for name in ("q", "qd", "qdd", "tau"):
+            a = getattr(self, name)
+            if a.ndim != 2 or a.shape != (len(self.t), self.q.shape[1] if self.q.ndim == 2 else -1):
+                raise LogError(self.source, name, f"expected shape ({len(self.t)}, n) like q, got {a.shape}")
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return self.q.shape[1]
+
+    @property
+    def duration(self) -> float:
+        """Time from the first to the last sample (s)."""
+        return float(self.t[-1] - self.t[0])
+
+    def __repr__(self) -> str:
+        rate = f"{_g(1 / self.dt)} Hz" if self.dt > 0 else "one sample"
+        return (f"Segment({self.source!r}, {len(self.t)} samples at {rate}, {self.n} joints, "
+                f"{_g(self.duration)} s from t = {_num(self.t[0])} s)")
+
+    def _part(self, rows: slice, note: str) -> "Segment":
+        return Segment(self.source, self.t[rows], self.dt, self.q[rows], self.qd[rows],
+                       self.qdd[rows], self.tau[rows], self.notes + (note,))
+
+
+def _round_rate(rate: float) -> float:
+    """A logger's nominal rate from its median step: 2 significant digits when within 1 % of
+    them (1/0.001002 s -> 1000 Hz, 1/0.0049991 s -> 200 Hz; a sampled median wanders by a
+    fraction of a percent), else 3 (125 Hz stays 125 Hz)."""
+    two = float(f"{rate:.2g}")
+    return two if abs(two - rate) <= 0.01 * rate else float(f"{rate:.3g}")
+
+
+def _uniform_clock(t: np.ndarray, tolerance: float) -> tuple[float, float] | None:
+    """(step, largest stamp deviation) of the least-squares uniform clock through the stamps,
+    if every stamp lies within ``tolerance`` steps of it; else None.
+
+    Stamps read off a fixed-rate clock with reception jitter scatter around such a line and
+    successive steps are anti-correlated; stamps of a genuinely uneven sampler wander away
+    from any line (a random walk), which this test catches on any log of useful length."""
+    k = np.arange(len(t), dtype=float)
+    rel = t - t[0]             # relative time: Unix stamps would cost digits in the fit
+    step, offset = np.polyfit(k, rel, 1)
+    if not step > 0:
+        return None
+    deviation = float(np.max(np.abs(rel - (offset + step * k))))
+    return (float(step), deviation) if deviation <= tolerance * step else None
+
+
+def _linear(x: np.ndarray, y: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Piecewise-linear interpolation of every column of y at the grid (inside x's range)."""
+    i = np.clip(np.searchsorted(x, grid, side="right") - 1, 0, len(x) - 2)
+    w = ((grid - x[i]) / (x[i + 1] - x[i]))[:, None]
+    return y[i] * (1.0 - w) + y[i + 1] * w
+
+
+def _describe(channels: Sequence[str]) -> str:
+    return ", ".join(channels)
+
+
+def preprocess(raw: RawLog, settings: Preprocessing = Preprocessing()) -> tuple[Segment, ...]:
+    """Turn a raw log into uniformly sampled, filtered segments with every derivative.
+
+    In order:
+
+    1. rows that repeat the previous row exactly (:func:`repeated_rows`) are dropped: they
+       are a logger re-sending an old sample, and differentiating through them would make
+       the velocity drop to zero and jump back;
+    2. the log is split where a time step exceeds ``gap_factor`` x the median step (judged
+       on the stamps as logged: a run of repeated rows shows the logger was alive, and the
+       interval it covers is bridged like any other);
+    3. each piece goes onto a uniform grid: a cubic spline for q (it is smooth, and it is
+       differentiated twice), linear interpolation for tau and given qd, qdd (measured and
+       noisy: a spline through noise at uneven steps overshoots, and the linear
+       interpolation error on signals below the cutoff, ``A (2 pi f dt)^2 / 8``, is far
+       below sensor noise); stamps that only jitter around a uniform clock stay on it;
+    4. zero-phase low-pass of q, tau (and given qd, qdd with ``filter_given``);
+    5. missing derivatives by central differences (``np.gradient``, uniform dt): qd from the
+       filtered q, qdd from the filtered qd.  Not filtered again: the difference of a
+       band-limited signal is band-limited, and a second pass would give qdd a different
+       (squared) magnitude response than tau near the cutoff, breaking
+       ``tau = Y(q, qd, qdd) p`` there;
+    6. ``trim`` seconds dropped at each end (filter edge transients).
+
+    Pieces too short to filter and trim are dropped with a note; if nothing remains, a
+    :class:`LogError`.  With ``cutoff_hz=None``, a uniform (clock) log with qd and qdd given
+    passes through unchanged apart from repeated-row removal (its time stamps are replaced
+    by the clock's).
+
+    >>> import numpy as np
+    >>> t = np.arange(0.0, 2.0, 0.005)
+    >>> q = np.sin(t)[:, None]; qd = np.cos(t)[:, None]; qdd = -q; tau = 2 * q
+    >>> (s,) = preprocess(RawLog("demo", t, q, tau, qd, qdd), Preprocessing(cutoff_hz=None))
+    >>> bool(np.array_equal(s.qdd, qdd)), len(s.t)
+    (True, 400)
+    """
+    if not isinstance(raw, RawLog):
+        raise TypeError(f"preprocess expects a RawLog, got {type(raw).__name__}")
+    if not isinstance(settings, Preprocessing):
+        raise TypeError(f"settings must be a Preprocessing, got {type(settings).__name__}")
+    source = raw.source
+    repeated = repeated_rows(raw)
+    total = len(raw.t)
+    log_notes = list(raw.notes)
+    log_notes.append(f"dropped {int(repeated.sum())} repeated rows ({100 * repeated.sum() / total:.2f} %"
+                     f" of {total})" if repeated.any() else f"no repeated rows among {total}")
+
+    steps = np.diff(raw.t)
+    positive = steps[steps > 0]
+    median = float(np.median(positive))
+    limit = settings.gap_factor * median
+    gaps = np.flatnonzero(steps > limit)
+    if gaps.size:
+        listed = ", ".join(f"t = {_g(raw.t[i] - raw.t[0])} s ({_g(1000 * steps[i])} ms)" for i in gaps[:8])
+        more = f" and {gaps.size - 8} more" if gaps.size > 8 else ""
+        log_notes.append(f"split at {gaps.size} gaps longer than {_g(1000 * limit)} ms "
+                         f"({_g(settings.gap_factor)} x median step {_g(1000 * median)} ms; times from "
+                         f"the first sample): {listed}{more}")
+    pieces = np.split(np.arange(total), gaps + 1)
+
+    trim = settings.effective_trim_s
+    results = []
+    dropped: list[str] = []
+    for idx in pieces:
+        keep = idx[~repeated[idx]]
+        span = float(raw.t[keep[-1]] - raw.t[keep[0]]) if keep.size else 0.0
+        needed = 2 * trim + (MIN_SAMPLES - 1) * median
+        where = f"t = {_g(raw.t[idx[0]] - raw.t[0])} .. {_g(raw.t[idx[-1]] - raw.t[0])} s"
+        if keep.size < MIN_SAMPLES or span <= needed:
+            dropped.append(f"dropped the piece {where} ({keep.size} samples, {_g(span)} s): too short "
+                           f"to filter and trim (needs more than {_g(needed)} s and "
+                           f"{MIN_SAMPLES} samples)")
+            continue
+        result = _process_piece(raw, keep, settings, median, trim)
+        if isinstance(result, str):   # too short once on its grid and trimmed
+            dropped.append(f"dropped the piece {where}: {result}")
+            continue
+        results.append(result + (where,))
+    if not results:
+        reasons = "; ".join(dropped) if dropped else "no samples"
+        raise LogError(source, "t", f"nothing left after preprocessing: {reasons}")
+    segments = []
+    for k, (t, dt, channels, notes, where) in enumerate(results):
+        label = (f"segment {k + 1} of {len(results)}: {where} of the log"
+                 if len(results) > 1 or dropped or gaps.size else f"whole log, {where}")
+        segments.append(Segment(source, t, dt, channels["q"], channels["qd"], channels["qdd"],
+                                channels["tau"], tuple(log_notes + dropped + [label] + notes)))
+    return tuple(segments)
+
+
+def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, median: float,
+                   trim: float) -> tuple[np.ndarray, float, dict, list[str]] | str:
+    """One gap-free piece (rows ``keep`` of the log): grid, filter, derivatives, trim.
+    Returns (t, dt, channels, notes), or the reason the piece is too short."""
+    source = raw.source
+    notes: list[str] = []
+    t = raw.t[keep]
+    given = {ch: getattr(raw, ch)[keep] for ch in _CHANNELS if getattr(raw, ch) is not None}
+
+    # --- onto a uniform grid
+    clock = _uniform_clock(t, settings.jitter_tolerance)
+    if clock is not None:
+        step, deviation = clock
+        x = t[0] + step * np.arange(len(t))          # the clock the stamps jitter around
+        # stamps uniform up to floating-point rounding (Unix times: ~1e-7 s) need no note
+        if deviation > max(1e-6 * step, 8 * np.spacing(np.abs(t).max())):
+            notes.append(f"time stamps within {_g(1000 * deviation)} ms ({deviation / step:.2f} of a "
+                         f"step) of a uniform {_g(1 / step)} Hz clock: samples placed on that clock")
+    else:
+        step, x = None, t
+    resampled = not (clock is not None and settings.rate_hz is None)
+    if not resampled:
+        dt, grid, values = step, x, dict(given)
+    else:
+        rate = settings.rate_hz if settings.rate_hz is not None else _round_rate(1.0 / median)
+        dt = 1.0 / rate
+        rel = x - x[0]
+        count = int(math.floor(rel[-1] / dt + 1e-9)) + 1
+        grid_rel = dt * np.arange(count)
+        values = {"q": CubicSpline(rel, given["q"], axis=0)(grid_rel)}
+        for ch in ("qd", "qdd", "tau"):
+            if ch in given:
+                values[ch] = _linear(rel, given[ch], grid_rel)
+        grid = x[0] + grid_rel
+        others = [ch for ch in ("tau", "qd", "qdd") if ch in given]
+        notes.append(f"resampled {len(t)} -> {count} samples at {_g(rate)} Hz (cubic spline for q, "
+                     f"linear for {_describe(others)})")
+        native = 1.0 / (step if step is not None else median)
+        if rate < 0.9 * native:
+            # interpolation comes before the low-pass (which needs a uniform grid), so a
+            # coarser grid than the log's folds everything above its Nyquist frequency in
+            notes.append(f"warning: interpolated below the log's own rate ({_g(native)} Hz) "
+                         f"before any low-pass: content above {_g(rate / 2)} Hz aliases")
+    rate = 1.0 / dt
+
+    # --- zero-phase low-pass
+    if settings.cutoff_hz is not None:
+        if settings.cutoff_hz >= rate / 2:
+            raise LogError(source, "cutoff_hz", f"{_g(settings.cutoff_hz)} Hz is not below the "
+                                                f"Nyquist frequency {_g(rate / 2)} Hz of the "
+                                                f"{_g(rate)} Hz grid")
+        sos = butter(settings.order, settings.cutoff_hz, btype="low", fs=rate, output="sos")
+        # pad (odd reflection) over one period of the cutoff, not scipy's default of a few
+        # samples: the filter's initial state then settles before the data begins, which
+        # cuts the edge error of qdd about 3x at the trim boundary
+        padlen = min(len(grid) - 1, int(round(rate / settings.cutoff_hz)))
+
+        def low_pass(y):
+            return sosfiltfilt(sos, y, axis=0, padlen=padlen)
+
+        filtered = ["q"] + [ch for ch in ("qd", "qdd") if ch in values and settings.filter_given] + ["tau"]
+        for ch in filtered:
+            values[ch] = low_pass(values[ch])
+        notes.append(f"{_describe(filtered)} low-pass {_g(settings.cutoff_hz)} Hz "
+                     f"({_ordinal(settings.order)}-order Butterworth, zero phase)")
+        unfiltered = [ch for ch in ("qd", "qdd") if ch in values and ch not in filtered]
+        if unfiltered:
+            notes.append(f"{_describe(unfiltered)} as given, not filtered (filter_given=False)")
+        how = "filtered"
+    else:
+        notes.append("no low-pass (cutoff_hz=None): " + ("interpolated values, not filtered"
+                                                         if resampled else "values as stored"))
+        how = "unfiltered"
+
+    # --- derivatives the log does not give
+    derived = []
+    if "qd" not in values:
+        values["qd"] = np.gradient(values["q"], dt, axis=0, edge_order=2)
+        derived.append(f"qd by central differences of the {how} q")
+    if "qdd" not in values:
+        if "qd" not in given:
+            source_qd = "that qd"
+        elif settings.cutoff_hz is not None and not settings.filter_given:
+            source_qd = "the given (unfiltered here) qd"
+        else:
+            source_qd = f"the {how} given qd"
+        values["qdd"] = np.gradient(values["qd"], dt, axis=0, edge_order=2)
+        derived.append(f"qdd by central differences of {source_qd}")
+    if derived:
+        notes.append("; ".join(derived))
+
+    # --- trim the filter's edge transients
+    cut = int(round(trim / dt))
+    if len(grid) - 2 * cut < MIN_SAMPLES:
+        return (f"{len(grid)} samples at {_g(rate)} Hz leave fewer than MIN_SAMPLES = {MIN_SAMPLES} "
+                f"after trimming {cut} at each end")
+    if cut:
+        grid = grid[cut:len(grid) - cut]
+        values = {ch: v[cut:len(v) - cut] for ch, v in values.items()}
+        notes.append(f"trimmed {_g(trim)} s ({cut} samples) at each end")
+    return grid, dt, values, notes
+
+
+def _ordinal(k: int) -> str:
+    suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"{k}{suffix}"
+
+
+def load_segments(path, n: int, settings: Preprocessing = Preprocessing()) -> tuple[Segment, ...]:
+    """:func:`read_log` then :func:`preprocess`.
+
+    >>> load_segments("run.txt", 7)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kindyngen.measured.logs.LogError: run.txt: field '<file>': unknown extension '.txt'; expected .csv or .npz
+    """
+    return preprocess(read_log(path, n), settings)
+
+
+# --------------------------------------------------------------------------- using segments
+
+def split_time(segments: Sequence[Segment], fraction: float) -> tuple[tuple[Segment, ...], tuple[Segment, ...]]:
+    """Split segments into (training, validation) by time: the first ``fraction`` of the
+    span from the first segment's start to the last one's end trains, the rest validates.
+    A segment straddling the cut is cut in two (samples before the cut time train), and
+    both parts get a note saying where; no sample is lost or duplicated.
+
+    Splitting by time, not by random rows, keeps validation honest: neighbouring samples of
+    a filtered log are strongly correlated, so randomly drawn validation rows would be
+    nearly copies of training rows.  The segments must be in time order and not overlap
+    (one log's segments); split several logs one by one.
+
+    >>> import numpy as np
+    >>> t = np.arange(10) * 0.1; z = np.zeros((10, 1))
+    >>> train, valid = split_time([Segment("demo", t, 0.1, z, z, z, z)], 0.5)
+    >>> [len(s.t) for s in train], [len(s.t) for s in valid]
+    ([5], [5])
+    >>> valid[0].notes[-1]
+    'cut at t = 0.45 s: after the first 50 % of the span 0 .. 0.9 s (validation part)'
+    """
+    segments = tuple(segments)
+    if not segments:
+        raise ValueError("split_time needs at least one segment")
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction < 1:
+        raise ValueError(f"fraction must be strictly between 0 and 1, got {fraction!r}")
+    for before, after in zip(segments, segments[1:]):
+        if after.t[0] <= before.t[-1]:
+            raise LogError(after.source, "t", f"segments overlap or are out of time order "
+                                              f"({_g(after.t[0])} s starts before {_g(before.t[-1])} s "
+                                              f"ends); split each log separately")
+    start, end = float(segments[0].t[0]), float(segments[-1].t[-1])
+    cut_time = start + fraction * (end - start)
+    train: list[Segment] = []
+    valid: list[Segment] = []
+    for s in segments:
+        if s.t[-1] < cut_time:
+            train.append(s)
+        elif s.t[0] >= cut_time:
+            valid.append(s)
+        else:
+            k = int(np.searchsorted(s.t, cut_time, side="left"))
+            where = (f"cut at t = {_g(cut_time)} s: after the first {_g(100 * fraction)} % of the "
+                     f"span {_g(start)} .. {_g(end)} s")
+            train.append(s._part(slice(0, k), where + " (training part)"))
+            valid.append(s._part(slice(k, None), where + " (validation part)"))
+    return tuple(train), tuple(valid)
+
+
+def concatenate_rows(segments: Sequence[Segment]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Stack the samples of several segments: ``(q, qd, qdd, tau)``, each (sum N, n), for
+    least squares.  Nothing is differentiated here: each segment's derivatives were taken
+    within that segment, never across the joins.
+
+    >>> import numpy as np
+    >>> z = np.zeros((3, 2)); t = np.arange(3.0)
+    >>> q, qd, qdd, tau = concatenate_rows([Segment("a", t, 1.0, z, z, z, z)] * 2)
+    >>> q.shape
+    (6, 2)
+    """
+    segments = tuple(segments)
+    if not segments:
+        raise ValueError("concatenate_rows needs at least one segment")
+    n = segments[0].n
+    for s in segments:
+        if s.n != n:
+            raise LogError(s.source, "q", f"has {s.n} joints, the first segment has {n}")
+    return tuple(np.concatenate([getattr(s, ch) for s in segments], axis=0)
+                 for ch in ("q", "qd", "qdd", "tau"))

@@ -1,0 +1,76 @@
+"""An identified model written back as a robot description (``model.yaml``) that the project's
+loader, and any tool reading the documented schema, takes as it is.
+
+The geometry (DH rows, limits, gravity) is copied from the description the identification
+started from; the links get the identified inertial parameters (mass, centre of mass, inertia
+about the centre of mass in the description's order ``ixx, iyy, izz, ixy, ixz, iyz``), the
+joints the identified friction, offset and armature. A payload of the starting description is
+already inside the identified last link (the data cannot tell them apart), so none is written.
+
+Example:
+
+>>> from kindyngen.measured.consistent import links_from_barycentric
+>>> links = links_from_barycentric(full_values, 7)                  # doctest: +SKIP
+>>> text = model_yaml("robots/lwr4.yaml", links, {"fv1": 0.5})      # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import yaml
+
+EFFECT_FIELDS = {"fv": ("friction", "viscous"), "fc": ("friction", "coulomb"), "f0": ("friction", "offset"),
+                 "Ia": ("armature", None)}
+
+
+class ModelWriteError(ValueError):
+    """The identified values do not make a valid robot description (named parameter, reason)."""
+
+
+def model_description(source: str | Path, links: list[dict], effects: dict[str, float],
+                      name: str | None = None) -> dict:
+    """The starting description (file ``source``) with identified links and effects.
+    ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``, 1-based joints)
+    to values; joints without an identified coefficient keep none."""
+    data = yaml.safe_load(Path(source).read_text())
+    data.pop("payload", None)
+    if name:
+        data["name"] = name
+    if len(links) != len(data["joints"]):
+        raise ModelWriteError(f"{len(links)} identified links for {len(data['joints'])} joints")
+    data["links"] = [{"mass": l["mass"], "com": list(l["com"]), "inertia": list(l["inertia"])} for l in links]
+    for joint in data["joints"]:
+        joint.pop("friction", None)
+        joint.pop("armature", None)
+    for key, value in effects.items():
+        prefix, index = key[:2], int(key[2:]) - 1
+        if prefix not in EFFECT_FIELDS or not 0 <= index < len(data["joints"]):
+            raise ModelWriteError(f"unknown effect coefficient {key!r}")
+        if not math.isfinite(value):
+            raise ModelWriteError(f"effect coefficient {key} is {value}")
+        field, sub = EFFECT_FIELDS[prefix]
+        joint = data["joints"][index]
+        if sub is None:
+            joint[field] = float(value)
+        else:
+            joint.setdefault(field, {})[sub] = float(value)
+    return data
+
+
+def model_yaml(source: str | Path, links: list[dict], effects: dict[str, float], header: str = "",
+               name: str | None = None) -> str:
+    """:func:`model_description` as YAML text (joint rows on one line each, as the shipped
+    descriptions are written), with ``header`` as leading comment lines."""
+    data = model_description(source, links, effects, name)
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    for key in ("name", "dh", "gravity"):
+        lines.append(yaml.safe_dump({key: data[key]}, default_flow_style=True, width=1000).strip().strip("{}"))
+    for key in ("joints", "links"):
+        lines.append(f"{key}:")
+        for row in data[key]:
+            lines.append("  - " + yaml.safe_dump(row, default_flow_style=True, sort_keys=False, width=10000).strip())
+    for key in data:
+        if key not in ("name", "dh", "gravity", "joints", "links"):
+            lines.append(yaml.safe_dump({key: data[key]}, default_flow_style=False, sort_keys=False).strip())
+    return "\n".join(lines) + "\n"
