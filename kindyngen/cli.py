@@ -15,7 +15,13 @@ import numpy as np
 
 from .base_parameters import BaseParameterError
 from .evaluate import EvaluationError
+from .measured.consistent import ConsistentIdentificationError
+from .measured.estimation import IdentificationDataError
+from .measured.logs import LogError
+from .measured.model_writer import ModelWriteError
 from .robot import RobotDescriptionError, load_robot
+
+MEASURED_ERRORS = (LogError, IdentificationDataError, ConsistentIdentificationError, ModelWriteError)
 
 LANGS = ("c", "python", "casadi")
 EXIT_BAD_INPUT = 2
@@ -252,15 +258,7 @@ def main(argv=None) -> int:
         return args.run(args)
     except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
         message = str(exc)
-    except ValueError as exc:   # the measured-data side's errors (logs, estimation, excitation)
-        from .measured.logs import LogError
-        from .measured.estimation import IdentificationDataError
-        if not isinstance(exc, (LogError, IdentificationDataError)) and type(exc).__module__.split(".")[1:2] != ["measured"]:
-            raise
-        message = str(exc)
-    except RuntimeError as exc:  # a solver that fails (consistent identification)
-        if type(exc).__module__.split(".")[1:2] != ["measured"]:
-            raise
+    except MEASURED_ERRORS as exc:   # logs, estimation, the solver, excitation
         message = str(exc)
     except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
         message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
