@@ -17,11 +17,12 @@ from .base_parameters import BaseParameterError
 from .evaluate import EvaluationError
 from .measured.consistent import ConsistentIdentificationError
 from .measured.estimation import IdentificationDataError
+from .measured.excitation import ExcitationError
 from .measured.logs import LogError
 from .measured.model_writer import ModelWriteError
 from .robot import RobotDescriptionError, load_robot
 
-MEASURED_ERRORS = (LogError, IdentificationDataError, ConsistentIdentificationError, ModelWriteError)
+MEASURED_ERRORS = (LogError, IdentificationDataError, ConsistentIdentificationError, ModelWriteError, ExcitationError)
 
 LANGS = ("c", "python", "casadi")
 EXIT_BAD_INPUT = 2
@@ -185,6 +186,40 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def _cmd_excite(args) -> int:
+    from .measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
+                                      write_trajectory_json)
+    model = load_robot(args.robot)
+    limits = default_limits(model, velocity=args.velocity, acceleration=args.acceleration, margin=args.margin)
+
+    def progress(text):
+        if not args.quiet:
+            print(f"excite: {text}", file=sys.stderr, flush=True)
+
+    result = optimise_excitation(model, limits, harmonics=args.harmonics, base_frequency_hz=args.frequency,
+                                 friction=not args.no_friction, seed=args.seed, max_iterations=args.iterations,
+                                 progress=progress)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = write_trajectory_csv(out / "excitation.csv", result.trajectory, args.rate, periods=args.periods)
+    write_trajectory_json(out / "excitation.json", result)
+    print(json.dumps({"condition_number": round(result.condition_number, 3),
+                      "initial_condition_number": round(result.initial_condition_number, 3),
+                      "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
+    progress(f"wrote {out}/excitation.csv ({rows} rows at {args.rate:g} Hz) and excitation.json")
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
         "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML description "
@@ -249,6 +284,32 @@ def parser() -> argparse.ArgumentParser:
     i.add_argument("--out", required=True, metavar="DIR")
     i.add_argument("--quiet", action="store_true", help="no progress output")
     i.set_defaults(run=_cmd_identify)
+
+    x = sub.add_parser("excite", help="design an excitation trajectory for identification",
+                       description=("Optimise a periodic finite-Fourier-series joint trajectory (Swevers) for the "
+                                    "condition number of the base torque regressor (plus viscous, Coulomb and "
+                                    "offset columns), within the description's joint limits less a margin and "
+                                    "the given velocity and acceleration limits, starting and ending at rest. "
+                                    "Writes DIR/excitation.csv (t, q1..qn, qd1..qdn, qdd1..qddn; s, rad, rad/s, "
+                                    "rad/s^2) to command, and DIR/excitation.json (coefficients, limits, "
+                                    "condition numbers)."))
+    x.add_argument("--robot", required=True, metavar="ROBOT.yaml")
+    x.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per joint (default 5)")
+    x.add_argument("--frequency", type=_positive, default=0.1, metavar="HZ",
+                   help="base frequency (default 0.1 Hz: a 10 s period)")
+    x.add_argument("--velocity", type=_positive, default=1.0, metavar="RAD_S", help="velocity limit (default 1.0)")
+    x.add_argument("--acceleration", type=_positive, default=3.0, metavar="RAD_S2",
+                   help="acceleration limit (default 3.0)")
+    x.add_argument("--margin", type=float, default=0.1, metavar="RAD",
+                   help="kept away from each joint limit (default 0.1)")
+    x.add_argument("--no-friction", action="store_true", help="condition the rigid-body columns only")
+    x.add_argument("--seed", type=int, default=0, help="start point of the optimisation (deterministic)")
+    x.add_argument("--iterations", type=int, default=60, help="iteration budget (default 60)")
+    x.add_argument("--rate", type=_positive, default=1000.0, metavar="HZ", help="CSV sampling rate (default 1000)")
+    x.add_argument("--periods", type=int, default=1, help="periods written to the CSV (default 1)")
+    x.add_argument("--out", required=True, metavar="DIR")
+    x.add_argument("--quiet", action="store_true", help="no progress output")
+    x.set_defaults(run=_cmd_excite)
     return p
 
 
