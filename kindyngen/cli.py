@@ -137,25 +137,34 @@ def _effects(text: str) -> tuple[str, ...]:
     return names
 
 
-def _cutoff(text: str):
-    if text.strip().lower() == "none":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a frequency in Hz or 'none', got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive frequency in Hz or 'none', got {text!r}")
-    return value
+def _number_argument(expected: str, accept, none_allowed: bool = False):
+    """An argparse type: a finite float that ``accept`` takes (or 'none' when allowed)."""
+    def parse(text: str):
+        if none_allowed and text.strip().lower() == "none":
+            return None
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and accept(value)):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return value
+    return parse
 
 
-def _fraction(text: str) -> float:
+_cutoff = _number_argument("a positive frequency in Hz or 'none'", lambda v: v > 0, none_allowed=True)
+_fraction = _number_argument("a fraction between 0 and 1", lambda v: 0 < v < 1)
+_positive = _number_argument("a positive number", lambda v: v > 0)
+
+
+def _count(text: str) -> int:
+    """An argparse type: a positive integer."""
     try:
-        value = float(text)
+        value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a fraction between 0 and 1, got {text!r}") from None
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"expected a fraction between 0 and 1, got {text!r}")
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return value
 
 
@@ -184,16 +193,6 @@ def _cmd_identify(args) -> int:
     print(json.dumps(summary))
     progress(f"wrote {out}/identification.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def _cmd_excite(args) -> int:
@@ -279,7 +278,7 @@ def parser() -> argparse.ArgumentParser:
     i.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
                    help="zero-phase low-pass cutoff for q, qd, tau before differentiation (default 5 Hz; "
                         "'none': use the data as stored)")
-    i.add_argument("--rate", type=float, default=None, metavar="HZ",
+    i.add_argument("--rate", type=_positive, default=None, metavar="HZ",
                    help="uniform resampling rate (default: the log's median rate)")
     i.add_argument("--out", required=True, metavar="DIR")
     i.add_argument("--quiet", action="store_true", help="no progress output")
@@ -304,9 +303,9 @@ def parser() -> argparse.ArgumentParser:
                    help="kept away from each joint limit (default 0.1)")
     x.add_argument("--no-friction", action="store_true", help="condition the rigid-body columns only")
     x.add_argument("--seed", type=int, default=0, help="start point of the optimisation (deterministic)")
-    x.add_argument("--iterations", type=int, default=60, help="iteration budget (default 60)")
+    x.add_argument("--iterations", type=_count, default=60, help="iteration budget (default 60)")
     x.add_argument("--rate", type=_positive, default=1000.0, metavar="HZ", help="CSV sampling rate (default 1000)")
-    x.add_argument("--periods", type=int, default=1, help="periods written to the CSV (default 1)")
+    x.add_argument("--periods", type=_count, default=1, help="periods written to the CSV (default 1)")
     x.add_argument("--out", required=True, metavar="DIR")
     x.add_argument("--quiet", action="store_true", help="no progress output")
     x.set_defaults(run=_cmd_excite)
