@@ -195,6 +195,39 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _candidates(text: str) -> tuple[str, ...]:
+    from .measured.discovery import CANDIDATES
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    bad = [x for x in names if x not in CANDIDATES]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"unknown candidate(s) {', '.join(bad) or '(none)'}; choose from "
+                                         f"{','.join(CANDIDATES)}")
+    return names
+
+
+def _cmd_discover(args) -> int:
+    from .measured.discovery import CANDIDATES
+    from .measured.discrepancy import DiscrepancyRequest, run_discrepancy, write_outputs
+    from .measured.logs import Preprocessing
+    request = DiscrepancyRequest(robot=args.robot, data=tuple(args.data), holdout=args.holdout,
+                                 candidates=args.candidates or CANDIDATES, folds=args.folds,
+                                 preprocessing=Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate))
+
+    def progress(text):
+        if not args.quiet:
+            print(f"discover: {text}", file=sys.stderr, flush=True)
+
+    result = run_discrepancy(request, progress)
+    out = write_outputs(result, args.out)
+    d = result.discovery
+    print(json.dumps({"effects": list(d.effects),
+                      "indistinguishable": [list(group) for group, _ in d.indistinguishable],
+                      "rms_before": [round(float(v), 4) for v in result.rms_before],
+                      "rms_after": [round(float(v), 4) for v in result.rms_after]}))
+    progress(f"wrote {out}/discovery.json, report.md" + (", model.yaml" if result.model_yaml else ""))
+    return 0
+
+
 def _cmd_excite(args) -> int:
     from .measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
                                       write_trajectory_json)
@@ -309,6 +342,27 @@ def parser() -> argparse.ArgumentParser:
     x.add_argument("--out", required=True, metavar="DIR")
     x.add_argument("--quiet", action="store_true", help="no progress output")
     x.set_defaults(run=_cmd_excite)
+
+    d = sub.add_parser("discover", help="find which effect the model is missing, add it, show the gap shrink",
+                       description=("Compare the nominal model's torques with a log, name the missing effects "
+                                    "(greedy selection with time-blocked cross-validation and an "
+                                    "autocorrelation-aware criterion; confusable effects are reported, not "
+                                    "guessed), write DIR/discovery.json, DIR/report.md with plots and "
+                                    "DIR/model.yaml (the description plus the named effects). The last "
+                                    "--holdout fraction of the log is held out for the before/after figures."))
+    d.add_argument("--robot", required=True, metavar="ROBOT.yaml", help="the nominal robot description")
+    d.add_argument("--data", required=True, action="append", metavar="LOG", help="measured log (repeatable)")
+    d.add_argument("--holdout", type=_fraction, default=0.3, metavar="FRACTION",
+                   help="fraction of the time span held out (default 0.3)")
+    d.add_argument("--candidates", type=_candidates, default=None, metavar="LIST",
+                   help="comma-separated candidate effects (default: all)")
+    d.add_argument("--folds", type=_count, default=5, help="cross-validation blocks (default 5)")
+    d.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
+                   help="zero-phase low-pass cutoff before differentiation (default 5 Hz; 'none': as stored)")
+    d.add_argument("--rate", type=_positive, default=None, metavar="HZ", help="uniform resampling rate")
+    d.add_argument("--out", required=True, metavar="DIR")
+    d.add_argument("--quiet", action="store_true", help="no progress output")
+    d.set_defaults(run=_cmd_discover)
     return p
 
 

@@ -5,7 +5,8 @@ The geometry (DH rows, limits, gravity) is copied from the description the ident
 started from; the links get the identified inertial parameters (mass, centre of mass, inertia
 about the centre of mass in the description's order ``ixx, iyy, izz, ixy, ixz, iyz``), the
 joints the identified friction, offset and armature. A payload of the starting description is
-already inside the identified last link (the data cannot tell them apart), so none is written.
+already inside identified links (the data cannot tell them apart), so none is written with
+them; a discovered payload or base tilt is written as ``payload`` and ``gravity``.
 
 Example:
 
@@ -28,18 +29,26 @@ class ModelWriteError(ValueError):
     """The identified values do not make a valid robot description (named parameter, reason)."""
 
 
-def model_description(source: str | Path, links: list[dict], effects: dict[str, float],
-                      name: str | None = None) -> dict:
+def model_description(source: str | Path, links: list[dict] | None, effects: dict[str, float],
+                      name: str | None = None, payload: dict | None = None, gravity=None) -> dict:
     """The starting description (file ``source``) with identified links and effects.
+    ``links``: new link entries (None keeps the description's links, and its payload);
     ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``, 1-based joints)
-    to values; joints without an identified coefficient keep none."""
+    to values, replacing the description's friction and armature; ``payload``
+    (``{mass, com, inertia}``) and ``gravity`` replace the description's when given."""
     data = yaml.safe_load(Path(source).read_text())
-    data.pop("payload", None)
     if name:
         data["name"] = name
-    if len(links) != len(data["joints"]):
-        raise ModelWriteError(f"{len(links)} identified links for {len(data['joints'])} joints")
-    data["links"] = [{"mass": l["mass"], "com": list(l["com"]), "inertia": list(l["inertia"])} for l in links]
+    if links is not None:
+        data.pop("payload", None)   # the identified last link already holds it
+        if len(links) != len(data["joints"]):
+            raise ModelWriteError(f"{len(links)} identified links for {len(data['joints'])} joints")
+        data["links"] = [{"mass": l["mass"], "com": list(l["com"]), "inertia": list(l["inertia"])} for l in links]
+    if payload is not None:
+        data["payload"] = {"mass": float(payload["mass"]), "com": [float(v) for v in payload["com"]],
+                           "inertia": [float(v) for v in payload["inertia"]]}
+    if gravity is not None:
+        data["gravity"] = [float(v) for v in gravity]
     for joint in data["joints"]:
         joint.pop("friction", None)
         joint.pop("armature", None)
@@ -58,11 +67,11 @@ def model_description(source: str | Path, links: list[dict], effects: dict[str, 
     return data
 
 
-def model_yaml(source: str | Path, links: list[dict], effects: dict[str, float], header: str = "",
-               name: str | None = None) -> str:
+def model_yaml(source: str | Path, links: list[dict] | None, effects: dict[str, float], header: str = "",
+               name: str | None = None, payload: dict | None = None, gravity=None) -> str:
     """:func:`model_description` as YAML text (joint rows on one line each, as the shipped
     descriptions are written), with ``header`` as leading comment lines."""
-    data = model_description(source, links, effects, name)
+    data = model_description(source, links, effects, name, payload, gravity)
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
     for key in ("name", "dh", "gravity"):
         lines.append(yaml.safe_dump({key: data[key]}, default_flow_style=True, width=1000).strip().strip("{}"))
