@@ -26,9 +26,13 @@ Objective (dimensionless)::
 
     1 / (N n) * sum_j s_j^2 ||Y_j p + E_j e - tau_j||^2  +  regularization * ||p - prior||^2
 
-``s_j = 1 / RMS(tau_j)`` (the measured torque of joint j over the N samples; 1 where it is 0):
-every joint weighs equally, and the first term is the mean squared torque error relative to
-each joint's torque (1 for a model that predicts zero).  RMS rather than the standard
+``s_j = 1 / RMS(tau)`` for every joint by default (``joint_weights="equal"``, the RMS over all
+joints and samples): the first term is the plain mean squared torque error in N m, made
+dimensionless (1 for a model that predicts zero) — the quantity the per-joint RMS errors users
+compare add up.  On the LWR4+ logs (train runs 1-2, validate run 3) this generalised better
+than weighting each joint by its own torque (2.76 against 3.21 N m summed held-out RMS).
+``joint_weights="rms"``: ``s_j = 1 / RMS(tau_j)`` (each joint's own measured torque; 1 where it
+is 0), every joint weighing equally relative to its torque; RMS rather than the standard
 deviation: a joint whose torque is mostly a constant gravity load would otherwise be weighted
 by its small fluctuation.  The regulariser (SI units, plain Euclidean, so masses dominate it:
 they are the best known parameters) picks, among the full parameters that fit equally well
@@ -82,6 +86,9 @@ EPSILON = 1e-6           # J - EPSILON * 1 >= 0 (SI)
 # the objective handed to the solver is multiplied by this: Clarabel's absolute gap tolerance
 # (1e-8) then resolves 1e-12 of the zero model's error, well below the regulariser's share
 OBJECTIVE_SCALE = 1e4
+# tighter than CLARABEL's defaults (1e-8): the last link's parameters move the objective little
+# when the joints are weighted equally, and its small torques must still be resolved
+SOLVER_OPTIONS = {"CLARABEL": {"tol_gap_abs": 1e-9, "tol_gap_rel": 1e-9}}
 
 
 class ConsistentIdentificationError(RuntimeError):
@@ -183,7 +190,7 @@ class ConsistentFit:
 def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
                         regularization: float = REGULARIZATION, min_mass: float = MIN_MASS,
                         epsilon: float = EPSILON, base_map=None, solver: str = "CLARABEL",
-                        verbose: bool = False) -> ConsistentFit:
+                        verbose: bool = False, joint_weights: str = "equal") -> ConsistentFit:
     """Physically consistent full parameters and effect coefficients (see the module text
     for the program, its scaling and the defaults).
 
@@ -224,8 +231,14 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     m = 10 * n + k
 
     # per-joint weights and the compressed, column-scaled least-squares term
-    rms_tau = np.sqrt(np.mean(tau ** 2, axis=0))
-    scale = np.where(rms_tau > 0, 1.0 / np.where(rms_tau > 0, rms_tau, 1.0), 1.0)
+    if joint_weights == "equal":
+        overall = float(np.sqrt(np.mean(tau ** 2)))
+        scale = np.full(n, 1.0 / overall if overall > 0 else 1.0)
+    elif joint_weights == "rms":
+        rms_tau = np.sqrt(np.mean(tau ** 2, axis=0))
+        scale = np.where(rms_tau > 0, 1.0 / np.where(rms_tau > 0, rms_tau, 1.0), 1.0)
+    else:
+        raise ValueError(f"joint_weights must be 'equal' or 'rms', got {joint_weights!r}")
     root = np.sqrt(N * n)
     A = (A3 * scale[None, :, None]).reshape(N * n, m) / root
     b = (tau * scale[None, :]).reshape(N * n) / root
@@ -256,7 +269,7 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     problem = cp.Problem(cp.Minimize(objective), constraints)
     setup = time.perf_counter() - started
     try:
-        problem.solve(solver=solver, verbose=verbose)
+        problem.solve(solver=solver, verbose=verbose, **SOLVER_OPTIONS.get(solver, {}))
     except cp.error.SolverError as exc:
         raise ConsistentIdentificationError(f"the semidefinite program failed in {solver}: {exc}") from exc
     status = problem.status
