@@ -13,7 +13,6 @@ on a slow, small motion around one pose (indistinguishable from an offset there)
 """
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pinocchio as pin
@@ -157,9 +156,10 @@ def test_nothing_missing_names_nothing(noise, kind):
     assert np.all(d.rms_after <= 1.5 * max(noise, 1e-9))
 
 
+@pytest.mark.parametrize("noise", [0.0, 0.02, 0.1])
 @pytest.mark.parametrize("effect", CANDIDATES)
-def test_each_effect_alone_is_named(effect):
-    d = check_named((effect,), 0.02)
+def test_each_effect_alone_is_named(effect, noise):
+    d = check_named((effect,), noise)
     step = d.steps[0]
     # joints the effect barely touches may gain nothing; the total must fall
     assert step.effect == effect and np.sum(step.rms_after ** 2) < np.sum(step.rms_before ** 2)
@@ -221,17 +221,11 @@ def test_statistics_helpers_can_fail():
     assert np.all(effective_samples(smooth) < 0.05 * len(x))
 
 
-def test_runtime_of_one_discover_on_40s_at_200Hz():
+def test_a_40s_log_at_200Hz():
+    """The issue's yardstick log (its time is measured by benchmarks/discovery_timing.py)."""
     t, q, qd, qdd = multisine(duration=40.0, seed=4)
-    segments = simulate((t, q, qd, qdd), ("viscous_friction",), 0.02)
-    s = segments[0]
-    discover(NOMINAL, (Segment("warm", s.t[:400], s.dt, s.q[:400], s.qd[:400], s.qdd[:400], s.tau[:400]),))
-    start = time.perf_counter()
-    d = discover(NOMINAL, segments)
-    elapsed = time.perf_counter() - start
-    print(f"discover on 40 s at 200 Hz: {elapsed:.2f} s")
+    d = discover(NOMINAL, simulate((t, q, qd, qdd), ("viscous_friction",), 0.02))
     assert d.effects == ("viscous_friction",)
-    assert elapsed < 30
 
 
 def test_module_examples():
