@@ -252,6 +252,17 @@ def _cmd_excite(args) -> int:
     return 0
 
 
+def _log_arguments(command: argparse.ArgumentParser) -> None:
+    """The preprocessing and output options every command that reads logs shares."""
+    command.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
+                         help="zero-phase low-pass cutoff for q, qd, tau before differentiation (default 5 Hz; "
+                              "'none': use the data as stored)")
+    command.add_argument("--rate", type=_positive, default=None, metavar="HZ",
+                         help="uniform resampling rate (default: the log's median rate)")
+    command.add_argument("--out", required=True, metavar="DIR")
+    command.add_argument("--quiet", action="store_true", help="no progress output")
+
+
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
         "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML description "
@@ -308,13 +319,7 @@ def parser() -> argparse.ArgumentParser:
                    help="physically consistent identification (semidefinite program): positive definite "
                         "pseudo-inertias, non-negative friction and armature")
     i.add_argument("--weighted", action="store_true", help="weighted least squares (per-joint noise levels)")
-    i.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
-                   help="zero-phase low-pass cutoff for q, qd, tau before differentiation (default 5 Hz; "
-                        "'none': use the data as stored)")
-    i.add_argument("--rate", type=_positive, default=None, metavar="HZ",
-                   help="uniform resampling rate (default: the log's median rate)")
-    i.add_argument("--out", required=True, metavar="DIR")
-    i.add_argument("--quiet", action="store_true", help="no progress output")
+    _log_arguments(i)
     i.set_defaults(run=_cmd_identify)
 
     x = sub.add_parser("excite", help="design an excitation trajectory for identification",
@@ -357,11 +362,7 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("--candidates", type=_candidates, default=None, metavar="LIST",
                    help="comma-separated candidate effects (default: all)")
     d.add_argument("--folds", type=_count, default=5, help="cross-validation blocks (default 5)")
-    d.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
-                   help="zero-phase low-pass cutoff before differentiation (default 5 Hz; 'none': as stored)")
-    d.add_argument("--rate", type=_positive, default=None, metavar="HZ", help="uniform resampling rate")
-    d.add_argument("--out", required=True, metavar="DIR")
-    d.add_argument("--quiet", action="store_true", help="no progress output")
+    _log_arguments(d)
     d.set_defaults(run=_cmd_discover)
     return p
 

@@ -241,7 +241,7 @@ def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: st
     >>> _check_keys({"a": 0, "ofset": 1}, JOINT_KEYS, "f.yaml", "joints[0].")
     Traceback (most recent call last):
     ...
-    kindyngen.robot.RobotDescriptionError: f.yaml: field 'joints[0].ofset': unknown key; did you mean 'offset'? (known: a, alpha, d, offset, lower, upper)
+    kindyngen.robot.RobotDescriptionError: f.yaml: field 'joints[0].ofset': unknown key; did you mean 'offset'? (known: a, alpha, d, offset, lower, upper, friction, armature)
     """
     for key in mapping:
         if key in allowed:

@@ -37,7 +37,7 @@ from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import CANDIDATES, Discovery, discover, nominal_torques, predict_effects
 from .effects import EFFECTS, effect_columns, effect_names
-from .logs import Preprocessing, concatenate_rows, load_segments, split_time
+from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
 from .model_writer import model_yaml
 from .report import rms_table, torque_figure
 
@@ -71,14 +71,6 @@ class DiscrepancyResult:
     heldout_motion: tuple             # q, qd, qdd on the held-out part
     preprocessing_notes: tuple[str, ...]
     samples: dict
-
-
-def _timeline(segments):
-    parts, start = [], 0.0
-    for s in segments:
-        parts.append(s.t - s.t[0] + start)
-        start = parts[-1][-1] + s.dt
-    return np.concatenate(parts)
 
 
 def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
@@ -165,7 +157,7 @@ def run_discrepancy(request: DiscrepancyRequest,
     return DiscrepancyResult(
         request=request, discovery=d, rms_before=rms(nominal), rms_after=rms(after), rms_after_fit=rms(fitted),
         model_yaml=text, not_written=not_written, phases=motion_phases(tau - nominal, qd, qdd),
-        heldout_t=_timeline(heldout), heldout_tau=tau, heldout_nominal=nominal, heldout_after=after,
+        heldout_t=timeline(heldout), heldout_tau=tau, heldout_nominal=nominal, heldout_after=after,
         heldout_motion=(q, qd, qdd),
         preprocessing_notes=tuple(dict.fromkeys(n for s in segments for n in s.notes)),
         samples={"selection": int(d.samples), "held_out": int(len(q))})

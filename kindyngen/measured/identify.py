@@ -36,7 +36,7 @@ from ..robot import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
 from .effects import NONNEGATIVE, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
-from .logs import Preprocessing, concatenate_rows, load_segments, split_time
+from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
 from .model_writer import ModelWriteError, model_yaml
 from .regressor_rows import TorqueRegressor
 from .report import rms_table, torque_figure
@@ -94,15 +94,6 @@ def _segments(paths, n, settings, progress, what):
         progress(f"reading {what} log {path}")
         out.extend(load_segments(path, n, settings))
     return tuple(out)
-
-
-def _timeline(segments):
-    """One time axis through several segments, each continuing where the previous ended."""
-    parts, start = [], 0.0
-    for s in segments:
-        parts.append(s.t - s.t[0] + start)
-        start = parts[-1][-1] + s.dt
-    return np.concatenate(parts)
 
 
 def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[str, ...]]:
@@ -196,7 +187,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         # the starting description's own prediction (rigid bodies and its declared effects)
         vnom = Yv @ (P @ prior) + _declared_effects(model, validation, eps)
         rms_nominal = rms_per_joint(vtau, vnom)
-        vt = _timeline(validation)
+        vt = timeline(validation)
     return Identification(
         request=request, method=method, base_names=regressor.names, base_values=np.asarray(base),
         base_std_percent=base_std, effect_names=enames, effect_values=np.asarray(evalues),

@@ -966,3 +966,19 @@ def concatenate_rows(segments: Sequence[Segment]) -> tuple[np.ndarray, np.ndarra
             raise LogError(s.source, "q", f"has {s.n} joints, the first segment has {n}")
     return tuple(np.concatenate([getattr(s, ch) for s in segments], axis=0)
                  for ch in ("q", "qd", "qdd", "tau"))
+
+
+def timeline(segments: Sequence[Segment]) -> np.ndarray:
+    """One time axis through several segments for plotting, each segment continuing one step
+    after the previous one ends (gaps and separate logs closed up).
+
+    >>> import numpy as np
+    >>> z = np.zeros((2, 1))
+    >>> timeline([Segment("a", np.array([5.0, 6.0]), 1.0, z, z, z, z), Segment("b", np.array([0.0, 1.0]), 1.0, z, z, z, z)])
+    array([0., 1., 2., 3.])
+    """
+    parts, start = [], 0.0
+    for s in segments:
+        parts.append(s.t - s.t[0] + start)
+        start = parts[-1][-1] + s.dt
+    return np.concatenate(parts)
