@@ -102,7 +102,7 @@ def test_eval_rejects_bad_requests_clearly():
     assert done.returncode == 2 and "no function 'nope'" in done.stderr
 
 
-@pytest.mark.parametrize("command", [[], ["generate"], ["count"], ["eval"], ["identify"], ["excite"], ["discover"]])
+@pytest.mark.parametrize("command", [[], ["generate"], ["count"], ["eval"], ["identify"], ["excite"], ["discover"], ["reproduce-identification"]])
 def test_every_command_has_help(command):
     done = subprocess.run([sys.executable, "-m", "kindyngen", *command, "--help"], capture_output=True, text=True,
                           cwd=ROOT)
