@@ -11,9 +11,11 @@ Tolerances:
   plus 1e-6, and below an absolute cap (1e-5 two-link, 2e-2 for the 7-joint arms at N = 10,
   whose light wrists with data-sheet torques make the dynamics fast).
 - limits: torques exactly (box bounds); q and qd at the nodes to IPOPT's tolerance (1e-6);
-  on the re-simulation, q within its limits + 1e-6 and qd within its limits + 0.1 rad/s (the
-  NLP imposes q and qd only at the nodes and the 3 inner RK4 steps of each interval, so qd may
-  overshoot a little in between: measured 0.057 rad/s on the LWR, 0.008 rad/s on the Panda).
+  on the re-simulation (20 RK4 steps per interval), q and qd within their limits up to the
+  re-simulation error itself (the plan's states and the integrated ones differ by that much):
+  the NLP imposes q and qd at the nodes and at the 3 inner RK4 steps of each interval, the
+  velocity backed off by 5 % (without the back-off qd overshot by up to 0.057 rad/s on the LWR
+  between the samples, beyond the integration error).
 """
 from __future__ import annotations
 
@@ -55,8 +57,10 @@ def test_limits_at_nodes(solved):
 def test_limits_on_resimulation(solved):
     problem, setup, res, sim = solved
     lim = sim["limit_excess"]
-    assert lim["q_resim"] < 1e-6
-    assert lim["qd_resim"] < 0.1
+    # the re-simulated motion is the planned one up to the integration error, so a limit the
+    # plan touches can be exceeded by at most that error
+    assert lim["q_resim"] <= sim["resim_error"] + 1e-6
+    assert lim["qd_resim"] <= sim["resim_error"] + 1e-6
 
 
 def test_resimulation_error(solved):
