@@ -54,6 +54,7 @@ MODES = ("sx", "mx", "mx_expand", "mx_map")
 # about as fast but takes 10-20 s longer to build on the 7-joint arms (its exact Hessian is
 # built over the whole unrolled graph); plain MX call nodes iterate slowest.
 DEFAULT_MODE = "mx_map"
+VELOCITY_BACKOFF = 0.05   # fraction of each velocity limit kept free (nodes and inner RK4 steps)
 
 # Limits of the 7-joint arms besides the position limits of the robot descriptions.
 DEG = np.pi / 180
@@ -245,9 +246,6 @@ def build_nlp(setup: dict, fd: ca.Function, N: int, mode: str = DEFAULT_MODE, su
     if inner_bounds is not None:
         lbg[ng_eq:], ubg[ng_eq:] = inner_bounds
     return {"x": V, "f": J, "g": g}, (nx, nu), (lbg, ubg)
-
-
-VELOCITY_BACKOFF = 0.05   # fraction of each velocity limit kept free inside the intervals
 
 
 def bounds_and_guess(setup: dict, N: int):
