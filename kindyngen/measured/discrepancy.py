@@ -233,7 +233,8 @@ def _gap_figure(path: Path, result: DiscrepancyResult) -> Path:
     import matplotlib.pyplot as plt
     d = result.discovery
     bars = [("nominal (held out)", result.rms_before)]
-    bars += [(f"+ {s.effect} (CV)", s.rms_after) for s in d.steps]
+    bars += [(f"+ {s.effect}{' (stand-in, not named)' if s.alternatives else ''} (CV)", s.rms_after)
+             for s in d.steps]
     bars.append(("model.yaml (held out)", result.rms_after))
     n = len(result.rms_before)
     width = 0.8 / len(bars)
