@@ -15,14 +15,9 @@ import numpy as np
 
 from .base_parameters import BaseParameterError
 from .evaluate import EvaluationError
-from .measured.consistent import ConsistentIdentificationError
-from .measured.estimation import IdentificationDataError
-from .measured.excitation import ExcitationError
-from .measured.logs import LogError
-from .measured.model_writer import ModelWriteError
+from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot
 
-MEASURED_ERRORS = (LogError, IdentificationDataError, ConsistentIdentificationError, ModelWriteError, ExcitationError)
 
 LANGS = ("c", "python", "casadi")
 EXIT_BAD_INPUT = 2
@@ -422,7 +417,7 @@ def main(argv=None) -> int:
         return args.run(args)
     except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
         message = str(exc)
-    except MEASURED_ERRORS as exc:   # logs, estimation, the solver, excitation
+    except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)
     except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
         message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")

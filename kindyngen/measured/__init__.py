@@ -13,4 +13,12 @@ adds what meeting real data needs, one module per job:
   semidefinite program);
 * :mod:`kindyngen.measured.excitation`: excitation trajectories optimised for the condition
   number of the regressor.
+
+Every refusal of this side (bad logs, unidentifiable data, a failed solve, an impossible
+request) is a :class:`MeasuredDataError`, defined here so that the command line can catch it
+without importing the heavy modules at start-up.
 """
+
+
+class MeasuredDataError(ValueError):
+    """Data or a request the measured-data side cannot use; the message says what and where."""

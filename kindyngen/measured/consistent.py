@@ -79,6 +79,7 @@ import scipy.linalg
 from ..inertial_parameters import NAMES
 from .effects import NONNEGATIVE, effect_of
 from .estimation import IdentificationDataError, check_rows
+from . import MeasuredDataError
 
 REGULARIZATION = 1e-7    # weight of ||p - prior||^2 (SI) against the normalised mean squared error
 MIN_MASS = 1e-3          # kg
@@ -91,7 +92,7 @@ OBJECTIVE_SCALE = 1e4
 SOLVER_OPTIONS = {"CLARABEL": {"tol_gap_abs": 1e-9, "tol_gap_rel": 1e-9}}
 
 
-class ConsistentIdentificationError(RuntimeError):
+class ConsistentIdentificationError(MeasuredDataError, RuntimeError):
     """The semidefinite program could not be solved (solver failure, infeasible, unbounded)."""
 
 

@@ -40,9 +40,10 @@ import numpy as np
 import scipy.linalg
 
 from ..base_parameters import RANK_TOL, numeric_rank
+from . import MeasuredDataError
 
 
-class IdentificationDataError(ValueError):
+class IdentificationDataError(MeasuredDataError):
     """Data that cannot be used for identification (NaN, shapes, too few samples)."""
 
 

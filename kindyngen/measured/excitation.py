@@ -47,6 +47,7 @@ from scipy.optimize import minimize
 from ..robot import RobotModel
 from .effects import effect_columns, effect_names
 from .regressor_rows import TorqueRegressor
+from . import MeasuredDataError
 
 # the friction columns appended to the rigid-body base regressor (kindyngen.measured.effects)
 FRICTION_EFFECTS = ("viscous_friction", "coulomb_friction", "torque_offset")
@@ -81,7 +82,7 @@ CONSTRAINT_DENSITY = 2
 CHECK_DENSITY = 10
 
 
-class ExcitationError(ValueError):
+class ExcitationError(MeasuredDataError):
     """A request that cannot give an excitation trajectory (bad harmonics, frequency, limits)."""
 
 

@@ -50,6 +50,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
+from . import MeasuredDataError
+
 __all__ = [
     "MIN_SAMPLES", "LogError", "RawLog", "read_log", "repeated_rows", "Preprocessing",
     "Segment", "preprocess", "load_segments", "split_time", "concatenate_rows",
@@ -75,7 +77,7 @@ _NPZ_IGNORED = ("target_positions", "target_velocities", "target_accelerations")
 _CHANNELS = ("q", "qd", "qdd", "tau")
 
 
-class LogError(ValueError):
+class LogError(MeasuredDataError):
     """A log that cannot be used, with the file, the field (column, key or row) and the
     reason; the same shape as :class:`kindyngen.robot.RobotDescriptionError`.
 

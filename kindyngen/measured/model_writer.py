@@ -21,11 +21,13 @@ from pathlib import Path
 
 import yaml
 
+from . import MeasuredDataError
+
 EFFECT_FIELDS = {"fv": ("friction", "viscous"), "fc": ("friction", "coulomb"), "f0": ("friction", "offset"),
                  "Ia": ("armature", None)}
 
 
-class ModelWriteError(ValueError):
+class ModelWriteError(MeasuredDataError):
     """The identified values do not make a valid robot description (named parameter, reason)."""
 
 
