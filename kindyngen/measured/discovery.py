@@ -72,7 +72,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from functools import lru_cache
 from typing import Callable, Sequence
 
 import numpy as np
@@ -83,7 +82,7 @@ from ..inertial_parameters import parameter_vector
 from ..robot import RobotModel
 from .effects import effect_columns, effect_names
 from .logs import Segment, concatenate_rows
-from .regressor_rows import TorqueRegressor
+from .regressor_rows import description_torques, torque_regressor
 
 CANDIDATES = ("viscous_friction", "coulomb_friction", "torque_offset", "armature", "payload",
               "base_tilt", "stribeck_friction", "position_ripple", "load_dependent_friction")
@@ -229,16 +228,9 @@ def predict_effects(discovery: Discovery, model: RobotModel, q, qd, qdd, effects
 # ---------------------------------------------------------------------------------------------
 # columns
 
-@lru_cache(maxsize=8)
-def _regressor(model: RobotModel) -> TorqueRegressor:
-    # symbolic derivation takes about a second: callers run discover repeatedly on one model
-    return TorqueRegressor(model)
-
-
 def nominal_torques(model: RobotModel, q, qd, qdd) -> np.ndarray:
     """The description's rigid-body torques ``Y @ (P @ parameter_vector(model))``, (N, n)."""
-    R = _regressor(model)
-    return R(q, qd, qdd) @ (R.base_map @ parameter_vector(model))
+    return description_torques(model, q, qd, qdd, effects=False)
 
 
 def _gravity_columns(model: RobotModel, q) -> np.ndarray:
@@ -248,7 +240,7 @@ def _gravity_columns(model: RobotModel, q) -> np.ndarray:
     zero = np.zeros_like(q)
     out = []
     for g in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
-        R = _regressor(replace(model, gravity=g))
+        R = torque_regressor(replace(model, gravity=g))
         out.append(R(q, zero, zero) @ (R.base_map @ full))
     return np.stack(out, axis=2)
 
@@ -260,7 +252,7 @@ def _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, stribeck_vs):
         return effect_columns(name, qd, qdd, eps), effect_names(name, n), ""
     rows = np.arange(n)
     if name == "payload":
-        R = _regressor(model)
+        R = torque_regressor(model)
         Yb = R(q, qd, qdd)
         P = R.base_map[:, -10:]               # the last link's 10 barycentric columns
         return Yb @ P, tuple(f"payload_{k}" for k in BARYCENTRIC_NAMES), ""

@@ -36,9 +36,10 @@ import yaml
 from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import CANDIDATES, Discovery, discover, nominal_torques, predict_effects
-from .effects import EFFECTS, effect_columns, effect_names
+from .effects import EFFECTS, coulomb_eps, effect_names
 from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
 from .model_writer import model_yaml
+from .regressor_rows import description_torques
 from .report import rms_table, torque_figure
 
 SCHEMA_EFFECTS = EFFECTS + ("payload", "base_tilt")   # what a robot description can hold
@@ -122,19 +123,6 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
     return None, not_written
 
 
-def _model_torques(text: str, q, qd, qdd) -> np.ndarray:
-    """Torques of a written description along motion: rigid bodies (payload, gravity included)
-    plus its declared joint effects."""
-    model = parse_robot(yaml.safe_load(text), "model.yaml")
-    tau = nominal_torques(model, q, qd, qdd)
-    if model.effects:
-        from ..joint_effects import effect_parameter_values
-        values = np.array([float(v) for v in effect_parameter_values(model)])
-        eps = float(model.coulomb_smoothing) if model.coulomb_smoothing is not None else None
-        tau = tau + effect_columns(model.effects, qd, qdd, eps) @ values
-    return tau
-
-
 def run_discrepancy(request: DiscrepancyRequest,
                     progress: Callable[[str], None] = lambda text: None) -> DiscrepancyResult:
     model = load_robot(request.robot)
@@ -143,13 +131,15 @@ def run_discrepancy(request: DiscrepancyRequest,
         progress(f"reading {path}")
         segments.extend(load_segments(path, model.n, request.preprocessing))
     train, heldout = split_time(segments, 1.0 - request.holdout)
-    eps = float(model.coulomb_smoothing) if model.coulomb_smoothing is not None else None
+    eps = coulomb_eps(model)
     d = discover(model, train, request.candidates, request.folds, progress, eps)
     q, qd, qdd, tau = concatenate_rows(heldout)
     nominal = nominal_torques(model, q, qd, qdd)
     fitted = nominal + predict_effects(d, model, q, qd, qdd)
     text, not_written = _model_text(request, model, d)
-    after = _model_torques(text, q, qd, qdd) if text is not None else nominal
+    # the written description's own prediction: what code generated from model.yaml computes
+    after = (description_torques(parse_robot(yaml.safe_load(text), "model.yaml"), q, qd, qdd)
+             if text is not None else nominal)
 
     def rms(pred):
         return np.sqrt(np.mean((tau - pred) ** 2, axis=0))

@@ -83,6 +83,12 @@ def _joint_array(a, what: str) -> np.ndarray:
     return a
 
 
+def coulomb_eps(model) -> float | None:
+    """The smoothing velocity of a robot description's Coulomb friction (rad/s), or None for
+    ``sign(qd)``."""
+    return float(model.coulomb_smoothing) if model.coulomb_smoothing is not None else None
+
+
 def effect_columns(effects, qd, qdd, eps: float | None = None) -> np.ndarray:
     """Regressor columns of ``effects`` at N samples: array (N, n, k) with k = len(effects) * n,
     so that the effect torques are ``columns @ coefficients`` (coefficients ordered as

@@ -45,8 +45,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..robot import RobotModel
-from .effects import effect_columns, effect_names
-from .regressor_rows import TorqueRegressor
+from .effects import coulomb_eps, effect_columns, effect_names
+from .regressor_rows import TorqueRegressor, torque_regressor
 from . import MeasuredDataError
 
 # the friction columns appended to the rigid-body base regressor (kindyngen.measured.effects)
@@ -244,13 +244,6 @@ def default_limits(model: RobotModel, velocity=DEFAULT_VELOCITY, acceleration=DE
 
 
 # ----------------------------------------------------------------------------- objective
-
-def _coulomb_eps(model: RobotModel) -> float | None:
-    """The description's Coulomb smoothing eps (rad/s), or None for sign(qd): the excitation
-    is optimised for the friction columns the identification will use (it reads the same)."""
-    eps = getattr(model, "coulomb_smoothing", None)
-    return None if eps is None else float(eps)
-
 
 def friction_columns(qd: np.ndarray, eps: float | None = None) -> np.ndarray:
     """(N, n, 3 n): viscous ``qd_i``, Coulomb ``sign(qd_i)`` (``tanh(qd_i / eps)`` with eps)
@@ -460,12 +453,12 @@ def optimise_excitation(model: RobotModel, limits: ExcitationLimits, harmonics: 
     if progress is not None and not callable(progress):
         raise ExcitationError("progress must be a callable taking one string")
     try:
-        R = TorqueRegressor(model)
+        R = torque_regressor(model)
     except ValueError as exc:
         raise ExcitationError(str(exc)) from exc
 
     n, H = model.n, harmonics
-    eps = _coulomb_eps(model) if friction else None
+    eps = coulomb_eps(model) if friction else None
     columns = tuple(R.names) + (friction_column_names(n) if friction else ())
     if samples_per_period * n < len(columns):
         raise ExcitationError(f"samples_per_period={samples_per_period} gives {samples_per_period * n} regressor rows, "

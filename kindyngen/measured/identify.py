@@ -34,11 +34,11 @@ import yaml
 from ..inertial_parameters import parameter_vector
 from ..robot import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
-from .effects import NONNEGATIVE, effect_columns, effect_names, effect_of
+from .effects import NONNEGATIVE, coulomb_eps, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
 from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
 from .model_writer import ModelWriteError, model_yaml
-from .regressor_rows import TorqueRegressor
+from .regressor_rows import description_torques, torque_regressor
 from .report import rms_table, torque_figure
 
 
@@ -123,8 +123,8 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     notes = tuple(dict.fromkeys(note for s in train + validation for note in s.notes))
 
     progress("building the regressor")
-    regressor = TorqueRegressor(model)
-    eps = float(model.coulomb_smoothing) if model.coulomb_smoothing is not None else None
+    regressor = torque_regressor(model)
+    eps = coulomb_eps(model)
     enames = effect_names(request.effects, n)
 
     def rows(segments):
@@ -185,7 +185,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         vpred = predicted(Yv, Ev)
         rms_val = rms_per_joint(vtau, vpred)
         # the starting description's own prediction (rigid bodies and its declared effects)
-        vnom = Yv @ (P @ prior) + _declared_effects(model, validation, eps)
+        vnom = description_torques(model, *concatenate_rows(validation)[:3])
         rms_nominal = rms_per_joint(vtau, vnom)
         vt = timeline(validation)
     return Identification(
@@ -197,17 +197,6 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         samples_train=int(len(tau)), samples_validation=int(0 if vtau is None else len(vtau)),
         preprocessing_notes=notes, validation_t=vt, validation_tau=vtau, validation_predicted=vpred,
         validation_nominal=vnom)
-
-
-def _declared_effects(model, segments, eps) -> np.ndarray:
-    """Torques of the effects the robot description declares, along ``segments``."""
-    from ..joint_effects import effect_parameter_names, effect_parameter_values
-    q, qd, qdd, _ = concatenate_rows(segments)
-    if not model.effects:
-        return np.zeros_like(q)
-    values = np.array([float(v) for v in effect_parameter_values(model)])
-    assert effect_names(model.effects, model.n) == effect_parameter_names(model)
-    return effect_columns(model.effects, qd, qdd, eps) @ values
 
 
 def _numbers(values) -> list:

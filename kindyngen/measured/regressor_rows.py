@@ -12,12 +12,16 @@ Example:
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 import symengine as se
 
+from ..inertial_parameters import parameter_vector
+from ..joint_effects import effect_parameter_values
 from ..regressors import base_parameters, regressor
 from ..robot import RobotModel
+from .effects import coulomb_eps, effect_columns
 
 
 def rigid_body_model(model: RobotModel) -> RobotModel:
@@ -58,3 +62,23 @@ class TorqueRegressor:
             raise ValueError(f"expected q, qd, qdd with {self.n} columns each")
         out = np.asarray(self._fn(x), float)
         return out.reshape(x.shape[0], self.n, self._columns)
+
+
+@lru_cache(maxsize=8)
+def torque_regressor(model: RobotModel) -> TorqueRegressor:
+    """:class:`TorqueRegressor` of ``model``, built once per model (the symbolic derivation
+    takes about a second and callers evaluate one model many times)."""
+    return TorqueRegressor(model)
+
+
+def description_torques(model: RobotModel, q, qd, qdd, effects: bool = True) -> np.ndarray:
+    """What the robot description itself predicts along motion, (N, n) in N m: the rigid bodies
+    with its parameters (payload included) and, with ``effects``, its declared friction, offset
+    and armature (the formulas of :mod:`kindyngen.measured.effects`)."""
+    R = torque_regressor(model)
+    tau = R(q, qd, qdd) @ (R.base_map @ parameter_vector(model))
+    if effects and model.effects:
+        values = np.array([float(v) for v in effect_parameter_values(model)])
+        tau = tau + effect_columns(model.effects, qd, qdd, coulomb_eps(model)) @ values
+    return tau
+
