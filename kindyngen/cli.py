@@ -34,14 +34,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"error: {self.prog}: {message} (see --help)\n")
 
 
-def _languages(text: str) -> tuple[str, ...]:
-    langs = tuple(x.strip() for x in text.split(",") if x.strip())
-    bad = [x for x in langs if x not in LANGS]
-    if bad or not langs:
-        raise argparse.ArgumentTypeError(f"unknown language(s) {', '.join(bad) or '(none)'}; choose from {','.join(LANGS)}")
-    return langs
-
-
 def _cmd_generate(args) -> int:
     from .pipeline import generate
     for path in args.robots:
@@ -123,13 +115,33 @@ def _cmd_eval(args) -> int:
     return 0
 
 
-def _effects(text: str) -> tuple[str, ...]:
+def _names_argument(what: str, known, allow_empty: bool = False):
+    """An argparse type: comma-separated names, each one of ``known()`` (called when parsing,
+    so the measured-data modules are imported only by the commands that use them)."""
+    def parse(text: str) -> tuple[str, ...]:
+        choices = known()
+        names = tuple(x.strip() for x in text.split(",") if x.strip())
+        bad = [x for x in names if x not in choices]
+        if bad or not (names or allow_empty):
+            raise argparse.ArgumentTypeError(f"unknown {what}(s) {', '.join(bad) or '(none)'}; choose from "
+                                             f"{','.join(choices)}")
+        return names
+    return parse
+
+
+def _effect_names():
     from .measured.effects import EFFECTS
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
-    bad = [x for x in names if x not in EFFECTS]
-    if bad:
-        raise argparse.ArgumentTypeError(f"unknown effect(s) {', '.join(bad)}; choose from {','.join(EFFECTS)}")
-    return names
+    return EFFECTS
+
+
+def _candidate_names():
+    from .measured.discovery import CANDIDATES
+    return CANDIDATES
+
+
+_languages = _names_argument("language", lambda: LANGS)
+_effects = _names_argument("effect", _effect_names, allow_empty=True)
+_candidates = _names_argument("candidate", _candidate_names)
 
 
 def _number_argument(expected: str, accept, none_allowed: bool = False):
@@ -188,16 +200,6 @@ def _cmd_identify(args) -> int:
     print(json.dumps(summary))
     progress(f"wrote {out}/identification.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
-
-
-def _candidates(text: str) -> tuple[str, ...]:
-    from .measured.discovery import CANDIDATES
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
-    bad = [x for x in names if x not in CANDIDATES]
-    if bad or not names:
-        raise argparse.ArgumentTypeError(f"unknown candidate(s) {', '.join(bad) or '(none)'}; choose from "
-                                         f"{','.join(CANDIDATES)}")
-    return names
 
 
 def _cmd_discover(args) -> int:
