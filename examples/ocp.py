@@ -304,7 +304,6 @@ def solve(setup: dict, fd: ca.Function, N: int, mode: str = DEFAULT_MODE, subste
     solver = ca.nlpsol("ocp", "ipopt", nlp, opts)
     build_s = time.perf_counter() - t0
     lbx, ubx, guess = bounds_and_guess(setup, N)
-    ng = nlp["g"].shape[0]
     t1 = time.perf_counter()
     sol = solver(x0=guess, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     solve_s = time.perf_counter() - t1

@@ -9,7 +9,6 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-import yaml
 
 from harness import ROOT, robot
 from kindyngen.cli import main

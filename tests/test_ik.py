@@ -8,7 +8,6 @@ generated-code runs of the same checks are for the all-language tests.
 """
 import numpy as np
 import pytest
-import sympy
 import symengine as se
 
 from harness import evaluate_symbolic, robot

@@ -6,7 +6,6 @@ data files read independently with numpy here; never from the code under test.""
 from __future__ import annotations
 
 import doctest
-import re
 from pathlib import Path
 
 import numpy as np

@@ -690,6 +690,23 @@ def _describe(channels: Sequence[str]) -> str:
     return ", ".join(channels)
 
 
+def zero_phase_low_pass(y: np.ndarray, rate_hz: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
+    """Butterworth low-pass of ``order`` run forwards and backwards along axis 0 (no delay).
+
+    The signal is padded (odd reflection) over one period of the cutoff, not scipy's default of
+    a few samples: the filter's initial state then settles before the data begins, which cuts
+    the edge error of a twice-differentiated signal about 3x.
+
+    >>> t = np.arange(0, 4, 0.001)
+    >>> y = zero_phase_low_pass(np.sin(2 * np.pi * 0.5 * t), 1000.0, 5.0)
+    >>> float(np.abs(y - np.sin(2 * np.pi * 0.5 * t))[500:-500].max()) < 1e-3
+    True
+    """
+    sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
+    padlen = min(len(y) - 1, int(round(rate_hz / cutoff_hz)))
+    return sosfiltfilt(sos, y, axis=0, padlen=padlen)
+
+
 def preprocess(raw: RawLog, settings: Preprocessing = Preprocessing()) -> tuple[Segment, ...]:
     """Turn a raw log into uniformly sampled, filtered segments with every derivative.
 
@@ -831,18 +848,9 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
             raise LogError(source, "cutoff_hz", f"{_g(settings.cutoff_hz)} Hz is not below the "
                                                 f"Nyquist frequency {_g(rate / 2)} Hz of the "
                                                 f"{_g(rate)} Hz grid")
-        sos = butter(settings.order, settings.cutoff_hz, btype="low", fs=rate, output="sos")
-        # pad (odd reflection) over one period of the cutoff, not scipy's default of a few
-        # samples: the filter's initial state then settles before the data begins, which
-        # cuts the edge error of qdd about 3x at the trim boundary
-        padlen = min(len(grid) - 1, int(round(rate / settings.cutoff_hz)))
-
-        def low_pass(y):
-            return sosfiltfilt(sos, y, axis=0, padlen=padlen)
-
         filtered = ["q"] + [ch for ch in ("qd", "qdd") if ch in values and settings.filter_given] + ["tau"]
         for ch in filtered:
-            values[ch] = low_pass(values[ch])
+            values[ch] = zero_phase_low_pass(values[ch], rate, settings.cutoff_hz, settings.order)
         notes.append(f"{_describe(filtered)} low-pass {_g(settings.cutoff_hz)} Hz "
                      f"({_ordinal(settings.order)}-order Butterworth, zero phase)")
         unfiltered = [ch for ch in ("qd", "qdd") if ch in values and ch not in filtered]

@@ -52,15 +52,14 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import symengine as se
 import sympy
-from scipy.signal import butter, sosfiltfilt
 
-from ..regressors import base_expressions_in_paper, base_parameters, paper_symbols, regressor
+from ..regressors import base_expressions_in_paper, base_parameters, paper_symbols
 from ..robot import RobotModel
 from .estimation import Fit, least_squares
 from .fri_source import DynamicsSource, Motion
-from .regressor_rows import TorqueRegressor, rigid_body_model
+from .logs import zero_phase_low_pass
+from .regressor_rows import BaseRegressor, TorqueRegressor, rigid_body_model
 
 # ----------------------------------------------------------------------------- the paper's figures
 
@@ -162,26 +161,6 @@ def paper_entry_map(model: RobotModel) -> EntryMap:
 
 
 # ----------------------------------------------------------------------------- batch regressors
-
-class BaseRegressor:
-    """A base regressor (``Y_g`` or ``Y_m``) of ``model`` evaluated in batches: (N, rows, cols)."""
-
-    def __init__(self, model: RobotModel, kind: str):
-        model = rigid_body_model(model)
-        function = regressor(model, kind)
-        if function is None:
-            raise ValueError(f"{model.source}: no regressor for a robot with symbolic DH lengths")
-        self.kind = kind
-        self.base = base_parameters(model, kind)
-        self.names = self.base.names
-        self.shape = function.outputs[0].shape
-        args = [s for syms in function.input_symbols for s in syms]
-        self._fn = se.Lambdify(args, list(function.output_exprs[0]), cse=True)
-
-    def __call__(self, q) -> np.ndarray:
-        q = np.atleast_2d(np.asarray(q, float))
-        return np.asarray(self._fn(q), float).reshape(len(q), *self.shape)
-
 
 def lower_stack(M) -> np.ndarray:
     """(N, n, n) -> (N, n(n+1)/2): the lower triangle row by row (M00, M10, M11, M20, ...)."""
@@ -329,12 +308,6 @@ def _identify(source, q, Yg, Ym, names_g, names_m, with_m=True) -> tuple[Identif
     return Identified(fit_g, fit_m), g, m
 
 
-def _low_pass(x, rate):
-    sos = butter(ORDER, CUTOFF, btype="low", fs=rate, output="sos")
-    padlen = min(len(x) - 1, int(round(rate / CUTOFF)))
-    return sosfiltfilt(sos, x, axis=0, padlen=padlen)
-
-
 def reproduce(source: DynamicsSource, model: RobotModel, n_train: int = 1000, n_val: int = 200,
               seed: int = 2014, tip_mass: float = 0.25, tip_distance: float = 0.0,
               motion: Motion | None = None, tip_source: DynamicsSource | None = None,
@@ -394,8 +367,8 @@ def reproduce(source: DynamicsSource, model: RobotModel, n_train: int = 1000, n_
     q_meas = np.asarray(motion.q, float)
     qd = np.gradient(q_meas, t, axis=0, edge_order=2)
     qdd = np.gradient(qd, t, axis=0, edge_order=2)
-    qf, qdf, qddf = (_low_pass(x, rate) for x in (q_meas, qd, qdd))
-    tau_f = _low_pass(np.asarray(motion.tau, float), rate)
+    qf, qdf, qddf = (zero_phase_low_pass(x, rate, CUTOFF, ORDER) for x in (q_meas, qd, qdd))
+    tau_f = zero_phase_low_pass(np.asarray(motion.tau, float), rate, CUTOFF, ORDER)
     pi_tau = A @ np.concatenate([pi_m, pi_g])
     tau_hat = Ytau(qf, qdf, qddf) @ pi_tau
     e = tau_hat - tau_f

@@ -31,37 +31,45 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
     return replace(model, joints=joints, coulomb_smoothing=None)
 
 
-class TorqueRegressor:
-    """``tau = Y(q, qd, qdd) @ base values`` for one robot (rigid bodies only).
+class BaseRegressor:
+    """A base regressor of ``model``'s rigid bodies (``kind`` "Y_g", "Y_m" or "Y", see
+    :mod:`kindyngen.regressors`) evaluated in batches: ``R(*inputs)`` -> (N, rows, columns).
 
     ``names``: the base parameters (columns); ``full_names``: the 10 n barycentric parameters;
-    ``base_map``: the matrix P (columns x 10 n) with ``base values = P @ full values``, so
-    ``Y @ P`` is the regressor on the full parameters (as linear as the dynamics itself)."""
+    ``base``: the :class:`kindyngen.base_parameters.BaseParameters`; ``base_map``: the matrix P
+    (columns x 10 n) with ``base values = P @ full values``, so ``Y @ P`` is the regressor on
+    the full parameters (as linear as the dynamics itself)."""
 
-    def __init__(self, model: RobotModel):
+    def __init__(self, model: RobotModel, kind: str):
         # rigid bodies only: the effects an identification fits are chosen by the caller
         # (kindyngen.measured.effects), whatever the description declares
         model = rigid_body_model(model)
-        function = regressor(model, "Y")
+        function = regressor(model, kind)
         if function is None:
             raise ValueError(f"{model.source}: no regressor for a robot with symbolic DH lengths")
-        self.model = model
-        self.n = model.n
-        b = base_parameters(model, "Y")
-        self.names = b.names
-        self.full_names = b.full_names
-        self.base_map = b.map_matrix()
+        self.model, self.n, self.kind = model, model.n, kind
+        self.base = base_parameters(model, kind)
+        self.names = self.base.names
+        self.full_names = self.base.full_names
+        self.base_map = self.base.map_matrix()
+        self.shape = function.outputs[0].shape
+        self._ports = function.inputs
         args = [s for syms in function.input_symbols for s in syms]
-        self._columns = len(b.names)
         self._fn = se.Lambdify(args, list(function.output_exprs[0]), cse=True)
 
-    def __call__(self, q, qd, qdd) -> np.ndarray:
-        """The regressor at N samples: array (N, n, columns)."""
-        x = np.concatenate([np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd)], axis=1)
-        if x.shape[1] != 3 * self.n:
-            raise ValueError(f"expected q, qd, qdd with {self.n} columns each")
-        out = np.asarray(self._fn(x), float)
-        return out.reshape(x.shape[0], self.n, self._columns)
+    def __call__(self, *inputs) -> np.ndarray:
+        """The regressor at N samples of its inputs (each (N, size) or one sample)."""
+        x = np.concatenate([np.atleast_2d(np.asarray(a, float)) for a in inputs], axis=1)
+        if len(inputs) != len(self._ports) or x.shape[1] != sum(p.size for p in self._ports):
+            raise ValueError(f"{self.kind} expects " + ", ".join(f"{p.name} ({p.size} columns)" for p in self._ports))
+        return np.asarray(self._fn(x), float).reshape(x.shape[0], *self.shape)
+
+
+class TorqueRegressor(BaseRegressor):
+    """``tau = Y(q, qd, qdd) @ base values`` for one robot (rigid bodies only): (N, n, columns)."""
+
+    def __init__(self, model: RobotModel):
+        super().__init__(model, "Y")
 
 
 @lru_cache(maxsize=8)
