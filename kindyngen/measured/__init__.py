@@ -12,7 +12,16 @@ adds what meeting real data needs, one module per job:
 * :mod:`kindyngen.measured.consistent`: physically consistent identification (a
   semidefinite program);
 * :mod:`kindyngen.measured.excitation`: excitation trajectories optimised for the condition
-  number of the regressor.
+  number of the regressor;
+* :mod:`kindyngen.measured.regressor_rows`: the pipeline's base regressors evaluated in batches,
+  and what a description predicts along motion;
+* :mod:`kindyngen.measured.model_writer`, :mod:`kindyngen.measured.report`: identified models
+  written back as descriptions, figures and tables;
+* :mod:`kindyngen.measured.identify`: the ``identify`` command's run;
+* :mod:`kindyngen.measured.discovery`, :mod:`kindyngen.measured.discrepancy`: naming the effect
+  a model misses, and the ``discover`` command's run;
+* :mod:`kindyngen.measured.fri_source`, :mod:`kindyngen.measured.paper_reproduction`: the
+  identification paper's procedure on a simulated control interface.
 
 Every refusal of this side (bad logs, unidentifiable data, a failed solve, an impossible
 request) is a :class:`MeasuredDataError`, defined here so that the command line can catch it
