@@ -34,10 +34,29 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"error: {self.prog}: {message} (see --help)\n")
 
 
+def _robot_options(command: argparse.ArgumentParser) -> None:
+    """How a description is read: the chain of a URDF, and whether near-exact angles snap."""
+    command.add_argument("--base", metavar="LINK", help="URDF: the chain's first link (default: the root)")
+    command.add_argument("--tip", metavar="LINK",
+                         help="URDF: the chain's last link, tool frames included (default: the single leaf)")
+    command.add_argument("--keep-angles", action="store_true",
+                         help="keep angles within 1e-5 of a multiple of pi/12 as written (default: snap them, "
+                              "with a note); within 1e-12 they are always read as the exact multiple")
+
+
+def load(path, args):
+    """A robot description read with the command's robot options; what reading changed
+    (snapped angles, zero-mass links) is printed to standard error."""
+    model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
+    for note in model.notes:
+        print(f"note: {note}", file=sys.stderr)
+    return model
+
+
 def _cmd_generate(args) -> int:
     from .pipeline import generate
     for path in args.robots:
-        model = load_robot(path)
+        model = load(path, args)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
@@ -57,7 +76,7 @@ def _cmd_count(args) -> int:
             raise UsageError(f"--only: unknown function(s) {', '.join(unknown)}; known: {', '.join(NAMES)}")
         only = set(args.only)
     for path in args.robots:
-        model = load_robot(path)
+        model = load(path, args)
         programs = build_programs(model, args.params, only=only, progress=False)
         missing = sorted(only - {p.function.name for p in programs}) if only else []
         if missing:
@@ -289,14 +308,15 @@ def _log_arguments(command: argparse.ArgumentParser) -> None:
 
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
-        "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML description "
+        "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML or URDF description "
         "and generate C, Python and CasADi code with operation counts. Bad input: one line on "
         "standard error and exit code 2."))
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     g = sub.add_parser("generate", help="derive and write generated code for one or more robots",
                        description="Derive, optimise and render every function of each robot into OUT/<robot>/.")
-    g.add_argument("robots", nargs="+", metavar="ROBOT.yaml")
+    g.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
+    _robot_options(g)
     g.add_argument("--out", required=True, metavar="DIR", help="output root; each robot goes to DIR/<robot>/")
     g.add_argument("--lang", type=_languages, default=LANGS, help="comma-separated subset of c,python,casadi (default: all)")
     g.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
@@ -306,7 +326,8 @@ def parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("count", help="print the operation-count table (before and after CSE)",
                        description="Derive each robot's functions and print their operation counts.")
-    c.add_argument("robots", nargs="+", metavar="ROBOT.yaml")
+    c.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
+    _robot_options(c)
     c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric")
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")

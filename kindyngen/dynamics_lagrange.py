@@ -23,7 +23,7 @@ from .joint_effects import with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import (ZERO, cross, dot, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
                            qd_port, vadd, vscale)
-from .robot import RobotModel
+from .model import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 HALF = se.Rational(1, 2)
@@ -39,7 +39,10 @@ def moving_frames(joints, qd):
     for joint, qdj in zip(joints, qd):
         v = joint.rot_t(vadd(v, cross(w, joint.t)))
         w = joint.rot_t(w)
-        w = [w[0], w[1], w[2] + qdj]
+        if joint.prismatic:
+            v = [v[0], v[1], v[2] + qdj]
+        else:
+            w = [w[0], w[1], w[2] + qdj]
         out.append((w, v))
     return out
 

@@ -30,7 +30,7 @@ from .joint_effects import effect_torques, with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import (ZERO, Body, cross, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
                            qd_port, qdd_port, tau_port, vadd, vscale)
-from .robot import RobotModel
+from .model import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 NE = "Newton-Euler route (joint frames, grouped parameters): "
@@ -39,7 +39,10 @@ NE = "Newton-Euler route (joint frames, grouped parameters): "
 def _rotate_body(joint, body: Body) -> Body:
     """Body seen from frame j-1 when given in frame j: ``Rz(q)`` by double angles
     (``I'xx = Ixx - s^2 (Ixx - Iyy) - 2 cs Ixy``, ``I'yy = Ixx + Iyy - I'xx``,
-    ``I'xy = cs (Ixx - Iyy) + (1 - 2 s^2) Ixy``), then the constant C and translation t."""
+    ``I'xy = cs (Ixx - Iyy) + (1 - 2 s^2) Ixy``), then the constant C and translation t
+    (a prismatic joint: no rotation, t includes the displacement)."""
+    if joint.prismatic:
+        return body.moved(joint.C, joint.t)
     c, s = joint.c, joint.s
     I, h = body.I, body.h
     cs, ss = c * s, s * s
@@ -67,7 +70,8 @@ def rnea(joints, bodies, qd, qdd, gam):
 
     Per link (Khalil-Kleinfinger form, all in frame j): ``U = skew(w') + skew(w)^2`` from the
     six products of w's components; ``F = m a + U h``; ``N = I w' + w x (I w) + h x a``;
-    the next origin's acceleration is ``R^T (a + U t)``.  (Variants with cross products for
+    the next origin's acceleration is ``R^T (a + U t)``, plus ``qdd e_z + 2 w x (qd e_z)``
+    after a prismatic joint, whose torque is the force along its axis.  (Variants with cross products for
     F, or products of w for ``w x I w``, cost more after CSE on the LWR and Panda.)"""
     n = len(joints)
     w, wd = [ZERO] * 3, [ZERO] * 3
@@ -83,8 +87,12 @@ def rnea(joints, bodies, qd, qdd, gam):
         wdr = joint.rot_t(wd)
         qdj = qd[j] if qd is not None else ZERO
         qddj = qdd[j] if qdd is not None else ZERO
-        w = [wr[0], wr[1], wr[2] + qdj]
-        wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
+        if joint.prismatic:
+            w, wd = wr, wdr
+            a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
+        else:
+            w = [wr[0], wr[1], wr[2] + qdj]
+            wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
         wx, wy, wz = w
         xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
         U = [[-(yy + zz), xy - wd[2], xz + wd[1]],
@@ -107,14 +115,15 @@ def rnea(joints, bodies, qd, qdd, gam):
             f = vadd(F, fr)
         else:
             f, nn = F, N
-        tau[j] = nn[2]
+        tau[j] = f[2] if joints[j].prismatic else nn[2]
     return tau
 
 
 def gravity_composite(joints, bodies, gam):
     """g from composite first moments: ``h^c_j = h_j + R h^c_{j+1} + m^c_{j+1} t_{j+1}``
     (the mass term vanishes with grouped parameters), ``g_j = -e_z . (h^c_j x gamma_j)``
-    with gravity gamma carried into each joint frame."""
+    with gravity gamma carried into each joint frame (a prismatic joint: ``g_j = -m^c_j
+    e_z . gamma_j``)."""
     n = len(joints)
     gams = []
     g_ = list(gam)
@@ -132,7 +141,7 @@ def gravity_composite(joints, bodies, gam):
         else:
             hc, mc = list(b.h), b.m
         gj = gams[j]
-        out[j] = -(hc[0] * gj[1] - hc[1] * gj[0])
+        out[j] = -mc * gj[2] if joints[j].prismatic else -(hc[0] * gj[1] - hc[1] * gj[0])
     return out
 
 
@@ -143,15 +152,20 @@ def crba(joints, bodies):
     comp = None
     for j in range(n - 1, -1, -1):
         comp = bodies[j] if comp is None else bodies[j] + _rotate_body(joints[j + 1], comp)
-        f = [-comp.h[1], comp.h[0], ZERO]
-        nn = [comp.I[0][2], comp.I[1][2], comp.I[2][2]]
-        M[j][j] = nn[2]
+        if joints[j].prismatic:     # the wrench of a unit acceleration along z
+            f = [ZERO, ZERO, comp.m]
+            nn = [comp.h[1], -comp.h[0], ZERO]
+            M[j][j] = f[2]
+        else:                       # ... of a unit angular acceleration about z
+            f = [-comp.h[1], comp.h[0], ZERO]
+            nn = [comp.I[0][2], comp.I[1][2], comp.I[2][2]]
+            M[j][j] = nn[2]
         for i in range(j - 1, -1, -1):
             joint = joints[i + 1]
             fr = joint.rot(f)
             nn = vadd(joint.rot(nn), cross(joint.t, fr))
             f = fr
-            M[i][j] = M[j][i] = nn[2]
+            M[i][j] = M[j][i] = fr[2] if joints[i].prismatic else nn[2]
     return M
 
 

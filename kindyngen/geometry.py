@@ -1,16 +1,20 @@
-"""Exact per-joint DH geometry as symengine expressions.
+"""Exact per-joint geometry as symengine expressions: ``before * motion(q) * after`` of
+every joint (:mod:`kindyngen.placement`), whatever the description gave (DH row, URDF
+origin and axis).
 
-Constants (alpha, a, d, offsets) stay exact, so cos(pi/2) is the integer 0 and the zeros and
-ones of the LWR's table vanish before any code exists.  Standard DH:
-``T_i = Rz(q_i + offset_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``; modified (Craig) DH:
-``T_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(q_i + offset_i) Tz(d_i)``.
+Constants stay exact, so cos(pi/2) is the integer 0 and the zeros and ones of the LWR's
+table vanish before any code exists. A standard DH row gives ``Rz(q_i + offset_i) Tz(d_i)
+Tx(a_i) Rx(alpha_i)``, a modified (Craig) one ``Rx(alpha_{i-1}) Tx(a_{i-1}) Tz(d_i)
+Rz(q_i + offset_i)``; a prismatic joint moves along z instead (``Tz(q_i + offset_i)``).
 
 Example:
 
 >>> import sympy, symengine as se
->>> from kindyngen.robot import Joint
->>> j = Joint(a=0, alpha=sympy.pi / 2, d=sympy.Rational(2, 5), offset=0, lower=-1, upper=1)
->>> R, p = joint_transform(j, "standard", se.Symbol("q"))
+>>> from kindyngen.model import Joint
+>>> from kindyngen.placement import dh_standard
+>>> before, after = dh_standard(0, sympy.pi / 2, sympy.Rational(2, 5))
+>>> j = Joint(before=before, after=after, offset=0, lower=-1, upper=1)
+>>> R, p = joint_transform(j, se.Symbol("q"))
 >>> R.tolist()[2], p.tolist()
 ([0, 1, 0], [[0], [0], [2/5]])
 """
@@ -19,7 +23,8 @@ from __future__ import annotations
 import sympy
 import symengine as se
 
-from .robot import Joint
+from .model import Joint
+from .placement import Placement
 
 
 def exact(value) -> se.Basic:
@@ -55,23 +60,48 @@ def rot_x(c, s) -> se.Matrix:
     return se.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
 
 
-def joint_transform(joint: Joint, convention: str, q: se.Symbol, cos_sin=None) -> tuple[se.Matrix, se.Matrix]:
-    """Rotation (3x3) and translation (3x1) of frame i in frame i-1.
+def constant_transform(placement: Placement) -> tuple[se.Matrix, se.Matrix] | None:
+    """A placement as symengine (R, p), or None for the identity (nothing to multiply)."""
+    if placement.is_identity:
+        return None
+    R, p = placement.matrix()
+    return (se.Matrix([[constant(R[r, c]) for c in range(3)] for r in range(3)]),
+            se.Matrix([constant(p[r]) for r in range(3)]))
 
-    ``cos_sin`` lets a caller pass already-built cos/sin of the joint angle so that every
-    derived function shares the same call objects."""
+
+def constant(value) -> se.Basic:
+    """An exact sympy constant as symengine: exact where sympy has a closed form (rationals,
+    sqrt(2)/2, symbols), else the double of its 30-digit value (cos(3/10)): evaluated by
+    mpmath, the same on every machine."""
+    value = sympy.sympify(value)
+    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan, sympy.tan):
+        return se.sympify(value)
+    return se.RealDouble(float(value.evalf(30)))
+
+
+def motion(joint: Joint, q: se.Symbol, cos_sin=None) -> tuple[se.Matrix, se.Matrix]:
+    """Rz(q + offset) of a revolute joint (``cos_sin``: already-built cos/sin of the angle,
+    so that every derived function shares the same call objects), Tz(q + offset) of a
+    prismatic one."""
+    if joint.prismatic:
+        return se.eye(3), se.Matrix([0, 0, q + exact(joint.offset)])
     c, s = cos_sin if cos_sin is not None else joint_cos_sin(q, joint.offset)
-    ca, sa = _cos_sin_exact(joint.alpha)
-    a, d = exact(joint.a), exact(joint.d)
-    if convention == "standard":
-        rotation = rot_z(c, s) * rot_x(ca, sa)
-        translation = se.Matrix([a * c, a * s, d])
-    else:
-        rotation = rot_x(ca, sa) * rot_z(c, s)
-        translation = se.Matrix([a, -sa * d, ca * d])
-    return rotation, translation
+    return rot_z(c, s), se.zeros(3, 1)
 
 
-def joint_axis_in_previous(convention: str) -> bool:
-    """Standard DH puts joint i on the z axis of frame i-1; modified DH on that of frame i."""
-    return convention == "standard"
+def compose(first, second):
+    """(R1, p1) * (R2, p2), skipping identities (None)."""
+    if first is None:
+        return second
+    if second is None:
+        return first
+    (R1, p1), (R2, p2) = first, second
+    return R1 * R2, p1 + R1 * p2
+
+
+def joint_transform(joint: Joint, q: se.Symbol, cos_sin=None) -> tuple[se.Matrix, se.Matrix]:
+    """Rotation (3x3) and translation (3x1) of the joint's link frame in its parent link's
+    frame: ``before * motion(q) * after``."""
+    out = compose(compose(constant_transform(joint.before), motion(joint, q, cos_sin)),
+                  constant_transform(joint.after))
+    return out

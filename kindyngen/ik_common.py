@@ -55,6 +55,7 @@ products inside, are replaced by the zero pose (status 2).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
@@ -100,43 +101,350 @@ CONVENTIONS = (
 # --- applicability -----------------------------------------------------------------------
 @dataclass(frozen=True)
 class LwrGeometry:
-    """What the closed form needs from an LWR-like model: the two link lengths (exact),
-    the joint offsets (exact) and the joint limits (floats)."""
+    """What the closed form needs from an LWR-type model, and how the model maps onto the
+    canonical LWR (lwr4.yaml's standard DH table with lengths d3, d5 and no offsets):
+
+        FK(q) = B FK_canon(theta) F,   theta_i = s_i q_i + o_i,
+
+    with FK the model's (tool included). ``d3``, ``d5``: the canonical lengths (exact,
+    signed); ``signs``: s_i = +-1; ``offsets``: o_i (exact sympy, in (-pi, pi]); ``base``: B
+    as exact sympy (R, p), the canonical base frame in the model's base frame, None for the
+    identity; ``flange``: F, the model's tool frame in the canonical flange frame, None for
+    the identity; ``lower``, ``upper``: the model's joint limits (floats)."""
 
     d3: se.Basic
     d5: se.Basic
     offsets: tuple
     lower: tuple[float, ...]
     upper: tuple[float, ...]
+    signs: tuple[int, ...] = (1,) * 7
+    base: Optional[tuple] = None
+    flange: Optional[tuple] = None
 
     def limits_text(self) -> str:
         return "[" + ", ".join(f"[{lo:.6g}, {up:.6g}]" for lo, up in zip(self.lower, self.upper)) + "] rad"
 
+    def window(self, i: int) -> Optional[float]:
+        """Where joint i's angle is returned: None for (-pi, pi] (limits within it), else the
+        lower limit L of [L, L + 2 pi) (so that a representative within the limits is
+        returned whenever one exists)."""
+        lo, up = self.lower[i], self.upper[i]
+        return None if -math.pi < lo and up <= math.pi else lo
 
+    @property
+    def is_canonical(self) -> bool:
+        """The model is the canonical table itself (up to its lengths): nothing is mapped."""
+        return (self.base is None and self.flange is None and all(s == 1 for s in self.signs)
+                and all(sympy.sympify(o) == 0 for o in self.offsets)
+                and all(self.window(i) is None for i in range(7)))
+
+    def map_text(self) -> str:
+        """The mapping onto the canonical LWR, for the generated documentation ('' when none)."""
+        if self.is_canonical:
+            return ""
+        signs = ", ".join("+1" if s == 1 else "-1" for s in self.signs)
+        offsets = ", ".join(sympy.sstr(o) for o in self.offsets)
+        parts = [f" Solved as the canonical LWR (standard DH, alpha = (pi/2, -pi/2, -pi/2, pi/2, pi/2, "
+                 f"-pi/2, 0), d3 = {self.d3}, d5 = {self.d5}) with FK(q) = B FK_canon(theta) F, "
+                 f"theta_i = s_i q_i + o_i, s = ({signs}), o = ({offsets})"]
+        for name, value in (("B", self.base), ("F", self.flange)):
+            if value is not None:
+                R, p = value
+                parts.append(f", {name} = (R = {sympy.sstr(R.tolist())}, p = {sympy.sstr(list(p))})")
+        windows = [f"q{i + 1} in [{self.window(i):.6g}, {self.window(i) + 2 * math.pi:.6g})"
+                   for i in range(7) if self.window(i) is not None]
+        parts.append("; the branch bits and singular statuses refer to theta, limits and angles to q"
+                     + (" (" + ", ".join(windows) + ")" if windows else "") + ".")
+        return "".join(parts)
+
+
+# the canonical table: sign of sin(alpha_i) for i = 1..6 (alpha_7 = 0)
+LWR_ALPHA_SIGNS = (1, -1, -1, 1, 1, -1)
 LWR_ALPHAS = (sympy.pi / 2, -sympy.pi / 2, -sympy.pi / 2, sympy.pi / 2, sympy.pi / 2, -sympy.pi / 2, 0)
+MAP_CHECK_TOL = 1e-9     # m and rotation entries (times 1 + the lengths involved): FK identity
+MAP_CHECK_SAMPLES = 8    # random configurations on which the identity is checked
+
+
+def _zero(value) -> bool:
+    """Exactly zero (expand, then simplify; never a float decision)."""
+    value = sympy.expand(sympy.sympify(value))
+    if value == 0:
+        return True
+    if value.is_Rational:
+        return False
+    return sympy.simplify(value) == 0
+
+
+def _tidy(value):
+    value = sympy.expand(sympy.sympify(value))
+    return value if value.is_Rational else sympy.radsimp(value)
+
+
+def _vec(values) -> sympy.Matrix:
+    return sympy.Matrix([_tidy(v) for v in values])
+
+
+def _unit(v: sympy.Matrix) -> sympy.Matrix:
+    norm = sympy.sqrt(_tidy(v.dot(v)))
+    return _vec(v / norm)
+
+
+def _compose(a, b):
+    (R1, p1), (R2, p2) = a, b
+    return (R1 * R2).applyfunc(_tidy), (p1 + R1 * p2).applyfunc(_tidy)
+
+
+def _zero_configuration(model: RobotModel):
+    """Each joint's axis (unit u, point p) in the base frame at q = 0, and the tool frame
+    (R, p) there, exact; None if a joint is not revolute."""
+    pose = (sympy.eye(3), sympy.zeros(3, 1))
+    axes = []
+    for joint in model.joints:
+        if joint.kind != "revolute":
+            return None
+        pose = _compose(pose, joint.before.matrix())
+        axes.append((_vec(pose[0][:, 2]), pose[1]))
+        offset = sympy.sympify(joint.offset)
+        if offset != 0:
+            c, s = sympy.cos(offset), sympy.sin(offset)
+            pose = _compose(pose, (sympy.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]]), sympy.zeros(3, 1)))
+        pose = _compose(pose, joint.after.matrix())
+    return axes, _compose(pose, model.tool.matrix())
+
+
+def _meet(line1, line2):
+    """The common point of two perpendicular lines, or None if they do not intersect."""
+    (u1, p1), (u2, p2) = line1, line2
+    a = _vec(p1 + u1 * (p2 - p1).dot(u1))           # the feet of the common perpendicular
+    b = _vec(p2 + u2 * (p1 - p2).dot(u2))
+    return a if all(_zero(x) for x in a - b) else None
+
+
+def _on_line(point, line) -> bool:
+    u, p = line
+    return all(_zero(x) for x in (point - p).cross(u))
+
+
+def _angle(x_from, x_to, axis):
+    """The exact angle about ``axis`` turning unit x_from (perpendicular to it) onto x_to."""
+    c = sympy.simplify(x_from.dot(x_to))
+    s = sympy.simplify(x_from.cross(x_to).dot(axis))
+    return sympy.simplify(sympy.atan2(s, c))
+
+
+def _perpendicular_unit(v, axis):
+    """v projected onto the plane perpendicular to unit ``axis``, normalised (None if 0)."""
+    w = _vec(v - axis * v.dot(axis))
+    return None if all(_zero(x) for x in w) else _unit(w)
+
+
+def _frame(x, z):
+    return sympy.Matrix.hstack(x, _vec(z.cross(x)), z)
+
+
+def _is_identity(pose) -> bool:
+    R, p = pose
+    return all(_zero(x) for x in R - sympy.eye(3)) and all(_zero(x) for x in p)
+
+
+def _choose_x(R_ref, z):
+    """The x axis of a canonical frame with z axis ``z`` closest to frame R_ref: its x axis
+    (else y axis) projected perpendicular to z."""
+    x = _perpendicular_unit(R_ref[:, 0], z)
+    return x if x is not None else _perpendicular_unit(R_ref[:, 1], z)
+
+
+def _end_frame(sign, u, point, R_ref):
+    """(R, p) of a canonical end frame (base or flange) with z = sign u, at ``point``."""
+    z = u * sign
+    return _frame(_choose_x(R_ref, z), z), point
+
+
+def _dh_numeric(theta, d3, d5):
+    """FK of the canonical LWR table, numpy (for the check of the map)."""
+    T = np.eye(4)
+    for i in range(7):
+        c, s = math.cos(theta[i]), math.sin(theta[i])
+        ca, sa = (0.0, 1.0) if i < 6 else (1.0, 0.0)
+        sa *= LWR_ALPHA_SIGNS[i] if i < 6 else 1
+        d = (0, 0, d3, 0, d5, 0, 0)[i]
+        T = T @ np.array([[c, -s * ca, s * sa, 0], [s, c * ca, -c * sa, 0], [0, sa, ca, d], [0, 0, 0, 1]])
+    return T
+
+
+def _pose_numeric(pose, values):
+    R, p = pose
+    T = np.eye(4)
+    T[:3, :3] = np.array(R.subs(values).evalf(), float)
+    T[:3, 3] = np.array(p.subs(values).evalf(), float).ravel()
+    return T
+
+
+def _model_fk_numeric(model: RobotModel, q, values):
+    """The model's FK (tool included), numpy, from its placements (independent of the map)."""
+    T = np.eye(4)
+    for joint, qi in zip(model.joints, q):
+        c, s = math.cos(qi + float(joint.offset)), math.sin(qi + float(joint.offset))
+        Rz = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        T = T @ _pose_numeric(joint.before.matrix(), values) @ Rz @ _pose_numeric(joint.after.matrix(), values)
+    return T @ _pose_numeric(model.tool.matrix(), values)
+
+
+def _map_holds(model, d3, d5, signs, offsets, base, flange) -> bool:
+    """FK(q) = B FK_canon(s q + o) F at random configurations (lengths given as names get
+    values between 0.3 and 0.6), to MAP_CHECK_TOL times the size of the arm."""
+    symbols = sorted({s for e in (d3, d5, *base[1], *flange[1]) for s in sympy.sympify(e).free_symbols}
+                     | {s for j in model.joints for P in (j.before, j.after) for e in P.matrix()[1]
+                        for s in sympy.sympify(e).free_symbols}, key=str)
+    values = {s: 0.3 + 0.05 * k for k, s in enumerate(symbols)}
+    B, F = _pose_numeric(base, values), _pose_numeric(flange, values)
+    l3, l5 = float(sympy.sympify(d3).subs(values)), float(sympy.sympify(d5).subs(values))
+    o = np.array([float(v) for v in offsets])
+    s = np.array(signs, float)
+    rng = np.random.default_rng(0)
+    scale = 1 + abs(l3) + abs(l5) + np.abs(B[:3, 3]).sum() + np.abs(F[:3, 3]).sum()
+    for q in rng.uniform(-math.pi, math.pi, (MAP_CHECK_SAMPLES, 7)):
+        error = np.abs(_model_fk_numeric(model, q, values) - B @ _dh_numeric(s * q + o, l3, l5) @ F).max()
+        if not error <= MAP_CHECK_TOL * scale:
+            return False
+    return True
 
 
 def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
-    """The LWR geometry of ``model``, or None when its DH table is not LWR-like.
+    """The LWR geometry of ``model`` and its map onto the canonical LWR, or None when the
+    arm is not of LWR type.
+
+    LWR type, decided on the exact zero configuration (whatever the description: DH table
+    of either convention, joint offsets, origins and axes, tool): seven revolute joints;
+    consecutive axes perpendicular; axes 1, 2, 3 through one point S (shoulder), axes 3, 4,
+    5 through one point E (elbow), axes 5, 6, 7 through one point W (wrist); S != E != W.
+    These properties do not depend on the configuration (each involves axes fixed to one
+    link, or points fixed by the joints between), so they hold everywhere.
+
+    The map (see :class:`LwrGeometry`) places the canonical DH frames on the arm at q = 0:
+    z_{i-1} = s_i u_i (joint i's axis), x_i = sign(sin alpha_i) z_{i-1} x z_i, origins S, S,
+    S, E, E, W, W, W; then o_i is the angle from x_{i-1} to x_i about z_{i-1}, d3 = z_2 . (E - S),
+    d5 = z_4 . (W - E). Choices: s_2 .. s_6 = +1 (so a DH table of the canonical type maps
+    onto itself with its own offsets, and d3, d5 keep their signs); x_0 (x_7) is the model's
+    base (tool) x axis projected perpendicular to z_0 (z_6); s_1 (s_7) is -1 only when that
+    makes the base (tool) rotation of the map the identity. The identity is checked
+    numerically at random configurations before the map is accepted (MAP_CHECK_TOL).
 
     >>> from kindyngen.robot import load_robot
     >>> lwr_geometry(load_robot("robots/lwr4.yaml")).d5           # doctest: +SKIP
     39/100
     """
-    if model.n != 7 or model.convention != "standard":
+    if model.n != 7:
         return None
-    joints = model.joints
-    for joint, alpha in zip(joints, LWR_ALPHAS):
-        if sympy.simplify(sympy.sympify(joint.alpha) - alpha) != 0:
-            return None
-        if sympy.sympify(joint.a) != 0:
-            return None
-    d = [sympy.sympify(j.d) for j in joints]
-    if any(d[i] != 0 for i in (0, 1, 3, 5, 6)) or d[2] == 0 or d[4] == 0:
+    zero = _zero_configuration(model)
+    if zero is None:
         return None
-    return LwrGeometry(d3=exact(d[2]), d5=exact(d[4]), offsets=tuple(j.offset for j in joints),
-                       lower=tuple(float(j.lower) for j in joints),
-                       upper=tuple(float(j.upper) for j in joints))
+    lines, tool = zero
+    u = [line[0] for line in lines]
+    if not all(_zero(u[i].dot(u[i + 1])) for i in range(6)):
+        return None
+    S, E, W = _meet(lines[0], lines[1]), _meet(lines[2], lines[3]), _meet(lines[4], lines[5])
+    if S is None or E is None or W is None:
+        return None
+    if not (_on_line(S, lines[2]) and _on_line(E, lines[4]) and _on_line(W, lines[6])):
+        return None
+    if all(_zero(x) for x in E - S) or all(_zero(x) for x in W - E):
+        return None
+
+    # s_1 and s_7: -1 only when that (alone) makes the base / tool rotation the identity
+    def end_sign(line, point, R_ref):
+        frames = {s: _end_frame(s, line[0], point, R_ref) for s in (1, -1)}
+        ok = {s: all(_zero(x) for x in frames[s][0] - R_ref) for s in (1, -1)}
+        return -1 if ok[-1] and not ok[1] else 1
+
+    signs = [end_sign(lines[0], S, sympy.eye(3))] + [1] * 5 + [end_sign(lines[6], W, tool[0])]
+    z = [u[i] * signs[i] for i in range(7)]
+    x = [_choose_x(sympy.eye(3), z[0])]
+    x += [_vec(z[i - 1].cross(z[i]) * LWR_ALPHA_SIGNS[i - 1]) for i in range(1, 7)]
+    x.append(_choose_x(tool[0], z[6]))
+    offsets = tuple(_angle(x[i], x[i + 1], z[i]) for i in range(7))
+    d3, d5 = _tidy(z[2].dot(E - S)), _tidy(z[4].dot(W - E))
+    base = (_frame(x[0], z[0]), S)
+    R7 = _frame(x[7], z[6])
+    flange = ((R7.T * tool[0]).applyfunc(_tidy), (R7.T * (tool[1] - W)).applyfunc(_tidy))
+    if not _map_holds(model, d3, d5, signs, offsets, base, flange):
+        return None
+    return LwrGeometry(d3=exact(d3), d5=exact(d5), offsets=offsets,
+                       lower=tuple(float(j.lower) for j in model.joints),
+                       upper=tuple(float(j.upper) for j in model.joints), signs=tuple(signs),
+                       base=None if _is_identity(base) else base,
+                       flange=None if _is_identity(flange) else flange)
+
+
+# --- the target in the canonical frames ----------------------------------------------------
+def constant(value) -> se.Basic:
+    """An exact sympy constant as symengine: exact where it has a closed form (rationals,
+    radicals, symbols), else the double of its 30-digit value (cos(3/10))."""
+    value = sympy.sympify(value)
+    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan,
+                                           sympy.atan2, sympy.tan):
+        return se.sympify(value)
+    return se.RealDouble(float(value.evalf(30)))
+
+
+def _translation_size(geometry: LwrGeometry) -> float:
+    """1 + |p_B| + |p_F| (m): how much the map can lengthen the target's translation (100
+    when a length is a name)."""
+    total = 1.0
+    for pose in (geometry.base, geometry.flange):
+        if pose is not None:
+            norm = sympy.sqrt(sum(v ** 2 for v in pose[1]))
+            if norm.free_symbols:
+                return 100.0
+            total += float(norm)
+    return total
+
+
+def input_bound(geometry: LwrGeometry, bound: float) -> float:
+    """The sanitising bound on the sum of squares of the input: ``bound`` divided by
+    (1 + |p_B| + |p_F|)^2, so that the mapped target stays within the unmapped bound (the
+    rotations keep norms; a translation grows by at most that factor)."""
+    return bound / _translation_size(geometry) ** 2
+
+
+def canonical_pose(geometry: LwrGeometry, R, p):
+    """The target (rows of R, p) mapped onto the canonical LWR: B^-1 (R, p) F^-1 (the input
+    itself when B and F are identities)."""
+    if geometry.base is None and geometry.flange is None:
+        return R, p
+    Rm, pm = se.Matrix([list(row) for row in R]), se.Matrix(list(p))
+    if geometry.flange is not None:                     # T F^-1 = (R RF^T, p - R RF^T pF)
+        RF = se.Matrix([[constant(v) for v in row] for row in geometry.flange[0].T.tolist()])
+        pF = se.Matrix([constant(v) for v in geometry.flange[1]])
+        Rm = Rm * RF
+        pm = pm - Rm * pF
+    if geometry.base is not None:                       # B^-1 X = (RB^T XR, RB^T (Xp - pB))
+        RBt = se.Matrix([[constant(v) for v in row] for row in geometry.base[0].T.tolist()])
+        pB = se.Matrix([constant(v) for v in geometry.base[1]])
+        Rm = RBt * Rm
+        pm = RBt * (pm - pB)
+    return tuple(tuple(Rm[i, j] for j in range(3)) for i in range(3)), tuple(pm[i] for i in range(3))
+
+
+def quaternion(R: sympy.Matrix) -> tuple:
+    """The unit quaternion (w, x, y, z) of an exact rotation matrix, exact (Shepperd: the
+    formula is picked by the largest of 1 + tr R, 1 + 2 R_kk - tr R, on floats; the result
+    is exact either way)."""
+    R = sympy.Matrix(R)
+    tr = R.trace()
+    candidates = [1 + tr] + [1 + 2 * R[k, k] - tr for k in range(3)]
+    k = max(range(4), key=lambda i: float(candidates[i]))
+    root = sympy.sqrt(_tidy(candidates[k])) / 2
+    quarter = 1 / (4 * root)
+    if k == 0:
+        q = (root, (R[2, 1] - R[1, 2]) * quarter, (R[0, 2] - R[2, 0]) * quarter, (R[1, 0] - R[0, 1]) * quarter)
+    elif k == 1:
+        q = ((R[2, 1] - R[1, 2]) * quarter, root, (R[0, 1] + R[1, 0]) * quarter, (R[0, 2] + R[2, 0]) * quarter)
+    elif k == 2:
+        q = ((R[0, 2] - R[2, 0]) * quarter, (R[0, 1] + R[1, 0]) * quarter, root, (R[1, 2] + R[2, 1]) * quarter)
+    else:
+        q = ((R[1, 0] - R[0, 1]) * quarter, (R[0, 2] + R[2, 0]) * quarter, (R[1, 2] + R[2, 1]) * quarter, root)
+    return tuple(_tidy(v) for v in q)
 
 
 # --- small symbolic helpers --------------------------------------------------------------
@@ -263,13 +571,30 @@ class Wrist:
     singular: se.Basic
 
 
-def _joint(theta, offset) -> se.Basic:
-    """Joint angle q = theta - offset, wrapped to (-pi, pi] when there is an offset."""
-    offset = exact(offset)
-    if offset == 0:
+def _joint(theta, sign: int, offset, window: Optional[float]) -> se.Basic:
+    """The model's joint angle q = s (theta - o) for a canonical angle theta in [-pi, pi],
+    wrapped into the joint's window: (-pi, pi] (``window`` None; theta itself when s = 1 and
+    o = 0) or [L, L + 2 pi) for ``window`` L (one shift of 2 pi either way suffices: the
+    constant part is reduced into the window first)."""
+    offset = sympy.sympify(offset)
+    if sign == 1 and offset == 0 and window is None:
         return theta
-    x = theta - offset
-    return select((x - 2 * PI, PI < x), (x + 2 * PI, x <= -PI), x)
+    shift = -sign * offset
+    if window is None:
+        x = sign * theta + exact(shift)
+        return select((x - 2 * PI, PI < x), (x + 2 * PI, x <= -PI), x)
+    lower, upper = window, window + 2 * math.pi
+    k = math.ceil((lower - float(shift)) / (2 * math.pi))
+    if float(shift) + 2 * math.pi * k >= upper:
+        k -= 1
+    shift = shift + 2 * sympy.pi * k                  # in [L, L + 2 pi): x in [shift - pi, shift + pi]
+    x = sign * theta + exact(shift)
+    pairs = []
+    if float(shift) - math.pi < lower:
+        pairs.append((x + 2 * PI, x < lower))
+    if float(shift) + math.pi >= upper:
+        pairs.append((x - 2 * PI, upper <= x))
+    return select(*pairs, x) if pairs else x
 
 
 def _outside(x, lower: float, upper: float, symmetric: bool) -> se.Basic:
@@ -290,13 +615,13 @@ def assemble(geometry: LwrGeometry, theta3: se.Symbol, th4: se.Basic, shoulders,
     joint 3's indicator as -8, so one select per row decides between 1 and the row's code."""
     lower, upper = geometry.lower, geometry.upper
     symmetric = [abs(lo + up) <= 1e-15 * max(1.0, abs(up)) for lo, up in zip(lower, upper)]
-    offsets = geometry.offsets
+    offsets, signs = geometry.offsets, geometry.signs
 
     def outside(i, q):
         return _outside(q, lower[i], upper[i], symmetric[i])
 
     def joint(i, theta):
-        return _joint(theta, offsets[i])
+        return _joint(theta, signs[i], offsets[i], geometry.window(i))
 
     q3 = theta3
     unreach = select(*[(1, cond) for cond in unreachable], 0)

@@ -32,9 +32,9 @@ import sympy
 import symengine as se
 
 from .geometry import joint_cos_sin
-from .ik_common import (CONVENTIONS, TINY, WRIST_S6, Wrist, assemble, elbow_cosine, half_angle,
-                        indicator, lwr_geometry, sanitize, solve_position)
-from .kinematics_dualquat import quat_mul
+from .ik_common import (CONVENTIONS, TINY, WRIST_S6, LwrGeometry, Wrist, assemble, constant, elbow_cosine,
+                        half_angle, indicator, input_bound, lwr_geometry, quaternion, sanitize, solve_position)
+from .kinematics_dualquat import quat_add, quat_mul
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -46,6 +46,27 @@ INPUT_BOUND = 1e149
 def conj(quat):
     w, x, y, z = quat
     return (w, -x, -y, -z)
+
+
+def _constant_dq(pose) -> tuple:
+    """The unit dual quaternion (r, 1/2 (0, p) (x) r) of an exact pose (R, p), symengine."""
+    R, p = pose
+    r = tuple(constant(v) for v in quaternion(R))
+    return r, quat_mul((0,) + tuple(constant(v) / 2 for v in p), r)
+
+
+def canonical_dq(geometry: LwrGeometry, xs) -> tuple:
+    """The target mapped onto the canonical LWR: B^-1 x F^-1 as dual quaternions (the input
+    itself when B and F are identities; the inverse of a unit dual quaternion is its
+    conjugate)."""
+    r, d = tuple(xs[:4]), tuple(xs[4:])
+    if geometry.flange is not None:                     # x F^-1 = (r f*, r fd* + d f*)
+        fr, fd = _constant_dq(geometry.flange)
+        r, d = quat_mul(r, conj(fr)), quat_add(quat_mul(r, conj(fd)), quat_mul(d, conj(fr)))
+    if geometry.base is not None:                       # B^-1 x = (b* r, b* d + bd* r)
+        br, bd = _constant_dq(geometry.base)
+        r, d = quat_mul(conj(br), r), quat_add(quat_mul(conj(br), d), quat_mul(conj(bd), r))
+    return r + d
 
 
 def _wrist(r, h1, h2, h3, h4) -> Wrist:
@@ -75,13 +96,16 @@ def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
         return None
     x = port_symbols("x", (8,))
     theta3 = port_symbols("theta3", (1,))
-    xs = sanitize(x, INPUT_BOUND)
+    bound = input_bound(geometry, INPUT_BOUND)
+    xs = sanitize(x, bound)
+    if geometry.base is not None or geometry.flange is not None:
+        xs = canonical_dq(geometry, xs)                # B^-1 x F^-1
     r, d = xs[:4], xs[4:]
     half = se.Rational(1, 2)
     d3, d5 = half * geometry.d3, half * geometry.d5     # lengths at the scale of t/2
     p = quat_mul(d, conj(r))[1:]                          # t/2 = vec(d (x) r*)
 
-    ch3, sh3 = joint_cos_sin(theta3[0] / 2, sympy.sympify(geometry.offsets[2]) / 2)
+    ch3, sh3 = joint_cos_sin(geometry.signs[2] * theta3[0] / 2, sympy.sympify(geometry.offsets[2]) / 2)
     c3, s3 = ch3 ** 2 - sh3 ** 2, 2 * ch3 * sh3
     c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5)
     ch4, sh4 = se.sqrt((1 + c4) / 2), se.sqrt((1 - c4) / 2)
@@ -104,6 +128,6 @@ def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
                       "3 wrist singular, 4 elbow singular, 5 shoulder singular", "", "int")),
         input_symbols=(x, theta3),
         output_exprs=(q, status),
-        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{INPUT_BOUND:g}")
-        + " Input x in fk_dq's layout; x and -x give the same result.",
+        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{bound:g}")
+        + " Input x in fk_dq's layout; x and -x give the same result." + geometry.map_text(),
     )

@@ -31,8 +31,8 @@ from typing import Optional
 import symengine as se
 
 from .geometry import joint_cos_sin
-from .ik_common import (CONVENTIONS, WRIST_S6, Wrist, assemble, elbow_cosine, half_angle, indicator,
-                        lwr_geometry, sanitize, solve_position)
+from .ik_common import (CONVENTIONS, WRIST_S6, Wrist, assemble, canonical_pose, elbow_cosine, half_angle,
+                        indicator, input_bound, lwr_geometry, sanitize, solve_position)
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -75,11 +75,13 @@ def ik_hom(model: RobotModel) -> Optional[SymbolicFunction]:
         return None
     T = port_symbols("T", (4, 4))
     theta3 = port_symbols("theta3", (1,))
-    entries = sanitize(T[0:3] + T[4:7] + T[8:11] + (T[3], T[7], T[11]), INPUT_BOUND)
+    bound = input_bound(geometry, INPUT_BOUND)
+    entries = sanitize(T[0:3] + T[4:7] + T[8:11] + (T[3], T[7], T[11]), bound)
     R, p = (entries[0:3], entries[3:6], entries[6:9]), entries[9:12]
+    R, p = canonical_pose(geometry, R, p)          # B^-1 T F^-1 (unchanged for the LWR's own table)
     d3, d5 = geometry.d3, geometry.d5
 
-    c3, s3 = joint_cos_sin(theta3[0], geometry.offsets[2])
+    c3, s3 = joint_cos_sin(geometry.signs[2] * theta3[0], geometry.offsets[2])
     c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5)
     s4 = se.sqrt((1 - c4) * (1 + c4))
     th4 = se.atan2(s4, c4)
@@ -98,5 +100,5 @@ def ik_hom(model: RobotModel) -> Optional[SymbolicFunction]:
                       "3 wrist singular, 4 elbow singular, 5 shoulder singular", "", "int")),
         input_symbols=(T, theta3),
         output_exprs=(q, status),
-        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{INPUT_BOUND:g}"),
+        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{bound:g}") + geometry.map_text(),
     )

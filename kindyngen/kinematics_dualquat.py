@@ -19,9 +19,10 @@ from __future__ import annotations
 import sympy
 import symengine as se
 
-from .geometry import exact
-from .kinematics_homogeneous import FRAME_CONVENTION, q_port
-from .robot import Joint, RobotModel
+from .geometry import constant, exact
+from .kinematics_homogeneous import frame_convention, q_port
+from .model import Joint, RobotModel
+from .placement import Placement
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 Quat = tuple  # (w, x, y, z)
@@ -54,12 +55,11 @@ def dq_conjugate(u: tuple[Quat, Quat]) -> tuple[Quat, Quat]:
     return (w, -x, -y, -z), (dw, -dx, -dy, -dz)
 
 
-def _rotation(angle, axis: int) -> tuple[Quat, Quat]:
-    """Exact constant rotation about x (axis 0) or z (axis 2)."""
+def _rotation(angle, axis) -> tuple[Quat, Quat]:
+    """Exact constant rotation by ``angle`` about a unit axis (three exact numbers)."""
     half = sympy.sympify(angle) / 2
-    v = [se.sympify(sympy.cos(half)), 0, 0, 0]
-    v[1 + axis] = se.sympify(sympy.sin(half))
-    return tuple(v), (0, 0, 0, 0)
+    c, s = sympy.cos(half), sympy.sin(half)
+    return (constant(c), *(constant(s * sympy.sympify(u)) for u in axis)), (0, 0, 0, 0)
 
 
 def _translation(t) -> tuple[Quat, Quat]:
@@ -75,16 +75,24 @@ def _product(factors):
     return u
 
 
-def joint_factors(joint: Joint, convention: str):
-    """Constant dual quaternions (A, B) with frame i in frame i-1 = A Rz(q_i) B.
+def placement_dq(placement: Placement) -> tuple[Quat, Quat]:
+    """A constant placement as a dual quaternion: the product of its factors' (exact
+    half-angle rotations, pure translations)."""
+    return _product([_translation(tuple(exact(v) for v in factor[1])) if factor[0] == "trans"
+                     else _rotation(factor[2], factor[1]) for factor in placement.factors])
 
-    The offset is a constant rotation folded into A, so it costs nothing at run time."""
-    a, d = exact(joint.a), exact(joint.d)
-    offset = _rotation(joint.offset, 2)
-    if convention == "standard":   # Rz(offset) Rz(q) Tz(d) Tx(a) Rx(alpha)
-        return offset, _product([_translation((a, 0, d)), _rotation(joint.alpha, 0)])
-    # modified: Rx(alpha) Tx(a) Rz(offset) Rz(q) Tz(d)
-    return _product([_rotation(joint.alpha, 0), _translation((a, 0, 0)), offset]), _translation((0, 0, d))
+
+def joint_factors(joint: Joint):
+    """Constant dual quaternions (A, B) with link frame i in link frame i-1 = A M(q_i) B,
+    M a rotation about (revolute) or translation along (prismatic) z.
+
+    The offset is a constant rotation (translation) folded into A, so it costs nothing at
+    run time."""
+    if joint.prismatic:
+        offset = _translation((0, 0, exact(joint.offset)))
+    else:
+        offset = _rotation(joint.offset, (0, 0, 1))
+    return _product([placement_dq(joint.before), offset]), placement_dq(joint.after)
 
 
 def _vector_part(quat) -> tuple:
@@ -104,13 +112,19 @@ def joint_lines(model: RobotModel):
     constant = ((1, 0, 0, 0), (0, 0, 0, 0))
     lines = []
     for joint in model.joints:
-        before, after = joint_factors(joint, model.convention)
+        before, after = joint_factors(joint)
         constant = dq_mul(constant, before)
         # C (0 + k) C^-1: the joint axis k = (0, 0, 1) carried to the zero configuration
         real, dual = dq_mul(dq_mul(constant, ((0, 0, 0, 1), (0, 0, 0, 0))), dq_conjugate(constant))
         lines.append((_vector_part(real), _vector_part(dual)))
         constant = dq_mul(constant, after)
-    return lines, constant
+    return lines, dq_mul(constant, placement_dq(model.tool))
+
+
+def _slide(u, q) -> tuple[Quat, Quat]:
+    """A prismatic joint: translation by q along the unit direction u, 1 + e/2 (0, q u)."""
+    half = se.Rational(1, 2) * q
+    return (1, 0, 0, 0), (0, half * u[0], half * u[1], half * u[2])
 
 
 def _screw(u, m, angle) -> tuple[Quat, Quat]:
@@ -134,12 +148,12 @@ def _common_point(lines):
     return tuple(se.sympify(x) for x in solution)
 
 
-def _spherical_triple(lines, q, i):
+def _spherical_triple(lines, q, i, revolute):
     """Joints i, i+1, i+2 about axes u, v, +-u through one point p (a spherical shoulder or
     wrist, as the LWR's), as the factors T(p), r, T(-p) with r in closed form:
     cos(b) cos(a+c) + cos(b) sin(a+c) u + sin(b) cos(a-c) v + sin(b) sin(a-c) (u x v),
     for half angles a, b, c: two sums and four products instead of two quaternion products."""
-    if i + 2 >= len(lines):
+    if i + 2 >= len(lines) or not all(revolute[i:i + 3]):
         return None
     (u, _), (v, _), (w, _) = lines[i:i + 3]
     if tuple(w) == tuple(u):
@@ -167,14 +181,15 @@ def joint_screw_factors(model: RobotModel, q) -> list[tuple[Quat, Quat]]:
     """The factors whose product is the flange dual quaternion: one screw per joint, or
     closed-form factors per spherical triple, with runs of constants multiplied out."""
     lines, constant = joint_lines(model)
+    revolute = [not joint.prismatic for joint in model.joints]
     factors, i = [], 0
     while i < len(lines):
-        triple = _spherical_triple(lines, q, i)
+        triple = _spherical_triple(lines, q, i, revolute)
         if triple is not None:
             factors += triple
             i += 3
         else:
-            factors.append(_screw(*lines[i], q[i]))
+            factors.append(_screw(*lines[i], q[i]) if revolute[i] else _slide(lines[i][0], q[i]))
             i += 1
     merged = []
     for factor in factors + [constant]:
@@ -209,7 +224,7 @@ def fk_dq(model: RobotModel) -> SymbolicFunction:
                       "1/2 t (x) r (w,x,y,z); t = flange position in the base frame", "1 (real), m (dual)"),),
         input_symbols=(q,),
         output_exprs=(tuple(se.sympify(v) for v in real) + tuple(se.sympify(v) for v in dual),),
-        conventions=FRAME_CONVENTION.format(n=model.n)
+        conventions=frame_convention(model)
         + " x = (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the "
           "product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).",
     )

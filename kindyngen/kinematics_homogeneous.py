@@ -1,10 +1,12 @@
 """Forward kinematics as 4x4 homogeneous transforms, and the geometric Jacobian.
 
-Conventions (stated in every generated header): frame 0 is the base frame of the DH table,
-the flange frame is the last DH frame; ``T`` maps flange coordinates to base coordinates,
-row-major.  ``J`` is 6 x n: rows 0-2 the linear velocity of the flange origin, rows 3-5 the
-angular velocity of the flange, both expressed in the base frame (Pinocchio's
-LOCAL_WORLD_ALIGNED), so that ``[v; w] = J(q) qd``.
+Conventions (stated in every generated header, see ``RobotModel.frames_text``): the base
+frame is DH frame 0 (a URDF: the root or ``--base`` link's frame), the flange frame the last
+DH frame (the last moving joint's link), moved by the description's constant tool
+transform; ``T`` maps flange (tool) coordinates to base coordinates, row-major.  ``J`` is 6 x
+n: rows 0-2 the linear velocity of the flange origin, rows 3-5 the angular velocity of the
+flange, both expressed in the base frame (Pinocchio's LOCAL_WORLD_ALIGNED), so that ``[v; w]
+= J(q) qd``. A prismatic joint's column is its axis (linear) and zeros (angular).
 
 Example:
 
@@ -17,17 +19,30 @@ from __future__ import annotations
 
 import symengine as se
 
-from .geometry import joint_axis_in_previous, joint_transform
-from .robot import RobotModel
+from .geometry import compose, constant_transform, joint_transform
+from .model import RobotModel
 from .symbolic import Port, SymbolicFunction, flatten, port_symbols
 
-FRAME_CONVENTION = (
-    "Frames: base = DH frame 0, flange = last DH frame ({n}). T maps flange to base "
-    "coordinates (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.")
+def frame_convention(model: RobotModel) -> str:
+    """The frames text of every kinematics header."""
+    return (f"{model.frames_text} T maps flange to base coordinates (row-major 4x4, last row "
+            f"0 0 0 1). Lengths in m, angles in rad.")
+
+
+def joint_units(model: RobotModel, revolute: str, prismatic: str) -> str:
+    """A port's unit: the revolute one, the prismatic one, or both with the joints named."""
+    kinds = {j.kind for j in model.joints}
+    if kinds == {"revolute"}:
+        return revolute
+    if kinds == {"prismatic"}:
+        return prismatic
+    moving = ", ".join(str(i) for i, j in enumerate(model.joints) if j.prismatic)
+    return f"{revolute} ({prismatic} for prismatic joints {moving}, 0-based)"
 
 
 def q_port(model: RobotModel) -> Port:
-    return Port("q", (model.n,), "joint angles, DH order", "rad")
+    what = "joint angles" if all(not j.prismatic for j in model.joints) else "joint positions"
+    return Port("q", (model.n,), f"{what}, {model.order_text}", joint_units(model, "rad", "m"))
 
 
 def frame_chain(model: RobotModel, q) -> list[tuple[se.Matrix, se.Matrix]]:
@@ -38,11 +53,28 @@ def frame_chain(model: RobotModel, q) -> list[tuple[se.Matrix, se.Matrix]]:
     rotation, position = se.eye(3), se.zeros(3, 1)
     chain = [(rotation, position)]
     for joint, qi in zip(model.joints, q):
-        r, p = joint_transform(joint, model.convention, qi)
+        r, p = joint_transform(joint, qi)
         position = position + rotation * p
         rotation = rotation * r
         chain.append((rotation, position))
     return chain
+
+
+def flange(model: RobotModel, chain) -> tuple[se.Matrix, se.Matrix]:
+    """The flange (tool) frame: the last link frame moved by the description's tool."""
+    return compose(chain[-1], constant_transform(model.tool))
+
+
+def joint_axes(model: RobotModel, chain) -> list[tuple[se.Matrix, se.Matrix]]:
+    """Every joint's axis (unit direction, a point on it) in the base frame: the z axis and
+    origin of ``chain[i] * before_i``."""
+    axes = []
+    for joint, (rotation, position) in zip(model.joints, chain):
+        before = constant_transform(joint.before)
+        if before is not None:
+            rotation, position = compose((rotation, position), before)
+        axes.append((rotation[:, 2], position))
+    return axes
 
 
 def homogeneous(rotation: se.Matrix, position: se.Matrix) -> se.Matrix:
@@ -53,7 +85,7 @@ def homogeneous(rotation: se.Matrix, position: se.Matrix) -> se.Matrix:
 def fk_hom(model: RobotModel) -> SymbolicFunction:
     """Flange pose as a 4x4 homogeneous transform, ``fk_hom(q) -> T``."""
     q = port_symbols("q", (model.n,))
-    rotation, position = frame_chain(model, q)[-1]
+    rotation, position = flange(model, frame_chain(model, q))
     return SymbolicFunction(
         name="fk_hom",
         summary="Forward kinematics: flange pose as a 4x4 homogeneous transform.",
@@ -61,7 +93,7 @@ def fk_hom(model: RobotModel) -> SymbolicFunction:
         outputs=(Port("T", (4, 4), "flange pose in the base frame (row-major)", "m (translation), 1 (rotation)"),),
         input_symbols=(q,),
         output_exprs=(flatten(homogeneous(rotation, position)),),
-        conventions=FRAME_CONVENTION.format(n=model.n),
+        conventions=frame_convention(model),
     )
 
 
@@ -69,13 +101,13 @@ def jacobian(model: RobotModel) -> SymbolicFunction:
     """Geometric Jacobian of the flange, ``jacobian(q) -> J`` (6 x n, linear rows first)."""
     q = port_symbols("q", (model.n,))
     chain = frame_chain(model, q)
-    flange = chain[-1][1]
+    point = flange(model, chain)[1]
     columns = []
-    for i in range(model.n):
-        rotation, origin = chain[i] if joint_axis_in_previous(model.convention) else chain[i + 1]
-        axis = rotation[:, 2]
-        linear = axis.cross(flange - origin)
-        columns.append(list(linear) + list(axis))
+    for joint, (axis, origin) in zip(model.joints, joint_axes(model, chain)):
+        if joint.prismatic:
+            columns.append(list(axis) + [0, 0, 0])
+        else:
+            columns.append(list(axis.cross(point - origin)) + list(axis))
     J = se.Matrix(columns).T
     return SymbolicFunction(
         name="jacobian",
@@ -86,6 +118,6 @@ def jacobian(model: RobotModel) -> SymbolicFunction:
                       "both in base-frame axes (row-major)", "m/rad (rows 0-2), 1 (rows 3-5)"),),
         input_symbols=(q,),
         output_exprs=(flatten(J),),
-        conventions=FRAME_CONVENTION.format(n=model.n)
+        conventions=frame_convention(model)
         + " J is expressed in base-frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED).",
     )

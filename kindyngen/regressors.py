@@ -185,17 +185,24 @@ def evaluate_full(model: RobotModel, kind: str, inputs: dict) -> np.ndarray:
 
 
 def common_denominator(model: RobotModel) -> int | None:
-    """A common denominator of every grouping coefficient: the squared lcm of the DH
-    lengths' denominators when all lengths are rational and every constant rotation is a
-    signed permutation (cos and sin of each alpha and offset in {0, 1, -1}); else None."""
+    """A common denominator of every grouping coefficient: the squared lcm of the joint
+    placements' lengths' denominators when all lengths are rational and every constant
+    rotation is a signed permutation (DH: cos and sin of each alpha and offset in {0, 1,
+    -1}); else None."""
     dens = []
     for joint in model.joints:
-        for angle in (joint.alpha, joint.offset):
-            for v in (sympy.cos(angle), sympy.sin(angle)):
+        if not joint.prismatic:
+            for v in (sympy.cos(joint.offset), sympy.sin(joint.offset)):
                 if v not in (0, 1, -1):
                     return None
-        for length in (joint.a, joint.d):
-            length = sympy.nsimplify(length) if isinstance(length, float) else sympy.sympify(length)
+        lengths = [joint.offset] if joint.prismatic else []
+        for placement in (joint.before, joint.after):
+            R, p = placement.matrix()
+            if any(v not in (0, 1, -1) for v in R):
+                return None
+            lengths += list(p)
+        for length in lengths:
+            length = sympy.sympify(length)
             if not length.is_Rational:
                 return None
             dens.append(int(length.q))

@@ -3,17 +3,20 @@ function assembly every dynamics route shares (:mod:`kindyngen.dynamics_lagrange
 :mod:`kindyngen.dynamics_newton_euler`, :mod:`kindyngen.forward_dynamics`).
 
 * **Joint frames.** Frame j is attached to link j with its z axis on joint j, so that every
-  joint is ``R_{j-1,j} = C_j Rz(q_j)``, ``p_{j-1,j} = t_j`` with an exact constant rotation
-  ``C_j`` and translation ``t_j`` (the DH alphas, lengths and offsets).  For modified DH
-  these are the DH frames; for standard DH, joint frame j is DH frame j-1 turned by
-  ``q_j + offset_j`` and link j's parameters are moved there from DH frame j (an exact
-  parallel-axis transform).  Joint axes are then always ``e_z`` and LWR-type tables
+  revolute joint is ``R_{j-1,j} = C_j Rz(q_j)``, ``p_{j-1,j} = t_j`` and every prismatic one
+  ``R_{j-1,j} = C_j``, ``p_{j-1,j} = t_j + C_j e_z q_j``, with an exact constant rotation
+  ``C_j`` and translation ``t_j``: the placement ``after_{j-1} before_j`` of
+  :mod:`kindyngen.placement` (and the joint offset).  Link j's parameters are moved from its
+  link frame into joint frame j by ``after_j`` (an exact parallel-axis transform).  For
+  modified DH the joint frames are the DH frames; for standard DH, joint frame j is DH frame
+  j-1 turned by ``q_j + offset_j``.  Joint axes are then always ``e_z`` and LWR-type tables
   (alpha = +-pi/2, a = 0) make ``C_j`` a signed permutation, so rotations cost only the
   ``Rz`` part.
 * **Grouped parameters.** For a revolute joint, the part ``(m, 0, 0, MZ, XX=YY, 0, YY, 0,
   0, 0)`` of link j's barycentric parameters is invariant under rotation about the joint
   axis and its energy does not depend on ``qd_j``; it is moved to link j-1 (to nothing for
-  the first link).  This is the classical base-parameter grouping (Khalil & Bennis): it
+  the first link).  For a prismatic joint the whole inertia tensor moves (link j turns with
+  link j-1, so ``1/2 w.I w`` is the same energy on either link); mass and first moments stay.  This is the classical base-parameter grouping (Khalil & Bennis): it
   leaves M, c, g and tau exactly unchanged and sets every link's mass, MZ and YY to zero,
   which removes most terms.  In symbolic mode the grouped parameters are expressions of
   the input ``p`` (a few dozen operations, counted in the function).
@@ -35,9 +38,12 @@ from dataclasses import dataclass
 import sympy
 import symengine as se
 
+from .placement import Placement
 from .inertial_parameters import LinkInertials, numeric_inertials, parameter_symbols, symbolic_inertials
 from .joint_effects import description_text
-from .robot import RobotModel
+from .geometry import exact
+from .kinematics_homogeneous import joint_units
+from .model import RobotModel
 from .symbolic import Port, SymbolicFunction
 
 ZERO = se.Integer(0)
@@ -54,26 +60,31 @@ def p_port(model: RobotModel) -> Port:
 
 
 def qd_port(model: RobotModel) -> Port:
-    return Port("qd", (model.n,), "joint velocities, DH order", "rad/s")
+    return Port("qd", (model.n,), f"joint velocities, {model.order_text}", joint_units(model, "rad/s", "m/s"))
 
 
 def qdd_port(model: RobotModel) -> Port:
-    return Port("qdd", (model.n,), "joint accelerations, DH order", "rad/s^2")
+    return Port("qdd", (model.n,), f"joint accelerations, {model.order_text}", joint_units(model, "rad/s^2", "m/s^2"))
 
 
-def tau_port(model: RobotModel, description: str = "joint torques, DH order") -> Port:
-    return Port("tau", (model.n,), description, "N m")
+def torque_unit(model: RobotModel) -> str:
+    return joint_units(model, "N m", "N")
+
+
+def tau_port(model: RobotModel, description: str = "joint torques") -> Port:
+    return Port("tau", (model.n,), description, torque_unit(model))
 
 
 def conventions(model: RobotModel, params: str) -> str:
     """The text every dynamics header carries."""
     gx, gy, gz = (float(v) for v in model.gravity)
     text = (
-        f"Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). "
+        f"Joint space in {model.order_text}: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m)"
+        f"{'' if all(not j.prismatic for j in model.joints) else ' (m, m/s, m/s^2, N for prismatic joints)'}. "
         f"Equation of motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. "
         f"Gravity acceleration in the base frame (DH frame 0): ({gx:g}, {gy:g}, {gz:g}) m/s^2; "
         f"g(q) is the torque that holds the arm against it. Link i's inertial parameters are "
-        f"given in DH frame i ({model.convention} DH). ")
+        f"given in {'DH frame i (' + model.convention + ' DH)' if model.is_dh else 'link frame i'}. ")
     if params == "symbolic":
         text += ("Inertial parameters: input p, 10 per link in the order m, m*cx, m*cy, m*cz, "
                  "Ixx, Ixy, Iyy, Ixz, Iyz, Izz (inertia about the link frame origin, link-frame axes).")
@@ -132,11 +143,6 @@ def _exact_trig(angle):
     return out
 
 
-def _rx(alpha):
-    c, s = _exact_trig(alpha)
-    return sympy.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
 def _rz(theta):
     c, s = _exact_trig(theta)
     return sympy.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
@@ -157,12 +163,14 @@ def _to_se(matrix: sympy.Matrix):
 @dataclass(frozen=True)
 class JointFrame:
     """Joint j in joint frames: ``R_{j-1,j} = C Rz(q)``, origin of frame j at ``t`` in frame
-    j-1; ``c, s`` are cos q, sin q (shared call objects)."""
+    j-1; ``c, s`` are cos q, sin q (shared call objects). A prismatic joint has ``c = 1,
+    s = 0`` and ``t`` includes its displacement ``C e_z q``."""
 
     C: list
     t: list
     c: se.Basic
     s: se.Basic
+    prismatic: bool = False
 
     def rot(self, v):
         """R v: frame-j coordinates to frame j-1."""
@@ -179,14 +187,15 @@ def joint_frames(model: RobotModel, q) -> tuple[JointFrame, ...]:
     """Constant parts of every joint in joint frames (see the module text)."""
     out = []
     for j, (joint, qj) in enumerate(zip(model.joints, q)):
-        if model.convention == "standard":
-            prev = model.joints[j - 1] if j > 0 else None
-            C = (_rx(prev.alpha) if prev else sympy.eye(3)) * _rz(joint.offset)
-            t = sympy.Matrix([prev.a, 0, prev.d]) if prev else sympy.zeros(3, 1)
+        placement = (model.joints[j - 1].after if j > 0 else Placement()) * joint.before
+        R, p = placement.matrix()
+        C, t = _to_se(R * (sympy.eye(3) if joint.prismatic else _rz(joint.offset))), [row[0] for row in _to_se(p)]
+        if joint.prismatic:
+            slide = qj + exact(joint.offset)
+            t = [t[r] + C[r][2] * slide for r in range(3)]
+            out.append(JointFrame(C=C, t=t, c=se.Integer(1), s=ZERO, prismatic=True))
         else:
-            C = _rx(joint.alpha) * _rz(joint.offset)
-            t = _rx(joint.alpha) * sympy.Matrix([joint.a, 0, joint.d])
-        out.append(JointFrame(C=_to_se(C), t=[row[0] for row in _to_se(t)], c=se.cos(qj), s=se.sin(qj)))
+            out.append(JointFrame(C=C, t=t, c=se.cos(qj), s=se.sin(qj)))
     return tuple(out)
 
 
@@ -240,15 +249,15 @@ def inertials(model: RobotModel, params: str):
 
 
 def joint_frame_bodies(model: RobotModel, links) -> list[Body]:
-    """Each link's parameters in its joint frame (standard DH: moved from DH frame j)."""
-    bodies = [Body.from_inertials(li) for li in links]
-    if model.convention == "modified":
-        return bodies
+    """Each link's parameters in its joint frame: moved from the link frame by ``after``
+    (standard DH: from DH frame j; modified DH and URDF-style axes along z: unchanged)."""
     out = []
-    for joint, body in zip(model.joints, bodies):
-        R = _to_se(_rx(joint.alpha))
-        p = [_constant(v) for v in (joint.a, 0, joint.d)]
-        out.append(body.moved(R, p))
+    for joint, li in zip(model.joints, links):
+        body = Body.from_inertials(li)
+        if not joint.after.is_identity:
+            R, p = joint.after.matrix()
+            body = body.moved(_to_se(R), [row[0] for row in _to_se(p)])
+        out.append(body)
     return out
 
 
@@ -258,6 +267,15 @@ def grouped_bodies(model: RobotModel, bodies, joints) -> list[Body]:
     bodies = list(bodies)
     for j in range(model.n - 1, -1, -1):
         b = bodies[j]
+        if joints[j].prismatic:
+            # the rotational inertia turns with link j-1: a pure rotation (no translation)
+            bodies[j] = Body(b.m, list(b.h), [[ZERO] * 3 for _ in range(3)])
+            part = Body(ZERO, [ZERO] * 3, b.I)
+            if j > 0:
+                bodies[j - 1] = bodies[j - 1] + part.moved(joints[j].C, [ZERO] * 3)
+            else:
+                bodies[j] = b
+            continue
         yy, mz = b.I[1][1], b.h[2]
         rest = Body(ZERO, [b.h[0], b.h[1], ZERO],
                     [[b.I[0][0] - yy, b.I[0][1], b.I[0][2]], [b.I[1][0], ZERO, b.I[1][2]],

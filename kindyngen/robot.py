@@ -1,7 +1,9 @@
-"""Robot descriptions: YAML file -> immutable :class:`RobotModel`.
+"""Robot descriptions: a YAML file (or, through :mod:`kindyngen.urdf`, a URDF) -> immutable
+:class:`kindyngen.model.RobotModel`.
 
-The schema is the one fixed in the project reference (``name``, ``dh``, ``gravity``,
-``joints``, ``links``).  Every problem in a file is reported as a
+The YAML schema: ``name``, ``dh`` (standard, modified, or none: joints by origin and axis),
+``gravity``, ``joints``, ``links``, optional ``payload``, ``coulomb_smoothing``, ``tool``
+(README, "Robot description").  Every problem in a file is reported as a
 :class:`RobotDescriptionError` naming the file, the field and the reason, so a user never
 sees a traceback from the YAML parser or from sympy.
 
@@ -20,126 +22,13 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import sympy
 import yaml
 
-CONVENTIONS = ("standard", "modified")
-
-
-class RobotDescriptionError(ValueError):
-    """A robot description that cannot be used, with the file, field and reason."""
-
-    def __init__(self, source: str, field: str, reason: str):
-        self.source, self.field, self.reason = source, field, reason
-        super().__init__(f"{source}: field '{field}': {reason}")
-
-
-@dataclass(frozen=True)
-class Joint:
-    """One DH row. ``alpha`` is kept exact (a sympy number such as pi/2) so that its
-    cosine and sine are exact and zeros never reach generated code; ``a`` and ``d`` are
-    exact numbers or symbols (symbolic lengths)."""
-
-    a: sympy.Expr
-    alpha: sympy.Expr
-    d: sympy.Expr
-    offset: sympy.Expr
-    lower: float
-    upper: float
-    friction: "Friction | None" = None       # None: the description declares no friction
-    armature: sympy.Rational | None = None   # kg m^2 (reflected rotor inertia); None: not declared
-
-
-@dataclass(frozen=True)
-class Friction:
-    """Joint friction and torque bias, exact (``tau_f = viscous qd + coulomb sign(qd) + offset``;
-    with ``coulomb_smoothing`` eps, ``tanh(qd / eps)`` replaces ``sign(qd)``)."""
-
-    viscous: sympy.Rational = sympy.Integer(0)   # N m s/rad
-    coulomb: sympy.Rational = sympy.Integer(0)   # N m
-    offset: sympy.Rational = sympy.Integer(0)    # N m, constant bias of the sensor or drive
-
-
-@dataclass(frozen=True)
-class Link:
-    """Inertial parameters of one link, in that link's DH frame (SI units).
-
-    ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about the centre of mass.  Loaded values
-    are exact rationals (sympy), the decimals as written, so that everything derived from
-    them and baked into generated code is computed exactly, whatever the processor."""
-
-    mass: sympy.Rational
-    com: tuple[sympy.Rational, sympy.Rational, sympy.Rational]
-    inertia: tuple[sympy.Rational, ...]
-
-    def inertia_matrix(self) -> np.ndarray:
-        """The inertia about the CoM as a float 3x3 array."""
-        ixx, iyy, izz, ixy, ixz, iyz = (float(v) for v in self.inertia)
-        return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-
-
-@dataclass(frozen=True)
-class RobotModel:
-    """A serial arm of revolute joints. Constant: derivations read it, never change it."""
-
-    name: str
-    convention: str  # "standard" or "modified" DH
-    gravity: tuple[sympy.Rational, sympy.Rational, sympy.Rational]  # exact, m/s^2
-    joints: tuple[Joint, ...]
-    links: tuple[Link, ...]
-    source: str = "<memory>"
-    payload: Link | None = None                     # a rigid body fixed to the flange, flange frame
-    coulomb_smoothing: sympy.Rational | None = None  # eps (rad/s) of tanh(qd / eps); None: sign(qd)
-
-    @property
-    def effects(self) -> tuple[str, ...]:
-        """The joint effects the description declares, in a fixed order: friction (any joint
-        with a ``friction`` entry gives every joint viscous, Coulomb and offset terms, zero
-        where not given) and ``armature``."""
-        out = []
-        if any(j.friction is not None for j in self.joints):
-            out += ["viscous_friction", "coulomb_friction", "torque_offset"]
-        if any(j.armature is not None for j in self.joints):
-            out.append("armature")
-        return tuple(out)
-
-    def friction(self, i: int) -> Friction:
-        """Joint i's friction (zeros where the description gives none)."""
-        return self.joints[i].friction or Friction()
-
-    def armature(self, i: int) -> sympy.Rational:
-        """Joint i's armature (zero where the description gives none)."""
-        return self.joints[i].armature if self.joints[i].armature is not None else sympy.Integer(0)
-
-    @property
-    def n(self) -> int:
-        return len(self.joints)
-
-    @property
-    def lower(self) -> np.ndarray:
-        return np.array([j.lower for j in self.joints])
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.array([j.upper for j in self.joints])
-
-    @property
-    def length_symbols(self) -> tuple:
-        """Symbolic DH lengths (plain names in the YAML), in order of first appearance."""
-        seen = []
-        for joint in self.joints:
-            for value in (joint.a, joint.d):
-                if isinstance(value, sympy.Symbol) and value not in seen:
-                    seen.append(value)
-        return tuple(seen)
-
-    @property
-    def identifier(self) -> str:
-        """The name as a C identifier (used as the prefix of generated functions)."""
-        ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
-        return ident if not ident[0].isdigit() else "r_" + ident
-
+from .model import (CONVENTIONS, DHRow, Friction, Joint, Link, RobotDescriptionError, RobotModel,  # noqa: F401
+                    check_inertia)
+from .placement import Placement, axis_alignment, clean_angle, dh_modified, dh_standard, rpy_xyz, unit_axis
+from .urdf import load_urdf
 
 _SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
                     "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan,
@@ -229,8 +118,14 @@ def _vector(value, length: int, source: str, field: str) -> tuple[sympy.Rational
 
 
 # every key a description may hold; anything else is refused with the closest known key
-TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing")
-JOINT_KEYS = ("a", "alpha", "d", "offset", "lower", "upper", "friction", "armature")
+TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool")
+JOINT_TYPES = ("revolute", "prismatic")
+# a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature")
+# a joint given by origin and axis (dh: none)
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature")
+ORIGIN_KEYS = ("xyz", "rpy")
+FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
 FRICTION_KEYS = ("viscous", "coulomb", "offset")
 
@@ -238,10 +133,10 @@ FRICTION_KEYS = ("viscous", "coulomb", "offset")
 def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
     """Refuse unknown keys (a typo such as ``ofset`` would otherwise be ignored silently).
 
-    >>> _check_keys({"a": 0, "ofset": 1}, JOINT_KEYS, "f.yaml", "joints[0].")
+    >>> _check_keys({"a": 0, "ofset": 1}, ("a", "alpha", "d", "offset"), "f.yaml", "joints[0].")
     Traceback (most recent call last):
     ...
-    kindyngen.robot.RobotDescriptionError: f.yaml: field 'joints[0].ofset': unknown key; did you mean 'offset'? (known: a, alpha, d, offset, lower, upper, friction, armature)
+    kindyngen.model.RobotDescriptionError: f.yaml: field 'joints[0].ofset': unknown key; did you mean 'offset'? (known: a, alpha, d, offset)
     """
     for key in mapping:
         if key in allowed:
@@ -258,6 +153,7 @@ def _require(mapping: dict, key: str, source: str, prefix: str):
     return mapping[key]
 
 
+TINY_LENGTH = 1e-12     # m
 _LENGTH_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*")
 _RESERVED = re.compile(r"t[0-9]+")  # names of CSE temporaries in generated code
 
@@ -274,24 +170,115 @@ def _length(value, source: str, field: str):
         if _RESERVED.fullmatch(name):
             raise RobotDescriptionError(source, field, f"the name {name!r} is reserved for generated temporaries")
         return sympy.Symbol(name, real=True)
-    return _number(value, source, field, exact=True)
+    value = _number(value, source, field, exact=True)
+    # below a picometre a length is a rounding residue (6.1e-17 = 1 m cos(pi/2)), not a design
+    return sympy.Integer(0) if value.is_number and abs(float(value)) < TINY_LENGTH else value
 
 
-def _parse_joint(row, source: str, field: str) -> Joint:
+@dataclass
+class _Reading:
+    """What parsing one file needs besides the data: its name, whether near-exact angles are
+    snapped, and the notes the user is shown about what was changed."""
+
+    source: str
+    snap_angles: bool = True
+    notes: list = None
+
+    def __post_init__(self):
+        self.notes = [] if self.notes is None else self.notes
+
+
+def _angle(value, reading: _Reading, field: str) -> sympy.Expr:
+    """An angle: an expression (``pi/2``) exactly, a number cleaned by
+    :func:`kindyngen.placement.clean_angle` (floats written for multiples of pi/12 read as
+    them; within 1e-5 snapped with a note unless the user keeps them)."""
+    value = _number(value, reading.source, field, exact=True)
+    if not value.is_Rational or value.is_Integer and value == 0:
+        return value
+    cleaned = clean_angle(float(value), f"{reading.source}: {field}", reading.snap_angles)
+    if cleaned.note:
+        reading.notes.append(cleaned.note)
+    return cleaned.value
+
+
+def _kind(row, reading: _Reading, field: str) -> str:
+    kind = row.get("type", "revolute")
+    if kind not in JOINT_TYPES:
+        raise RobotDescriptionError(reading.source, f"{field}.type", f"expected one of {JOINT_TYPES}, got {kind!r}")
+    return kind
+
+
+def _dh_placement(row, convention: str, kind: str, reading: _Reading, field: str):
+    """(before, after, offset, DH row) of a DH row; a revolute row's angle offset is part of
+    its motion, a prismatic row's displacement offset is its ``d``."""
+    source = reading.source
+    allowed = JOINT_KEYS + (("theta",) if kind == "prismatic" else ("offset",))
+    _check_keys(row, allowed, source, field + ".")
+    a, d = (_length(_require(row, k, source, field + "."), source, f"{field}.{k}") for k in ("a", "d"))
+    alpha = _angle(_require(row, "alpha", source, field + "."), reading, f"{field}.alpha")
+    theta = _angle(row.get("theta", 0), reading, f"{field}.theta")
+    make = dh_standard if convention == "standard" else dh_modified
+    if kind == "prismatic":
+        before, after = make(a, alpha, 0, theta)
+        return before, after, d, DHRow(a=a, alpha=alpha, d=d, theta=theta)
+    before, after = make(a, alpha, d)
+    return before, after, _angle(row.get("offset", 0), reading, f"{field}.offset"), DHRow(a=a, alpha=alpha, d=d)
+
+
+def parse_origin(value, reading: _Reading, field: str) -> Placement:
+    """``{xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` (both optional, zero) as a placement
+    ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (the URDF convention)."""
+    if not isinstance(value, dict):
+        raise RobotDescriptionError(reading.source, field, f"expected a mapping with xyz and rpy, got {value!r}")
+    _check_keys(value, ORIGIN_KEYS, reading.source, field + ".")
+    xyz = value.get("xyz", [0, 0, 0])
+    rpy = value.get("rpy", [0, 0, 0])
+    for key, item in (("xyz", xyz), ("rpy", rpy)):
+        if not isinstance(item, (list, tuple)) or len(item) != 3:
+            raise RobotDescriptionError(reading.source, f"{field}.{key}", f"expected a list of 3 numbers, got {item!r}")
+    lengths = [_length(v, reading.source, f"{field}.xyz[{k}]") for k, v in enumerate(xyz)]
+    angles = [_angle(v, reading, f"{field}.rpy[{k}]") for k, v in enumerate(rpy)]
+    return rpy_xyz(lengths, angles)
+
+
+def parse_axis(value, source: str, field: str) -> tuple:
+    """A joint axis: three numbers, not all zero, as an exact unit vector."""
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise RobotDescriptionError(source, field, f"expected a list of 3 numbers, got {value!r}")
+    numbers = [_number(v, source, f"{field}[{k}]") for k, v in enumerate(value)]
+    if max(abs(v) for v in numbers) < 1e-9:
+        raise RobotDescriptionError(source, field, f"the axis {numbers} has no direction (all zero)")
+    return unit_axis(numbers)
+
+
+def _frames_placement(row, kind: str, reading: _Reading, field: str):
+    """(before, after, offset, None) of a joint given by origin and axis."""
+    _check_keys(row, FRAME_JOINT_KEYS, reading.source, field + ".")
+    origin = parse_origin(row.get("origin", {}), reading, f"{field}.origin")
+    align = axis_alignment(parse_axis(row.get("axis", [0, 0, 1]), reading.source, f"{field}.axis"))
+    return origin * align, align.inverse(), sympy.Integer(0), None
+
+
+def _parse_joint(row, convention: str, reading: _Reading, field: str) -> Joint:
+    source = reading.source
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
-    _check_keys(row, JOINT_KEYS, source, field + ".")
-    exact = {k: _length(_require(row, k, source, field + "."), source, f"{field}.{k}") for k in ("a", "d")}
-    exact["alpha"] = _number(_require(row, "alpha", source, field + "."), source, f"{field}.alpha", exact=True)
-    offset = _number(row.get("offset", 0), source, f"{field}.offset", exact=True)
+    kind = _kind(row, reading, field)
+    if convention in CONVENTIONS:
+        before, after, offset, dh = _dh_placement(row, convention, kind, reading, field)
+    else:
+        before, after, offset, dh = _frames_placement(row, kind, reading, field)
     lower = _number(_require(row, "lower", source, field + "."), source, f"{field}.lower")
     upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")
     if not lower < upper:
         raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     friction = _parse_friction(row["friction"], source, f"{field}.friction") if "friction" in row else None
     armature = _nonnegative(row["armature"], source, f"{field}.armature") if "armature" in row else None
-    return Joint(a=exact["a"], alpha=exact["alpha"], d=exact["d"], offset=offset, lower=lower, upper=upper,
-                 friction=friction, armature=armature)
+    name = row.get("name", "")
+    if not isinstance(name, str):
+        raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
+    return Joint(before=before, after=after, offset=offset, lower=lower, upper=upper, kind=kind, name=name,
+                 friction=friction, armature=armature, dh=dh)
 
 
 def _nonnegative(value, source: str, field: str) -> sympy.Rational:
@@ -313,24 +300,6 @@ def _parse_friction(row, source: str, field: str) -> Friction:
                     offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero)
 
 
-def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:
-    """Reject a tensor that no rigid body has: not symmetric positive definite, or
-    principal moments violating the triangle inequality (each at most the sum of the others).
-    With ``point_mass_allowed`` an all-zero tensor (a point mass) is accepted."""
-    moments = np.linalg.eigvalsh(inertia)
-    if point_mass_allowed and not np.any(inertia):
-        return
-    scale = max(abs(moments).max(), 1e-300)
-    if moments.min() <= 1e-12 * scale:
-        listed = ", ".join(f"{v:.6g}" for v in moments)
-        raise RobotDescriptionError(source, field, f"inertia is not positive definite (principal moments {listed})")
-    a, b, c = (float(v) for v in sorted(moments))
-    if c > a + b + 1e-9 * scale:
-        raise RobotDescriptionError(
-            source, field,
-            f"principal moments {a:.6g}, {b:.6g}, {c:.6g} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")
-
-
 def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) -> Link:
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
@@ -345,8 +314,10 @@ def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) 
     return link
 
 
-def parse_robot(data, source: str = "<memory>") -> RobotModel:
-    """Build a :class:`RobotModel` from already-parsed YAML data."""
+def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> RobotModel:
+    """Build a :class:`RobotModel` from already-parsed YAML data (``snap_angles``: see
+    :func:`kindyngen.placement.clean_angle`; what was snapped is in ``model.notes``)."""
+    reading = _Reading(source, snap_angles)
     if not isinstance(data, dict):
         raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
     _check_keys(data, TOP_KEYS, source, "")
@@ -354,13 +325,13 @@ def parse_robot(data, source: str = "<memory>") -> RobotModel:
     if not isinstance(name, str) or not name.strip():
         raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
     convention = _require(data, "dh", source, "")
-    if convention not in CONVENTIONS:
-        raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS}, got {convention!r}")
+    if convention not in CONVENTIONS + (FRAMES,):
+        raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS + (FRAMES,)}, got {convention!r}")
     gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
     rows = _require(data, "joints", source, "")
     if not isinstance(rows, list) or not rows:
-        raise RobotDescriptionError(source, "joints", "expected a non-empty list of DH rows")
-    joints = tuple(_parse_joint(row, source, f"joints[{k}]") for k, row in enumerate(rows))
+        raise RobotDescriptionError(source, "joints", "expected a non-empty list of joints")
+    joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
@@ -375,14 +346,22 @@ def parse_robot(data, source: str = "<memory>") -> RobotModel:
         if smoothing <= 0:
             raise RobotDescriptionError(source, "coulomb_smoothing",
                                         f"must be a positive velocity (rad/s), got {float(smoothing):g}")
-    return RobotModel(name=name.strip(), convention=convention, gravity=gravity, joints=joints,
-                      links=links, source=source, payload=payload, coulomb_smoothing=smoothing)
+    tool = parse_origin(data["tool"], reading, "tool") if "tool" in data else Placement()
+    return RobotModel(name=name.strip(), convention=convention if convention in CONVENTIONS else "frames",
+                      gravity=gravity, joints=joints, links=links, source=source, payload=payload,
+                      coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes))
 
 
-def load_robot(path: str | Path) -> RobotModel:
-    """Read and validate a robot description file."""
+def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = None,
+               tip: str | None = None) -> RobotModel:
+    """Read and validate a robot description file: YAML, or URDF (``.urdf``; ``base`` and
+    ``tip`` name the chain's first and last link, see :mod:`kindyngen.urdf`)."""
     path = Path(path)
     source = str(path)
+    if path.suffix.lower() == ".urdf":
+        return load_urdf(path, base=base, tip=tip, snap_angles=snap_angles)
+    if base is not None or tip is not None:
+        raise RobotDescriptionError(source, "<file>", "--base and --tip apply to URDF files only")
     try:
         text = path.read_text()
     except OSError as exc:
@@ -394,4 +373,4 @@ def load_robot(path: str | Path) -> RobotModel:
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
         raise RobotDescriptionError(source, "<yaml>", f"malformed YAML{where}: {problem}") from exc
-    return parse_robot(data, source)
+    return parse_robot(data, source, snap_angles)

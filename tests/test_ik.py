@@ -364,11 +364,12 @@ def test_dq_sign_does_not_matter(lwr, targets):
 
 # --- applicability, other LWR-like tables ------------------------------------------------------
 def test_only_lwr_like_arms():
-    assert lwr_geometry(robot("lwr4")) is not None
-    for name in ("panda", "lwr4_hartl"):          # the Hartl table has all alphas +pi/2
-        assert lwr_geometry(robot(name)) is None
-        assert derive_all(robot(name), only={"ik_hom", "ik_dq"}) == []
-    assert [f.name for f in derive_all(robot("lwr4"), only={"ik_hom", "ik_dq"})] == ["ik_hom", "ik_dq"]
+    # the Hartl table (all alphas +pi/2) is the same arm: LWR type too (tests/test_ik_geometry.py)
+    for name in ("lwr4", "lwr4_hartl"):
+        assert lwr_geometry(robot(name)) is not None
+        assert [f.name for f in derive_all(robot(name), only={"ik_hom", "ik_dq"})] == ["ik_hom", "ik_dq"]
+    assert lwr_geometry(robot("panda")) is None
+    assert derive_all(robot("panda"), only={"ik_hom", "ik_dq"}) == []
 
 
 def lwr_variant(d3, d5, offsets=(0,) * 7, lower=None, upper=None, alphas=None, a=None):
@@ -386,7 +387,9 @@ def test_applicability_checks():
     assert lwr_geometry(lwr_variant(0.3, 0.5)) is not None
     assert lwr_geometry(lwr_variant(0.3, 0)) is None
     assert lwr_geometry(lwr_variant(0.3, 0.5, a=[0, 0, 0.01, 0, 0, 0, 0])) is None
-    assert lwr_geometry(lwr_variant(0.3, 0.5, alphas=["pi/2"] * 6 + [0])) is None
+    assert lwr_geometry(lwr_variant(0.3, 0.5, alphas=["pi/2"] * 6 + [0])) is not None   # Hartl's table
+    assert lwr_geometry(lwr_variant(0.3, 0.5, alphas=["pi/2", "pi/3"] + ["pi/2"] * 4 + [0])) is None
+    assert lwr_geometry(lwr_variant(0.3, 0.5, alphas=["pi/2", 0] + ["pi/2"] * 4 + [0])) is None
 
 
 def evaluate_function(f, **inputs):

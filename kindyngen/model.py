@@ -1,0 +1,221 @@
+"""The robot model every derivation reads: immutable dataclasses, exact numbers.
+
+A :class:`RobotModel` is a serial chain of revolute and prismatic :class:`Joint` s, each
+placed on its parent link by exact constant placements (:mod:`kindyngen.placement`), with
+the inertial parameters of every :class:`Link` in that link's frame. Readers build it from
+a YAML description (:mod:`kindyngen.robot`) or a URDF (:mod:`kindyngen.urdf`); derivations
+read it and never change it.
+
+Example:
+
+>>> from kindyngen.robot import load_robot
+>>> model = load_robot("robots/lwr4.yaml")            # doctest: +SKIP
+>>> model.n, model.joints[0].kind                     # doctest: +SKIP
+(7, 'revolute')
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from .placement import Placement
+
+CONVENTIONS = ("standard", "modified")
+
+
+class RobotDescriptionError(ValueError):
+    """A robot description that cannot be used, with the file, field and reason."""
+
+    def __init__(self, source: str, field: str, reason: str):
+        self.source, self.field, self.reason = source, field, reason
+        super().__init__(f"{source}: field '{field}': {reason}")
+
+
+@dataclass(frozen=True)
+class DHRow:
+    """A joint's DH row as written (standard or modified convention of the model); kept for
+    what is defined on DH tables only (the paper's per-joint coefficients, its simulator).
+    ``alpha`` is exact (pi/2, not a float); ``a`` and ``d`` are exact numbers or symbols."""
+
+    a: sympy.Expr
+    alpha: sympy.Expr
+    d: sympy.Expr
+    theta: sympy.Expr = sympy.Integer(0)     # constant angle of a prismatic row
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One joint: ``before * motion(q) * after`` (see :mod:`kindyngen.placement`).
+
+    ``before`` places the joint frame on the parent link's frame (the joint axis is that
+    frame's z axis), ``motion`` is ``Rz(q + offset)`` for a revolute joint and ``Tz(q +
+    offset)`` for a prismatic one, ``after`` places this joint's link frame (where the link's
+    inertial parameters are given) on the moved joint frame. Everything is exact."""
+
+    before: Placement
+    after: Placement
+    offset: sympy.Expr
+    lower: float
+    upper: float
+    kind: str = "revolute"                   # "revolute" or "prismatic"
+    name: str = ""
+    friction: "Friction | None" = None       # None: the description declares no friction
+    armature: sympy.Rational | None = None   # kg m^2 (kg, prismatic): reflected rotor inertia
+    dh: DHRow | None = None                  # the DH row, when the description is a DH table
+
+    @property
+    def prismatic(self) -> bool:
+        return self.kind == "prismatic"
+
+    # the DH row's entries, for code defined on DH tables only
+    @property
+    def a(self):
+        return self._dh().a
+
+    @property
+    def alpha(self):
+        return self._dh().alpha
+
+    @property
+    def d(self):
+        return self._dh().d
+
+    def _dh(self) -> DHRow:
+        if self.dh is None:
+            raise ValueError(f"joint {self.name or '?'} has no DH row (given by origin and axis)")
+        return self.dh
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Joint friction and torque bias, exact (``tau_f = viscous qd + coulomb sign(qd) + offset``;
+    with ``coulomb_smoothing`` eps, ``tanh(qd / eps)`` replaces ``sign(qd)``)."""
+
+    viscous: sympy.Rational = sympy.Integer(0)   # N m s/rad
+    coulomb: sympy.Rational = sympy.Integer(0)   # N m
+    offset: sympy.Rational = sympy.Integer(0)    # N m, constant bias of the sensor or drive
+
+
+@dataclass(frozen=True)
+class Link:
+    """Inertial parameters of one link, in that link's DH frame (SI units).
+
+    ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about the centre of mass.  Loaded values
+    are exact rationals (sympy), the decimals as written, so that everything derived from
+    them and baked into generated code is computed exactly, whatever the processor."""
+
+    mass: sympy.Rational
+    com: tuple[sympy.Rational, sympy.Rational, sympy.Rational]
+    inertia: tuple[sympy.Rational, ...]
+
+    def inertia_matrix(self) -> np.ndarray:
+        """The inertia about the CoM as a float 3x3 array."""
+        ixx, iyy, izz, ixy, ixz, iyz = (float(v) for v in self.inertia)
+        return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A serial arm of revolute and prismatic joints. Constant: derivations read it, never
+    change it."""
+
+    name: str
+    convention: str  # "standard" or "modified" DH, or "frames" (joints by origin and axis)
+    gravity: tuple[sympy.Rational, sympy.Rational, sympy.Rational]  # exact, m/s^2
+    joints: tuple[Joint, ...]
+    links: tuple[Link, ...]
+    source: str = "<memory>"
+    payload: Link | None = None                     # a rigid body fixed to the flange, flange frame
+    coulomb_smoothing: sympy.Rational | None = None  # eps (rad/s) of tanh(qd / eps); None: sign(qd)
+    tool: Placement = Placement()                   # flange (last link frame) -> tool frame
+    base_name: str = ""                             # the base frame's name (URDF root link)
+    flange_name: str = ""                           # the last link's name
+    notes: tuple[str, ...] = ()                     # what reading the description changed, for the user
+
+    @property
+    def is_dh(self) -> bool:
+        return self.convention in CONVENTIONS
+
+    @property
+    def order_text(self) -> str:
+        """How the joints are ordered, for port descriptions."""
+        return "DH order" if self.is_dh else "chain order from the base"
+
+    @property
+    def frames_text(self) -> str:
+        """Which frames the outputs refer to (stated in every generated header)."""
+        if self.is_dh:
+            base, flange = "DH frame 0", f"last DH frame ({self.n})"
+        else:
+            base = f"the frame of link '{self.base_name}'" if self.base_name else "the base frame"
+            flange = f"the frame of link '{self.flange_name}'" if self.flange_name else "the last link frame"
+        tool = "" if self.tool.is_identity else ", moved by the constant tool transform of the description"
+        return f"Frames: base = {base}, flange = {flange}{tool}."
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """The joint effects the description declares, in a fixed order: friction (any joint
+        with a ``friction`` entry gives every joint viscous, Coulomb and offset terms, zero
+        where not given) and ``armature``."""
+        out = []
+        if any(j.friction is not None for j in self.joints):
+            out += ["viscous_friction", "coulomb_friction", "torque_offset"]
+        if any(j.armature is not None for j in self.joints):
+            out.append("armature")
+        return tuple(out)
+
+    def friction(self, i: int) -> Friction:
+        """Joint i's friction (zeros where the description gives none)."""
+        return self.joints[i].friction or Friction()
+
+    def armature(self, i: int) -> sympy.Rational:
+        """Joint i's armature (zero where the description gives none)."""
+        return self.joints[i].armature if self.joints[i].armature is not None else sympy.Integer(0)
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([j.lower for j in self.joints])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([j.upper for j in self.joints])
+
+    @property
+    def length_symbols(self) -> tuple:
+        """Symbolic DH lengths (plain names in the YAML), in order of first appearance."""
+        seen = []
+        for joint in self.joints:
+            for value in ((joint.dh.a, joint.dh.d) if joint.dh is not None else ()):
+                if isinstance(value, sympy.Symbol) and value not in seen:
+                    seen.append(value)
+        return tuple(seen)
+
+    @property
+    def identifier(self) -> str:
+        """The name as a C identifier (used as the prefix of generated functions)."""
+        ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
+        return ident if not ident[0].isdigit() else "r_" + ident
+
+
+def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:
+    """Reject a tensor that no rigid body has: not symmetric positive definite, or
+    principal moments violating the triangle inequality (each at most the sum of the others).
+    With ``point_mass_allowed`` an all-zero tensor (a point mass) is accepted."""
+    moments = np.linalg.eigvalsh(inertia)
+    if point_mass_allowed and not np.any(inertia):
+        return
+    scale = max(abs(moments).max(), 1e-300)
+    if moments.min() <= 1e-12 * scale:
+        listed = ", ".join(f"{v:.6g}" for v in moments)
+        raise RobotDescriptionError(source, field, f"inertia is not positive definite (principal moments {listed})")
+    a, b, c = (float(v) for v in sorted(moments))
+    if c > a + b + 1e-9 * scale:
+        raise RobotDescriptionError(
+            source, field,
+            f"principal moments {a:.6g}, {b:.6g}, {c:.6g} violate the triangle inequality ({c:.6g} > {a:.6g} + {b:.6g})")

@@ -1,0 +1,486 @@
+"""URDF -> :class:`kindyngen.model.RobotModel`: the serial chain from a base link to a tip link.
+
+Each revolute, continuous or prismatic joint on the chain becomes a
+:class:`kindyngen.model.Joint` whose link frame is the URDF child link frame:
+``before = F * T(xyz) Rz(yaw) Ry(pitch) Rx(roll) * A``, ``after = A^-1``, with F the fixed
+joints met since the previous moving joint and A turning z onto the joint axis. Fixed joints
+are merged: into the next moving joint's ``before``, or after the last one into the model's
+``tool``. Each moving joint's :class:`kindyngen.model.Link` is the exact combination (mass,
+centre of mass, inertia about it, in the child link frame) of its child link and every link
+fixed to it, the same bodies Pinocchio's ``buildModelFromUrdf`` makes; bodies below a moving
+joint off the chain (a gripper's fingers) are left out with a note, and links above the
+first moving joint are the base, which carries no dynamics.
+
+Numbers are read as the decimals written (exact rationals); lengths below 1e-12 are 0 and
+angles are cleaned by :func:`kindyngen.placement.clean_angle` (1.5708 read as pi/2, with a
+note). An inertia entry that is not rational (rotated by an angle that is not a multiple of
+pi/12) is its value to 17 significant digits, so every :class:`Link` field is rational.
+A URDF states no gravity: the model's is (0, 0, -9.81) m/s^2, the base link's z axis up.
+Every problem is a :class:`kindyngen.model.RobotDescriptionError` naming the file and the
+element, never a traceback.
+
+Example: a 1-joint arm turning about y, its link a point mass 1 kg at 0.5 m along x:
+
+>>> model = parse_urdf('''<robot name="pendulum">
+...   <link name="base"/>
+...   <link name="arm"><inertial><mass value="1"/><origin xyz="0.5 0 0"/>
+...     <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+...   <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/>
+...     <origin xyz="0 0 1" rpy="0 0 1.5708"/><axis xyz="0 1 0"/>
+...     <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+... </robot>''')
+>>> joint = model.joints[0]
+>>> joint.name, joint.kind, joint.lower, joint.upper
+('shoulder', 'revolute', -2.0, 2.0)
+>>> joint.before.factors           # T(xyz) Rz(yaw), then Rx(-pi/2) turning z onto the axis y
+(('trans', (0, 0, 1)), ('rot', (0, 0, 1), pi/2), ('rot', (1, 0, 0), -pi/2))
+>>> joint.after.factors
+(('rot', (1, 0, 0), pi/2),)
+>>> model.links[0].mass, model.links[0].com, model.base_name, model.flange_name
+(1, (1/2, 0, 0), 'base', 'arm')
+>>> print(model.notes[0])
+<memory>: joint 'shoulder' origin rpy[2]: 1.5708 read as pi/2 (off by 3.7e-06 rad; keep the value ...)
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field as dataclass_field
+from pathlib import Path
+
+import numpy as np     # only to check inertias as written: nothing in the model is computed with it
+import sympy
+
+from .model import Joint, Link, RobotDescriptionError, RobotModel, check_inertia
+from .placement import Placement, axis_alignment, clean_angle, rpy_xyz, unit_axis
+
+GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
+MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
+UNSUPPORTED = ("floating", "planar")          # several degrees of freedom: not a serial-arm joint
+JOINT_TYPES = tuple(MOVING) + ("fixed",) + UNSUPPORTED
+TINY_LENGTH = 1e-12     # m: below, a rounding residue (6.1e-17 = 1 m cos(pi/2)), not a design
+TINY_RESIDUE = 1e-20    # an evaluated inertia or CoM entry below this is an exact cancellation
+SIGNIFICANT_DIGITS = 17  # a double's worth: non-rational entries are rounded to this
+# a decimal as URDF parsers read it (float() would also accept nan, inf and 1_0)
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+@dataclass
+class _Reading:
+    """One file being read: its name, whether near-exact angles are snapped, and the notes
+    (in order, each once) the user is shown about what reading changed."""
+
+    source: str
+    snap_angles: bool = True
+    notes: list = dataclass_field(default_factory=list)
+
+    def error(self, field: str, reason: str) -> RobotDescriptionError:
+        return RobotDescriptionError(self.source, field, reason)
+
+    def note(self, text: str) -> None:
+        if text not in self.notes:
+            self.notes.append(text)
+
+
+@dataclass(frozen=True)
+class _Origin:
+    """An ``<origin>`` as written (floats), with the element path its notes name."""
+
+    xyz: tuple
+    rpy: tuple
+    field: str
+
+
+@dataclass(frozen=True)
+class _Inertial:
+    """A link's ``<inertial>`` as written: mass, origin, (ixx, ixy, ixz, iyy, iyz, izz)."""
+
+    mass: float
+    origin: _Origin
+    inertia: tuple
+
+
+@dataclass(frozen=True)
+class _UrdfJoint:
+    """A ``<joint>`` as written (numbers as floats, checked but not yet made exact)."""
+
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: _Origin
+    axis: tuple                 # as written, (1, 0, 0) when absent (the URDF default)
+    limit: tuple | None         # (lower, upper) of <limit>, None without one
+    mimic: str | None
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """The kinematic tree: links (name -> inertial or None) in document order, the joint
+    above each non-root link, the joints below each link, and the root link."""
+
+    links: dict
+    parent_joint: dict
+    child_joints: dict
+    root: str
+
+
+# ------------------------------------------------------------------ numbers and elements
+
+def _floats(text: str | None, count: int, reading: _Reading, field: str) -> tuple[float, ...]:
+    """``count`` whitespace-separated finite decimals.
+
+    >>> _floats("0 0.333 -1e-3", 3, _Reading("f.urdf"), "xyz")
+    (0.0, 0.333, -0.001)
+    """
+    tokens = (text or "").split()
+    if len(tokens) != count:
+        raise reading.error(field, f"expected {count} numbers, got {text!r}")
+    for token in tokens:
+        if not _NUMBER.fullmatch(token):
+            hint = " (a xacro expression: run xacro on the file first)" if "$" in token else ""
+            raise reading.error(field, f"cannot read {token!r} as a number{hint}")
+    values = tuple(float(token) for token in tokens)
+    if not all(math.isfinite(v) for v in values):
+        raise reading.error(field, f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _attribute(element: ET.Element, name: str, reading: _Reading, field: str, default: float | None = None) -> float:
+    """One numeric attribute (``default`` when absent, an error when there is none)."""
+    text = element.get(name)
+    if text is None:
+        if default is None:
+            raise reading.error(f"{field} {name}", "missing")
+        return default
+    return _floats(text, 1, reading, f"{field} {name}")[0]
+
+
+def _length(value: float):
+    """A length as written, exact (below a picometre: 0)."""
+    return sympy.Integer(0) if abs(value) < TINY_LENGTH else sympy.Rational(repr(value))
+
+
+def _read_origin(element: ET.Element | None, reading: _Reading, field: str) -> _Origin:
+    """An optional ``<origin xyz rpy>`` (absent parts zero)."""
+    field = f"{field} origin"
+    if element is None:
+        return _Origin((0.0,) * 3, (0.0,) * 3, field)
+    return _Origin(_floats(element.get("xyz", "0 0 0"), 3, reading, f"{field} xyz"),
+                   _floats(element.get("rpy", "0 0 0"), 3, reading, f"{field} rpy"), field)
+
+
+def _placement(origin: _Origin, reading: _Reading) -> Placement:
+    """An origin as an exact placement ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)``, noting every
+    snapped angle."""
+    angles = []
+    for k, value in enumerate(origin.rpy):
+        cleaned = clean_angle(value, f"{reading.source}: {origin.field} rpy[{k}]", reading.snap_angles)
+        if cleaned.note:
+            reading.note(cleaned.note)
+        angles.append(cleaned.value)
+    return rpy_xyz([_length(v) for v in origin.xyz], angles)
+
+
+def _name(element: ET.Element, what: str, index: int, reading: _Reading) -> str:
+    name = element.get("name")
+    if not name:
+        raise reading.error(f"{what}[{index}] name", f"<{what}> number {index + 1} has no name")
+    return name
+
+
+def _read_inertial(element: ET.Element, link: str, reading: _Reading) -> _Inertial | None:
+    """A link's ``<inertial>`` (None without one); mass, origin and all six moments as
+    urdfdom requires them."""
+    inertial = element.find("inertial")
+    if inertial is None:
+        return None
+    field = f"link '{link}' inertial"
+    mass_element, inertia_element = inertial.find("mass"), inertial.find("inertia")
+    if mass_element is None:
+        raise reading.error(f"{field} mass", "missing")
+    if inertia_element is None:
+        raise reading.error(f"{field} inertia", "missing")
+    mass = _attribute(mass_element, "value", reading, f"{field} mass")
+    if mass < 0:
+        raise reading.error(f"{field} mass value", f"mass must not be negative, got {mass:g}")
+    moments = tuple(_attribute(inertia_element, key, reading, f"{field} inertia")
+                    for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
+    return _Inertial(mass, _read_origin(inertial.find("origin"), reading, field), moments)
+
+
+def _read_joint(element: ET.Element, index: int, reading: _Reading) -> _UrdfJoint:
+    name = _name(element, "joint", index, reading)
+    field = f"joint '{name}'"
+    kind = element.get("type")
+    if kind not in JOINT_TYPES:
+        raise reading.error(f"{field} type", f"expected one of {', '.join(JOINT_TYPES)}, got {kind!r}")
+    ends = []
+    for end in ("parent", "child"):
+        link = element.find(end)
+        if link is None or not link.get("link"):
+            raise reading.error(f"{field} {end}", f"missing (<{end} link=\"...\"/>)")
+        ends.append(link.get("link"))
+    axis = element.find("axis")
+    axis = (1.0, 0.0, 0.0) if axis is None else _floats(axis.get("xyz", "1 0 0"), 3, reading, f"{field} axis xyz")
+    limit = element.find("limit")
+    if limit is not None:
+        limit = tuple(_attribute(limit, key, reading, f"{field} limit", default=0.0) for key in ("lower", "upper"))
+    mimic = element.find("mimic")
+    return _UrdfJoint(name, kind, ends[0], ends[1], _read_origin(element.find("origin"), reading, field),
+                      axis, limit, None if mimic is None else mimic.get("joint", "?"))
+
+
+def _read_xml(text: str | bytes, reading: _Reading) -> ET.Element:
+    """The ``<robot>`` element of a URDF text."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        line, column = exc.position
+        raise reading.error("<xml>", f"malformed XML at line {line}, column {column + 1}: {exc}") from exc
+    if root.tag != "robot":
+        raise reading.error("<robot>", f"the top element is <{root.tag}>, expected <robot>")
+    return root
+
+
+def _closest(name: str, names) -> str:
+    close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.4)
+    return f"; closest: {', '.join(close)}" if close else ""
+
+
+def _read_tree(robot: ET.Element, reading: _Reading) -> _Tree:
+    """Links and joints (direct children of ``<robot>``: a ``<transmission>`` names joints
+    too), checked to form one tree."""
+    links = {}
+    for index, element in enumerate(robot.findall("link")):
+        name = _name(element, "link", index, reading)
+        if name in links:
+            raise reading.error(f"link '{name}'", "defined twice")
+        links[name] = _read_inertial(element, name, reading)
+    if not links:
+        raise reading.error("<robot>", "no <link> elements")
+    parent_joint, child_joints, joint_names = {}, {name: [] for name in links}, set()
+    for index, element in enumerate(robot.findall("joint")):
+        joint = _read_joint(element, index, reading)
+        if joint.name in joint_names:
+            raise reading.error(f"joint '{joint.name}'", "defined twice")
+        joint_names.add(joint.name)
+        for end, link in (("parent", joint.parent), ("child", joint.child)):
+            if link not in links:
+                raise reading.error(f"joint '{joint.name}' {end}",
+                                    f"link '{link}' is not defined{_closest(link, links)}")
+        if joint.child in parent_joint:
+            raise reading.error(f"joint '{joint.name}' child", f"link '{joint.child}' already has a parent "
+                                f"(joint '{parent_joint[joint.child].name}'): not a tree")
+        parent_joint[joint.child] = joint
+        child_joints[joint.parent].append(joint)
+    roots = [name for name in links if name not in parent_joint]
+    if len(roots) > 1:
+        raise reading.error("<robot>", f"several root links, not connected by joints: {', '.join(roots)}")
+    reached = _descendants(child_joints, roots[0]) if roots else []
+    if len(reached) < len(links):
+        cycle = [name for name in links if name not in reached]
+        raise reading.error("<robot>", f"the joints between links {', '.join(cycle)} form a cycle")
+    return _Tree(links, parent_joint, child_joints, roots[0])
+
+
+def _descendants(child_joints: dict, link: str, follow=lambda joint: True) -> list:
+    """``link`` and the links below it (through joints accepted by ``follow``), depth first."""
+    out, stack = [], [link]
+    while stack:
+        name = stack.pop()
+        out.append(name)
+        stack.extend(joint.child for joint in reversed(child_joints[name]) if follow(joint))
+    return out
+
+
+# ------------------------------------------------------------------ the chain
+
+def _link_name(tree: _Tree, name: str, option: str, reading: _Reading) -> str:
+    if name not in tree.links:
+        raise reading.error(option, f"no link named '{name}' in the URDF{_closest(name, tree.links)}")
+    return name
+
+
+def _path(tree: _Tree, base: str, tip: str, reading: _Reading) -> list:
+    """The joints from ``base`` down to ``tip``."""
+    path, link = [], tip
+    while link != base:
+        if link == tree.root:
+            raise reading.error("--tip", f"link '{tip}' is not below the base link '{base}'")
+        path.append(tree.parent_joint[link])
+        link = path[-1].parent
+    return path[::-1]
+
+
+def _default_tip(tree: _Tree, base: str, reading: _Reading) -> str:
+    """The single leaf below ``base`` reached through a moving joint (a leaf fixed to the
+    base, such as UR's ``base`` frame, belongs to the base and cannot end an arm)."""
+    static = set(_descendants(tree.child_joints, base, lambda joint: joint.kind == "fixed"))
+    leaves = [link for link in _descendants(tree.child_joints, base)
+              if not tree.child_joints[link] and link not in static]
+    if len(leaves) == 1:
+        return leaves[0]
+    if not leaves:
+        raise reading.error("--base", f"no moving joint below link '{base}'")
+    raise reading.error("--tip", f"the tree below '{base}' has {len(leaves)} leaves; name the last link "
+                        f"of the arm with --tip (one of: {', '.join(leaves)})")
+
+
+def _limits(joint: _UrdfJoint, reading: _Reading) -> tuple[float, float]:
+    """The joint's range; a continuous joint (and a revolute one with limits 0, 0, which
+    some exporters write for unlimited) gets -pi..pi, for samplers, with a note."""
+    field = f"joint '{joint.name}' limit"
+    if joint.kind == "continuous":
+        reading.note(f"{reading.source}: joint '{joint.name}' is continuous: range -pi..pi assumed")
+        return -math.pi, math.pi
+    if joint.limit is None:
+        raise reading.error(field, f"missing (URDF requires <limit lower upper> on {joint.kind} joints)")
+    lower, upper = joint.limit
+    if lower == upper == 0:
+        if joint.kind == "prismatic":
+            raise reading.error(field, "a prismatic joint needs a range (lower and upper are 0)")
+        reading.note(f"{reading.source}: {field} is 0..0: range -pi..pi assumed")
+        return -math.pi, math.pi
+    if not lower < upper:
+        raise reading.error(field, f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
+    return lower, upper
+
+
+def _axis(joint: _UrdfJoint, reading: _Reading) -> tuple:
+    """The joint axis as an exact unit vector."""
+    if max(abs(v) for v in joint.axis) < 1e-9:
+        raise reading.error(f"joint '{joint.name}' axis xyz",
+                            f"the axis {list(joint.axis)} has no direction (all zero)")
+    return unit_axis(joint.axis)
+
+
+def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: _Reading) -> Joint:
+    """A revolute or prismatic joint whose link frame is the URDF child link frame, placed
+    after the fixed placement ``fixed`` on the previous link frame."""
+    if joint.kind in UNSUPPORTED:
+        raise reading.error(f"joint '{joint.name}' type",
+                            f"a {joint.kind} joint cannot be part of a serial arm (only revolute, continuous, "
+                            f"prismatic and fixed joints)")
+    if joint.mimic is not None:
+        reading.note(f"{reading.source}: joint '{joint.name}' mimics '{joint.mimic}' in the URDF; "
+                     f"here it is an independent joint")
+    align = axis_alignment(_axis(joint, reading))
+    lower, upper = _limits(joint, reading)
+    return Joint(before=fixed * _placement(joint.origin, reading) * align, after=align.inverse(),
+                 offset=sympy.Integer(0), lower=lower, upper=upper, kind=MOVING[joint.kind], name=joint.name)
+
+
+# ------------------------------------------------------------------ rigid bodies
+
+def _rigid_body(tree: _Tree, link: str, chain: set, reading: _Reading) -> list:
+    """(placement in ``link``'s frame, inertial, name) of ``link`` and every link fixed to it;
+    what hangs below a moving joint not in ``chain`` is left out, with a note."""
+    parts, stack = [], [(link, Placement())]
+    while stack:
+        name, placement = stack.pop()
+        parts.append((placement, tree.links[name], name))
+        fixed = []
+        for joint in tree.child_joints[name]:
+            if joint.kind == "fixed":
+                fixed.append((joint.child, placement * _placement(joint.origin, reading)))
+            elif joint.name not in chain:
+                below = ", ".join(_descendants(tree.child_joints, joint.child))
+                reading.note(f"{reading.source}: joint '{joint.name}' ({joint.kind}) is not on the chain: "
+                             f"links {below} are left out of the dynamics of link '{link}'")
+        stack.extend(reversed(fixed))       # depth first, in document order
+    return parts
+
+
+def _rational(value) -> sympy.Rational:
+    """An exact constant as a rational: itself if rational, else its value to 17 significant
+    digits (a decimal, the same on every machine); a cancellation residue is 0.
+
+    >>> _rational(sympy.Rational(1, 3)), _rational(sympy.cos(sympy.Rational(3, 10)))
+    (1/3, 47766824456280301/50000000000000000)
+    """
+    value = sympy.sympify(value)
+    if value.is_Rational:
+        return value
+    approx = value.evalf(30)
+    if abs(approx) < TINY_RESIDUE:
+        return sympy.Integer(0)
+    return sympy.Rational(str(sympy.Float(approx, SIGNIFICANT_DIGITS)))
+
+
+def _combine(parts: list, reading: _Reading) -> Link:
+    """One body from rigid parts (placement, inertial, name): total mass, mass-weighted CoM
+    and the inertia about it (each part's ``R I R^T`` moved by the parallel axis theorem),
+    exact, in the frame the placements refer to. A part without ``<inertial>`` is massless."""
+    masses, coms, inertias = [], [], []
+    for placement, inertial, name in parts:
+        if inertial is None:
+            reading.note(f"{reading.source}: link '{name}' has no <inertial>: massless")
+            continue
+        check_inertia(_float_tensor(inertial.inertia), reading.source, f"link '{name}' inertial inertia",
+                      point_mass_allowed=True)
+        R, p = (placement * _placement(inertial.origin, reading)).matrix()
+        ixx, ixy, ixz, iyy, iyz, izz = (sympy.Rational(repr(v)) for v in inertial.inertia)
+        tensor = sympy.Matrix([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        masses.append(sympy.Rational(repr(inertial.mass)))
+        coms.append(p)
+        inertias.append(R * tensor * R.T)
+    mass = sum(masses, sympy.Integer(0))
+    com = sympy.zeros(3, 1)
+    if mass != 0:
+        com = sum((m * c for m, c in zip(masses, coms)), sympy.zeros(3, 1)) / mass
+    total = sympy.zeros(3, 3)
+    for m, c, tensor in zip(masses, coms, inertias):
+        d = c - com
+        total += tensor + m * ((d.T * d)[0] * sympy.eye(3) - d * d.T)
+    return Link(mass=mass, com=tuple(_rational(v) for v in com),
+                inertia=tuple(_rational(total[i, j]) for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))))
+
+
+def _float_tensor(moments: tuple) -> np.ndarray:
+    """The tensor as written, in floats, for :func:`kindyngen.model.check_inertia` only."""
+    ixx, ixy, ixz, iyy, iyz, izz = moments
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+# ------------------------------------------------------------------ entry points
+
+def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = None, tip: str | None = None,
+               snap_angles: bool = True) -> RobotModel:
+    """The serial chain from link ``base`` (default: the root) to link ``tip`` (default: the
+    only leaf reached through a moving joint) of a URDF text (see the module docstring)."""
+    reading = _Reading(source, snap_angles)
+    robot = _read_xml(text, reading)
+    name = (robot.get("name") or "").strip()
+    if not name:
+        raise reading.error("<robot> name", "missing (the model's name)")
+    tree = _read_tree(robot, reading)
+    base = tree.root if base is None else _link_name(tree, base, "--base", reading)
+    tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
+    path = _path(tree, base, tip, reading)
+    chain = {joint.name for joint in path}
+    joints, links, fixed, flange = [], [], Placement(), None
+    for joint in path:
+        if joint.kind == "fixed":
+            fixed = fixed * _placement(joint.origin, reading)
+            continue
+        joints.append(_moving_joint(joint, fixed, reading))
+        links.append(_combine(_rigid_body(tree, joint.child, chain, reading), reading))
+        fixed, flange = Placement(), joint.child
+    if not joints:
+        raise reading.error("--tip", f"no moving joint between links '{base}' and '{tip}'")
+    return RobotModel(name=name, convention="frames", gravity=GRAVITY, joints=tuple(joints), links=tuple(links),
+                      source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
+
+
+def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None,
+              snap_angles: bool = True) -> RobotModel:
+    """Read a URDF file: :func:`parse_urdf` of its text, errors naming the file."""
+    path = Path(path)
+    try:
+        text = path.read_bytes()       # bytes: the XML declaration names the encoding
+    except OSError as exc:
+        raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc
+    return parse_urdf(text, str(path), base=base, tip=tip, snap_angles=snap_angles)
