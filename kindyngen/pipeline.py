@@ -17,7 +17,7 @@ from .optimize import Program, optimize
 from .regressors import base_params_document
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
-from .robot import RobotModel
+from .model import RobotModel
 
 LANGUAGES = ("c", "python", "casadi")
 
@@ -92,10 +92,11 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
 
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
-             progress: bool = True) -> Path:
-    """Write all generated files of ``model`` under ``out_root/<robot>/``; returns that folder."""
+             progress: bool = True, only=None) -> Path:
+    """Write all generated files of ``model`` (``only``: just the named functions) under
+    ``out_root/<robot>/``; returns that folder."""
     out = Path(out_root) / model.identifier
-    programs = build_programs(model, params, progress=progress)
+    programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
     base_params = base_params_document(model)   # None for robots with symbolic lengths
     if base_params is not None:

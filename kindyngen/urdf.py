@@ -7,9 +7,10 @@ joints met since the previous moving joint and A turning z onto the joint axis. 
 are merged: into the next moving joint's ``before``, or after the last one into the model's
 ``tool``. Each moving joint's :class:`kindyngen.model.Link` is the exact combination (mass,
 centre of mass, inertia about it, in the child link frame) of its child link and every link
-fixed to it, the same bodies Pinocchio's ``buildModelFromUrdf`` makes; bodies below a moving
-joint off the chain (a gripper's fingers) are left out with a note, and links above the
-first moving joint are the base, which carries no dynamics.
+fixed to it, the same bodies Pinocchio's ``buildModelFromUrdf`` makes; a moving joint off
+the chain (a gripper's fingers) is locked at q = 0 with a note (its links join the body it
+hangs from, as in Pinocchio's ``buildReducedModel``), and links above the first moving joint
+are the base, which carries no dynamics.
 
 Numbers are read as the decimals written (exact rationals); lengths below 1e-12 are 0 and
 angles are cleaned by :func:`kindyngen.placement.clean_angle` (1.5708 read as pi/2, with a
@@ -377,7 +378,8 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: _Reading) -> Joi
 
 def _rigid_body(tree: _Tree, link: str, chain: set, reading: _Reading) -> list:
     """(placement in ``link``'s frame, inertial, name) of ``link`` and every link fixed to it;
-    what hangs below a moving joint not in ``chain`` is left out, with a note."""
+    a moving joint not in ``chain`` (a gripper's fingers) is locked at q = 0, with a note, so
+    its links count (the bodies of Pinocchio's ``buildReducedModel`` locking it at 0)."""
     parts, stack = [], [(link, Placement())]
     while stack:
         name, placement = stack.pop()
@@ -387,9 +389,10 @@ def _rigid_body(tree: _Tree, link: str, chain: set, reading: _Reading) -> list:
             if joint.kind == "fixed":
                 fixed.append((joint.child, placement * _placement(joint.origin, reading)))
             elif joint.name not in chain:
-                below = ", ".join(_descendants(tree.child_joints, joint.child))
+                # at q = 0 a joint's transform is its origin (rotation and slide are zero)
+                fixed.append((joint.child, placement * _placement(joint.origin, reading)))
                 reading.note(f"{reading.source}: joint '{joint.name}' ({joint.kind}) is not on the chain: "
-                             f"links {below} are left out of the dynamics of link '{link}'")
+                             f"locked at 0, its links part of link '{link}'")
         stack.extend(reversed(fixed))       # depth first, in document order
     return parts
 

@@ -100,7 +100,16 @@ def _pinocchio_forward(pmodel, model, q, tip: str) -> np.ndarray:
     return (base.inverse() * data.oMf[pmodel.getFrameId(tip, pin.BODY)]).homogeneous
 
 
+def reduced(pmodel, model):
+    """Pinocchio's model with every joint that is not on our chain locked at its neutral
+    position (what the reader does with a gripper's fingers)."""
+    chain = {joint.name for joint in model.joints}
+    lock = [i for i in range(1, pmodel.njoints) if pmodel.names[i] not in chain]
+    return pin.buildReducedModel(pmodel, lock, pin.neutral(pmodel)) if lock else pmodel
+
+
 def _check_against_pinocchio(model, pmodel, tip: str, tolerance: float) -> None:
+    pmodel = reduced(pmodel, model)
     rng = np.random.default_rng(7)
     for _ in range(5):
         q = rng.uniform(model.lower, model.upper)
@@ -132,11 +141,12 @@ def test_arm_structure(tmp_path):
     # every inertial parameter is an exact rational
     for link in model.links:
         assert all(isinstance(v, sympy.Rational) for v in (link.mass, *link.com, *link.inertia))
-    # merged bodies: link1 + spacer; link2 + camera; link3 + flange (+ massless tcp)
-    masses = [sympy.Rational(32, 10), sympy.Rational(21, 10), sympy.Rational(11, 10)]
+    # merged bodies: link1 + spacer; link2 + camera; link3 + flange (+ massless tcp) + the
+    # finger, locked at 0
+    masses = [sympy.Rational(32, 10), sympy.Rational(21, 10), sympy.Rational(12, 10)]
     assert [link.mass for link in model.links] == masses
     notes = "\n".join(model.notes)
-    assert "joint 'finger_joint' (revolute) is not on the chain: links finger" in notes
+    assert "joint 'finger_joint' (revolute) is not on the chain: locked at 0, its links part of link 'link3'" in notes
     assert "link 'tcp' has no <inertial>: massless" in notes
 
 
@@ -146,8 +156,11 @@ def test_exact_rotations_keep_inertias_exact(tmp_path):
     model = load_urdf(_write(tmp_path, ARM), tip="tcp")
     link3 = model.links[2]
     # flange CoM: T(0.05, 0, 0) Ry(-pi/2) (0, 0, 0.01) = (0.04, 0, 0)
+    # finger (locked at 0): T(0.02, 0, 0) (0, 0, 0.02) = (0.02, 0, 0.02)
     expected = (sympy.Rational(9, 10) * sympy.Matrix([sympy.Rational(5, 100), sympy.Rational(1, 100), 0])
-                + sympy.Rational(2, 10) * sympy.Matrix([sympy.Rational(4, 100), 0, 0])) / sympy.Rational(11, 10)
+                + sympy.Rational(2, 10) * sympy.Matrix([sympy.Rational(4, 100), 0, 0])
+                + sympy.Rational(1, 10) * sympy.Matrix([sympy.Rational(2, 100), 0, sympy.Rational(2, 100)])
+                ) / sympy.Rational(12, 10)
     assert link3.com == tuple(expected)
 
 
