@@ -203,7 +203,8 @@ def _cmd_identify(args) -> int:
     settings = Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate)
     request = IdentificationRequest(robot=args.robot, data=tuple(args.data), validate=tuple(args.validate or ()),
                                     effects=args.effects, consistent=args.consistent, weighted=args.weighted,
-                                    split=args.split, preprocessing=settings)
+                                    split=args.split, preprocessing=settings,
+                                    base=args.base, tip=args.tip, snap_angles=not args.keep_angles)
 
     def progress(text):
         if not args.quiet:
@@ -227,7 +228,8 @@ def _cmd_discover(args) -> int:
     from .measured.logs import Preprocessing
     request = DiscrepancyRequest(robot=args.robot, data=tuple(args.data), holdout=args.holdout,
                                  candidates=args.candidates or CANDIDATES, folds=args.folds,
-                                 preprocessing=Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate))
+                                 preprocessing=Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate),
+                                 base=args.base, tip=args.tip, snap_angles=not args.keep_angles)
 
     def progress(text):
         if not args.quiet:
@@ -274,7 +276,7 @@ def _cmd_reproduce(args) -> int:
 def _cmd_excite(args) -> int:
     from .measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
                                       write_trajectory_json)
-    model = load_robot(args.robot)
+    model = load(args.robot, args)
     limits = default_limits(model, velocity=args.velocity, acceleration=args.acceleration, margin=args.margin)
 
     def progress(text):
@@ -353,7 +355,8 @@ def parser() -> argparse.ArgumentParser:
                                     "qdd1..; s, rad, N m) or npz with times, positions, velocities, "
                                     "accelerations, torques. Each file is one experiment; files are never "
                                     "differentiated across."))
-    i.add_argument("--robot", required=True, metavar="ROBOT.yaml", help="the robot description (geometry, prior)")
+    i.add_argument("--robot", required=True, metavar="ROBOT", help="the robot description, YAML or URDF (geometry, prior)")
+    _robot_options(i)
     i.add_argument("--data", required=True, action="append", metavar="LOG", help="training log (repeatable)")
     i.add_argument("--validate", action="append", metavar="LOG", help="validation log (repeatable)")
     i.add_argument("--split", type=_fraction, metavar="FRACTION",
@@ -375,7 +378,8 @@ def parser() -> argparse.ArgumentParser:
                                     "Writes DIR/excitation.csv (t, q1..qn, qd1..qdn, qdd1..qddn; s, rad, rad/s, "
                                     "rad/s^2) to command, and DIR/excitation.json (coefficients, limits, "
                                     "condition numbers)."))
-    x.add_argument("--robot", required=True, metavar="ROBOT.yaml")
+    x.add_argument("--robot", required=True, metavar="ROBOT", help="the robot description, YAML or URDF")
+    _robot_options(x)
     x.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per joint (default 5)")
     x.add_argument("--frequency", type=_positive, default=0.1, metavar="HZ",
                    help="base frequency (default 0.1 Hz: a 10 s period)")
@@ -422,7 +426,8 @@ def parser() -> argparse.ArgumentParser:
                                     "guessed), write DIR/discovery.json, DIR/report.md with plots and "
                                     "DIR/model.yaml (the description plus the named effects). The last "
                                     "--holdout fraction of the log is held out for the before/after figures."))
-    d.add_argument("--robot", required=True, metavar="ROBOT.yaml", help="the nominal robot description")
+    d.add_argument("--robot", required=True, metavar="ROBOT", help="the nominal robot description, YAML or URDF")
+    _robot_options(d)
     d.add_argument("--data", required=True, action="append", metavar="LOG", help="measured log (repeatable)")
     d.add_argument("--holdout", type=_fraction, default=0.3, metavar="FRACTION",
                    help="fraction of the time span held out (default 0.3)")

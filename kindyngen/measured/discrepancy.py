@@ -53,6 +53,9 @@ class DiscrepancyRequest:
     candidates: tuple[str, ...] = CANDIDATES
     folds: int = 5
     preprocessing: Preprocessing = field(default_factory=Preprocessing)
+    base: str | None = None          # a URDF's chain: first and last link (kindyngen.urdf)
+    tip: str | None = None
+    snap_angles: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,7 +113,7 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
     header = (f"Nominal model {request.robot} with the effects KinDynGen's discrepancy workflow named "
               f"from {', '.join(map(str, request.data))}: {', '.join(d.effects) or 'none'}.")
     for with_payload in ((True, False) if payload is not None else (False,)):
-        text = model_yaml(request.robot, None, values, header=header, name=f"{model.name}_discovered",
+        text = model_yaml(request.robot, None, values, header=header, name=f"{model.name}_discovered", model=model,
                           payload=payload if with_payload else None, gravity=gravity)
         try:
             parse_robot(yaml.safe_load(text), "model.yaml")   # the loader must take what we write
@@ -125,7 +128,7 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
 
 def run_discrepancy(request: DiscrepancyRequest,
                     progress: Callable[[str], None] = lambda text: None) -> DiscrepancyResult:
-    model = load_robot(request.robot)
+    model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     segments = []
     for path in request.data:
         progress(f"reading {path}")

@@ -58,6 +58,9 @@ class IdentificationRequest:
     weighted: bool = False
     split: float | None = None
     preprocessing: Preprocessing = field(default_factory=Preprocessing)
+    base: str | None = None          # a URDF's chain: first and last link (kindyngen.urdf)
+    tip: str | None = None
+    snap_angles: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,7 +115,7 @@ def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[s
 
 def identify(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None) -> Identification:
     """Run the identification of ``request`` (see the module text)."""
-    model = load_robot(request.robot)
+    model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     n = model.n
     settings = request.preprocessing
     train = _segments(request.data, n, settings, progress, "training")
@@ -169,6 +172,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
             header = (f"Identified by KinDynGen from {', '.join(map(str, request.data))} ({method}).\n"
                       f"Geometry from {request.robot}; link parameters and joint effects identified.")
             text = model_yaml(request.robot, links_from_barycentric(full, n), dict(zip(enames, map(float, evalues))),
+                              model=model,
                               header=header, name=f"{model.name}_identified")
             parse_robot(yaml.safe_load(text), "model.yaml")     # the loader must take what we write
         except (ModelWriteError, ValueError) as exc:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import yaml
 
+from ..description_writer import describe
 from . import MeasuredDataError
 
 EFFECT_FIELDS = {"fv": ("friction", "viscous"), "fc": ("friction", "coulomb"), "f0": ("friction", "offset"),
@@ -32,13 +33,20 @@ class ModelWriteError(MeasuredDataError):
 
 
 def model_description(source: str | Path, links: list[dict] | None, effects: dict[str, float],
-                      name: str | None = None, payload: dict | None = None, gravity=None) -> dict:
+                      name: str | None = None, payload: dict | None = None, gravity=None, model=None) -> dict:
     """The starting description (file ``source``) with identified links and effects.
     ``links``: new link entries (None keeps the description's links, and its payload);
     ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``, 1-based joints)
     to values, replacing the description's friction and armature; ``payload``
-    (``{mass, com, inertia}``) and ``gravity`` replace the description's when given."""
-    data = yaml.safe_load(Path(source).read_text())
+    (``{mass, com, inertia}``) and ``gravity`` replace the description's when given. A URDF
+    ``source`` is written as the YAML of ``model`` (the chain read from it; joints by origin
+    and axis, :func:`kindyngen.description_writer.describe`)."""
+    if Path(source).suffix.lower() == ".urdf":
+        if model is None:
+            raise ModelWriteError(f"{source}: a URDF is written from its model; pass model=")
+        data = describe(model)
+    else:
+        data = yaml.safe_load(Path(source).read_text())
     if name:
         data["name"] = name
     if links is not None:
@@ -70,10 +78,10 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
 
 
 def model_yaml(source: str | Path, links: list[dict] | None, effects: dict[str, float], header: str = "",
-               name: str | None = None, payload: dict | None = None, gravity=None) -> str:
+               name: str | None = None, payload: dict | None = None, gravity=None, model=None) -> str:
     """:func:`model_description` as YAML text (joint rows on one line each, as the shipped
     descriptions are written), with ``header`` as leading comment lines."""
-    data = model_description(source, links, effects, name, payload, gravity)
+    data = model_description(source, links, effects, name, payload, gravity, model)
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
     for key in ("name", "dh", "gravity"):
         lines.append(yaml.safe_dump({key: data[key]}, default_flow_style=True, width=1000).strip().strip("{}"))
