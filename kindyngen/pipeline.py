@@ -99,6 +99,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
     base_params = base_params_document(model)   # None for robots with symbolic lengths
+    for kind, entry in (base_params or {}).items():
+        if "unavailable" in entry and progress:
+            print(f"note: {model.identifier}: regressor {kind} not generated: {entry['unavailable']}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")

@@ -40,7 +40,7 @@ import numpy as np
 import symengine as se
 import sympy
 
-from .base_parameters import BaseParameters, find_base_parameters
+from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
 from .dynamics_lagrange import gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import inverse_dynamics
 from .inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
@@ -222,6 +222,22 @@ def base_parameters(model: RobotModel, kind: str) -> BaseParameters:
     return find_base_parameters(evaluate, names, SEEDS, common_denominator(model))
 
 
+@lru_cache(maxsize=None)
+def unavailable(model: RobotModel, kind: str) -> str | None:
+    """Why regressor ``kind`` is not generated for ``model``, or None when it is: symbolic
+    lengths, or a rank / column decision the samples cannot make with the stated margin
+    (:func:`kindyngen.base_parameters.check_margin`; seen on real arms with millimetre
+    offsets, e.g. the Kinova Jaco 2's joint 2, 1.6 mm off joint 1's axis). The other
+    functions are generated all the same."""
+    if not supported(model):
+        return "symbolic lengths"
+    try:
+        base_parameters(model, kind)
+    except BaseParameterError as exc:
+        return f"base parameters undecided ({exc})"
+    return None
+
+
 def supported(model: RobotModel) -> bool:
     """Regressors need numeric DH lengths (the grouping coefficients are found numerically)."""
     return not model.length_symbols
@@ -229,8 +245,8 @@ def supported(model: RobotModel) -> bool:
 
 def regressor(model: RobotModel, kind: str, name: str | None = None) -> SymbolicFunction | None:
     """``Y_g(q)``, ``Y_m(q)`` or ``Y(q, qd, qdd)`` on base parameters (output port ``Y``);
-    None for a robot with symbolic DH lengths."""
-    if not supported(model):
+    None where :func:`unavailable` says why not."""
+    if unavailable(model, kind):
         return None
     full = full_regressor(model, kind)
     base = base_parameters(model, kind)
@@ -265,6 +281,9 @@ def base_params_document(model: RobotModel) -> dict | None:
         return None
     out = {}
     for kind in KINDS:
+        if unavailable(model, kind):
+            out[kind] = {"unavailable": unavailable(model, kind)}
+            continue
         b = base_parameters(model, kind)
         values = full_values(model, kind)
         out[kind] = {
