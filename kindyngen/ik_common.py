@@ -1,11 +1,27 @@
-"""Closed-form inverse kinematics of LWR-like arms: the pieces shared by the homogeneous
+"""Closed-form inverse kinematics of LWR-type arms: the pieces shared by the homogeneous
 form (:mod:`kindyngen.ik_lwr_homogeneous`, ``ik_hom``) and the dual-quaternion form
 (:mod:`kindyngen.ik_lwr_dualquat`, ``ik_dq``), plus pure-numpy helpers that work on their
 outputs (closest branch, admissible intervals of the redundancy parameter).
 
-Applicability ("LWR-like"): 7 joints, standard DH, alpha = (+pi/2, -pi/2, -pi/2, +pi/2, +pi/2,
--pi/2, 0) exactly, every a_i = 0, d_1 = d_2 = d_4 = d_6 = d_7 = 0, d_3 != 0, d_5 != 0 (joint
-offsets are allowed). Then, with R_y the rotation about y,
+Applicability ("LWR type", :func:`lwr_geometry`): decided on the exact geometry, whatever
+the description (DH table of either convention with any offsets, joints by origin and axis,
+a tool): seven revolute joints, consecutive axes perpendicular, axes 1, 2, 3 through one point
+S (spherical shoulder), axes 3, 4, 5 through one point E (elbow), axes 5, 6, 7 through one
+point W (spherical wrist), S != E != W (the KUKA LWR 4 and the iiwa family). Such an arm is
+mapped exactly onto the canonical LWR, the standard DH table alpha = (+pi/2, -pi/2, -pi/2,
++pi/2, +pi/2, -pi/2, 0), every a_i = 0, d = (0, 0, d3, 0, d5, 0, 0), no offsets:
+
+    FK(q) = B FK_canon(theta) F,   theta_i = s_i q_i + o_i   (s_i = +-1, o_i exact),
+
+with B, F constant exact transforms (base, tool; FK includes the description's tool). The
+closed form below solves B^-1 T F^-1 for theta (the target is not touched when B = F = 1,
+as for robots/lwr4.yaml, which is the canonical table itself); each q_i = s_i (theta_i - o_i)
+is returned in a 2 pi wide window holding the joint's limits (:meth:`LwrGeometry.angle_plan`:
+(-pi, pi] when the limits lie within it, else theta + constant or [lower, lower + 2 pi)), so
+that the representative within the limits is returned whenever there is one. Example:
+robots/lwr4_hartl.yaml (all alphas +pi/2) has B = F = 1, s = 1, o = (0, pi, 0, pi, 0, pi, pi),
+its q2, q4, q6, q7 in [0, 2 pi]. In what follows th_i are the canonical angles theta_i. With
+R_y the rotation about y,
 
     R_04 = Rz(th1) Ry(-th2) Rz(th3) Ry(th4),   R_47 = Rz(th5) Ry(-th6) Rz(th7),
     wrist centre = flange origin = Rz(th1) Ry(-th2) (d5 c3 s4, d5 s3 s4, d3 + d5 c4).
@@ -24,34 +40,38 @@ computed; the other six branches follow from two exact identities of this geomet
 singularity (th6 = 0, only th5 + th7 matters) the rotation about the common axis is split
 equally, th5 = th7, in every row, and the wrist twin is the same row.
 
-Branch order: row k = 4 s + 2 e + w of ``q``:
-    e (elbow) = 0: q4 >= 0, e = 1: q4 <= 0 (the elbow twin of row k - 2);
-    w (wrist) = 0: q6 >= 0, w = 1: q6 <= 0 (the wrist twin of row k - 1);
+Branch order: row k = 4 s + 2 e + w of ``q`` (bits of the canonical angles, which are the
+angles q themselves for the canonical table):
+    e (elbow) = 0: th4 >= 0, e = 1: th4 <= 0 (the elbow twin of row k - 2);
+    w (wrist) = 0: th6 >= 0, w = 1: th6 <= 0 (the wrist twin of row k - 1);
     s (shoulder) = 0 / 1: r = c1 px + s1 py (the wrist centre seen along the heading of
-    joint 1) has the sign of +q4 / -q4, i.e. for e = 0 rows, s = 0 has r >= 0.
+    joint 1, in the canonical base frame) has the sign of +th4 / -th4, i.e. for e = 0 rows,
+    s = 0 has r >= 0.
 
 Status codes (one per row, first match wins):
 
     2  unreachable: the target is outside the workspace (||p|| beyond |d3| + |d5| or below
        ||d3| - |d5||), or not reachable with this theta3 (horizontal distance of the wrist
-       centre from the z0 axis below |v| = |d5 sin q3 sin q4|); q is then a finite
+       centre from the z0 axis below |v| = |d5 sin th3 sin th4|); q is then a finite
        best effort (clamped), FK(q) != target.
-    1  outside joint limits (reachable; some q_i outside [lower_i, upper_i] of the YAML).
+    1  outside joint limits (reachable; some q_i outside [lower_i, upper_i] of the
+       description: the arm's own angles against the arm's own limits).
     5  shoulder singular: r^2 < 1e-12 m^2 (both shoulder branches coincide; on the z0
-       axis, reachable only with sin q3 sin q4 = 0, q1 is free: within 1e-12 m of the axis
-       the wrist centre is put on it and q1 = 0 (or pi in the elbow twins) is returned).
-    4  elbow singular: |sin q4| < ~1e-6 (arm stretched or folded; q4 is snapped to 0 / pi).
-    3  wrist singular: |q6| < 1e-12 (joints 5 and 7 aligned; the rotation about the
-       common axis is split equally, q5 = q7, within +-135 deg (ik_dq: +-90 deg), so that
-       the limits of joints 5 and 7 rarely exclude it; q6 = 0 exactly and the wrist twin
-       is the same row). q6 = +-pi (anti-aligned, beyond any joint limit) is not
+       axis, reachable only with sin th3 sin th4 = 0, th1 is free: within 1e-12 m of the axis
+       the wrist centre is put on it and th1 = 0 (or pi in the elbow twins) is returned).
+    4  elbow singular: |sin th4| < ~1e-6 (arm stretched or folded; th4 is snapped to 0 / pi).
+    3  wrist singular: |th6| < 1e-12 (joints 5 and 7 aligned; the rotation about the
+       common axis is split equally, th5 = th7, within +-135 deg (ik_dq: +-90 deg), so that
+       the limits of joints 5 and 7 rarely exclude it; th6 = 0 exactly and the wrist twin
+       is the same row). th6 = +-pi (anti-aligned, beyond the LWR's limits) is not
        flagged; a valid member is returned there too.
     0  valid.
 
 Statuses 0, 1, 3, 4, 5 all satisfy FK(q) = target (to rounding); 0, 3, 4, 5 are
 admissible (within limits). Every output is finite for every finite input: inputs whose
-sum of squares reaches 1e300 (ik_hom) or 1e149 (ik_dq), too large for the squares and
-products inside, are replaced by the zero pose (status 2).
+sum of squares reaches 1e300 (ik_hom) or 1e149 (ik_dq), divided by (1 + |p_B| + |p_F|)^2
+for a map with translations, too large for the squares and products inside, are replaced by
+the (canonical) zero pose (status 2).
 """
 from __future__ import annotations
 
@@ -124,19 +144,37 @@ class LwrGeometry:
     def limits_text(self) -> str:
         return "[" + ", ".join(f"[{lo:.6g}, {up:.6g}]" for lo, up in zip(self.lower, self.upper)) + "] rad"
 
-    def window(self, i: int) -> Optional[float]:
-        """Where joint i's angle is returned: None for (-pi, pi] (limits within it), else the
-        lower limit L of [L, L + 2 pi) (so that a representative within the limits is
-        returned whenever one exists)."""
-        lo, up = self.lower[i], self.upper[i]
-        return None if -math.pi < lo and up <= math.pi else lo
+    def angle_plan(self, i: int) -> tuple:
+        """How the returned q_i is formed from the canonical theta_i in [-pi, pi]:
+        ``(shift, lo, hi, wrap)``: q_i = s_i theta_i + shift (shift = -s_i o_i mod 2 pi, exact)
+        lies in the 2 pi wide window [lo, hi] that holds the joint's limits, so a representative
+        within the limits is returned whenever one exists:
+
+        * limits within (-pi, pi]: the window (-pi, pi] (wrap: at most one 2 pi shift, a select;
+          none when s_i = 1 and o_i = 0);
+        * else, when [shift - pi, shift + pi] holds the limits for the shift nearest their middle:
+          that window, without any select;
+        * else [lower, lower + 2 pi) (wrap)."""
+        sign, offset = self.signs[i], sympy.sympify(self.offsets[i])
+        lower, upper = self.lower[i], self.upper[i]
+        shift = -sign * offset
+        if -math.pi < lower and upper <= math.pi:
+            return shift, -math.pi, math.pi, not (sign == 1 and offset == 0)
+        middle = 0.5 * (lower + upper)
+        shift = shift + 2 * sympy.pi * round((middle - float(shift)) / (2 * math.pi))
+        if float(shift) - math.pi <= lower and upper <= float(shift) + math.pi:
+            return shift, float(shift) - math.pi, float(shift) + math.pi, False
+        k = math.ceil((lower - float(shift)) / (2 * math.pi))       # shift into [lower, lower + 2 pi)
+        if float(shift) + 2 * math.pi * k >= lower + 2 * math.pi:
+            k -= 1
+        return shift + 2 * sympy.pi * k, lower, lower + 2 * math.pi, True
 
     @property
     def is_canonical(self) -> bool:
         """The model is the canonical table itself (up to its lengths): nothing is mapped."""
         return (self.base is None and self.flange is None and all(s == 1 for s in self.signs)
                 and all(sympy.sympify(o) == 0 for o in self.offsets)
-                and all(self.window(i) is None for i in range(7)))
+                and all(-math.pi < lo and up <= math.pi for lo, up in zip(self.lower, self.upper)))
 
     def map_text(self) -> str:
         """The mapping onto the canonical LWR, for the generated documentation ('' when none)."""
@@ -151,8 +189,8 @@ class LwrGeometry:
             if value is not None:
                 R, p = value
                 parts.append(f", {name} = (R = {sympy.sstr(R.tolist())}, p = {sympy.sstr(list(p))})")
-        windows = [f"q{i + 1} in [{self.window(i):.6g}, {self.window(i) + 2 * math.pi:.6g})"
-                   for i in range(7) if self.window(i) is not None]
+        windows = [f"q{i + 1} in [{self.angle_plan(i)[1]:.6g}, {self.angle_plan(i)[2]:.6g}]" for i in range(7)
+                   if not (-math.pi < self.lower[i] and self.upper[i] <= math.pi)]
         parts.append("; the branch bits and singular statuses refer to theta, limits and angles to q"
                      + (" (" + ", ".join(windows) + ")" if windows else "") + ".")
         return "".join(parts)
@@ -165,19 +203,39 @@ MAP_CHECK_TOL = 1e-9     # m and rotation entries (times 1 + the lengths involve
 MAP_CHECK_SAMPLES = 8    # random configurations on which the identity is checked
 
 
-def _zero(value) -> bool:
-    """Exactly zero (expand, then simplify; never a float decision)."""
-    value = sympy.expand(sympy.sympify(value))
-    if value == 0:
-        return True
-    if value.is_Rational:
-        return False
-    return sympy.simplify(value) == 0
+def _circle_reduce(value):
+    """sin(a)^k with k >= 2 rewritten through sin^2 = 1 - cos^2, expanded: a canonical form of
+    a polynomial in sines and cosines of independent angles (zero iff it vanishes)."""
+    def high_sine(e):
+        return e.is_Pow and isinstance(e.base, sympy.sin) and e.exp.is_Integer and e.exp >= 2
+
+    def lower(e):
+        a = e.base.args[0]
+        return sympy.sin(a) ** (e.exp % 2) * (1 - sympy.cos(a) ** 2) ** (e.exp // 2)
+
+    return sympy.expand(sympy.expand(value).replace(high_sine, lower))
 
 
 def _tidy(value):
+    """Cheap exact simplification of a constant: expanded, sines reduced on the circle,
+    radicals rationalised."""
     value = sympy.expand(sympy.sympify(value))
-    return value if value.is_Rational else sympy.radsimp(value)
+    if value.is_Rational:
+        return value
+    if value.has(sympy.sin):
+        value = _circle_reduce(value)
+    return sympy.radsimp(value) if value.has(sympy.Pow) else value
+
+
+def _zero(value) -> bool:
+    """Exactly zero (expanded, reduced on the circle; simplify for what remains without
+    sines and cosines). Never a float decision; a zero it cannot prove counts as nonzero."""
+    value = _tidy(value)
+    if value == 0:
+        return True
+    if value.is_Rational or value.has(sympy.sin, sympy.cos):
+        return False
+    return sympy.simplify(value) == 0
 
 
 def _vec(values) -> sympy.Matrix:
@@ -195,8 +253,9 @@ def _compose(a, b):
 
 
 def _zero_configuration(model: RobotModel):
-    """Each joint's axis (unit u, point p) in the base frame at q = 0, and the tool frame
-    (R, p) there, exact; None if a joint is not revolute."""
+    """Each joint's axis (unit u, point p) in the base frame where every joint's motion is
+    the identity (q_i = -offset_i), and the tool frame (R, p) there, exact; None if a joint
+    is not revolute."""
     pose = (sympy.eye(3), sympy.zeros(3, 1))
     axes = []
     for joint in model.joints:
@@ -204,10 +263,6 @@ def _zero_configuration(model: RobotModel):
             return None
         pose = _compose(pose, joint.before.matrix())
         axes.append((_vec(pose[0][:, 2]), pose[1]))
-        offset = sympy.sympify(joint.offset)
-        if offset != 0:
-            c, s = sympy.cos(offset), sympy.sin(offset)
-            pose = _compose(pose, (sympy.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]]), sympy.zeros(3, 1)))
         pose = _compose(pose, joint.after.matrix())
     return axes, _compose(pose, model.tool.matrix())
 
@@ -226,10 +281,28 @@ def _on_line(point, line) -> bool:
 
 
 def _angle(x_from, x_to, axis):
-    """The exact angle about ``axis`` turning unit x_from (perpendicular to it) onto x_to."""
-    c = sympy.simplify(x_from.dot(x_to))
-    s = sympy.simplify(x_from.cross(x_to).dot(axis))
-    return sympy.simplify(sympy.atan2(s, c))
+    """The exact angle in (-pi, pi] about ``axis`` turning unit x_from (perpendicular to it)
+    onto x_to: sympy's atan2 where sine and cosine are algebraic (pi/2, pi/4, ...); where
+    they hold sines and cosines of other angles (a URDF's rpy of 0.3), one of those angles
+    plus or minus a multiple of pi/12 if it matches exactly, else atan2 of them."""
+    c, s = _tidy(x_from.dot(x_to)), _tidy(x_from.cross(x_to).dot(axis))
+    if not (c.has(sympy.sin, sympy.cos) or s.has(sympy.sin, sympy.cos)):
+        return sympy.atan2(s, c)
+    value = math.atan2(float(s), float(c))
+    found = {t.args[0] for f in (c, s) for t in f.atoms(sympy.sin, sympy.cos)}
+    for a in sorted(found, key=sympy.default_sort_key):
+        for sign in (1, -1):
+            k = round((value - sign * float(a)) * 12 / math.pi)
+            guess = sign * a + sympy.pi * sympy.Rational(k, 12)
+            if _zero(sympy.cos(guess) - c) and _zero(sympy.sin(guess) - s):
+                return _principal(guess)
+    return sympy.atan2(s, c)
+
+
+def _principal(angle):
+    """An exact angle shifted by a multiple of 2 pi into (-pi, pi]."""
+    k = math.floor((math.pi - float(angle)) / (2 * math.pi))
+    return sympy.expand(angle + 2 * sympy.pi * k)
 
 
 def _perpendicular_unit(v, axis):
@@ -265,8 +338,7 @@ def _dh_numeric(theta, d3, d5):
     T = np.eye(4)
     for i in range(7):
         c, s = math.cos(theta[i]), math.sin(theta[i])
-        ca, sa = (0.0, 1.0) if i < 6 else (1.0, 0.0)
-        sa *= LWR_ALPHA_SIGNS[i] if i < 6 else 1
+        ca, sa = (float(sympy.cos(LWR_ALPHAS[i])), float(sympy.sin(LWR_ALPHAS[i])))
         d = (0, 0, d3, 0, d5, 0, 0)[i]
         T = T @ np.array([[c, -s * ca, s * sa, 0], [s, c * ca, -c * sa, 0], [0, sa, ca, d], [0, 0, 0, 1]])
     return T
@@ -362,7 +434,9 @@ def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     x = [_choose_x(sympy.eye(3), z[0])]
     x += [_vec(z[i - 1].cross(z[i]) * LWR_ALPHA_SIGNS[i - 1]) for i in range(1, 7)]
     x.append(_choose_x(tool[0], z[6]))
-    offsets = tuple(_angle(x[i], x[i + 1], z[i]) for i in range(7))
+    # theta_i = s_i (q_i + offset_i) + angle_i: the model's offsets folded in
+    offsets = tuple(_principal(signs[i] * sympy.sympify(model.joints[i].offset) + _angle(x[i], x[i + 1], z[i]))
+                    for i in range(7))
     d3, d5 = _tidy(z[2].dot(E - S)), _tidy(z[4].dot(W - E))
     base = (_frame(x[0], z[0]), S)
     R7 = _frame(x[7], z[6])
@@ -407,9 +481,10 @@ def input_bound(geometry: LwrGeometry, bound: float) -> float:
     return bound / _translation_size(geometry) ** 2
 
 
-def canonical_pose(geometry: LwrGeometry, R, p):
+def canonical_pose(geometry: LwrGeometry, R, p, drop=0):
     """The target (rows of R, p) mapped onto the canonical LWR: B^-1 (R, p) F^-1 (the input
-    itself when B and F are identities)."""
+    itself when B and F are identities). ``drop`` (the 0/1 indicator of :func:`sanitize`)
+    keeps a replaced input the canonical zero pose (the map's translation would move it)."""
     if geometry.base is None and geometry.flange is None:
         return R, p
     Rm, pm = se.Matrix([list(row) for row in R]), se.Matrix(list(p))
@@ -423,6 +498,7 @@ def canonical_pose(geometry: LwrGeometry, R, p):
         pB = se.Matrix([constant(v) for v in geometry.base[1]])
         Rm = RBt * Rm
         pm = RBt * (pm - pB)
+    pm = pm - pm * drop
     return tuple(tuple(Rm[i, j] for j in range(3)) for i in range(3)), tuple(pm[i] for i in range(3))
 
 
@@ -476,14 +552,16 @@ def half_angle(c, s):
     return f * (1 + c - s) + s, f * (s + c - 1) + 1 - c
 
 
-def sanitize(entries, bound: float) -> tuple:
+def sanitize(entries, bound: float, flag: bool = False) -> tuple:
     """The input entries, or all zeros when their sum of squares is not below ``bound``
     (entries too large for the squares and products downstream; the zero pose is then
     reported unreachable). A sum of squares of finite numbers is never NaN, so this turns
-    every finite input into one for which no intermediate overflows."""
+    every finite input into one for which no intermediate overflows. With ``flag``:
+    (entries, drop), drop the 0/1 indicator of the replacement."""
     drop = select((0, sum(e ** 2 for e in entries) < bound), 1)
     # e - e drop, not keep * e: symengine would rewrite (keep e)^2 as keep^2 e^2 (0 * inf)
-    return tuple(e - e * drop for e in entries)
+    out = tuple(e - e * drop for e in entries)
+    return (out, drop) if flag else out
 
 
 def plus_pi(x) -> se.Basic:
@@ -571,29 +649,22 @@ class Wrist:
     singular: se.Basic
 
 
-def _joint(theta, sign: int, offset, window: Optional[float]) -> se.Basic:
-    """The model's joint angle q = s (theta - o) for a canonical angle theta in [-pi, pi],
-    wrapped into the joint's window: (-pi, pi] (``window`` None; theta itself when s = 1 and
-    o = 0) or [L, L + 2 pi) for ``window`` L (one shift of 2 pi either way suffices: the
-    constant part is reduced into the window first)."""
-    offset = sympy.sympify(offset)
-    if sign == 1 and offset == 0 and window is None:
+def _joint(theta, sign: int, plan) -> se.Basic:
+    """The model's joint angle q = s theta + shift for a canonical angle theta in [-pi, pi],
+    in its window (:meth:`LwrGeometry.angle_plan`; theta itself for the canonical table)."""
+    shift, lo, hi, wrap = plan
+    if sign == 1 and shift == 0 and not wrap:
         return theta
-    shift = -sign * offset
-    if window is None:
-        x = sign * theta + exact(shift)
-        return select((x - 2 * PI, PI < x), (x + 2 * PI, x <= -PI), x)
-    lower, upper = window, window + 2 * math.pi
-    k = math.ceil((lower - float(shift)) / (2 * math.pi))
-    if float(shift) + 2 * math.pi * k >= upper:
-        k -= 1
-    shift = shift + 2 * sympy.pi * k                  # in [L, L + 2 pi): x in [shift - pi, shift + pi]
     x = sign * theta + exact(shift)
-    pairs = []
-    if float(shift) - math.pi < lower:
-        pairs.append((x + 2 * PI, x < lower))
-    if float(shift) + math.pi >= upper:
-        pairs.append((x - 2 * PI, upper <= x))
+    if not wrap:
+        return x
+    if lo == -math.pi:                                   # (-pi, pi]: x in [-2 pi, 2 pi]
+        return select((x - 2 * PI, PI < x), (x + 2 * PI, x <= -PI), x)
+    pairs = []                                           # [lo, lo + 2 pi), x in [shift - pi, shift + pi]
+    if float(shift) - math.pi < lo:
+        pairs.append((x + 2 * PI, x < lo))
+    if float(shift) + math.pi >= hi:
+        pairs.append((x - 2 * PI, hi <= x))
     return select(*pairs, x) if pairs else x
 
 
@@ -613,15 +684,23 @@ def assemble(geometry: LwrGeometry, theta3: se.Symbol, th4: se.Basic, shoulders,
     flags are comparisons, each wrist's ``singular`` a 0/1 indicator. A row's limit check is
     the sum of per-value 0/1 indicators (shared between rows); unreachability is folded into
     joint 3's indicator as -8, so one select per row decides between 1 and the row's code."""
-    lower, upper = geometry.lower, geometry.upper
-    symmetric = [abs(lo + up) <= 1e-15 * max(1.0, abs(up)) for lo, up in zip(lower, upper)]
-    offsets, signs = geometry.offsets, geometry.signs
+    signs, plans = geometry.signs, [geometry.angle_plan(i) for i in range(7)]
+    # the limits of q_i = s_i theta_i + shift_i (not wrapped) as limits of theta_i (the same
+    # test, cheaper when they become symmetric); joint 3 and wrapped joints: on q_i itself
+    checks = []
+    for i, (lo, up) in enumerate(zip(geometry.lower, geometry.upper)):
+        shift, _, _, wrap = plans[i]
+        on_theta = i != 2 and not wrap
+        if on_theta and not (signs[i] == 1 and shift == 0):
+            lo, up = sorted((signs[i] * (lo - float(shift)), signs[i] * (up - float(shift))))
+        checks.append((on_theta, lo, up, abs(lo + up) <= 1e-15 * max(1.0, abs(up))))
 
-    def outside(i, q):
-        return _outside(q, lower[i], upper[i], symmetric[i])
+    def outside(i, q, theta=None):
+        on_theta, lo, up, symmetric = checks[i]
+        return _outside(theta if on_theta else q, lo, up, symmetric)
 
     def joint(i, theta):
-        return _joint(theta, signs[i], offsets[i], geometry.window(i))
+        return _joint(theta, signs[i], plans[i])
 
     q3 = theta3
     unreach = select(*[(1, cond) for cond in unreachable], 0)
@@ -630,7 +709,7 @@ def assemble(geometry: LwrGeometry, theta3: se.Symbol, th4: se.Basic, shoulders,
     wrist_code = select((WRIST_SINGULAR, global_code < 0.5), 0)   # 3 where nothing global
     outside3 = outside(2, q3) - 8 * unreach
     q4 = (joint(3, th4), joint(3, -th4))
-    outside4 = tuple(outside(3, x) for x in q4)
+    outside4 = tuple(outside(3, x, t) for x, t in zip(q4, (th4, -th4)))
 
     q_rows, statuses = [], []
     for sh, wr in zip(shoulders, wrists):
@@ -653,11 +732,11 @@ def assemble(geometry: LwrGeometry, theta3: se.Symbol, th4: se.Basic, shoulders,
         q5 = {k: joint(4, t) for k, t in th5.items()}
         q6 = {w: joint(5, th6[w]) for w in (0, 1)}
         q7 = {k: joint(6, t) for k, t in th7.items()}
-        out1 = {e: outside(0, q1[e]) for e in (0, 1)}
-        out2 = {e: outside(1, q2[e]) for e in (0, 1)}
-        out5 = {k: outside(4, x) for k, x in q5.items()}
-        out6 = {w: outside(5, q6[w]) for w in (0, 1)}
-        out7 = {k: outside(6, x) for k, x in q7.items()}
+        out1 = {e: outside(0, q1[e], th1[e]) for e in (0, 1)}
+        out2 = {e: outside(1, q2[e], th2[e]) for e in (0, 1)}
+        out5 = {k: outside(4, x, th5[k]) for k, x in q5.items()}
+        out6 = {w: outside(5, q6[w], th6[w]) for w in (0, 1)}
+        out7 = {k: outside(6, x, th7[k]) for k, x in q7.items()}
         code = global_code + wrist_code * wr.singular
         for elbow in (0, 1):
             for wrist in (0, 1):

@@ -1,5 +1,8 @@
-"""Closed-form inverse kinematics of the KUKA LWR (and LWR-like arms) from a unit dual
-quaternion: ``ik_dq(x, theta3) -> q (8 x 7), status (8)``, with x in fk_dq's layout
+"""Closed-form inverse kinematics of the KUKA LWR (and every arm of LWR type, mapped onto it
+by :func:`kindyngen.ik_common.lwr_geometry`: the target x becomes b* x f*, the product with
+the conjugate dual quaternions of the constant base and tool transforms B and F, which is
+bilinear, so the zero input stays zero) from a unit dual quaternion:
+``ik_dq(x, theta3) -> q (8 x 7), status (8)``, with x in fk_dq's layout
 (rw, rx, ry, rz, dw, dx, dy, dz), |r| = 1, d = 1/2 t (x) r; x and -x give the same result.
 
 Solved with quaternion algebra throughout, never building a rotation matrix:
@@ -90,7 +93,7 @@ def _wrist(r, h1, h2, h3, h4) -> Wrist:
 
 
 def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
-    """All eight IK branches of an LWR-like arm from a unit dual quaternion (None otherwise)."""
+    """All eight IK branches of an arm of LWR type from a unit dual quaternion (None otherwise)."""
     geometry = lwr_geometry(model)
     if geometry is None:
         return None

@@ -1,5 +1,6 @@
-"""Closed-form inverse kinematics of the KUKA LWR (and LWR-like arms) from a 4x4 pose:
-``ik_hom(T, theta3) -> q (8 x 7), status (8)``.
+"""Closed-form inverse kinematics of the KUKA LWR (and every arm of LWR type, mapped onto it
+by :func:`kindyngen.ik_common.lwr_geometry`: the target T becomes B^-1 T F^-1, the canonical
+angles theta the arm's q) from a 4x4 pose: ``ik_hom(T, theta3) -> q (8 x 7), status (8)``.
 
 theta3 (= q3) is the redundancy parameter. All eight branches (shoulder, elbow, wrist) come
 out of one straight-line, branch-free program (selects only), so it prints to C, numpy and
@@ -69,16 +70,16 @@ def _wrist(R, c1, s1, c2, s2, c3, s3, c4, s4) -> Wrist:
 
 
 def ik_hom(model: RobotModel) -> Optional[SymbolicFunction]:
-    """All eight IK branches of an LWR-like arm from a homogeneous pose (None otherwise)."""
+    """All eight IK branches of an arm of LWR type from a homogeneous pose (None otherwise)."""
     geometry = lwr_geometry(model)
     if geometry is None:
         return None
     T = port_symbols("T", (4, 4))
     theta3 = port_symbols("theta3", (1,))
     bound = input_bound(geometry, INPUT_BOUND)
-    entries = sanitize(T[0:3] + T[4:7] + T[8:11] + (T[3], T[7], T[11]), bound)
+    entries, drop = sanitize(T[0:3] + T[4:7] + T[8:11] + (T[3], T[7], T[11]), bound, flag=True)
     R, p = (entries[0:3], entries[3:6], entries[6:9]), entries[9:12]
-    R, p = canonical_pose(geometry, R, p)          # B^-1 T F^-1 (unchanged for the LWR's own table)
+    R, p = canonical_pose(geometry, R, p, drop)    # B^-1 T F^-1 (unchanged for the LWR's own table)
     d3, d5 = geometry.d3, geometry.d5
 
     c3, s3 = joint_cos_sin(geometry.signs[2] * theta3[0], geometry.offsets[2])
