@@ -214,6 +214,68 @@ void lwr4_hartl_g_lagrange(const double *q, double *g);
 void lwr4_hartl_c_christoffel(const double *q, const double *qd, double *c);
 
 /*
+ * ik_hom: Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
+ * Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+ * = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+ * q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+ * 0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+ * theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+ * reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+ * shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+ * snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+ * axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+ * are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+ * 2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+ * 6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+ * squares >= 1e+300 count as the zero pose: status 2). Solved as the canonical LWR
+ * (standard DH, alpha = (pi/2, -pi/2, -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100)
+ * with FK(q) = B FK_canon(theta) F, theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1,
+ * +1), o = (0, pi, 0, pi, 0, pi, pi); the branch bits and singular statuses refer to
+ * theta, limits and angles to q (q2 in [0, 6.28319], q4 in [0, 6.28319], q6 in [0,
+ * 6.28319], q7 in [0, 6.28319]).
+ *
+ * in  T[16]: 4 x 4 double, target flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
+ * in  theta3[1]: 1 double, redundancy parameter: the angle of joint 3 [rad]
+ * out q[56]: 8 x 7 double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+ * out status[8]: 8 int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+ *
+ * Cost: 252 add, 216 mul, 89 call
+ * (as derived, before CSE: 53666920 add, 54617352 mul, 5069232 call).
+ */
+void lwr4_hartl_ik_hom(const double *T, const double *theta3, double *q, int *status);
+
+/*
+ * ik_dq: Closed-form inverse kinematics (all eight branches) from a unit dual quaternion, with theta3 = q3 as the redundancy parameter.
+ * Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+ * = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+ * q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+ * 0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+ * theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+ * reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+ * shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+ * snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+ * axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+ * are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+ * 2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+ * 6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+ * squares >= 1e+149 count as the zero pose: status 2). Input x in fk_dq's layout; x and -x
+ * give the same result. Solved as the canonical LWR (standard DH, alpha = (pi/2, -pi/2,
+ * -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100) with FK(q) = B FK_canon(theta) F,
+ * theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1, +1), o = (0, pi, 0, pi, 0, pi,
+ * pi); the branch bits and singular statuses refer to theta, limits and angles to q (q2 in
+ * [0, 6.28319], q4 in [0, 6.28319], q6 in [0, 6.28319], q7 in [0, 6.28319]).
+ *
+ * in  x[8]: 8 double, target flange pose as in fk_dq: (rw, rx, ry, rz, dw, dx, dy, dz), d = 1/2 t (x) r; either sign [1 (real), m (dual)]
+ * in  theta3[1]: 1 double, redundancy parameter: the angle of joint 3 [rad]
+ * out q[56]: 8 x 7 double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+ * out status[8]: 8 int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+ *
+ * Cost: 264 add, 211 mul, 90 call
+ * (as derived, before CSE: 5130962216 add, 5224650480 mul, 565628768 call).
+ */
+void lwr4_hartl_ik_dq(const double *x, const double *theta3, double *q, int *status);
+
+/*
  * Y_g: Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
  * (0, 0, -9.81) m/s^2. Rows: g0, g1, g2, g3, g4, g5, g6. Columns: the 12 base parameters

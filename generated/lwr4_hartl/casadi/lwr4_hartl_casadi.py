@@ -2746,6 +2746,464 @@ def c_christoffel():
                        ["q", "qd"], ["c"])
 
 
+def ik_hom():
+    """Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
+
+    Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+    = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+    q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+    0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+    theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+    reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+    shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+    snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+    axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+    are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+    2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+    6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+    squares >= 1e+300 count as the zero pose: status 2). Solved as the canonical LWR
+    (standard DH, alpha = (pi/2, -pi/2, -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100)
+    with FK(q) = B FK_canon(theta) F, theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1,
+    +1), o = (0, pi, 0, pi, 0, pi, pi); the branch bits and singular statuses refer to
+    theta, limits and angles to q (q2 in [0, 6.28319], q4 in [0, 6.28319], q6 in [0,
+    6.28319], q7 in [0, 6.28319]).
+
+    in  T: 4 x 4, target flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
+    in  theta3: 1, redundancy parameter: the angle of joint 3 [rad]
+    out q: 8 x 7, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+    out status: 8, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+    Cost: 252 add, 216 mul, 89 call.
+    """
+    T = ca.SX.sym("T", 4, 4)
+    theta3 = ca.SX.sym("theta3", 1)
+    t0 = ca.if_else((T[0, 0]*T[0, 0] + T[0, 1]*T[0, 1] + T[0, 2]*T[0, 2] + T[1, 0]*T[1, 0] + T[1, 1]*T[1, 1] + T[1, 2]*T[1, 2] + T[2, 1]*T[2, 1] + T[0, 3]*T[0, 3] + T[1, 3]*T[1, 3] + T[2, 0]*T[2, 0] + T[2, 2]*T[2, 2] + T[2, 3]*T[2, 3]) < 1e+300, 0.0, 1.0)
+    t1 = T[0, 3] - t0*T[0, 3]
+    t2 = ca.sin(theta3[0])
+    t3 = T[1, 3] - t0*T[1, 3]
+    t4 = t1*t1 + t3*t3
+    t5 = ca.if_else(t4 < 1e-24, 0.0, 1.0)
+    t6 = T[2, 3] - t0*T[2, 3]
+    t7 = t6*t6
+    t8 = 3.2051282051282053*(t4 + t7)
+    t9 = t8 - 1.0003205128205128
+    t10 = ca.if_else(0.9999999999995 < t9, 1.0, ca.if_else(t9 < -0.9999999999995, -1.0, t9))
+    t11 = (-t10 + 1.0)*(t10 + 1.0)
+    t12 = ca.sqrt(t11)
+    t13 = 0.39*t12
+    t14 = t5*t2*t13
+    t15 = -t1*t14
+    t16 = 0.1521*t11
+    t17 = t2*t2*t16
+    t18 = t5*t4
+    t19 = t18 - t17
+    t20 = ca.fmax(0.0, t19)
+    t21 = ca.sqrt(t20)
+    t22 = t5*t21
+    t23 = t3*t22
+    t24 = t23 + t15
+    t25 = t1*t22
+    t26 = t3*t14 + 1e-150
+    t27 = t26 + t25
+    t28 = ca.atan2(t24, t27)
+    t29 = 0.39*t10 + 0.4
+    t30 = t29*t21
+    t31 = ca.cos(theta3[0])
+    t32 = t31*t13
+    t33 = t6*t32
+    t34 = t33 - t30
+    t35 = t21*t32
+    t36 = t6*t29 + 1e-150
+    t37 = t36 + t35
+    t38 = ca.atan2(t34, t37)
+    t39 = t38 + 3.141592653589793
+    t40 = ca.atan2(t12, t10)
+    t41 = t40 + 3.141592653589793
+    t42 = ca.sqrt(t18)
+    t43 = 1.0/ca.fmax(1e-150, t42*ca.sqrt(ca.fmax(t17, t18)))
+    t44 = t43*(T[1, 1] - t0*T[1, 1])
+    t45 = t43*(T[0, 1] - t0*T[0, 1])
+    t46 = t45*t27 + t44*t24
+    t47 = 1.0/ca.fmax(1e-150, ca.sqrt((t20 + t7)*(t31*t31*t16 + t29*t29)))
+    t48 = t47*t34
+    t49 = T[2, 1] - t0*T[2, 1]
+    t50 = t47*t37
+    t51 = t49*t50 - t46*t48
+    t52 = t44*t27 - t45*t24
+    t53 = t46*t50 + t49*t48
+    t54 = t53*t31 + t2*t52
+    t55 = t54*t10 - t51*t12
+    t56 = t54*t12 + t51*t10
+    t57 = T[1, 0] - t0*T[1, 0]
+    t58 = t43*t24
+    t59 = t43*(T[0, 0] - t0*T[0, 0])
+    t60 = t59*t27 + t57*t58
+    t61 = T[2, 0] - t0*T[2, 0]
+    t62 = t50*t61 - t48*t60
+    t63 = t43*t27
+    t64 = t57*t63 - t59*t24
+    t65 = t50*t60 + t48*t61
+    t66 = t31*t65 + t2*t64
+    t67 = t66*t12 + t62*t10
+    t68 = ca.sqrt(t67*t67 + t56*t56)
+    t69 = ca.if_else(t68 < 1e-12, 1.0, 0.0)
+    t70 = -t55
+    t71 = t52*t31 - t2*t53
+    t72 = ca.if_else(0.0 <= t71, 1.0, 0.0)
+    t73 = -t69 + 1.0
+    t74 = t73*t67 + t69*((t71 + t55 + 1.0)*t72 + t70)
+    t75 = t69*((t71 + t70 - 1.0)*t72 - t71 + 1.0) - t73*t56
+    t76 = ca.atan2(-((t66*t10 - t62*t12)*t75 + t74*t55), t75*(t31*t64 - t2*t65) + t74*t71)
+    t77 = t43*(T[1, 2] - t0*T[1, 2])
+    t78 = T[0, 2] - t0*T[0, 2]
+    t79 = t78*t63 + t77*t24
+    t80 = T[2, 2] - t0*T[2, 2]
+    t81 = t12*((t79*t50 + t48*t80)*t31 + (t77*t27 - t78*t58)*t2) + (t50*t80 - t48*t79)*t10
+    t82 = ca.atan2(t73*t68, t81)
+    t83 = t82 + 3.141592653589793
+    t84 = ca.atan2(t75, t74)
+    t85 = t84 + 3.141592653589793
+    t86 = -6.283185307179586
+    t87 = t69*ca.if_else(0.0 < t81, 1.0, 0.0)
+    t88 = 3.141592653589793*(-t87 + 1.0)
+    t89 = t76 + t88
+    t90 = t89 + t86
+    t91 = ca.if_else(3.141592653589793 < t89, t90, t89)
+    t92 = -t82 + 3.141592653589793
+    t93 = t84 + t88
+    t94 = ca.if_else(3.141592653589793 < t93, t93 + t86, t93)
+    t95 = -3.141592653589793
+    t96 = ca.if_else(0.0 < t28, t28 + t95, t28 + 3.141592653589793)
+    t97 = -t38 + 3.141592653589793
+    t98 = -t40 + 3.141592653589793
+    t99 = 1.5707963267948966
+    t100 = -t99
+    t101 = t87*ca.if_else(0.0 < t84, t100, t99)
+    t102 = t89 + t101
+    t103 = ca.if_else(3.141592653589793 < t102, t90 + t101, t102)
+    t104 = t103 + t88
+    t105 = ca.if_else(3.141592653589793 < t104, t104 + t86, t104)
+    t106 = t93 + t101
+    t107 = ca.if_else(3.141592653589793 < t106, t106 + t86, t106)
+    t108 = t15 - t23
+    t109 = t26 - t25
+    t110 = ca.atan2(t108, t109)
+    t111 = t33 + t30
+    t112 = t36 - t35
+    t113 = ca.atan2(t111, t112)
+    t114 = t113 + 3.141592653589793
+    t115 = t45*t109 + t44*t108
+    t116 = t47*t111
+    t117 = t47*t112
+    t118 = t49*t117 - t115*t116
+    t119 = t44*t109 - t45*t108
+    t120 = t115*t117 + t49*t116
+    t121 = t31*t120 + t2*t119
+    t122 = t10*t121 - t12*t118
+    t123 = t12*t121 + t10*t118
+    t124 = t43*t108
+    t125 = t59*t109 + t57*t124
+    t126 = t61*t117 - t125*t116
+    t127 = t43*t109
+    t128 = t57*t127 - t59*t108
+    t129 = t125*t117 + t61*t116
+    t130 = t31*t129 + t2*t128
+    t131 = t12*t130 + t10*t126
+    t132 = ca.sqrt(t131*t131 + t123*t123)
+    t133 = ca.if_else(t132 < 1e-12, 1.0, 0.0)
+    t134 = -t122
+    t135 = t31*t119 - t2*t120
+    t136 = ca.if_else(0.0 <= t135, 1.0, 0.0)
+    t137 = -t133 + 1.0
+    t138 = t131*t137 + t133*((t135 + t122 + 1.0)*t136 + t134)
+    t139 = t133*((t135 + t134 - 1.0)*t136 - t135 + 1.0) - t137*t123
+    t140 = ca.atan2(-((t10*t130 - t12*t126)*t139 + t138*t122), t139*(t31*t128 - t2*t129) + t138*t135)
+    t141 = t78*t127 + t77*t108
+    t142 = t12*(t31*(t141*t117 + t80*t116) + (t77*t109 - t78*t124)*t2) + t10*(t80*t117 - t141*t116)
+    t143 = ca.atan2(t132*t137, t142)
+    t144 = t143 + 3.141592653589793
+    t145 = ca.atan2(t139, t138)
+    t146 = t145 + 3.141592653589793
+    t147 = t133*ca.if_else(0.0 < t142, 1.0, 0.0)
+    t148 = 3.141592653589793*(-t147 + 1.0)
+    t149 = t140 + t148
+    t150 = t149 + t86
+    t151 = ca.if_else(3.141592653589793 < t149, t150, t149)
+    t152 = -t143 + 3.141592653589793
+    t153 = t145 + t148
+    t154 = ca.if_else(3.141592653589793 < t153, t153 + t86, t153)
+    t155 = ca.if_else(0.0 < t110, t110 + t95, t110 + 3.141592653589793)
+    t156 = -t113 + 3.141592653589793
+    t157 = t147*ca.if_else(0.0 < t145, t100, t99)
+    t158 = t149 + t157
+    t159 = ca.if_else(3.141592653589793 < t158, t150 + t157, t158)
+    t160 = t159 + t148
+    t161 = ca.if_else(3.141592653589793 < t160, t160 + t86, t160)
+    t162 = t145 + t157
+    t163 = t162 + t148
+    t164 = ca.if_else(3.141592653589793 < t163, t163 + t86, t163)
+    t165 = ca.fabs(-t8 + 1.0003205128205128)
+    t178 = t42 + 1e-10
+    t166 = ca.if_else(1.000000000001 < t165, 1.0, ca.if_else(t178*t178 < t17, 1.0, 0.0))
+    t167 = ca.if_else(8.803443431835879 < theta3[0]*theta3[0], 1.0, 0.0) - 8.0*t166 + ca.if_else(4.386490844928601 < t40*t40, 1.0, 0.0)
+    t168 = t167 + ca.if_else(4.386490844928601 < t38*t38, 1.0, 0.0) + ca.if_else(4.386490844928601 < t82*t82, 1.0, 0.0)
+    t169 = t168 + ca.if_else(8.803443431835879 < t28*t28, 1.0, 0.0)
+    t170 = ca.if_else(0.5 < t166, 2.0, ca.if_else(t19 < 1e-12, 5.0, ca.if_else(0.9999999999995 < t165, 4.0, 0.0)))
+    t171 = ca.if_else(t170 < 0.5, 3.0, 0.0)
+    t172 = t170 + t87*t171
+    t173 = t168 + ca.if_else(8.803443431835879 < t96*t96, 1.0, 0.0)
+    t174 = t167 + ca.if_else(4.386490844928601 < t113*t113, 1.0, 0.0) + ca.if_else(4.386490844928601 < t143*t143, 1.0, 0.0)
+    t175 = t174 + ca.if_else(8.803443431835879 < t110*t110, 1.0, 0.0)
+    t176 = t170 + t171*t147
+    t177 = t174 + ca.if_else(8.803443431835879 < t155*t155, 1.0, 0.0)
+    t179 = t84 + t101
+    out_q = _matrix([t28, t39, theta3[0], t41, t76, t83, t85, t28, t39, theta3[0], t41, t91, t92, t94 + 3.141592653589793, t96, t97, theta3[0], t98, t103, t83, t85 + t101, t96, t97, theta3[0], t98, t105, t92, t107 + 3.141592653589793, t110, t114, theta3[0], t41, t140, t144, t146, t110, t114, theta3[0], t41, t151, t152, t154 + 3.141592653589793, t155, t156, theta3[0], t98, t159, t144, t146 + t157, t155, t156, theta3[0], t98, t161, t152, t164 + 3.141592653589793], 8, 7)
+    out_status = ca.SX(ca.vertcat(ca.if_else(0.5 < (t169 + ca.if_else(8.803443431835879 < t76*t76, 1.0, 0.0) + ca.if_else(8.803443431835879 < t84*t84, 1.0, 0.0)), 1.0, t172), ca.if_else(0.5 < (t169 + ca.if_else(8.803443431835879 < t91*t91, 1.0, 0.0) + ca.if_else(8.803443431835879 < t94*t94, 1.0, 0.0)), 1.0, t172), ca.if_else(0.5 < (t173 + ca.if_else(8.803443431835879 < t103*t103, 1.0, 0.0) + ca.if_else(8.803443431835879 < t179*t179, 1.0, 0.0)), 1.0, t172), ca.if_else(0.5 < (t173 + ca.if_else(8.803443431835879 < t105*t105, 1.0, 0.0) + ca.if_else(8.803443431835879 < t107*t107, 1.0, 0.0)), 1.0, t172), ca.if_else(0.5 < (t175 + ca.if_else(8.803443431835879 < t145*t145, 1.0, 0.0) + ca.if_else(8.803443431835879 < t140*t140, 1.0, 0.0)), 1.0, t176), ca.if_else(0.5 < (ca.if_else(8.803443431835879 < t154*t154, 1.0, 0.0) + ca.if_else(8.803443431835879 < t151*t151, 1.0, 0.0) + t175), 1.0, t176), ca.if_else(0.5 < (t177 + ca.if_else(8.803443431835879 < t162*t162, 1.0, 0.0) + ca.if_else(8.803443431835879 < t159*t159, 1.0, 0.0)), 1.0, t176), ca.if_else(0.5 < (t177 + ca.if_else(8.803443431835879 < t164*t164, 1.0, 0.0) + ca.if_else(8.803443431835879 < t161*t161, 1.0, 0.0)), 1.0, t176)))
+    return ca.Function("ik_hom", [T, theta3], [out_q, out_status],
+                       ["T", "theta3"], ["q", "status"])
+
+
+def ik_dq():
+    """Closed-form inverse kinematics (all eight branches) from a unit dual quaternion, with theta3 = q3 as the redundancy parameter.
+
+    Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+    = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+    q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+    0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+    theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+    reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+    shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+    snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+    axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+    are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+    2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+    6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+    squares >= 1e+149 count as the zero pose: status 2). Input x in fk_dq's layout; x and -x
+    give the same result. Solved as the canonical LWR (standard DH, alpha = (pi/2, -pi/2,
+    -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100) with FK(q) = B FK_canon(theta) F,
+    theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1, +1), o = (0, pi, 0, pi, 0, pi,
+    pi); the branch bits and singular statuses refer to theta, limits and angles to q (q2 in
+    [0, 6.28319], q4 in [0, 6.28319], q6 in [0, 6.28319], q7 in [0, 6.28319]).
+
+    in  x: 8, target flange pose as in fk_dq: (rw, rx, ry, rz, dw, dx, dy, dz), d = 1/2 t (x) r; either sign [1 (real), m (dual)]
+    in  theta3: 1, redundancy parameter: the angle of joint 3 [rad]
+    out q: 8 x 7, joint angles, one branch per row (row 4 s + 2 e + w) [rad]
+    out status: 8, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+    Cost: 264 add, 211 mul, 90 call.
+    """
+    x = ca.SX.sym("x", 8)
+    theta3 = ca.SX.sym("theta3", 1)
+    t0 = ca.if_else((x[0]*x[0] + x[1]*x[1] + x[2]*x[2] + x[3]*x[3] + x[6]*x[6] + x[4]*x[4] + x[5]*x[5] + x[7]*x[7]) < 1e+149, 0.0, 1.0)
+    t1 = x[7] - t0*x[7]
+    t2 = x[2] - t0*x[2]
+    t3 = x[3] - t0*x[3]
+    t4 = x[6] - t0*x[6]
+    t5 = x[5] - t0*x[5]
+    t6 = x[0] - t0*x[0]
+    t7 = x[4] - t0*x[4]
+    t8 = x[1] - t0*x[1]
+    t9 = t5*t6 - t8*t7 - t4*t3 + t1*t2
+    t10 = 0.5*theta3[0]
+    t11 = ca.sin(t10)
+    t12 = ca.cos(t10)
+    t13 = t5*t3 - t7*t2 + t4*t6 - t8*t1
+    t14 = t9*t9 + t13*t13
+    t15 = ca.if_else(t14 < 2.5e-25, 0.0, 1.0)
+    t16 = t6*t1 - t7*t3 - t5*t2 + t8*t4
+    t17 = t16*t16
+    t18 = 12.820512820512821*(t14 + t17)
+    t19 = t18 - 1.0003205128205128
+    t20 = ca.if_else(0.9999999999995 < t19, 1.0, ca.if_else(t19 < -0.9999999999995, -1.0, t19))
+    t21 = -t20 + 1.0
+    t22 = ca.sqrt(t21)
+    t23 = t20 + 1.0
+    t24 = ca.sqrt(t23)
+    t25 = t24*t22
+    t26 = 0.39*t25*t11*t12*t15
+    t27 = -t9*t26
+    t28 = t11*t11
+    t29 = t12*t12
+    t30 = t23*t21
+    t31 = 0.1521*t29*t28*t30
+    t32 = t14*t15
+    t33 = t32 - t31
+    t34 = ca.fmax(0.0, t33)
+    t35 = ca.sqrt(t34)
+    t36 = t35*t15
+    t37 = t36*t13
+    t38 = t37 + t27
+    t39 = t9*t36
+    t40 = t26*t13 + 1e-150
+    t41 = t40 + t39
+    t42 = ca.atan2(t38, t41)
+    t43 = 0.195*t20 + 0.2
+    t44 = t43*t35
+    t45 = t29 - t28
+    t46 = 0.195*t45*t25
+    t47 = t46*t16
+    t48 = t47 - t44
+    t49 = t46*t35
+    t50 = t43*t16 + 1e-150
+    t51 = t50 + t49
+    t52 = ca.atan2(t48, t51)
+    t53 = t52 + 3.141592653589793
+    t54 = ca.atan2(t25, t20)
+    t55 = t54 + 3.141592653589793
+    t56 = ca.sqrt(t32)
+    t57 = 1.0/ca.fmax(1e-150, t56*ca.sqrt(ca.fmax(t31, t32)))
+    t58 = t41*t57
+    t59 = t57*t38
+    t60 = ca.if_else(0.0 <= t58, 1.0, 0.0)
+    t61 = (t59 + t58 - 1.0)*t60 - t58 + 1.0
+    t62 = (t58 - t59 + 1.0)*t60 + t59
+    t63 = t6*t62 + t3*t61
+    t64 = 1.0/ca.fmax(1e-150, ca.sqrt((t34 + t17)*(0.038025*t45*t45*t30 + t43*t43)))
+    t65 = t51*t64
+    t66 = ca.if_else(0.0 <= t65, 1.0, 0.0)
+    t67 = t48*t64
+    t68 = (t67 + t65 - 1.0)*t66 - t65 + 1.0
+    t69 = (t65 - t67 + 1.0)*t66 + t67
+    t70 = t2*t62 - t8*t61
+    t71 = t70*t69 + t68*t63
+    t72 = t3*t62 - t6*t61
+    t73 = t8*t62 + t2*t61
+    t74 = t73*t69 + t72*t68
+    t75 = t74*t12 + t71*t11
+    t76 = 0.7071067811865476
+    t77 = t76*t22
+    t78 = t69*t63 - t70*t68
+    t79 = t72*t69 - t73*t68
+    t80 = t79*t12 - t78*t11
+    t81 = t76*t24
+    t82 = t80*t81 + t77*t75
+    t83 = t78*t12 + t79*t11
+    t84 = t71*t12 - t74*t11
+    t85 = t84*t81 - t77*t83
+    t86 = t75*t81 - t77*t80
+    t87 = t86*t86 + t85*t85
+    t88 = t83*t81 + t77*t84
+    t89 = t88*t88 + t82*t82
+    t90 = ca.if_else(t87 < 2.5e-25*(t87 + t89), 1.0, 0.0)
+    t91 = -t90 + 1.0
+    t92 = t88 + 1e-150
+    t93 = t90*t92 - t85*t91
+    t94 = t82*t93
+    t95 = t86*t91
+    t96 = t95*t92
+    t97 = t82*t95
+    t98 = t93*t92
+    t99 = ca.atan2(t96 + t94, t98 - t97)
+    t100 = ca.atan2(2.0*t91*ca.sqrt(t87*t89), t89 - t87)
+    t101 = t100 + 3.141592653589793
+    t102 = ca.atan2(t94 - t96, t98 + t97)
+    t103 = -6.283185307179586
+    t104 = 3.141592653589793*t91
+    t105 = t99 + t104
+    t106 = ca.if_else(3.141592653589793 < t105, t105 + t103, t105)
+    t107 = -t100 + 3.141592653589793
+    t108 = t102 + t104
+    t109 = t108 + t103
+    t110 = ca.if_else(3.141592653589793 < t108, t109, t108)
+    t111 = -3.141592653589793
+    t112 = ca.if_else(0.0 < t42, t42 + t111, t42 + 3.141592653589793)
+    t113 = -t52 + 3.141592653589793
+    t114 = -t54 + 3.141592653589793
+    t115 = 1.5707963267948966
+    t116 = -t115
+    t117 = t90*ca.if_else(0.0 < t102, t116, t115)
+    t118 = t105 + t117
+    t119 = ca.if_else(3.141592653589793 < t118, t118 + t103, t118)
+    t120 = t102 + t117
+    t121 = t119 + t104
+    t122 = ca.if_else(3.141592653589793 < t121, t121 + t103, t121)
+    t123 = t108 + t117
+    t124 = ca.if_else(3.141592653589793 < t123, t109 + t117, t123)
+    t125 = t27 - t37
+    t126 = t40 - t39
+    t127 = ca.atan2(t125, t126)
+    t128 = t47 + t44
+    t129 = t50 - t49
+    t130 = ca.atan2(t128, t129)
+    t131 = t130 + 3.141592653589793
+    t132 = t64*t129
+    t133 = ca.if_else(0.0 <= t132, 1.0, 0.0)
+    t134 = t64*t128
+    t135 = (t134 + t132 - 1.0)*t133 - t132 + 1.0
+    t136 = t57*t126
+    t137 = t57*t125
+    t138 = ca.if_else(0.0 <= t136, 1.0, 0.0)
+    t139 = (t137 + t136 - 1.0)*t138 - t136 + 1.0
+    t140 = (t136 - t137 + 1.0)*t138 + t137
+    t141 = t6*t140 + t3*t139
+    t142 = (t132 - t134 + 1.0)*t133 + t134
+    t143 = t2*t140 - t8*t139
+    t144 = t143*t142 + t141*t135
+    t145 = t3*t140 - t6*t139
+    t146 = t8*t140 + t2*t139
+    t147 = t142*t146 + t145*t135
+    t148 = t12*t147 + t11*t144
+    t149 = t142*t141 - t143*t135
+    t150 = t142*t145 - t146*t135
+    t151 = t12*t150 - t11*t149
+    t152 = t81*t151 + t77*t148
+    t153 = t12*t149 + t11*t150
+    t154 = t12*t144 - t11*t147
+    t155 = t81*t154 - t77*t153
+    t156 = t81*t148 - t77*t151
+    t157 = t156*t156 + t155*t155
+    t158 = t81*t153 + t77*t154
+    t159 = t158*t158 + t152*t152
+    t160 = ca.if_else(t157 < 2.5e-25*(t157 + t159), 1.0, 0.0)
+    t161 = -t160 + 1.0
+    t162 = t158 + 1e-150
+    t163 = t160*t162 - t161*t155
+    t164 = t163*t152
+    t165 = t161*t156
+    t166 = t162*t165
+    t167 = t165*t152
+    t168 = t163*t162
+    t169 = ca.atan2(t166 + t164, t168 - t167)
+    t170 = ca.atan2(2.0*t161*ca.sqrt(t159*t157), t159 - t157)
+    t171 = t170 + 3.141592653589793
+    t172 = ca.atan2(t164 - t166, t168 + t167)
+    t173 = t172 + 3.141592653589793
+    t174 = 3.141592653589793*t161
+    t175 = t169 + t174
+    t176 = t175 + t103
+    t177 = ca.if_else(3.141592653589793 < t175, t176, t175)
+    t178 = -t170 + 3.141592653589793
+    t179 = t172 + t174
+    t180 = t179 + t103
+    t181 = ca.if_else(3.141592653589793 < t179, t180, t179)
+    t182 = ca.if_else(0.0 < t127, t127 + t111, t127 + 3.141592653589793)
+    t183 = -t130 + 3.141592653589793
+    t184 = t160*ca.if_else(0.0 < t172, t116, t115)
+    t185 = t175 + t184
+    t186 = ca.if_else(3.141592653589793 < t185, t176 + t184, t185)
+    t187 = t186 + t174
+    t188 = ca.if_else(3.141592653589793 < t187, t187 + t103, t187)
+    t189 = t179 + t184
+    t190 = ca.if_else(3.141592653589793 < t189, t180 + t184, t189)
+    t191 = ca.fabs(-t18 + 1.0003205128205128)
+    t204 = t56 + 5e-11
+    t192 = ca.if_else(1.000000000001 < t191, 1.0, ca.if_else(t204*t204 < t31, 1.0, 0.0))
+    t193 = ca.if_else(8.803443431835879 < theta3[0]*theta3[0], 1.0, 0.0) - 8.0*t192 + ca.if_else(4.386490844928601 < t54*t54, 1.0, 0.0)
+    t194 = t193 + ca.if_else(4.386490844928601 < t52*t52, 1.0, 0.0) + ca.if_else(4.386490844928601 < t100*t100, 1.0, 0.0)
+    t195 = t194 + ca.if_else(8.803443431835879 < t42*t42, 1.0, 0.0)
+    t196 = ca.if_else(0.5 < t192, 2.0, ca.if_else(t33 < 2.5e-13, 5.0, ca.if_else(0.9999999999995 < t191, 4.0, 0.0)))
+    t197 = ca.if_else(t196 < 0.5, 3.0, 0.0)
+    t198 = t196 + t90*t197
+    t199 = t194 + ca.if_else(8.803443431835879 < t112*t112, 1.0, 0.0)
+    t200 = t193 + ca.if_else(4.386490844928601 < t130*t130, 1.0, 0.0) + ca.if_else(4.386490844928601 < t170*t170, 1.0, 0.0)
+    t201 = t200 + ca.if_else(8.803443431835879 < t127*t127, 1.0, 0.0)
+    t202 = t196 + t160*t197
+    t203 = t200 + ca.if_else(8.803443431835879 < t182*t182, 1.0, 0.0)
+    t205 = t172 + t184
+    out_q = _matrix([t42, t53, theta3[0], t55, t99, t101, t102 + 3.141592653589793, t42, t53, theta3[0], t55, t106, t107, t110 + 3.141592653589793, t112, t113, theta3[0], t114, t119, t101, t120 + 3.141592653589793, t112, t113, theta3[0], t114, t122, t107, t124 + 3.141592653589793, t127, t131, theta3[0], t55, t169, t171, t173, t127, t131, theta3[0], t55, t177, t178, t181 + 3.141592653589793, t182, t183, theta3[0], t114, t186, t171, t173 + t184, t182, t183, theta3[0], t114, t188, t178, t190 + 3.141592653589793], 8, 7)
+    out_status = ca.SX(ca.vertcat(ca.if_else(0.5 < (t195 + ca.if_else(8.803443431835879 < t99*t99, 1.0, 0.0) + ca.if_else(8.803443431835879 < t102*t102, 1.0, 0.0)), 1.0, t198), ca.if_else(0.5 < (t195 + ca.if_else(8.803443431835879 < t106*t106, 1.0, 0.0) + ca.if_else(8.803443431835879 < t110*t110, 1.0, 0.0)), 1.0, t198), ca.if_else(0.5 < (ca.if_else(8.803443431835879 < t119*t119, 1.0, 0.0) + t199 + ca.if_else(8.803443431835879 < t120*t120, 1.0, 0.0)), 1.0, t198), ca.if_else(0.5 < (t199 + ca.if_else(8.803443431835879 < t122*t122, 1.0, 0.0) + ca.if_else(8.803443431835879 < t124*t124, 1.0, 0.0)), 1.0, t198), ca.if_else(0.5 < (t201 + ca.if_else(8.803443431835879 < t169*t169, 1.0, 0.0) + ca.if_else(8.803443431835879 < t172*t172, 1.0, 0.0)), 1.0, t202), ca.if_else(0.5 < (t201 + ca.if_else(8.803443431835879 < t181*t181, 1.0, 0.0) + ca.if_else(8.803443431835879 < t177*t177, 1.0, 0.0)), 1.0, t202), ca.if_else(0.5 < (t203 + ca.if_else(8.803443431835879 < t186*t186, 1.0, 0.0) + ca.if_else(8.803443431835879 < t205*t205, 1.0, 0.0)), 1.0, t202), ca.if_else(0.5 < (t203 + ca.if_else(8.803443431835879 < t188*t188, 1.0, 0.0) + ca.if_else(8.803443431835879 < t190*t190, 1.0, 0.0)), 1.0, t202)))
+    return ca.Function("ik_dq", [x, theta3], [out_q, out_status],
+                       ["x", "theta3"], ["q", "status"])
+
+
 def Y_g():
     """Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
 
@@ -3933,4 +4391,4 @@ def ik_dls():
                        ["T", "q0"], ["q", "status"])
 
 
-BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}
+BUILDERS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}

@@ -3115,6 +3115,626 @@ def c_christoffel(q, qd):
     return c
 
 
+def ik_hom(T, theta3):
+    """Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
+
+    Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+    = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+    q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+    0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+    theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+    reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+    shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+    snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+    axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+    are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+    2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+    6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+    squares >= 1e+300 count as the zero pose: status 2). Solved as the canonical LWR
+    (standard DH, alpha = (pi/2, -pi/2, -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100)
+    with FK(q) = B FK_canon(theta) F, theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1,
+    +1), o = (0, pi, 0, pi, 0, pi, pi); the branch bits and singular statuses refer to
+    theta, limits and angles to q (q2 in [0, 6.28319], q4 in [0, 6.28319], q6 in [0,
+    6.28319], q7 in [0, 6.28319]).
+
+    T: (..., 4, 4) target flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
+    theta3: (..., 1,) redundancy parameter: the angle of joint 3 [rad]
+    Returns q: (..., 8, 7) double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]; status: (..., 8,) int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+    Cost per configuration: 252 add, 216 mul, 89 call.
+    """
+    T, batch_T = _input(T, (4, 4), "T")
+    theta3, batch_theta3 = _input(theta3, (1,), "theta3")
+    batch = np.broadcast_shapes(batch_T, batch_theta3, )
+    with np.errstate(all="ignore"):  # selects evaluate both branches; the discarded one may be invalid
+        return _ik_hom_body(T, theta3, batch)
+
+
+def _ik_hom_body(T, theta3, batch):
+    T_0 = T[..., 0, 0]
+    T_1 = T[..., 0, 1]
+    T_2 = T[..., 0, 2]
+    T_3 = T[..., 0, 3]
+    T_4 = T[..., 1, 0]
+    T_5 = T[..., 1, 1]
+    T_6 = T[..., 1, 2]
+    T_7 = T[..., 1, 3]
+    T_8 = T[..., 2, 0]
+    T_9 = T[..., 2, 1]
+    T_10 = T[..., 2, 2]
+    T_11 = T[..., 2, 3]
+    T_12 = T[..., 3, 0]
+    T_13 = T[..., 3, 1]
+    T_14 = T[..., 3, 2]
+    T_15 = T[..., 3, 3]
+    theta3_0 = theta3[..., 0]
+    t0 = np.where((T_0*T_0 + T_1*T_1 + T_2*T_2 + T_4*T_4 + T_5*T_5 + T_6*T_6 + T_9*T_9 + T_3*T_3 + T_7*T_7 + T_8*T_8 + T_10*T_10 + T_11*T_11) < 1e+300, 0.0, 1.0)
+    t1 = T_3 - t0*T_3
+    t2 = np.sin(theta3_0)
+    t3 = T_7 - t0*T_7
+    t4 = t1*t1 + t3*t3
+    t5 = np.where(t4 < 1e-24, 0.0, 1.0)
+    t6 = T_11 - t0*T_11
+    t7 = t6*t6
+    t8 = 3.2051282051282053*(t4 + t7)
+    t9 = t8 - 1.0003205128205128
+    t10 = np.where(0.9999999999995 < t9, 1.0, np.where(t9 < -0.9999999999995, -1.0, t9))
+    t11 = (-t10 + 1.0)*(t10 + 1.0)
+    t12 = np.sqrt(t11)
+    t13 = 0.39*t12
+    t14 = t5*t2*t13
+    t15 = -t1*t14
+    t16 = 0.1521*t11
+    t17 = t2*t2*t16
+    t18 = t5*t4
+    t19 = t18 - t17
+    t20 = np.maximum(0.0, t19)
+    t21 = np.sqrt(t20)
+    t22 = t5*t21
+    t23 = t3*t22
+    t24 = t23 + t15
+    t25 = t1*t22
+    t26 = t3*t14 + 1e-150
+    t27 = t26 + t25
+    t28 = np.arctan2(t24, t27)
+    t29 = 0.39*t10 + 0.4
+    t30 = t29*t21
+    t31 = np.cos(theta3_0)
+    t32 = t31*t13
+    t33 = t6*t32
+    t34 = t33 - t30
+    t35 = t21*t32
+    t36 = t6*t29 + 1e-150
+    t37 = t36 + t35
+    t38 = np.arctan2(t34, t37)
+    t39 = t38 + 3.141592653589793
+    t40 = np.arctan2(t12, t10)
+    t41 = t40 + 3.141592653589793
+    t42 = np.sqrt(t18)
+    t43 = 1.0/np.maximum(1e-150, t42*np.sqrt(np.maximum(t17, t18)))
+    t44 = t43*(T_5 - t0*T_5)
+    t45 = t43*(T_1 - t0*T_1)
+    t46 = t45*t27 + t44*t24
+    t47 = 1.0/np.maximum(1e-150, np.sqrt((t20 + t7)*(t31*t31*t16 + t29*t29)))
+    t48 = t47*t34
+    t49 = T_9 - t0*T_9
+    t50 = t47*t37
+    t51 = t49*t50 - t46*t48
+    t52 = t44*t27 - t45*t24
+    t53 = t46*t50 + t49*t48
+    t54 = t53*t31 + t2*t52
+    t55 = t54*t10 - t51*t12
+    t56 = t54*t12 + t51*t10
+    t57 = T_4 - t0*T_4
+    t58 = t43*t24
+    t59 = t43*(T_0 - t0*T_0)
+    t60 = t59*t27 + t57*t58
+    t61 = T_8 - t0*T_8
+    t62 = t50*t61 - t48*t60
+    t63 = t43*t27
+    t64 = t57*t63 - t59*t24
+    t65 = t50*t60 + t48*t61
+    t66 = t31*t65 + t2*t64
+    t67 = t66*t12 + t62*t10
+    t68 = np.sqrt(t67*t67 + t56*t56)
+    t69 = np.where(t68 < 1e-12, 1.0, 0.0)
+    t70 = -t55
+    t71 = t52*t31 - t2*t53
+    t72 = np.where(0.0 <= t71, 1.0, 0.0)
+    t73 = -t69 + 1.0
+    t74 = t73*t67 + t69*((t71 + t55 + 1.0)*t72 + t70)
+    t75 = t69*((t71 + t70 - 1.0)*t72 - t71 + 1.0) - t73*t56
+    t76 = np.arctan2(-((t66*t10 - t62*t12)*t75 + t74*t55), t75*(t31*t64 - t2*t65) + t74*t71)
+    t77 = t43*(T_6 - t0*T_6)
+    t78 = T_2 - t0*T_2
+    t79 = t78*t63 + t77*t24
+    t80 = T_10 - t0*T_10
+    t81 = t12*((t79*t50 + t48*t80)*t31 + (t77*t27 - t78*t58)*t2) + (t50*t80 - t48*t79)*t10
+    t82 = np.arctan2(t73*t68, t81)
+    t83 = t82 + 3.141592653589793
+    t84 = np.arctan2(t75, t74)
+    t85 = t84 + 3.141592653589793
+    t86 = -6.283185307179586
+    t87 = t69*np.where(0.0 < t81, 1.0, 0.0)
+    t88 = 3.141592653589793*(-t87 + 1.0)
+    t89 = t76 + t88
+    t90 = t89 + t86
+    t91 = np.where(3.141592653589793 < t89, t90, t89)
+    t92 = -t82 + 3.141592653589793
+    t93 = t84 + t88
+    t94 = np.where(3.141592653589793 < t93, t93 + t86, t93)
+    t95 = -3.141592653589793
+    t96 = np.where(0.0 < t28, t28 + t95, t28 + 3.141592653589793)
+    t97 = -t38 + 3.141592653589793
+    t98 = -t40 + 3.141592653589793
+    t99 = 1.5707963267948966
+    t100 = -t99
+    t101 = t87*np.where(0.0 < t84, t100, t99)
+    t102 = t89 + t101
+    t103 = np.where(3.141592653589793 < t102, t90 + t101, t102)
+    t104 = t103 + t88
+    t105 = np.where(3.141592653589793 < t104, t104 + t86, t104)
+    t106 = t93 + t101
+    t107 = np.where(3.141592653589793 < t106, t106 + t86, t106)
+    t108 = t15 - t23
+    t109 = t26 - t25
+    t110 = np.arctan2(t108, t109)
+    t111 = t33 + t30
+    t112 = t36 - t35
+    t113 = np.arctan2(t111, t112)
+    t114 = t113 + 3.141592653589793
+    t115 = t45*t109 + t44*t108
+    t116 = t47*t111
+    t117 = t47*t112
+    t118 = t49*t117 - t115*t116
+    t119 = t44*t109 - t45*t108
+    t120 = t115*t117 + t49*t116
+    t121 = t31*t120 + t2*t119
+    t122 = t10*t121 - t12*t118
+    t123 = t12*t121 + t10*t118
+    t124 = t43*t108
+    t125 = t59*t109 + t57*t124
+    t126 = t61*t117 - t125*t116
+    t127 = t43*t109
+    t128 = t57*t127 - t59*t108
+    t129 = t125*t117 + t61*t116
+    t130 = t31*t129 + t2*t128
+    t131 = t12*t130 + t10*t126
+    t132 = np.sqrt(t131*t131 + t123*t123)
+    t133 = np.where(t132 < 1e-12, 1.0, 0.0)
+    t134 = -t122
+    t135 = t31*t119 - t2*t120
+    t136 = np.where(0.0 <= t135, 1.0, 0.0)
+    t137 = -t133 + 1.0
+    t138 = t131*t137 + t133*((t135 + t122 + 1.0)*t136 + t134)
+    t139 = t133*((t135 + t134 - 1.0)*t136 - t135 + 1.0) - t137*t123
+    t140 = np.arctan2(-((t10*t130 - t12*t126)*t139 + t138*t122), t139*(t31*t128 - t2*t129) + t138*t135)
+    t141 = t78*t127 + t77*t108
+    t142 = t12*(t31*(t141*t117 + t80*t116) + (t77*t109 - t78*t124)*t2) + t10*(t80*t117 - t141*t116)
+    t143 = np.arctan2(t132*t137, t142)
+    t144 = t143 + 3.141592653589793
+    t145 = np.arctan2(t139, t138)
+    t146 = t145 + 3.141592653589793
+    t147 = t133*np.where(0.0 < t142, 1.0, 0.0)
+    t148 = 3.141592653589793*(-t147 + 1.0)
+    t149 = t140 + t148
+    t150 = t149 + t86
+    t151 = np.where(3.141592653589793 < t149, t150, t149)
+    t152 = -t143 + 3.141592653589793
+    t153 = t145 + t148
+    t154 = np.where(3.141592653589793 < t153, t153 + t86, t153)
+    t155 = np.where(0.0 < t110, t110 + t95, t110 + 3.141592653589793)
+    t156 = -t113 + 3.141592653589793
+    t157 = t147*np.where(0.0 < t145, t100, t99)
+    t158 = t149 + t157
+    t159 = np.where(3.141592653589793 < t158, t150 + t157, t158)
+    t160 = t159 + t148
+    t161 = np.where(3.141592653589793 < t160, t160 + t86, t160)
+    t162 = t145 + t157
+    t163 = t162 + t148
+    t164 = np.where(3.141592653589793 < t163, t163 + t86, t163)
+    t165 = np.abs(-t8 + 1.0003205128205128)
+    t178 = t42 + 1e-10
+    t166 = np.where(1.000000000001 < t165, 1.0, np.where(t178*t178 < t17, 1.0, 0.0))
+    t167 = np.where(8.803443431835879 < theta3_0*theta3_0, 1.0, 0.0) - 8.0*t166 + np.where(4.386490844928601 < t40*t40, 1.0, 0.0)
+    t168 = t167 + np.where(4.386490844928601 < t38*t38, 1.0, 0.0) + np.where(4.386490844928601 < t82*t82, 1.0, 0.0)
+    t169 = t168 + np.where(8.803443431835879 < t28*t28, 1.0, 0.0)
+    t170 = np.where(0.5 < t166, 2.0, np.where(t19 < 1e-12, 5.0, np.where(0.9999999999995 < t165, 4.0, 0.0)))
+    t171 = np.where(t170 < 0.5, 3.0, 0.0)
+    t172 = t170 + t87*t171
+    t173 = t168 + np.where(8.803443431835879 < t96*t96, 1.0, 0.0)
+    t174 = t167 + np.where(4.386490844928601 < t113*t113, 1.0, 0.0) + np.where(4.386490844928601 < t143*t143, 1.0, 0.0)
+    t175 = t174 + np.where(8.803443431835879 < t110*t110, 1.0, 0.0)
+    t176 = t170 + t171*t147
+    t177 = t174 + np.where(8.803443431835879 < t155*t155, 1.0, 0.0)
+    t179 = t84 + t101
+    q = np.empty(batch + (8, 7), dtype=float)
+    q[..., 0, 0] = t28
+    q[..., 0, 1] = t39
+    q[..., 0, 2] = theta3_0
+    q[..., 0, 3] = t41
+    q[..., 0, 4] = t76
+    q[..., 0, 5] = t83
+    q[..., 0, 6] = t85
+    q[..., 1, 0] = t28
+    q[..., 1, 1] = t39
+    q[..., 1, 2] = theta3_0
+    q[..., 1, 3] = t41
+    q[..., 1, 4] = t91
+    q[..., 1, 5] = t92
+    q[..., 1, 6] = t94 + 3.141592653589793
+    q[..., 2, 0] = t96
+    q[..., 2, 1] = t97
+    q[..., 2, 2] = theta3_0
+    q[..., 2, 3] = t98
+    q[..., 2, 4] = t103
+    q[..., 2, 5] = t83
+    q[..., 2, 6] = t85 + t101
+    q[..., 3, 0] = t96
+    q[..., 3, 1] = t97
+    q[..., 3, 2] = theta3_0
+    q[..., 3, 3] = t98
+    q[..., 3, 4] = t105
+    q[..., 3, 5] = t92
+    q[..., 3, 6] = t107 + 3.141592653589793
+    q[..., 4, 0] = t110
+    q[..., 4, 1] = t114
+    q[..., 4, 2] = theta3_0
+    q[..., 4, 3] = t41
+    q[..., 4, 4] = t140
+    q[..., 4, 5] = t144
+    q[..., 4, 6] = t146
+    q[..., 5, 0] = t110
+    q[..., 5, 1] = t114
+    q[..., 5, 2] = theta3_0
+    q[..., 5, 3] = t41
+    q[..., 5, 4] = t151
+    q[..., 5, 5] = t152
+    q[..., 5, 6] = t154 + 3.141592653589793
+    q[..., 6, 0] = t155
+    q[..., 6, 1] = t156
+    q[..., 6, 2] = theta3_0
+    q[..., 6, 3] = t98
+    q[..., 6, 4] = t159
+    q[..., 6, 5] = t144
+    q[..., 6, 6] = t146 + t157
+    q[..., 7, 0] = t155
+    q[..., 7, 1] = t156
+    q[..., 7, 2] = theta3_0
+    q[..., 7, 3] = t98
+    q[..., 7, 4] = t161
+    q[..., 7, 5] = t152
+    q[..., 7, 6] = t164 + 3.141592653589793
+    status = np.empty(batch + (8,), dtype=np.int64)
+    status[..., 0] = np.where(0.5 < (t169 + np.where(8.803443431835879 < t76*t76, 1.0, 0.0) + np.where(8.803443431835879 < t84*t84, 1.0, 0.0)), 1.0, t172)
+    status[..., 1] = np.where(0.5 < (t169 + np.where(8.803443431835879 < t91*t91, 1.0, 0.0) + np.where(8.803443431835879 < t94*t94, 1.0, 0.0)), 1.0, t172)
+    status[..., 2] = np.where(0.5 < (t173 + np.where(8.803443431835879 < t103*t103, 1.0, 0.0) + np.where(8.803443431835879 < t179*t179, 1.0, 0.0)), 1.0, t172)
+    status[..., 3] = np.where(0.5 < (t173 + np.where(8.803443431835879 < t105*t105, 1.0, 0.0) + np.where(8.803443431835879 < t107*t107, 1.0, 0.0)), 1.0, t172)
+    status[..., 4] = np.where(0.5 < (t175 + np.where(8.803443431835879 < t145*t145, 1.0, 0.0) + np.where(8.803443431835879 < t140*t140, 1.0, 0.0)), 1.0, t176)
+    status[..., 5] = np.where(0.5 < (np.where(8.803443431835879 < t154*t154, 1.0, 0.0) + np.where(8.803443431835879 < t151*t151, 1.0, 0.0) + t175), 1.0, t176)
+    status[..., 6] = np.where(0.5 < (t177 + np.where(8.803443431835879 < t162*t162, 1.0, 0.0) + np.where(8.803443431835879 < t159*t159, 1.0, 0.0)), 1.0, t176)
+    status[..., 7] = np.where(0.5 < (t177 + np.where(8.803443431835879 < t164*t164, 1.0, 0.0) + np.where(8.803443431835879 < t161*t161, 1.0, 0.0)), 1.0, t176)
+    return q, status
+
+
+def ik_dq(x, theta3):
+    """Closed-form inverse kinematics (all eight branches) from a unit dual quaternion, with theta3 = q3 as the redundancy parameter.
+
+    Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). Row k
+    = 4 s + 2 e + w of q: e = 0 elbow q4 >= 0, e = 1 q4 <= 0 (elbow twin: q1 + pi, -q2, -q4,
+    q5 + pi); w = 0 wrist q6 >= 0, w = 1 q6 <= 0 (wrist twin: q5 + pi, -q6, q7 + pi); s =
+    0/1 shoulder: r = c1 px + s1 py has the sign of +q4/-q4. Angles in (-pi, pi] (q3 =
+    theta3 as given). status (first match wins): 2 unreachable (outside the workspace or not
+    reachable with this theta3; q finite but not a solution), 1 outside joint limits, 5
+    shoulder singular (r ~ 0; q1 = 0 on the z0 axis), 4 elbow singular (|sin q4| < 1e-6, q4
+    snapped), 3 wrist singular (|q6| < 1e-12, q6 = 0, q5 = q7: the rotation about the common
+    axis split equally), 0 valid. Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5
+    are within the joint limits [[-2.96706, 2.96706], [1.0472, 5.23599], [-2.96706,
+    2.96706], [1.0472, 5.23599], [-2.96706, 2.96706], [1.0472, 5.23599], [0.174533,
+    6.10865]] rad. Branch-free; no NaN/Inf for any finite input (inputs with a sum of
+    squares >= 1e+149 count as the zero pose: status 2). Input x in fk_dq's layout; x and -x
+    give the same result. Solved as the canonical LWR (standard DH, alpha = (pi/2, -pi/2,
+    -pi/2, pi/2, pi/2, -pi/2, 0), d3 = 2/5, d5 = 39/100) with FK(q) = B FK_canon(theta) F,
+    theta_i = s_i q_i + o_i, s = (+1, +1, +1, +1, +1, +1, +1), o = (0, pi, 0, pi, 0, pi,
+    pi); the branch bits and singular statuses refer to theta, limits and angles to q (q2 in
+    [0, 6.28319], q4 in [0, 6.28319], q6 in [0, 6.28319], q7 in [0, 6.28319]).
+
+    x: (..., 8,) target flange pose as in fk_dq: (rw, rx, ry, rz, dw, dx, dy, dz), d = 1/2 t (x) r; either sign [1 (real), m (dual)]
+    theta3: (..., 1,) redundancy parameter: the angle of joint 3 [rad]
+    Returns q: (..., 8, 7) double, joint angles, one branch per row (row 4 s + 2 e + w) [rad]; status: (..., 8,) int, per branch: 0 valid, 1 outside joint limits, 2 unreachable, 3 wrist singular, 4 elbow singular, 5 shoulder singular []
+    Cost per configuration: 264 add, 211 mul, 90 call.
+    """
+    x, batch_x = _input(x, (8,), "x")
+    theta3, batch_theta3 = _input(theta3, (1,), "theta3")
+    batch = np.broadcast_shapes(batch_x, batch_theta3, )
+    with np.errstate(all="ignore"):  # selects evaluate both branches; the discarded one may be invalid
+        return _ik_dq_body(x, theta3, batch)
+
+
+def _ik_dq_body(x, theta3, batch):
+    x_0 = x[..., 0]
+    x_1 = x[..., 1]
+    x_2 = x[..., 2]
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    theta3_0 = theta3[..., 0]
+    t0 = np.where((x_0*x_0 + x_1*x_1 + x_2*x_2 + x_3*x_3 + x_6*x_6 + x_4*x_4 + x_5*x_5 + x_7*x_7) < 1e+149, 0.0, 1.0)
+    t1 = x_7 - t0*x_7
+    t2 = x_2 - t0*x_2
+    t3 = x_3 - t0*x_3
+    t4 = x_6 - t0*x_6
+    t5 = x_5 - t0*x_5
+    t6 = x_0 - t0*x_0
+    t7 = x_4 - t0*x_4
+    t8 = x_1 - t0*x_1
+    t9 = t5*t6 - t8*t7 - t4*t3 + t1*t2
+    t10 = 0.5*theta3_0
+    t11 = np.sin(t10)
+    t12 = np.cos(t10)
+    t13 = t5*t3 - t7*t2 + t4*t6 - t8*t1
+    t14 = t9*t9 + t13*t13
+    t15 = np.where(t14 < 2.5e-25, 0.0, 1.0)
+    t16 = t6*t1 - t7*t3 - t5*t2 + t8*t4
+    t17 = t16*t16
+    t18 = 12.820512820512821*(t14 + t17)
+    t19 = t18 - 1.0003205128205128
+    t20 = np.where(0.9999999999995 < t19, 1.0, np.where(t19 < -0.9999999999995, -1.0, t19))
+    t21 = -t20 + 1.0
+    t22 = np.sqrt(t21)
+    t23 = t20 + 1.0
+    t24 = np.sqrt(t23)
+    t25 = t24*t22
+    t26 = 0.39*t25*t11*t12*t15
+    t27 = -t9*t26
+    t28 = t11*t11
+    t29 = t12*t12
+    t30 = t23*t21
+    t31 = 0.1521*t29*t28*t30
+    t32 = t14*t15
+    t33 = t32 - t31
+    t34 = np.maximum(0.0, t33)
+    t35 = np.sqrt(t34)
+    t36 = t35*t15
+    t37 = t36*t13
+    t38 = t37 + t27
+    t39 = t9*t36
+    t40 = t26*t13 + 1e-150
+    t41 = t40 + t39
+    t42 = np.arctan2(t38, t41)
+    t43 = 0.195*t20 + 0.2
+    t44 = t43*t35
+    t45 = t29 - t28
+    t46 = 0.195*t45*t25
+    t47 = t46*t16
+    t48 = t47 - t44
+    t49 = t46*t35
+    t50 = t43*t16 + 1e-150
+    t51 = t50 + t49
+    t52 = np.arctan2(t48, t51)
+    t53 = t52 + 3.141592653589793
+    t54 = np.arctan2(t25, t20)
+    t55 = t54 + 3.141592653589793
+    t56 = np.sqrt(t32)
+    t57 = 1.0/np.maximum(1e-150, t56*np.sqrt(np.maximum(t31, t32)))
+    t58 = t41*t57
+    t59 = t57*t38
+    t60 = np.where(0.0 <= t58, 1.0, 0.0)
+    t61 = (t59 + t58 - 1.0)*t60 - t58 + 1.0
+    t62 = (t58 - t59 + 1.0)*t60 + t59
+    t63 = t6*t62 + t3*t61
+    t64 = 1.0/np.maximum(1e-150, np.sqrt((t34 + t17)*(0.038025*t45*t45*t30 + t43*t43)))
+    t65 = t51*t64
+    t66 = np.where(0.0 <= t65, 1.0, 0.0)
+    t67 = t48*t64
+    t68 = (t67 + t65 - 1.0)*t66 - t65 + 1.0
+    t69 = (t65 - t67 + 1.0)*t66 + t67
+    t70 = t2*t62 - t8*t61
+    t71 = t70*t69 + t68*t63
+    t72 = t3*t62 - t6*t61
+    t73 = t8*t62 + t2*t61
+    t74 = t73*t69 + t72*t68
+    t75 = t74*t12 + t71*t11
+    t76 = 0.7071067811865476
+    t77 = t76*t22
+    t78 = t69*t63 - t70*t68
+    t79 = t72*t69 - t73*t68
+    t80 = t79*t12 - t78*t11
+    t81 = t76*t24
+    t82 = t80*t81 + t77*t75
+    t83 = t78*t12 + t79*t11
+    t84 = t71*t12 - t74*t11
+    t85 = t84*t81 - t77*t83
+    t86 = t75*t81 - t77*t80
+    t87 = t86*t86 + t85*t85
+    t88 = t83*t81 + t77*t84
+    t89 = t88*t88 + t82*t82
+    t90 = np.where(t87 < 2.5e-25*(t87 + t89), 1.0, 0.0)
+    t91 = -t90 + 1.0
+    t92 = t88 + 1e-150
+    t93 = t90*t92 - t85*t91
+    t94 = t82*t93
+    t95 = t86*t91
+    t96 = t95*t92
+    t97 = t82*t95
+    t98 = t93*t92
+    t99 = np.arctan2(t96 + t94, t98 - t97)
+    t100 = np.arctan2(2.0*t91*np.sqrt(t87*t89), t89 - t87)
+    t101 = t100 + 3.141592653589793
+    t102 = np.arctan2(t94 - t96, t98 + t97)
+    t103 = -6.283185307179586
+    t104 = 3.141592653589793*t91
+    t105 = t99 + t104
+    t106 = np.where(3.141592653589793 < t105, t105 + t103, t105)
+    t107 = -t100 + 3.141592653589793
+    t108 = t102 + t104
+    t109 = t108 + t103
+    t110 = np.where(3.141592653589793 < t108, t109, t108)
+    t111 = -3.141592653589793
+    t112 = np.where(0.0 < t42, t42 + t111, t42 + 3.141592653589793)
+    t113 = -t52 + 3.141592653589793
+    t114 = -t54 + 3.141592653589793
+    t115 = 1.5707963267948966
+    t116 = -t115
+    t117 = t90*np.where(0.0 < t102, t116, t115)
+    t118 = t105 + t117
+    t119 = np.where(3.141592653589793 < t118, t118 + t103, t118)
+    t120 = t102 + t117
+    t121 = t119 + t104
+    t122 = np.where(3.141592653589793 < t121, t121 + t103, t121)
+    t123 = t108 + t117
+    t124 = np.where(3.141592653589793 < t123, t109 + t117, t123)
+    t125 = t27 - t37
+    t126 = t40 - t39
+    t127 = np.arctan2(t125, t126)
+    t128 = t47 + t44
+    t129 = t50 - t49
+    t130 = np.arctan2(t128, t129)
+    t131 = t130 + 3.141592653589793
+    t132 = t64*t129
+    t133 = np.where(0.0 <= t132, 1.0, 0.0)
+    t134 = t64*t128
+    t135 = (t134 + t132 - 1.0)*t133 - t132 + 1.0
+    t136 = t57*t126
+    t137 = t57*t125
+    t138 = np.where(0.0 <= t136, 1.0, 0.0)
+    t139 = (t137 + t136 - 1.0)*t138 - t136 + 1.0
+    t140 = (t136 - t137 + 1.0)*t138 + t137
+    t141 = t6*t140 + t3*t139
+    t142 = (t132 - t134 + 1.0)*t133 + t134
+    t143 = t2*t140 - t8*t139
+    t144 = t143*t142 + t141*t135
+    t145 = t3*t140 - t6*t139
+    t146 = t8*t140 + t2*t139
+    t147 = t142*t146 + t145*t135
+    t148 = t12*t147 + t11*t144
+    t149 = t142*t141 - t143*t135
+    t150 = t142*t145 - t146*t135
+    t151 = t12*t150 - t11*t149
+    t152 = t81*t151 + t77*t148
+    t153 = t12*t149 + t11*t150
+    t154 = t12*t144 - t11*t147
+    t155 = t81*t154 - t77*t153
+    t156 = t81*t148 - t77*t151
+    t157 = t156*t156 + t155*t155
+    t158 = t81*t153 + t77*t154
+    t159 = t158*t158 + t152*t152
+    t160 = np.where(t157 < 2.5e-25*(t157 + t159), 1.0, 0.0)
+    t161 = -t160 + 1.0
+    t162 = t158 + 1e-150
+    t163 = t160*t162 - t161*t155
+    t164 = t163*t152
+    t165 = t161*t156
+    t166 = t162*t165
+    t167 = t165*t152
+    t168 = t163*t162
+    t169 = np.arctan2(t166 + t164, t168 - t167)
+    t170 = np.arctan2(2.0*t161*np.sqrt(t159*t157), t159 - t157)
+    t171 = t170 + 3.141592653589793
+    t172 = np.arctan2(t164 - t166, t168 + t167)
+    t173 = t172 + 3.141592653589793
+    t174 = 3.141592653589793*t161
+    t175 = t169 + t174
+    t176 = t175 + t103
+    t177 = np.where(3.141592653589793 < t175, t176, t175)
+    t178 = -t170 + 3.141592653589793
+    t179 = t172 + t174
+    t180 = t179 + t103
+    t181 = np.where(3.141592653589793 < t179, t180, t179)
+    t182 = np.where(0.0 < t127, t127 + t111, t127 + 3.141592653589793)
+    t183 = -t130 + 3.141592653589793
+    t184 = t160*np.where(0.0 < t172, t116, t115)
+    t185 = t175 + t184
+    t186 = np.where(3.141592653589793 < t185, t176 + t184, t185)
+    t187 = t186 + t174
+    t188 = np.where(3.141592653589793 < t187, t187 + t103, t187)
+    t189 = t179 + t184
+    t190 = np.where(3.141592653589793 < t189, t180 + t184, t189)
+    t191 = np.abs(-t18 + 1.0003205128205128)
+    t204 = t56 + 5e-11
+    t192 = np.where(1.000000000001 < t191, 1.0, np.where(t204*t204 < t31, 1.0, 0.0))
+    t193 = np.where(8.803443431835879 < theta3_0*theta3_0, 1.0, 0.0) - 8.0*t192 + np.where(4.386490844928601 < t54*t54, 1.0, 0.0)
+    t194 = t193 + np.where(4.386490844928601 < t52*t52, 1.0, 0.0) + np.where(4.386490844928601 < t100*t100, 1.0, 0.0)
+    t195 = t194 + np.where(8.803443431835879 < t42*t42, 1.0, 0.0)
+    t196 = np.where(0.5 < t192, 2.0, np.where(t33 < 2.5e-13, 5.0, np.where(0.9999999999995 < t191, 4.0, 0.0)))
+    t197 = np.where(t196 < 0.5, 3.0, 0.0)
+    t198 = t196 + t90*t197
+    t199 = t194 + np.where(8.803443431835879 < t112*t112, 1.0, 0.0)
+    t200 = t193 + np.where(4.386490844928601 < t130*t130, 1.0, 0.0) + np.where(4.386490844928601 < t170*t170, 1.0, 0.0)
+    t201 = t200 + np.where(8.803443431835879 < t127*t127, 1.0, 0.0)
+    t202 = t196 + t160*t197
+    t203 = t200 + np.where(8.803443431835879 < t182*t182, 1.0, 0.0)
+    t205 = t172 + t184
+    q = np.empty(batch + (8, 7), dtype=float)
+    q[..., 0, 0] = t42
+    q[..., 0, 1] = t53
+    q[..., 0, 2] = theta3_0
+    q[..., 0, 3] = t55
+    q[..., 0, 4] = t99
+    q[..., 0, 5] = t101
+    q[..., 0, 6] = t102 + 3.141592653589793
+    q[..., 1, 0] = t42
+    q[..., 1, 1] = t53
+    q[..., 1, 2] = theta3_0
+    q[..., 1, 3] = t55
+    q[..., 1, 4] = t106
+    q[..., 1, 5] = t107
+    q[..., 1, 6] = t110 + 3.141592653589793
+    q[..., 2, 0] = t112
+    q[..., 2, 1] = t113
+    q[..., 2, 2] = theta3_0
+    q[..., 2, 3] = t114
+    q[..., 2, 4] = t119
+    q[..., 2, 5] = t101
+    q[..., 2, 6] = t120 + 3.141592653589793
+    q[..., 3, 0] = t112
+    q[..., 3, 1] = t113
+    q[..., 3, 2] = theta3_0
+    q[..., 3, 3] = t114
+    q[..., 3, 4] = t122
+    q[..., 3, 5] = t107
+    q[..., 3, 6] = t124 + 3.141592653589793
+    q[..., 4, 0] = t127
+    q[..., 4, 1] = t131
+    q[..., 4, 2] = theta3_0
+    q[..., 4, 3] = t55
+    q[..., 4, 4] = t169
+    q[..., 4, 5] = t171
+    q[..., 4, 6] = t173
+    q[..., 5, 0] = t127
+    q[..., 5, 1] = t131
+    q[..., 5, 2] = theta3_0
+    q[..., 5, 3] = t55
+    q[..., 5, 4] = t177
+    q[..., 5, 5] = t178
+    q[..., 5, 6] = t181 + 3.141592653589793
+    q[..., 6, 0] = t182
+    q[..., 6, 1] = t183
+    q[..., 6, 2] = theta3_0
+    q[..., 6, 3] = t114
+    q[..., 6, 4] = t186
+    q[..., 6, 5] = t171
+    q[..., 6, 6] = t173 + t184
+    q[..., 7, 0] = t182
+    q[..., 7, 1] = t183
+    q[..., 7, 2] = theta3_0
+    q[..., 7, 3] = t114
+    q[..., 7, 4] = t188
+    q[..., 7, 5] = t178
+    q[..., 7, 6] = t190 + 3.141592653589793
+    status = np.empty(batch + (8,), dtype=np.int64)
+    status[..., 0] = np.where(0.5 < (t195 + np.where(8.803443431835879 < t99*t99, 1.0, 0.0) + np.where(8.803443431835879 < t102*t102, 1.0, 0.0)), 1.0, t198)
+    status[..., 1] = np.where(0.5 < (t195 + np.where(8.803443431835879 < t106*t106, 1.0, 0.0) + np.where(8.803443431835879 < t110*t110, 1.0, 0.0)), 1.0, t198)
+    status[..., 2] = np.where(0.5 < (np.where(8.803443431835879 < t119*t119, 1.0, 0.0) + t199 + np.where(8.803443431835879 < t120*t120, 1.0, 0.0)), 1.0, t198)
+    status[..., 3] = np.where(0.5 < (t199 + np.where(8.803443431835879 < t122*t122, 1.0, 0.0) + np.where(8.803443431835879 < t124*t124, 1.0, 0.0)), 1.0, t198)
+    status[..., 4] = np.where(0.5 < (t201 + np.where(8.803443431835879 < t169*t169, 1.0, 0.0) + np.where(8.803443431835879 < t172*t172, 1.0, 0.0)), 1.0, t202)
+    status[..., 5] = np.where(0.5 < (t201 + np.where(8.803443431835879 < t181*t181, 1.0, 0.0) + np.where(8.803443431835879 < t177*t177, 1.0, 0.0)), 1.0, t202)
+    status[..., 6] = np.where(0.5 < (t203 + np.where(8.803443431835879 < t186*t186, 1.0, 0.0) + np.where(8.803443431835879 < t205*t205, 1.0, 0.0)), 1.0, t202)
+    status[..., 7] = np.where(0.5 < (t203 + np.where(8.803443431835879 < t188*t188, 1.0, 0.0) + np.where(8.803443431835879 < t190*t190, 1.0, 0.0)), 1.0, t202)
+    return q, status
+
+
 def Y_g(q):
     """Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
 
@@ -5831,4 +6451,4 @@ def _ik_dls_solve(T, q0):
     return out, status
 
 
-FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}
+FUNCTIONS = {"fk_hom": fk_hom, "fk_dq": fk_dq, "jacobian": jacobian, "M": M, "g": g, "c": c, "S": S, "tau": tau, "fd": fd, "M_lagrange": M_lagrange, "g_lagrange": g_lagrange, "c_christoffel": c_christoffel, "ik_hom": ik_hom, "ik_dq": ik_dq, "Y_g": Y_g, "Y_m": Y_m, "Y": Y, "ik_dls": ik_dls}
