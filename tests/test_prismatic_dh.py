@@ -11,6 +11,7 @@ import yaml
 from kindyngen.evaluate import load_generated
 from kindyngen.pipeline import generate
 from kindyngen.robot import parse_robot
+from reference import _rx, _rz
 
 pin = pytest.importorskip("pinocchio")
 
@@ -25,16 +26,6 @@ ROWS = [{"a": 0.05, "alpha": "pi/2", "d": 0.3, "lower": -2.5, "upper": 2.5},
         {"a": 0.0, "alpha": "pi/2", "d": 0.08, "lower": -3.0, "upper": 3.0}]
 TOOL = {"xyz": [0.01, 0.02, 0.12], "rpy": [0.1, -0.2, 0.3]}
 FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd")
-
-
-def _rz(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-
-
-def _rx(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
 
 
 def _ry(t):
