@@ -47,10 +47,16 @@ import sympy
 RANK_TOL = 1e-9          # numeric rank: |R_kk| > RANK_TOL * |R_00| (pivoted QR)
 DEPENDENT_TOL = 1e-8     # a column is dependent when |R_kk| <= DEPENDENT_TOL * its norm
 # The rank and the choice of columns are structural (they decide the generated regressors),
-# so they are taken only when no ratio lies within a factor DECISION_MARGIN of its threshold:
-# a last-bit difference between processors then cannot change them.  On the shipped robots
-# the dependent ratios are below 1e-14 and the independent ones above 1e-4.
+# so they are taken only when no ratio lies near its threshold.  What a last-bit difference
+# between processors can move is a rounding residue: an exact zero shows up as a ratio of at
+# most ~1e-14 (on the shipped robots below 7e-16), a genuine value is known to ~1e-14 of the
+# scale.  So a ratio counts as zero only below threshold / DECISION_MARGIN (1e-11 for the
+# column test: a thousand times above any residue) and as genuine only above threshold *
+# ABOVE_MARGIN (1e-7: no residue comes near it, and a genuine value there is known to 1e-7
+# relative). Real arms have genuine small ratios: the Kinova Jaco 2's joint 2 sits 1.6 mm off
+# joint 1's axis, which gives link 2's mass a column of ratio 1.1e-6 in the inertia regressor.
 DECISION_MARGIN = 1e3
+ABOVE_MARGIN = 10
 NUMERIC_DIGITS = 12      # significant digits kept of a grouping coefficient that is not rational
 RATIONAL_TOL = 1e-12     # a rational replaces a float when it reproduces it to this (relative)
 MAX_DENOMINATOR = 10 ** 4   # without a known denominator
@@ -203,20 +209,23 @@ def _coefficient(t) -> str:
     return f"{float(t)!r}*"
 
 
-def check_margin(ratios, threshold: float, what: str, margin: float = DECISION_MARGIN) -> None:
+def check_margin(ratios, threshold: float, what: str, margin: float = DECISION_MARGIN,
+                 above: float = ABOVE_MARGIN) -> None:
     """Refuse a structural decision that a rounding difference could flip: every ratio must be
-    below ``threshold / margin`` or above ``threshold * margin``.
+    below ``threshold / margin`` (a residue of an exact zero) or above ``threshold * above``
+    (a genuine value).
 
-    >>> check_margin([1e-15, 0.3], 1e-8, "rank")
+    >>> check_margin([1e-15, 1e-6, 0.3], 1e-8, "rank")
     >>> check_margin([1e-9, 0.3], 1e-8, "rank")
     Traceback (most recent call last):
     ...
-    kindyngen.base_parameters.BaseParameterError: rank: ratio 1e-09 within a factor 1000 of the threshold 1e-08; the decision would depend on rounding
+    kindyngen.base_parameters.BaseParameterError: rank: ratio 1e-09 between 1e-11 and 1e-07 (the threshold 1e-08 divided by 1000, times 10); the decision would depend on rounding
     """
     for r in np.asarray(ratios, float).ravel():
-        if threshold / margin <= r <= threshold * margin:
-            raise BaseParameterError(f"{what}: ratio {r:.3g} within a factor {margin:g} of the threshold "
-                                     f"{threshold:g}; the decision would depend on rounding")
+        if threshold / margin <= r <= threshold * above:
+            raise BaseParameterError(f"{what}: ratio {r:.3g} between {threshold / margin:g} and {threshold * above:g} "
+                                     f"(the threshold {threshold:g} divided by {margin:g}, times {above:g}); "
+                                     f"the decision would depend on rounding")
 
 
 def numeric_rank(A: np.ndarray, tol: float = RANK_TOL) -> tuple[int, np.ndarray]:

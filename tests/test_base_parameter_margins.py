@@ -9,7 +9,7 @@ import sympy
 
 from harness import robot
 from kindyngen import regressors
-from kindyngen.base_parameters import (DECISION_MARGIN, DEPENDENT_TOL, RANK_TOL, BaseParameterError,
+from kindyngen.base_parameters import (ABOVE_MARGIN, DECISION_MARGIN, DEPENDENT_TOL, RANK_TOL, BaseParameterError,
                                        find_base_parameters, numeric_rank)
 
 
@@ -34,7 +34,7 @@ def test_shipped_robots_decide_far_from_the_thresholds(name, kind):
     for ratios, tol in ((rank_ratios, RANK_TOL), (column_ratios, DEPENDENT_TOL)):
         below, above = ratios[ratios < tol], ratios[ratios >= tol]
         assert below.size == 0 or below.max() < tol / DECISION_MARGIN
-        assert above.min() > tol * DECISION_MARGIN
+        assert above.min() > tol * ABOVE_MARGIN
     print(f"{name} {kind}: rank ratios {rank_ratios[rank_ratios >= RANK_TOL].min():.2g} (kept) / "
           f"{rank_ratios[rank_ratios < RANK_TOL].max():.2g} (dropped)")
 
