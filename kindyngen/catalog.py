@@ -16,7 +16,7 @@ from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics
 from .forward_dynamics import forward_dynamics
 from .ik_lwr_dualquat import ik_dq
 from .ik_lwr_homogeneous import ik_hom
-from .kinematics_dualquat import fk_dq
+from .kinematics_dualquat import fk_dq, jacobian_dq, pose_jacobian_dq
 from .kinematics_homogeneous import fk_hom, jacobian
 from .regressors import regressor
 from .robot import RobotModel
@@ -28,6 +28,8 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("fk_hom", lambda model, params: fk_hom(model)),
     ("fk_dq", lambda model, params: fk_dq(model)),
     ("jacobian", lambda model, params: jacobian(model)),
+    ("pose_jacobian_dq", lambda model, params: pose_jacobian_dq(model)),
+    ("jacobian_dq", lambda model, params: jacobian_dq(model)),
     # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
     # the other route under a suffixed name (kindyngen/dynamics_*.py, forward_dynamics.py)
     ("M", lambda model, params: mass_matrix_crba(model, params, "M")),

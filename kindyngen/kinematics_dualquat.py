@@ -228,3 +228,101 @@ def fk_dq(model: RobotModel) -> SymbolicFunction:
         + " x = (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the "
           "product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).",
     )
+
+
+def _scaled(u, factor) -> tuple[Quat, Quat]:
+    return tuple(tuple(se.expand(factor * se.sympify(v)) for v in part) for part in u)
+
+
+def pose_jacobian_columns(model: RobotModel, q, scale=se.Rational(1, 2)):
+    """``2 scale dx/dq_i`` for every joint (dx/dq_i by default), and ``scale x``, as dual
+    quaternions.
+
+    With x = S_1 ... S_n C (``joint_lines``), P_i = S_1 ... S_{i-1} and R_i = S_i ... S_n C:
+    a revolute screw S_i = cos(q_i/2) + sin(q_i/2) l_i, l_i = u_i + e m_i, has
+    dS_i/dq_i = 1/2 l_i S_i; a slide (``_slide``) S_i = 1 + e/2 q_i u_i has dS_i/dq_i =
+    1/2 (e u_i) S_i = 1/2 l_i S_i with l_i = e u_i. So
+
+        dx/dq_i = 1/2 P_i l_i R_i = 1/2 (P_i l_i P_i^*) x = 1/2 L_i(q) x,
+
+    L_i(q) the joint's current line (its current axis direction, for a slide), a pure
+    dual quaternion in the base frame. The columns are built as P_i (l_i R_i): one prefix
+    chain P_i and one suffix chain R_i shared by all columns, l_i R_i a product by exact
+    constants, and the factor ``scale`` folded into the constant C (so it costs nothing
+    at run time): the columns are scale P_i l_i R_i, and the last product of the suffix
+    chain is scale x."""
+    lines, flange_offset = joint_lines(model)
+    screws = [_slide(u, qi) if joint.prismatic else _screw(u, m, qi)
+              for joint, (u, m), qi in zip(model.joints, lines, q)]
+    prefixes, product = [], None   # prefixes[i] = S_1 ... S_{i-1}, None for the identity
+    for screw in screws:
+        prefixes.append(product)
+        product = screw if product is None else dq_mul(product, screw)
+    suffix = _scaled(flange_offset, scale)
+    suffixes = [None] * len(screws)
+    for i in reversed(range(len(screws))):
+        suffix = dq_mul(screws[i], suffix)
+        suffixes[i] = suffix
+    columns = []
+    for joint, (u, m), prefix, rest in zip(model.joints, lines, prefixes, suffixes):
+        line = ((0, 0, 0, 0), (0, *u)) if joint.prismatic else ((0, *u), (0, *m))
+        column = dq_mul(line, rest)
+        if prefix is not None:
+            column = dq_mul(prefix, column)
+        columns.append(tuple(se.sympify(v) for v in column[0] + column[1]))
+    return columns, suffixes[0]
+
+
+def pose_jacobian_dq(model: RobotModel) -> SymbolicFunction:
+    """Pose Jacobian of the flange dual quaternion, ``pose_jacobian_dq(q) -> Jx`` (8 x n):
+    ``vec8(xdot) = Jx qd`` with x as ``fk_dq`` gives it (DQ Robotics' pose Jacobian)."""
+    q = port_symbols("q", (model.n,))
+    columns, _ = pose_jacobian_columns(model, q)
+    return SymbolicFunction(
+        name="pose_jacobian_dq",
+        summary="Pose Jacobian of the flange dual quaternion: vec8(xdot) = Jx(q) qd.",
+        inputs=(q_port(model),),
+        outputs=(Port("Jx", (8, model.n),
+                      "dx/dq: column i = 1/2 L_i(q) x, L_i = joint i's current line (u_i + e m_i; e u_i "
+                      "for a prismatic joint) in the base frame; rows in fk_dq's layout "
+                      "(rw, rx, ry, rz, dw, dx, dy, dz) (row-major)",
+                      "1 (rows 0-3), m (rows 4-7) per rad (per m for prismatic joints)"),),
+        input_symbols=(q,),
+        output_exprs=(tuple(column[k] for k in range(8) for column in columns),),
+        conventions=frame_convention(model)
+        + " x = (rw, rx, ry, rz, dw, dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with "
+          "fk_dq's sign (the product of the joint dual quaternions, not normalised to rw >= 0); "
+          "vec8(xdot) = Jx qd.",
+    )
+
+
+def jacobian_dq(model: RobotModel) -> SymbolicFunction:
+    """The geometric Jacobian from the pose Jacobian and x, ``jacobian_dq(q) -> J`` (6 x n):
+    w = 2 vec(rdot r^*) and v = tdot = 2 vec(ddot r^* + d rdot^*) (t = 2 d r^*), column by
+    column, with (rdot, ddot) the column of ``pose_jacobian_dq``. Same convention as
+    ``jacobian``: rows 0-2 linear velocity of the flange origin, rows 3-5 angular velocity,
+    base-frame axes."""
+    q = port_symbols("q", (model.n,))
+    # scale 1: the columns are 2 dx/dq_i and the suffix chain ends in x itself
+    doubled, (r, d) = pose_jacobian_columns(model, q, scale=1)
+    r_conj = (r[0], -r[1], -r[2], -r[3])
+    columns = []
+    for column in doubled:
+        rdot2, ddot2 = column[:4], column[4:]
+        angular = quat_mul(rdot2, r_conj)[1:]
+        linear = [a + b for a, b in zip(quat_mul(ddot2, r_conj)[1:],
+                                        quat_mul(d, (rdot2[0], -rdot2[1], -rdot2[2], -rdot2[3]))[1:])]
+        columns.append(tuple(linear) + tuple(angular))
+    return SymbolicFunction(
+        name="jacobian_dq",
+        summary="Geometric Jacobian of the flange: [v; w] = J(q) qd (dual-quaternion route).",
+        inputs=(q_port(model),),
+        outputs=(Port("J", (6, model.n),
+                      "rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; "
+                      "both in base-frame axes (row-major)", "m/rad (rows 0-2), 1 (rows 3-5)"),),
+        input_symbols=(q,),
+        output_exprs=(tuple(se.sympify(column[k]) for k in range(6) for column in columns),),
+        conventions=frame_convention(model)
+        + " J is expressed in base-frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED); "
+          "computed from the pose Jacobian Jx and x: w = 2 vec(rdot r^*), v = 2 vec(ddot r^* + d rdot^*).",
+    )
