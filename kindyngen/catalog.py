@@ -11,6 +11,7 @@ from typing import Callable, Optional
 
 import symengine as se
 
+from .dynamics_dualquat import coriolis_dq, gravity_dq, inverse_dynamics_dq, mass_matrix_dq, regressor_dq
 from .dynamics_lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
 from .forward_dynamics import forward_dynamics
@@ -41,6 +42,13 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
     ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
     ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),
+    # the same dynamics in dual-quaternion form (kindyngen/dynamics_dualquat.py); Y_dq: the
+    # regressor of tau_dq on Y's base parameters, the same function in both params modes
+    ("M_dq", lambda model, params: mass_matrix_dq(model, params, "M_dq")),
+    ("g_dq", lambda model, params: gravity_dq(model, params, "g_dq")),
+    ("c_dq", lambda model, params: coriolis_dq(model, params, "c_dq")),
+    ("tau_dq", lambda model, params: inverse_dynamics_dq(model, params, "tau_dq")),
+    ("Y_dq", lambda model, params: regressor_dq(model, "Y_dq")),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik_lwr_*.py
     ("ik_hom", lambda model, params: ik_hom(model)),
     ("ik_dq", lambda model, params: ik_dq(model)),
