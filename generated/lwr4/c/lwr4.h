@@ -63,6 +63,36 @@ void lwr4_fk_dq(const double *q, double *x);
 void lwr4_jacobian(const double *q, double *J);
 
 /*
+ * pose_jacobian_dq: Pose Jacobian of the flange dual quaternion: vec8(xdot) = Jx(q) qd.
+ * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
+ * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
+ * dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with fk_dq's sign (the
+ * product of the joint dual quaternions, not normalised to rw >= 0); vec8(xdot) = Jx qd.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out Jx[56]: 8 x 7 double, dx/dq: column i = 1/2 L_i(q) x, L_i = joint i's current line (u_i + e m_i; e u_i for a prismatic joint) in the base frame; rows in fk_dq's layout (rw, rx, ry, rz, dw, dx, dy, dz) (row-major) [1 (rows 0-3), m (rows 4-7) per rad (per m for prismatic joints)]
+ *
+ * Cost: 228 add, 359 mul, 14 call
+ * (as derived, before CSE: 2072 add, 16208 mul, 8384 call).
+ */
+void lwr4_pose_jacobian_dq(const double *q, double *Jx);
+
+/*
+ * jacobian_dq: Geometric Jacobian of the flange: [v; w] = J(q) qd (dual-quaternion route).
+ * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
+ * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
+ * frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED); computed from the pose
+ * Jacobian Jx and x: w = 2 vec(rdot r^*), v = 2 vec(ddot r^* + d rdot^*).
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
+ *
+ * Cost: 417 add, 577 mul, 14 call
+ * (as derived, before CSE: 16009 add, 116220 mul, 63688 call).
+ */
+void lwr4_jacobian_dq(const double *q, double *J);
+
+/*
  * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
@@ -212,6 +242,93 @@ void lwr4_g_lagrange(const double *q, double *g);
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call).
  */
 void lwr4_c_christoffel(const double *q, const double *qd, double *c);
+
+/*
+ * M_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): inertia matrix M(q), composite inertia operators carried by the joint adjoints.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
+ *
+ * Cost: 165 add, 241 mul, 12 call
+ * (as derived, before CSE: 10819 add, 36451 mul, 12471 call).
+ */
+void lwr4_M_dq(const double *q, double *M);
+
+/*
+ * g_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): gravity torques g = tau(q, 0, 0) by dual-quaternion Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out g[7]: 7 double, gravity torques [N m]
+ *
+ * Cost: 44 add, 98 mul, 12 call
+ * (as derived, before CSE: 1676 add, 8829 mul, 3217 call).
+ */
+void lwr4_g_dq(const double *q, double *g);
+
+/*
+ * c_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by dual-quaternion Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ *
+ * Cost: 290 add, 420 mul, 12 call
+ * (as derived, before CSE: 91914 add, 408827 mul, 136861 call).
+ */
+void lwr4_c_dq(const double *q, const double *qd, double *c);
+
+/*
+ * tau_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): inverse dynamics tau = M qdd + c + g by dual-quaternion Newton-Euler.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out tau[7]: 7 double, joint torques [N m]
+ *
+ * Cost: 313 add, 440 mul, 12 call
+ * (as derived, before CSE: 102182 add, 437860 mul, 146946 call).
+ */
+void lwr4_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
+
+/*
+ * Y_dq: Torque regressor on base parameters from the dual-quaternion route: tau = Y_dq(q, qd, qdd) pi (the columns and values of Y).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame:
+ * (0, 0, -9.81) m/s^2. Rows: tau0, tau1, tau2, tau3, tau4, tau5, tau6. Columns: the 43
+ * base parameters (rank of the full 70-column regressor), named after the barycentric
+ * parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per link, inertia
+ * about the link frame origin in link-frame axes; suffix R: other parameters grouped into
+ * it); their expressions and the robot's values are in base_params.json. Y times those
+ * values equals the modelled quantity.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
+ *
+ * Cost: 611 add, 853 mul, 12 call
+ * (as derived, before CSE: 115759 add, 499001 mul, 168182 call).
+ */
+void lwr4_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 
 /*
  * ik_hom: Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
