@@ -21,6 +21,19 @@ def _rx(t):
     return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
 
 
+def origin_matrix(xyz, rpy) -> np.ndarray:
+    """4x4 of a URDF ``<origin>``: ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)``; entries may be
+    numbers or expression strings such as ``"pi/2"``."""
+    import sympy
+    r, p, y = (float(sympy.sympify(v)) for v in rpy)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    T = np.eye(4)
+    T[:3, :3] = (np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+                 @ np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]]))
+    T[:3, 3] = [float(v) for v in xyz]
+    return T
+
+
 def _se3(R=np.eye(3), p=np.zeros(3)):
     return pin.SE3(np.asarray(R, float), np.asarray(p, float))
 

@@ -21,7 +21,7 @@ import symengine as se
 import sympy
 
 from harness import robot
-from reference import fk_numpy, random_configurations
+from reference import fk_numpy, origin_matrix, random_configurations
 from test_ik import angle_diff, fk_batch, matrix_to_dq
 
 from kindyngen.ik_common import ADMISSIBLE, LIMITS, UNREACHABLE, lwr_geometry
@@ -56,17 +56,6 @@ def solve(model, form, T, theta3, rng=None):
 
 
 # --- independent forward kinematics ---------------------------------------------------------------
-def rpy_numpy(xyz, rpy):
-    """4x4 of a URDF origin: T(xyz) Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = (float(sympy.sympify(v)) for v in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    T = np.eye(4)
-    T[:3, :3] = (np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-                 @ np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]]))
-    T[:3, 3] = [float(v) for v in xyz]
-    return T
-
-
 def axis_rotation(axis, q):
     """(N, 4, 4) rotations by angles q (N,) about the unit ``axis`` (Rodrigues)."""
     u = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -82,10 +71,10 @@ def frames_fk(spec, Q):
     T = np.tile(np.eye(4), (len(Q), 1, 1))
     for i, joint in enumerate(spec["joints"]):
         origin = joint.get("origin", {})
-        placed = rpy_numpy(origin.get("xyz", (0, 0, 0)), origin.get("rpy", (0, 0, 0)))
+        placed = origin_matrix(origin.get("xyz", (0, 0, 0)), origin.get("rpy", (0, 0, 0)))
         T = T @ placed @ axis_rotation(joint["axis"], Q[:, i])
     if "tool" in spec:
-        T = T @ rpy_numpy(spec["tool"].get("xyz", (0, 0, 0)), spec["tool"].get("rpy", (0, 0, 0)))
+        T = T @ origin_matrix(spec["tool"].get("xyz", (0, 0, 0)), spec["tool"].get("rpy", (0, 0, 0)))
     return T
 
 
@@ -157,7 +146,7 @@ def placed_lwr4():
     tool = rpy_xyz((R(1, 100), R(1, 50), R(1, 10)), (0, sympy.pi / 2, R(3, 10)))
     joints = (dataclasses.replace(lwr4.joints[0], before=base * lwr4.joints[0].before),) + lwr4.joints[1:]
     model = dataclasses.replace(lwr4, name="lwr4_placed", joints=joints, tool=tool)
-    B, F = rpy_numpy((0.1, -0.2, 0.3), (np.pi / 2, 0, np.pi / 4)), rpy_numpy((0.01, 0.02, 0.1), (0, np.pi / 2, 0.3))
+    B, F = origin_matrix((0.1, -0.2, 0.3), (np.pi / 2, 0, np.pi / 4)), origin_matrix((0.01, 0.02, 0.1), (0, np.pi / 2, 0.3))
     return model, (lambda Q: B @ fk_batch(lwr4, Q) @ F)
 
 

@@ -16,13 +16,12 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-import sympy
 
 from harness import LANGS, ROOT
 from kindyngen.evaluate import load_generated
 from kindyngen.pipeline import generate
 from kindyngen.robot import load_robot, parse_robot
-from reference import dh_numbers, pinocchio_model, random_configurations
+from reference import dh_numbers, origin_matrix, pinocchio_model, random_configurations
 
 N = 1000
 FUNCTIONS = {"fk_dq", "jacobian", "pose_jacobian_dq", "jacobian_dq"}
@@ -86,16 +85,6 @@ def line_times(u, m, x):
     return np.concatenate([qmul(pure(u), r), qmul(pure(u), d) + qmul(pure(m), r)], axis=-1)
 
 
-def rpy_matrix(xyz, rpy):
-    r, p, y = (float(sympy.sympify(v)) for v in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    T = np.eye(4)
-    T[:3, :3] = (np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-                 @ np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]]))
-    T[:3, 3] = [float(v) for v in xyz]
-    return T
-
-
 def frames_pose_and_jacobian(spec, q):
     """Tool pose (4x4) and geometric Jacobian [v; w] (base axes) of a ``dh: none`` arm by a
     plain product of 4x4 matrices."""
@@ -103,7 +92,7 @@ def frames_pose_and_jacobian(spec, q):
     axes = []
     for joint, qi in zip(spec["joints"], q):
         origin = joint.get("origin", {})
-        T = T @ rpy_matrix(origin.get("xyz", (0, 0, 0)), origin.get("rpy", (0, 0, 0)))
+        T = T @ origin_matrix(origin.get("xyz", (0, 0, 0)), origin.get("rpy", (0, 0, 0)))
         a = np.asarray(joint["axis"], float) / np.linalg.norm(joint["axis"])
         prismatic = joint.get("type") == "prismatic"
         axes.append((T[:3, :3] @ a, T[:3, 3].copy(), prismatic))
@@ -114,7 +103,7 @@ def frames_pose_and_jacobian(spec, q):
             K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
             motion[:3, :3] = np.eye(3) + math.sin(qi) * K + (1 - math.cos(qi)) * K @ K
         T = T @ motion
-    T = T @ rpy_matrix(spec["tool"]["xyz"], spec["tool"]["rpy"])
+    T = T @ origin_matrix(spec["tool"]["xyz"], spec["tool"]["rpy"])
     J = np.zeros((6, len(q)))
     for i, (u, p, prismatic) in enumerate(axes):
         J[:, i] = np.r_[u, 0, 0, 0] if prismatic else np.r_[np.cross(u, T[:3, 3] - p), u]
