@@ -63,6 +63,27 @@ def _cmd_generate(args) -> int:
     return 0
 
 
+def _cmd_describe(args) -> int:
+    import yaml
+    from .description_writer import describe
+    model = load(args.robot, args)
+    try:
+        data = describe(model)
+    except ValueError as exc:       # a standard DH table: its link frames are off the joint axes
+        raise UsageError(f"{args.robot}: {exc}") from None
+    header = (f"# {model.name}: written by kindyngen describe from {Path(args.robot).name}"
+              + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "") + "\n")
+    text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    if args.out:
+        try:
+            Path(args.out).write_text(text)
+        except OSError as exc:
+            raise UsageError(f"--out {args.out}: cannot write: {exc.strerror}") from None
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def _cmd_count(args) -> int:
     from .catalog import NAMES
     from .pipeline import build_programs
@@ -340,6 +361,16 @@ def parser() -> argparse.ArgumentParser:
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")
     c.set_defaults(run=_cmd_count)
+
+    w = sub.add_parser("describe", help="write a robot (a URDF's chain, say) as a YAML description",
+                       description=("Read a robot description (URDF or YAML) and write it as a YAML description "
+                                    "with joints by origin and axis (dh: none): the chain, merged fixed links, "
+                                    "tool and limits as KinDynGen reads them, ready to edit and to load again. "
+                                    "A standard DH table is refused (its link frames are off the joint axes)."))
+    w.add_argument("robot", metavar="ROBOT", help="a URDF or YAML description")
+    _robot_options(w)
+    w.add_argument("--out", metavar="FILE", help="write here instead of standard output")
+    w.set_defaults(run=_cmd_describe)
 
     e = sub.add_parser("eval", help="evaluate a generated function on JSON inputs from stdin",
                        description=("Read a JSON object of named inputs from standard input (each an array of "

@@ -44,12 +44,18 @@ def origin(placement: Placement) -> dict:
     >>> from kindyngen.placement import rpy_xyz
     >>> origin(rpy_xyz((0.1, 0, 0), (sympy.pi / 2, 0, 0)))
     {'xyz': [0.1, 0.0, 0.0], 'rpy': ['pi/2', 0, 0]}
+    >>> origin(rpy_xyz((0, 0, 0), (0, sympy.pi / 2, 0)))["rpy"]    # gimbal lock: roll 0
+    [0, 'pi/2', 0]
     """
     R, p = placement.matrix()
     R = R.applyfunc(sympy.nsimplify) if R.has(sympy.Float) else R
-    yaw = sympy.atan2(R[1, 0], R[0, 0])
-    pitch = sympy.atan2(-R[2, 0], sympy.sqrt(R[0, 0] ** 2 + R[1, 0] ** 2))
-    roll = sympy.atan2(R[2, 1], R[2, 2])
+    cos_pitch = sympy.simplify(sympy.sqrt(R[0, 0] ** 2 + R[1, 0] ** 2))
+    pitch = sympy.atan2(-R[2, 0], cos_pitch)
+    if cos_pitch == 0:
+        # pitch = +-pi/2: only roll -+ yaw is defined; roll = 0 and all of it in yaw
+        roll, yaw = sympy.Integer(0), sympy.atan2(-R[0, 1], R[1, 1])
+    else:
+        roll, yaw = sympy.atan2(R[2, 1], R[2, 2]), sympy.atan2(R[1, 0], R[0, 0])
     return {"xyz": [_number(v) for v in p], "rpy": [_angle(sympy.simplify(a)) for a in (roll, pitch, yaw)]}
 
 
