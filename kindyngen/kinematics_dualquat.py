@@ -254,10 +254,7 @@ def pose_jacobian_columns(model: RobotModel, q, scale=se.Rational(1, 2)):
     lines, flange_offset = joint_lines(model)
     screws = [_slide(u, qi) if joint.prismatic else _screw(u, m, qi)
               for joint, (u, m), qi in zip(model.joints, lines, q)]
-    prefixes, product = [], None   # prefixes[i] = S_1 ... S_{i-1}, None for the identity
-    for screw in screws:
-        prefixes.append(product)
-        product = screw if product is None else dq_mul(product, screw)
+    prefixes, _ = _prefix_products(screws)   # prefixes[i] = S_1 ... S_{i-1}, None for the identity
     suffix = _scaled(flange_offset, scale)
     suffixes = [None] * len(screws)
     for i in reversed(range(len(screws))):
@@ -296,23 +293,59 @@ def pose_jacobian_dq(model: RobotModel) -> SymbolicFunction:
     )
 
 
+def _prefix_products(screws):
+    """[S_1 ... S_{i-1} for every i] (None for the identity) and the product of all."""
+    prefixes, product = [], None
+    for screw in screws:
+        prefixes.append(product)
+        product = screw if product is None else dq_mul(product, screw)
+    return prefixes, product
+
+
+def current_lines(model: RobotModel, q):
+    """Every joint's line now, ``L_i(q) = P_i l_i P_i^*`` as (direction w, moment m about the
+    base origin) in the base frame (a slide: (0, direction)), and x = P_{n+1} C.
+
+    ``Jx_i = 1/2 L_i(q) x`` (:func:`pose_jacobian_columns`): these are the lines the pose
+    Jacobian is made of. The sandwich of a pure line ``u + e m`` by ``P = r + e d`` is
+    ``r u r* + e (r m r* + d u r* + r u d*)``."""
+    lines, flange_offset = joint_lines(model)
+    screws = [_slide(u, qi) if joint.prismatic else _screw(u, m, qi)
+              for joint, (u, m), qi in zip(model.joints, lines, q)]
+    prefixes, product = _prefix_products(screws)
+    out = []
+    for joint, (u, m), prefix in zip(model.joints, lines, prefixes):
+        if prefix is None:
+            direction, moment = list(u), list(m)
+        else:
+            r, d = prefix
+            rc, dc = (r[0], -r[1], -r[2], -r[3]), (d[0], -d[1], -d[2], -d[3])
+            pure_u, pure_m = (0, *u), (0, *m)
+            ru = quat_mul(r, pure_u)
+            direction = list(quat_mul(ru, rc)[1:])
+            moment = [a + b + c for a, b, c in zip(quat_mul(quat_mul(r, pure_m), rc)[1:],
+                                                   quat_mul(quat_mul(d, pure_u), rc)[1:], quat_mul(ru, dc)[1:])]
+        out.append(((0, 0, 0), direction) if joint.prismatic else (direction, moment))
+    return out, dq_mul(product, flange_offset)
+
+
 def jacobian_dq(model: RobotModel) -> SymbolicFunction:
-    """The geometric Jacobian from the pose Jacobian and x, ``jacobian_dq(q) -> J`` (6 x n):
-    w = 2 vec(rdot r^*) and v = tdot = 2 vec(ddot r^* + d rdot^*) (t = 2 d r^*), column by
-    column, with (rdot, ddot) the column of ``pose_jacobian_dq``. Same convention as
-    ``jacobian``: rows 0-2 linear velocity of the flange origin, rows 3-5 angular velocity,
-    base-frame axes."""
+    """The geometric Jacobian by the dual-quaternion route, ``jacobian_dq(q) -> J`` (6 x n),
+    from the joints' current lines L_i(q) = u_i + e m_i that make the pose Jacobian
+    (``Jx_i = 1/2 L_i x``) and the flange position t = 2 vec(d r^*) of x: a revolute
+    column is ``[m_i + u_i x t; u_i]`` (the velocity of the point t turning about the line),
+    a prismatic one ``[u_i; 0]``. Same convention as ``jacobian``: rows 0-2 linear velocity
+    of the flange origin, rows 3-5 angular velocity, base-frame axes."""
     q = port_symbols("q", (model.n,))
-    # scale 1: the columns are 2 dx/dq_i and the suffix chain ends in x itself
-    doubled, (r, d) = pose_jacobian_columns(model, q, scale=1)
-    r_conj = (r[0], -r[1], -r[2], -r[3])
+    lines, (r, d) = current_lines(model, q)
+    t = [2 * v for v in quat_mul(d, (r[0], -r[1], -r[2], -r[3]))[1:]]
     columns = []
-    for column in doubled:
-        rdot2, ddot2 = column[:4], column[4:]
-        angular = quat_mul(rdot2, r_conj)[1:]
-        linear = [a + b for a, b in zip(quat_mul(ddot2, r_conj)[1:],
-                                        quat_mul(d, (rdot2[0], -rdot2[1], -rdot2[2], -rdot2[3]))[1:])]
-        columns.append(tuple(linear) + tuple(angular))
+    for (w, m), joint in zip(lines, model.joints):
+        if joint.prismatic:
+            columns.append(tuple(m) + (0, 0, 0))
+            continue
+        w_cross_t = (w[1] * t[2] - w[2] * t[1], w[2] * t[0] - w[0] * t[2], w[0] * t[1] - w[1] * t[0])
+        columns.append(tuple(a + b for a, b in zip(m, w_cross_t)) + tuple(w))
     return SymbolicFunction(
         name="jacobian_dq",
         summary="Geometric Jacobian of the flange: [v; w] = J(q) qd (dual-quaternion route).",
@@ -324,5 +357,6 @@ def jacobian_dq(model: RobotModel) -> SymbolicFunction:
         output_exprs=(tuple(se.sympify(column[k]) for k in range(6) for column in columns),),
         conventions=frame_convention(model)
         + " J is expressed in base-frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED); "
-          "computed from the pose Jacobian Jx and x: w = 2 vec(rdot r^*), v = 2 vec(ddot r^* + d rdot^*).",
+          "computed from the joints' current lines L_i = u_i + e m_i of the pose Jacobian (Jx_i = 1/2 L_i x) "
+          "and t = 2 vec(d r^*): revolute columns [m_i + u_i x t; u_i], prismatic [u_i; 0].",
     )
