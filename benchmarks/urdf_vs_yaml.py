@@ -54,20 +54,27 @@ def panda_pair(folder: Path):
     return urdf, parse_robot(data, "robots/panda.yaml + tool")
 
 
-def _timed_counts(load, repeats: int):
+def _timed_counts(loads: dict, repeats: int):
+    """{name: (op counts after CSE, median seconds)} for each description loader; one
+    untimed warm-up run first (imports, caches), then the descriptions alternate, so that
+    neither pays for going first."""
     from kindyngen.pipeline import build_programs
-    seconds, programs = [], None
+    for load in loads.values():
+        build_programs(load(), progress=False)
+    seconds = {name: [] for name in loads}
+    counts = {}
     for _ in range(repeats):
-        start = time.perf_counter()
-        programs = build_programs(load(), progress=False)
-        seconds.append(time.perf_counter() - start)
-    counts = {p.function.name: p.after.to_json() for p in programs}
-    return counts, statistics.median(seconds)
+        for name, load in loads.items():
+            start = time.perf_counter()
+            programs = build_programs(load(), progress=False)
+            seconds[name].append(time.perf_counter() - start)
+            counts[name] = {p.function.name: p.after.to_json() for p in programs}
+    return {name: (counts[name], statistics.median(seconds[name])) for name in loads}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.urdf_vs_yaml", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--repeats", type=int, default=3, help="generation runs per description (median)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed generation runs per description (median)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="results folder")
     args = parser.parse_args(argv)
     from kindyngen.robot import load_robot, parse_robot
@@ -76,8 +83,9 @@ def main(argv=None) -> int:
         data = yaml.safe_load((ROOT / "robots" / "panda.yaml").read_text())
         data["tool"] = TOOL
         # loading is part of generation: each run reads its description again
-        urdf_counts, urdf_time = _timed_counts(lambda: load_robot(urdf_path, tip="panda_link8"), args.repeats)
-        yaml_counts, yaml_time = _timed_counts(lambda: parse_robot(data, "panda.yaml"), args.repeats)
+        timed = _timed_counts({"urdf": lambda: load_robot(urdf_path, tip="panda_link8"),
+                               "yaml": lambda: parse_robot(data, "panda.yaml")}, args.repeats)
+        (urdf_counts, urdf_time), (yaml_counts, yaml_time) = timed["urdf"], timed["yaml"]
     result = {"machine": machine(), "repeats": args.repeats,
               "generation_seconds": {"urdf": round(urdf_time, 2), "yaml": round(yaml_time, 2)},
               "opcounts_after_cse": {name: {"urdf": urdf_counts[name], "yaml": yaml_counts[name]}
