@@ -31,7 +31,7 @@ Example:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import sympy
 
@@ -195,11 +195,39 @@ def clean_angle(value: float, field: str, snap: bool = True) -> CleanAngle:
     return CleanAngle(sympy.Rational(repr(x)))
 
 
-def exact_decimal(value: float) -> sympy.Rational:
-    """A float as the exact rational of its shortest decimal (``0.1`` -> 1/10), the same
-    on every machine.
+TINY_LENGTH = 1e-12     # m: below, a rounding residue (6.1e-17 = 1 m cos(pi/2)), not a design
 
-    >>> exact_decimal(0.333)
-    333/1000
+
+def exact_length(value: float) -> sympy.Rational:
+    """A length written as a float, exact: the rational of its decimal, 0 below a picometre.
+
+    >>> exact_length(0.333), exact_length(6.1e-17)
+    (333/1000, 0)
     """
-    return sympy.Rational(repr(float(value)))
+    return sympy.Integer(0) if abs(value) < TINY_LENGTH else sympy.Rational(repr(float(value)))
+
+
+@dataclass
+class Reading:
+    """What reading one description file needs besides its data: its name, whether
+    near-exact angles are snapped, and the notes (in order, each once) the user is shown
+    about what reading changed. Shared by the YAML and the URDF reader."""
+
+    source: str
+    snap_angles: bool = True
+    notes: list = field(default_factory=list)
+
+    def note(self, text: str) -> None:
+        if text not in self.notes:
+            self.notes.append(text)
+
+    def angle(self, value: float, what: str) -> sympy.Expr:
+        """A float angle cleaned by :func:`clean_angle`, its note (if snapped) kept.
+
+        >>> r = Reading("f.urdf"); r.angle(1.5708, "rpy[0]"), len(r.notes)
+        (pi/2, 1)
+        """
+        cleaned = clean_angle(value, f"{self.source}: {what}", self.snap_angles)
+        if cleaned.note:
+            self.note(cleaned.note)
+        return cleaned.value

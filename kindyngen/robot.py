@@ -19,7 +19,6 @@ import ast
 import difflib
 import math
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import sympy
@@ -27,7 +26,8 @@ import yaml
 
 from .model import (CONVENTIONS, DHRow, Friction, Joint, Link, RobotDescriptionError, RobotModel,  # noqa: F401
                     check_inertia)
-from .placement import Placement, axis_alignment, clean_angle, dh_modified, dh_standard, rpy_xyz, unit_axis
+from .placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
+                        unit_axis)
 from .urdf import load_urdf
 
 _SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
@@ -153,7 +153,6 @@ def _require(mapping: dict, key: str, source: str, prefix: str):
     return mapping[key]
 
 
-TINY_LENGTH = 1e-12     # m
 _LENGTH_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*")
 _RESERVED = re.compile(r"t[0-9]+")  # names of CSE temporaries in generated code
 
@@ -171,44 +170,27 @@ def _length(value, source: str, field: str):
             raise RobotDescriptionError(source, field, f"the name {name!r} is reserved for generated temporaries")
         return sympy.Symbol(name, real=True)
     value = _number(value, source, field, exact=True)
-    # below a picometre a length is a rounding residue (6.1e-17 = 1 m cos(pi/2)), not a design
-    return sympy.Integer(0) if value.is_number and abs(float(value)) < TINY_LENGTH else value
+    return exact_length(float(value)) if value.is_Rational else value
 
 
-@dataclass
-class _Reading:
-    """What parsing one file needs besides the data: its name, whether near-exact angles are
-    snapped, and the notes the user is shown about what was changed."""
-
-    source: str
-    snap_angles: bool = True
-    notes: list = None
-
-    def __post_init__(self):
-        self.notes = [] if self.notes is None else self.notes
-
-
-def _angle(value, reading: _Reading, field: str) -> sympy.Expr:
+def _angle(value, reading: Reading, field: str) -> sympy.Expr:
     """An angle: an expression (``pi/2``) exactly, a number cleaned by
     :func:`kindyngen.placement.clean_angle` (floats written for multiples of pi/12 read as
     them; within 1e-5 snapped with a note unless the user keeps them)."""
     value = _number(value, reading.source, field, exact=True)
     if not value.is_Rational or value.is_Integer and value == 0:
         return value
-    cleaned = clean_angle(float(value), f"{reading.source}: {field}", reading.snap_angles)
-    if cleaned.note:
-        reading.notes.append(cleaned.note)
-    return cleaned.value
+    return reading.angle(float(value), field)
 
 
-def _kind(row, reading: _Reading, field: str) -> str:
+def _kind(row, reading: Reading, field: str) -> str:
     kind = row.get("type", "revolute")
     if kind not in JOINT_TYPES:
         raise RobotDescriptionError(reading.source, f"{field}.type", f"expected one of {JOINT_TYPES}, got {kind!r}")
     return kind
 
 
-def _dh_placement(row, convention: str, kind: str, reading: _Reading, field: str):
+def _dh_placement(row, convention: str, kind: str, reading: Reading, field: str):
     """(before, after, offset, DH row) of a DH row; a revolute row's angle offset is part of
     its motion, a prismatic row's displacement offset is its ``d``."""
     source = reading.source
@@ -225,7 +207,7 @@ def _dh_placement(row, convention: str, kind: str, reading: _Reading, field: str
     return before, after, _angle(row.get("offset", 0), reading, f"{field}.offset"), DHRow(a=a, alpha=alpha, d=d)
 
 
-def parse_origin(value, reading: _Reading, field: str) -> Placement:
+def parse_origin(value, reading: Reading, field: str) -> Placement:
     """``{xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` (both optional, zero) as a placement
     ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (the URDF convention)."""
     if not isinstance(value, dict):
@@ -251,7 +233,7 @@ def parse_axis(value, source: str, field: str) -> tuple:
     return unit_axis(numbers)
 
 
-def _frames_placement(row, kind: str, reading: _Reading, field: str):
+def _frames_placement(row, kind: str, reading: Reading, field: str):
     """(before, after, offset, None) of a joint given by origin and axis."""
     _check_keys(row, FRAME_JOINT_KEYS, reading.source, field + ".")
     origin = parse_origin(row.get("origin", {}), reading, f"{field}.origin")
@@ -259,7 +241,7 @@ def _frames_placement(row, kind: str, reading: _Reading, field: str):
     return origin * align, align.inverse(), sympy.Integer(0), None
 
 
-def _parse_joint(row, convention: str, reading: _Reading, field: str) -> Joint:
+def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     source = reading.source
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
@@ -317,7 +299,7 @@ def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) 
 def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> RobotModel:
     """Build a :class:`RobotModel` from already-parsed YAML data (``snap_angles``: see
     :func:`kindyngen.placement.clean_angle`; what was snapped is in ``model.notes``)."""
-    reading = _Reading(source, snap_angles)
+    reading = Reading(source, snap_angles)
     if not isinstance(data, dict):
         raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
     _check_keys(data, TOP_KEYS, source, "")

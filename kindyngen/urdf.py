@@ -48,41 +48,27 @@ import difflib
 import math
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field as dataclass_field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np     # only to check inertias as written: nothing in the model is computed with it
 import sympy
 
 from .model import Joint, Link, RobotDescriptionError, RobotModel, check_inertia
-from .placement import Placement, axis_alignment, clean_angle, rpy_xyz, unit_axis
+from .placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
 
 GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
 UNSUPPORTED = ("floating", "planar")          # several degrees of freedom: not a serial-arm joint
 JOINT_TYPES = tuple(MOVING) + ("fixed",) + UNSUPPORTED
-TINY_LENGTH = 1e-12     # m: below, a rounding residue (6.1e-17 = 1 m cos(pi/2)), not a design
 TINY_RESIDUE = 1e-20    # an evaluated inertia or CoM entry below this is an exact cancellation
 SIGNIFICANT_DIGITS = 17  # a double's worth: non-rational entries are rounded to this
 # a decimal as URDF parsers read it (float() would also accept nan, inf and 1_0)
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 
 
-@dataclass
-class _Reading:
-    """One file being read: its name, whether near-exact angles are snapped, and the notes
-    (in order, each once) the user is shown about what reading changed."""
-
-    source: str
-    snap_angles: bool = True
-    notes: list = dataclass_field(default_factory=list)
-
-    def error(self, field: str, reason: str) -> RobotDescriptionError:
-        return RobotDescriptionError(self.source, field, reason)
-
-    def note(self, text: str) -> None:
-        if text not in self.notes:
-            self.notes.append(text)
+def _error(reading: Reading, field: str, reason: str) -> RobotDescriptionError:
+    return RobotDescriptionError(reading.source, field, reason)
 
 
 @dataclass(frozen=True)
@@ -130,41 +116,36 @@ class _Tree:
 
 # ------------------------------------------------------------------ numbers and elements
 
-def _floats(text: str | None, count: int, reading: _Reading, field: str) -> tuple[float, ...]:
+def _floats(text: str | None, count: int, reading: Reading, field: str) -> tuple[float, ...]:
     """``count`` whitespace-separated finite decimals.
 
-    >>> _floats("0 0.333 -1e-3", 3, _Reading("f.urdf"), "xyz")
+    >>> _floats("0 0.333 -1e-3", 3, Reading("f.urdf"), "xyz")
     (0.0, 0.333, -0.001)
     """
     tokens = (text or "").split()
     if len(tokens) != count:
-        raise reading.error(field, f"expected {count} numbers, got {text!r}")
+        raise _error(reading, field, f"expected {count} numbers, got {text!r}")
     for token in tokens:
         if not _NUMBER.fullmatch(token):
             hint = " (a xacro expression: run xacro on the file first)" if "$" in token else ""
-            raise reading.error(field, f"cannot read {token!r} as a number{hint}")
+            raise _error(reading, field, f"cannot read {token!r} as a number{hint}")
     values = tuple(float(token) for token in tokens)
     if not all(math.isfinite(v) for v in values):
-        raise reading.error(field, f"expected finite numbers, got {text!r}")
+        raise _error(reading, field, f"expected finite numbers, got {text!r}")
     return values
 
 
-def _attribute(element: ET.Element, name: str, reading: _Reading, field: str, default: float | None = None) -> float:
+def _attribute(element: ET.Element, name: str, reading: Reading, field: str, default: float | None = None) -> float:
     """One numeric attribute (``default`` when absent, an error when there is none)."""
     text = element.get(name)
     if text is None:
         if default is None:
-            raise reading.error(f"{field} {name}", "missing")
+            raise _error(reading, f"{field} {name}", "missing")
         return default
     return _floats(text, 1, reading, f"{field} {name}")[0]
 
 
-def _length(value: float):
-    """A length as written, exact (below a picometre: 0)."""
-    return sympy.Integer(0) if abs(value) < TINY_LENGTH else sympy.Rational(repr(value))
-
-
-def _read_origin(element: ET.Element | None, reading: _Reading, field: str) -> _Origin:
+def _read_origin(element: ET.Element | None, reading: Reading, field: str) -> _Origin:
     """An optional ``<origin xyz rpy>`` (absent parts zero)."""
     field = f"{field} origin"
     if element is None:
@@ -173,26 +154,21 @@ def _read_origin(element: ET.Element | None, reading: _Reading, field: str) -> _
                    _floats(element.get("rpy", "0 0 0"), 3, reading, f"{field} rpy"), field)
 
 
-def _placement(origin: _Origin, reading: _Reading) -> Placement:
+def _placement(origin: _Origin, reading: Reading) -> Placement:
     """An origin as an exact placement ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)``, noting every
     snapped angle."""
-    angles = []
-    for k, value in enumerate(origin.rpy):
-        cleaned = clean_angle(value, f"{reading.source}: {origin.field} rpy[{k}]", reading.snap_angles)
-        if cleaned.note:
-            reading.note(cleaned.note)
-        angles.append(cleaned.value)
-    return rpy_xyz([_length(v) for v in origin.xyz], angles)
+    angles = [reading.angle(value, f"{origin.field} rpy[{k}]") for k, value in enumerate(origin.rpy)]
+    return rpy_xyz([exact_length(v) for v in origin.xyz], angles)
 
 
-def _name(element: ET.Element, what: str, index: int, reading: _Reading) -> str:
+def _name(element: ET.Element, what: str, index: int, reading: Reading) -> str:
     name = element.get("name")
     if not name:
-        raise reading.error(f"{what}[{index}] name", f"<{what}> number {index + 1} has no name")
+        raise _error(reading, f"{what}[{index}] name", f"<{what}> number {index + 1} has no name")
     return name
 
 
-def _read_inertial(element: ET.Element, link: str, reading: _Reading) -> _Inertial | None:
+def _read_inertial(element: ET.Element, link: str, reading: Reading) -> _Inertial | None:
     """A link's ``<inertial>`` (None without one); mass, origin and all six moments as
     urdfdom requires them."""
     inertial = element.find("inertial")
@@ -201,28 +177,28 @@ def _read_inertial(element: ET.Element, link: str, reading: _Reading) -> _Inerti
     field = f"link '{link}' inertial"
     mass_element, inertia_element = inertial.find("mass"), inertial.find("inertia")
     if mass_element is None:
-        raise reading.error(f"{field} mass", "missing")
+        raise _error(reading, f"{field} mass", "missing")
     if inertia_element is None:
-        raise reading.error(f"{field} inertia", "missing")
+        raise _error(reading, f"{field} inertia", "missing")
     mass = _attribute(mass_element, "value", reading, f"{field} mass")
     if mass < 0:
-        raise reading.error(f"{field} mass value", f"mass must not be negative, got {mass:g}")
+        raise _error(reading, f"{field} mass value", f"mass must not be negative, got {mass:g}")
     moments = tuple(_attribute(inertia_element, key, reading, f"{field} inertia")
                     for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
     return _Inertial(mass, _read_origin(inertial.find("origin"), reading, field), moments)
 
 
-def _read_joint(element: ET.Element, index: int, reading: _Reading) -> _UrdfJoint:
+def _read_joint(element: ET.Element, index: int, reading: Reading) -> _UrdfJoint:
     name = _name(element, "joint", index, reading)
     field = f"joint '{name}'"
     kind = element.get("type")
     if kind not in JOINT_TYPES:
-        raise reading.error(f"{field} type", f"expected one of {', '.join(JOINT_TYPES)}, got {kind!r}")
+        raise _error(reading, f"{field} type", f"expected one of {', '.join(JOINT_TYPES)}, got {kind!r}")
     ends = []
     for end in ("parent", "child"):
         link = element.find(end)
         if link is None or not link.get("link"):
-            raise reading.error(f"{field} {end}", f"missing (<{end} link=\"...\"/>)")
+            raise _error(reading, f"{field} {end}", f"missing (<{end} link=\"...\"/>)")
         ends.append(link.get("link"))
     axis = element.find("axis")
     axis = (1.0, 0.0, 0.0) if axis is None else _floats(axis.get("xyz", "1 0 0"), 3, reading, f"{field} axis xyz")
@@ -234,15 +210,15 @@ def _read_joint(element: ET.Element, index: int, reading: _Reading) -> _UrdfJoin
                       axis, limit, None if mimic is None else mimic.get("joint", "?"))
 
 
-def _read_xml(text: str | bytes, reading: _Reading) -> ET.Element:
+def _read_xml(text: str | bytes, reading: Reading) -> ET.Element:
     """The ``<robot>`` element of a URDF text."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         line, column = exc.position
-        raise reading.error("<xml>", f"malformed XML at line {line}, column {column + 1}: {exc}") from exc
+        raise _error(reading, "<xml>", f"malformed XML at line {line}, column {column + 1}: {exc}") from exc
     if root.tag != "robot":
-        raise reading.error("<robot>", f"the top element is <{root.tag}>, expected <robot>")
+        raise _error(reading, "<robot>", f"the top element is <{root.tag}>, expected <robot>")
     return root
 
 
@@ -251,39 +227,39 @@ def _closest(name: str, names) -> str:
     return f"; closest: {', '.join(close)}" if close else ""
 
 
-def _read_tree(robot: ET.Element, reading: _Reading) -> _Tree:
+def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
     """Links and joints (direct children of ``<robot>``: a ``<transmission>`` names joints
     too), checked to form one tree."""
     links = {}
     for index, element in enumerate(robot.findall("link")):
         name = _name(element, "link", index, reading)
         if name in links:
-            raise reading.error(f"link '{name}'", "defined twice")
+            raise _error(reading, f"link '{name}'", "defined twice")
         links[name] = _read_inertial(element, name, reading)
     if not links:
-        raise reading.error("<robot>", "no <link> elements")
+        raise _error(reading, "<robot>", "no <link> elements")
     parent_joint, child_joints, joint_names = {}, {name: [] for name in links}, set()
     for index, element in enumerate(robot.findall("joint")):
         joint = _read_joint(element, index, reading)
         if joint.name in joint_names:
-            raise reading.error(f"joint '{joint.name}'", "defined twice")
+            raise _error(reading, f"joint '{joint.name}'", "defined twice")
         joint_names.add(joint.name)
         for end, link in (("parent", joint.parent), ("child", joint.child)):
             if link not in links:
-                raise reading.error(f"joint '{joint.name}' {end}",
+                raise _error(reading, f"joint '{joint.name}' {end}",
                                     f"link '{link}' is not defined{_closest(link, links)}")
         if joint.child in parent_joint:
-            raise reading.error(f"joint '{joint.name}' child", f"link '{joint.child}' already has a parent "
+            raise _error(reading, f"joint '{joint.name}' child", f"link '{joint.child}' already has a parent "
                                 f"(joint '{parent_joint[joint.child].name}'): not a tree")
         parent_joint[joint.child] = joint
         child_joints[joint.parent].append(joint)
     roots = [name for name in links if name not in parent_joint]
     if len(roots) > 1:
-        raise reading.error("<robot>", f"several root links, not connected by joints: {', '.join(roots)}")
+        raise _error(reading, "<robot>", f"several root links, not connected by joints: {', '.join(roots)}")
     reached = _descendants(child_joints, roots[0]) if roots else []
     if len(reached) < len(links):
         cycle = [name for name in links if name not in reached]
-        raise reading.error("<robot>", f"the joints between links {', '.join(cycle)} form a cycle")
+        raise _error(reading, "<robot>", f"the joints between links {', '.join(cycle)} form a cycle")
     return _Tree(links, parent_joint, child_joints, roots[0])
 
 
@@ -299,24 +275,24 @@ def _descendants(child_joints: dict, link: str, follow=lambda joint: True) -> li
 
 # ------------------------------------------------------------------ the chain
 
-def _link_name(tree: _Tree, name: str, option: str, reading: _Reading) -> str:
+def _link_name(tree: _Tree, name: str, option: str, reading: Reading) -> str:
     if name not in tree.links:
-        raise reading.error(option, f"no link named '{name}' in the URDF{_closest(name, tree.links)}")
+        raise _error(reading, option, f"no link named '{name}' in the URDF{_closest(name, tree.links)}")
     return name
 
 
-def _path(tree: _Tree, base: str, tip: str, reading: _Reading) -> list:
+def _path(tree: _Tree, base: str, tip: str, reading: Reading) -> list:
     """The joints from ``base`` down to ``tip``."""
     path, link = [], tip
     while link != base:
         if link == tree.root:
-            raise reading.error("--tip", f"link '{tip}' is not below the base link '{base}'")
+            raise _error(reading, "--tip", f"link '{tip}' is not below the base link '{base}'")
         path.append(tree.parent_joint[link])
         link = path[-1].parent
     return path[::-1]
 
 
-def _default_tip(tree: _Tree, base: str, reading: _Reading) -> str:
+def _default_tip(tree: _Tree, base: str, reading: Reading) -> str:
     """The single leaf below ``base`` reached through a moving joint (a leaf fixed to the
     base, such as UR's ``base`` frame, belongs to the base and cannot end an arm)."""
     static = set(_descendants(tree.child_joints, base, lambda joint: joint.kind == "fixed"))
@@ -325,12 +301,12 @@ def _default_tip(tree: _Tree, base: str, reading: _Reading) -> str:
     if len(leaves) == 1:
         return leaves[0]
     if not leaves:
-        raise reading.error("--base", f"no moving joint below link '{base}'")
-    raise reading.error("--tip", f"the tree below '{base}' has {len(leaves)} leaves; name the last link "
+        raise _error(reading, "--base", f"no moving joint below link '{base}'")
+    raise _error(reading, "--tip", f"the tree below '{base}' has {len(leaves)} leaves; name the last link "
                         f"of the arm with --tip (one of: {', '.join(leaves)})")
 
 
-def _limits(joint: _UrdfJoint, reading: _Reading) -> tuple[float, float]:
+def _limits(joint: _UrdfJoint, reading: Reading) -> tuple[float, float]:
     """The joint's range; a continuous joint (and a revolute one with limits 0, 0, which
     some exporters write for unlimited) gets -pi..pi, for samplers, with a note."""
     field = f"joint '{joint.name}' limit"
@@ -338,31 +314,31 @@ def _limits(joint: _UrdfJoint, reading: _Reading) -> tuple[float, float]:
         reading.note(f"{reading.source}: joint '{joint.name}' is continuous: range -pi..pi assumed")
         return -math.pi, math.pi
     if joint.limit is None:
-        raise reading.error(field, f"missing (URDF requires <limit lower upper> on {joint.kind} joints)")
+        raise _error(reading, field, f"missing (URDF requires <limit lower upper> on {joint.kind} joints)")
     lower, upper = joint.limit
     if lower == upper == 0:
         if joint.kind == "prismatic":
-            raise reading.error(field, "a prismatic joint needs a range (lower and upper are 0)")
+            raise _error(reading, field, "a prismatic joint needs a range (lower and upper are 0)")
         reading.note(f"{reading.source}: {field} is 0..0: range -pi..pi assumed")
         return -math.pi, math.pi
     if not lower < upper:
-        raise reading.error(field, f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
+        raise _error(reading, field, f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     return lower, upper
 
 
-def _axis(joint: _UrdfJoint, reading: _Reading) -> tuple:
+def _axis(joint: _UrdfJoint, reading: Reading) -> tuple:
     """The joint axis as an exact unit vector."""
     if max(abs(v) for v in joint.axis) < 1e-9:
-        raise reading.error(f"joint '{joint.name}' axis xyz",
+        raise _error(reading, f"joint '{joint.name}' axis xyz",
                             f"the axis {list(joint.axis)} has no direction (all zero)")
     return unit_axis(joint.axis)
 
 
-def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: _Reading) -> Joint:
+def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Joint:
     """A revolute or prismatic joint whose link frame is the URDF child link frame, placed
     after the fixed placement ``fixed`` on the previous link frame."""
     if joint.kind in UNSUPPORTED:
-        raise reading.error(f"joint '{joint.name}' type",
+        raise _error(reading, f"joint '{joint.name}' type",
                             f"a {joint.kind} joint cannot be part of a serial arm (only revolute, continuous, "
                             f"prismatic and fixed joints)")
     if joint.mimic is not None:
@@ -376,7 +352,7 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: _Reading) -> Joi
 
 # ------------------------------------------------------------------ rigid bodies
 
-def _rigid_body(tree: _Tree, link: str, chain: set, reading: _Reading) -> list:
+def _rigid_body(tree: _Tree, link: str, chain: set, reading: Reading) -> list:
     """(placement in ``link``'s frame, inertial, name) of ``link`` and every link fixed to it;
     a moving joint not in ``chain`` (a gripper's fingers) is locked at q = 0, with a note, so
     its links count (the bodies of Pinocchio's ``buildReducedModel`` locking it at 0)."""
@@ -413,7 +389,7 @@ def _rational(value) -> sympy.Rational:
     return sympy.Rational(str(sympy.Float(approx, SIGNIFICANT_DIGITS)))
 
 
-def _combine(parts: list, reading: _Reading) -> Link:
+def _combine(parts: list, reading: Reading) -> Link:
     """One body from rigid parts (placement, inertial, name): total mass, mass-weighted CoM
     and the inertia about it (each part's ``R I R^T`` moved by the parallel axis theorem),
     exact, in the frame the placements refer to. A part without ``<inertial>`` is massless."""
@@ -454,11 +430,11 @@ def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = N
                snap_angles: bool = True) -> RobotModel:
     """The serial chain from link ``base`` (default: the root) to link ``tip`` (default: the
     only leaf reached through a moving joint) of a URDF text (see the module docstring)."""
-    reading = _Reading(source, snap_angles)
+    reading = Reading(source, snap_angles)
     robot = _read_xml(text, reading)
     name = (robot.get("name") or "").strip()
     if not name:
-        raise reading.error("<robot> name", "missing (the model's name)")
+        raise _error(reading, "<robot> name", "missing (the model's name)")
     tree = _read_tree(robot, reading)
     base = tree.root if base is None else _link_name(tree, base, "--base", reading)
     tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
@@ -473,7 +449,7 @@ def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = N
         links.append(_combine(_rigid_body(tree, joint.child, chain, reading), reading))
         fixed, flange = Placement(), joint.child
     if not joints:
-        raise reading.error("--tip", f"no moving joint between links '{base}' and '{tip}'")
+        raise _error(reading, "--tip", f"no moving joint between links '{base}' and '{tip}'")
     return RobotModel(name=name, convention="frames", gravity=GRAVITY, joints=tuple(joints), links=tuple(links),
                       source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
 
