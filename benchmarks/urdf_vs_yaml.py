@@ -55,7 +55,7 @@ def panda_pair(folder: Path):
 
 
 def _timed_counts(loads: dict, repeats: int):
-    """{name: (op counts after CSE, median seconds)} for each description loader; one
+    """{name: (op counts after CSE, seconds of each timed run)} for each description loader; one
     untimed warm-up run first (imports, caches), then the descriptions alternate, so that
     neither pays for going first."""
     from kindyngen.pipeline import build_programs
@@ -69,7 +69,7 @@ def _timed_counts(loads: dict, repeats: int):
             programs = build_programs(load(), progress=False)
             seconds[name].append(time.perf_counter() - start)
             counts[name] = {p.function.name: p.after.to_json() for p in programs}
-    return {name: (counts[name], statistics.median(seconds[name])) for name in loads}
+    return {name: (counts[name], seconds[name]) for name in loads}
 
 
 def main(argv=None) -> int:
@@ -85,9 +85,12 @@ def main(argv=None) -> int:
         # loading is part of generation: each run reads its description again
         timed = _timed_counts({"urdf": lambda: load_robot(urdf_path, tip="panda_link8"),
                                "yaml": lambda: parse_robot(data, "panda.yaml")}, args.repeats)
-        (urdf_counts, urdf_time), (yaml_counts, yaml_time) = timed["urdf"], timed["yaml"]
+        (urdf_counts, urdf_runs), (yaml_counts, yaml_runs) = timed["urdf"], timed["yaml"]
+    urdf_time, yaml_time = statistics.median(urdf_runs), statistics.median(yaml_runs)
     result = {"machine": machine(), "repeats": args.repeats,
               "generation_seconds": {"urdf": round(urdf_time, 2), "yaml": round(yaml_time, 2)},
+              "generation_seconds_runs": {"urdf": [round(t, 2) for t in urdf_runs],
+                                          "yaml": [round(t, 2) for t in yaml_runs]},
               "opcounts_after_cse": {name: {"urdf": urdf_counts[name], "yaml": yaml_counts[name]}
                                      for name in yaml_counts}}
     args.out.mkdir(parents=True, exist_ok=True)
