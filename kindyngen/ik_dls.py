@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .kinematics_homogeneous import joint_units
 from .opcount import OpCount
 from .robot import RobotModel
 
@@ -224,12 +225,14 @@ def ports(model: RobotModel, programs) -> tuple[list, list]:
     inputs = [
         {"name": "T", "shape": [4, 4], "description": "target flange pose in the base frame (row-major; last row unused)",
          "unit": "m (translation), 1 (rotation)", "dtype": "double"},
-        {"name": "q0", "shape": [n], "description": "start configuration, DH order", "unit": "rad", "dtype": "double"},
+        {"name": "q0", "shape": [n], "description": f"start configuration, {model.order_text}",
+         "unit": joint_units(model, "rad", "m"), "dtype": "double"},
     ] + [{"name": p.name, "shape": list(p.shape), "description": p.description, "unit": p.unit, "dtype": "double"}
          for p in extra]
     outputs = [
-        {"name": "q", "shape": [n], "description": "joint angles reaching T (status 0); see status otherwise",
-         "unit": "rad", "dtype": "double"},
+        {"name": "q", "shape": [n], "description": "joint positions reaching T (status 0); see status otherwise"
+         if any(j.prismatic for j in model.joints) else "joint angles reaching T (status 0); see status otherwise",
+         "unit": joint_units(model, "rad", "m"), "dtype": "double"},
         {"name": "status", "shape": [1], "description": "0 converged within limits, 1 converged outside limits, "
          "2 not converged (q = best iterate), 3 invalid input", "unit": "1", "dtype": "int"},
     ]
