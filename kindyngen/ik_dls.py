@@ -126,6 +126,9 @@ class DlsView:
     summary: str
     conventions: str
     status_text: tuple[str, ...]
+    order: str                 # how q is ordered ("DH order", "chain order from the base")
+    q_unit: str                # "rad", or the units of a robot with prismatic joints
+    q_what: str                # "joint angles", or "joint positions" with prismatic joints
 
 
 SUMMARY = "Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T within the joint limits."
@@ -215,7 +218,12 @@ def dls_view(model: RobotModel, programs) -> DlsView | None:
         descriptions={k: d for k, (_, d) in CONSTANTS.items()},
         extra=extra, cost=per_iteration_counts(model, programs),
         summary=SUMMARY, conventions=CONVENTIONS, status_text=STATUS,
+        order=model.order_text, q_unit=joint_units(model, "rad", "m"), q_what=_q_what(model),
     )
+
+
+def _q_what(model: RobotModel) -> str:
+    return "joint positions" if any(j.prismatic for j in model.joints) else "joint angles"
 
 
 def ports(model: RobotModel, programs) -> tuple[list, list]:
@@ -230,8 +238,7 @@ def ports(model: RobotModel, programs) -> tuple[list, list]:
     ] + [{"name": p.name, "shape": list(p.shape), "description": p.description, "unit": p.unit, "dtype": "double"}
          for p in extra]
     outputs = [
-        {"name": "q", "shape": [n], "description": "joint positions reaching T (status 0); see status otherwise"
-         if any(j.prismatic for j in model.joints) else "joint angles reaching T (status 0); see status otherwise",
+        {"name": "q", "shape": [n], "description": f"{_q_what(model)} reaching T (status 0); see status otherwise",
          "unit": joint_units(model, "rad", "m"), "dtype": "double"},
         {"name": "status", "shape": [1], "description": "0 converged within limits, 1 converged outside limits, "
          "2 not converged (q = best iterate), 3 invalid input", "unit": "1", "dtype": "int"},
