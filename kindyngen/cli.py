@@ -87,6 +87,7 @@ def _cmd_describe(args) -> int:
 def _cmd_count(args) -> int:
     from .catalog import NAMES
     from .pipeline import build_programs
+    from .regressors import undecided_notes
     from .report import opcounts_json, opcounts_markdown
     only = None
     if args.only is not None:
@@ -99,11 +100,8 @@ def _cmd_count(args) -> int:
     for path in args.robots:
         model = load(path, args)
         programs = build_programs(model, args.params, only=only, progress=False)
-        from .regressors import KINDS, unavailable
-        for kind in KINDS:
-            if (only is None or kind in only) and unavailable(model, kind) not in (None, "symbolic lengths"):
-                print(f"note: {model.identifier}: regressor {kind} not generated: {unavailable(model, kind)}",
-                      file=sys.stderr)
+        for note in undecided_notes(model, only):
+            print(f"note: {note}", file=sys.stderr)
         missing = sorted(only - {p.function.name for p in programs}) if only else []
         if missing:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "

@@ -14,7 +14,7 @@ from pathlib import Path
 from .catalog import derive_all
 from .ik_dls import applies as dls_applies, dls_manifest_entry
 from .optimize import Program, optimize
-from .regressors import base_params_document
+from .regressors import base_params_document, undecided_notes
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
@@ -99,9 +99,8 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
     base_params = base_params_document(model)   # None for robots with symbolic lengths
-    for kind, entry in (base_params or {}).items():
-        if "unavailable" in entry and progress:
-            print(f"note: {model.identifier}: regressor {kind} not generated: {entry['unavailable']}", file=sys.stderr)
+    for note in undecided_notes(model, only) if progress else ():
+        print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")

@@ -238,6 +238,14 @@ def unavailable(model: RobotModel, kind: str) -> str | None:
     return None
 
 
+def undecided_notes(model: RobotModel, only=None) -> list[str]:
+    """One line per regressor (of ``only``, default all) left out because its base parameters
+    could not be decided (robots with symbolic lengths have none, and say so elsewhere)."""
+    return [f"{model.identifier}: regressor {kind} not generated: {unavailable(model, kind)}"
+            for kind in KINDS if (only is None or kind in only)
+            and unavailable(model, kind) not in (None, "symbolic lengths")]
+
+
 def supported(model: RobotModel) -> bool:
     """Regressors need numeric DH lengths (the grouping coefficients are found numerically)."""
     return not model.length_symbols
