@@ -77,6 +77,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -382,6 +383,7 @@ def _map_holds(model, d3, d5, signs, offsets, base, flange) -> bool:
     return True
 
 
+@lru_cache(maxsize=None)    # exact geometry and a numeric check: once per model, not per IK form
 def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     """The LWR geometry of ``model`` and its map onto the canonical LWR, or None when the
     arm is not of LWR type.
