@@ -57,7 +57,19 @@ LOGIC = (se.And, se.Or, se.Not, type(se.true).__mro__[1])  # BooleanAtom: true/f
 
 def is_literal(e: se.Basic) -> bool:
     """A numeric constant, printed as one literal."""
-    return e.is_Number or (not e.free_symbols and not isinstance(e, (se.Piecewise,) + COMPARISONS + LOGIC))
+    return e.is_Number or (not isinstance(e, (se.Piecewise,) + COMPARISONS + LOGIC) and not _has_symbol(e))
+
+
+def _has_symbol(e: se.Basic) -> bool:
+    """Whether ``e`` contains a symbol, stopping at the first one found (``free_symbols``
+    walks the whole sub-DAG at every node: quadratic on the deep DAGs of derivatives)."""
+    stack = [e]
+    while stack:
+        x = stack.pop()
+        if x.is_Symbol:
+            return True
+        stack.extend(x.args)
+    return False
 
 
 def add_parts(e: se.Add) -> tuple[float, list[se.Basic]]:

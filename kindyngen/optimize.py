@@ -41,8 +41,8 @@ def optimize(function: SymbolicFunction) -> Program:
     flat = [e for port in function.output_exprs for e in port]
     replacements, reduced = se.cse(flat)
     rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
-    assignments = tuple((rename[sym], expr.xreplace(rename)) for sym, expr in replacements)
-    reduced = [e.xreplace(rename) for e in reduced]
+    assignments = tuple((rename[sym], _renamed(expr, rename)) for sym, expr in replacements)
+    reduced = [_renamed(e, rename) for e in reduced]
     assignments, reduced = _hoist_power_bases(assignments, reduced)
     assignments = _live(assignments, reduced)
     outputs, start = [], 0
@@ -56,6 +56,12 @@ def optimize(function: SymbolicFunction) -> Program:
         before=tree_count(flat),
         after=program_count(assignments, reduced),
     )
+
+
+def _renamed(expr, rename):
+    """``expr.xreplace(rename)`` with only the symbols ``expr`` holds: xreplace converts its
+    whole mapping at every call, quadratic in the number of temporaries."""
+    return expr.xreplace({s: rename[s] for s in expr.free_symbols if s in rename})
 
 
 def _live(assignments, outputs):
