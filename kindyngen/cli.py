@@ -14,12 +14,15 @@ from pathlib import Path
 import numpy as np
 
 from .base_parameters import BaseParameterError
+from .c_trig import TRIG_MODES
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot
 
 
 LANGS = ("c", "python", "casadi")
+# generate also writes the CPython extension source (python_c), which eval does not run
+GENERATE_LANGS = LANGS + ("python_c",)
 EXIT_BAD_INPUT = 2
 
 
@@ -57,7 +60,7 @@ def _cmd_generate(args) -> int:
     from .pipeline import generate
     for path in args.robots:
         model = load(path, args)
-        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet)
+        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -158,6 +161,16 @@ def _cmd_eval(args) -> int:
     return 0
 
 
+def _cmd_build_python(args) -> int:
+    from .python_c import BuildError, load
+    try:
+        module = load(args.generated_dir)
+    except BuildError as exc:
+        raise UsageError(str(exc)) from None
+    print(module.__file__)
+    return 0
+
+
 def _names_argument(what: str, known, allow_empty: bool = False):
     """An argparse type: comma-separated names, each one of ``known()`` (called when parsing,
     so the measured-data modules are imported only by the commands that use them)."""
@@ -182,7 +195,7 @@ def _candidate_names():
     return CANDIDATES
 
 
-_languages = _names_argument("language", lambda: LANGS)
+_languages = _names_argument("language", lambda: GENERATE_LANGS)
 _effects = _names_argument("effect", _effect_names, allow_empty=True)
 _candidates = _names_argument("candidate", _candidate_names)
 
@@ -344,9 +357,13 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
     _robot_options(g)
     g.add_argument("--out", required=True, metavar="DIR", help="output root; each robot goes to DIR/<robot>/")
-    g.add_argument("--lang", type=_languages, default=LANGS, help="comma-separated subset of c,python,casadi (default: all)")
+    g.add_argument("--lang", type=_languages, default=GENERATE_LANGS,
+                   help="comma-separated subset of c,python,casadi,python_c (default: all; python_c needs c)")
     g.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
                    help="inertial parameters baked in from the YAML (numeric) or an extra input p (symbolic)")
+    g.add_argument("--trig", choices=TRIG_MODES, default="kernel",
+                   help="C: sin/cos of joint angles by a vectorisable polynomial kernel emitted into the .c, "
+                        "within 1 ulp of glibc (kernel, default), or every sin/cos by libm (libm)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
     g.set_defaults(run=_cmd_generate)
 
@@ -380,6 +397,15 @@ def parser() -> argparse.ArgumentParser:
     e.add_argument("function", metavar="FUNCTION", help="e.g. fk_hom, fk_dq, jacobian")
     e.add_argument("--lang", choices=LANGS, default="c")
     e.set_defaults(run=_cmd_eval)
+
+    b = sub.add_parser("build-python", help="compile a robot's python_c extension and print its path",
+                       description=("Compile GENERATED_DIR/python_c/<robot>_ext.c (the generated C as a CPython "
+                                    "extension: the numpy module's functions at compiled speed, one configuration "
+                                    "per call) with this interpreter's compiler settings into the cache "
+                                    "($KINDYNGEN_CACHE, default ~/.cache/kindyngen), import it once, print the "
+                                    "module's path. From Python: kindyngen.python_c.load(GENERATED_DIR)."))
+    b.add_argument("generated_dir", metavar="GENERATED_DIR", help="a robot folder, e.g. generated/lwr4")
+    b.set_defaults(run=_cmd_build_python)
 
     i = sub.add_parser("identify", help="identify the dynamic model from logged motion",
                        description=("Fit the robot's base parameters (and chosen joint effects) to logged joint "

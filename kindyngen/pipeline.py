@@ -19,7 +19,7 @@ from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
 
-LANGUAGES = ("c", "python", "casadi")
+LANGUAGES = ("c", "python", "casadi", "python_c")
 
 
 class Progress:
@@ -58,7 +58,7 @@ def build_programs(model: RobotModel, params: str = "numeric", only=None, progre
     return programs
 
 
-def manifest(model: RobotModel, programs: list[Program], params: str) -> dict:
+def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel") -> dict:
     return {
         "robot": model.identifier,
         "name": model.name,
@@ -66,6 +66,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str) -> dict:
         "convention": model.convention,
         "gravity": [float(v) for v in model.gravity],
         "params": params,
+        "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/c_trig.py)
         "functions": [{
             "name": p.function.name,
             "summary": p.function.summary,
@@ -92,12 +93,12 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
 
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
-             progress: bool = True, only=None) -> Path:
+             progress: bool = True, only=None, trig: str = "kernel") -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
-    ``out_root/<robot>/``; returns that folder."""
+    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES."""
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
-    _write(out / "functions.json", json.dumps(manifest(model, programs, params), indent=1) + "\n")
+    _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
     base_params = base_params_document(model)   # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
@@ -106,7 +107,8 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     for lang in languages:
-        for filename, text in RENDERERS[lang](model, programs).items():
+        options = {"trig": trig} if lang == "c" else {}
+        for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
             if lang == "casadi":
                 save_casadi_functions(text, out / lang)

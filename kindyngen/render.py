@@ -11,14 +11,35 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import jinja2
+import symengine as se
 
 from . import __version__
+from .c_trig import BOUND as TRIG_BOUND, MAX_ULP as TRIG_MAX_ULP, kernel_c
 from .ik_dls import dls_view
 from .optimize import Program
 from .printer import C, CASADI, NUMPY, Dialect
+from .render_python_c import render_python_c
 from .robot import RobotModel
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+BATCH_BLOCK = 64
+"""Most configurations per block of a C batch function. A block's sin/cos of the joint angles
+and its outputs live in local arrays (outputs written there, then copied out row by row: stores
+to port[k*count + i] for several k would need run-time alias checks that stop compilers from
+vectorising), so functions with large outputs get smaller blocks."""
+
+BATCH_STACK = 32768
+"""Bytes of those local arrays a batch function may use."""
+
+BATCH_MIN_BLOCK = 16
+"""Fewest configurations per block worth a local output array; functions whose outputs need
+smaller blocks (regressors, hundreds of entries, mostly zeros: their time is the stores) write
+outputs in place instead, in blocks of BATCH_BLOCK."""
+
+KERNEL_LANES = 8
+"""Single calls run the sincos kernel over the angles padded with zeros to a multiple of this
+(AVX-512 lanes): the vectorised loop then covers them all, with no scalar remainder."""
 
 
 @dataclass(frozen=True)
@@ -45,6 +66,11 @@ class FunctionView:
     before: dict
     after: dict
     has_select: bool
+    angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel
+    lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
+    block: int = 0                # C batch: configurations per block
+    in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
+    batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
 
 
 def _environment() -> jinja2.Environment:
@@ -68,9 +94,49 @@ def input_names(program: Program, dialect: Dialect) -> dict:
     return names
 
 
-def function_view(program: Program, dialect: Dialect, prefix: str) -> FunctionView:
+def kernel_angles(program: Program) -> int:
+    """How many sines/cosines the C sincos kernel computes: the size of the ``q`` port if some
+    sin or cos has exactly one of its entries as argument (others, e.g. sin(q_1/2), stay
+    libm calls), else 0."""
+    f = program.function
+    if "q" not in [p.name for p in f.inputs]:
+        return 0
+    q = set(f.input_symbols[[p.name for p in f.inputs].index("q")])
+    for e in [e for _, e in program.assignments] + [e for port in program.outputs for e in port]:
+        if any(a.args[0] in q for a in e.atoms(se.sin, se.cos)):
+            return len(q)
+    return 0
+
+
+def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
+    """(configurations per block, outputs in place): the largest power of two up to BATCH_BLOCK
+    whose local arrays fit BATCH_STACK bytes, or BATCH_BLOCK in place when that is below
+    BATCH_MIN_BLOCK."""
+    block = BATCH_BLOCK
+    while block >= BATCH_MIN_BLOCK and 8 * block * (2 * angles + outputs) > BATCH_STACK:
+        block //= 2
+    return (block, False) if block >= BATCH_MIN_BLOCK else (BATCH_BLOCK, True)
+
+
+def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "libm",
+                  batch: bool = False) -> FunctionView:
+    """What the templates print of one function. C: ``trig="kernel"`` reads sin/cos of joint
+    angles from the arrays sin_q/cos_q the kernel fills; ``batch`` prints inputs and outputs of
+    configuration start + j of a structure-of-arrays batch (entry k at ``port[k*count + start + j]``,
+    sin/cos at ``sin_q[k][j]``; output entry k goes to ``out_<port>[k][j]``) and always reads sin/cos
+    of joint angles from those arrays."""
     f = program.function
     names = input_names(program, dialect)
+    if batch:
+        names = {sym: f"{port.name}[{k}*count + start + j]"
+                 for port, symbols in zip(f.inputs, f.input_symbols) for k, sym in enumerate(symbols)}
+    angles = kernel_angles(program) if (trig == "kernel" or batch) else 0
+    if angles:
+        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+        for k, sym in enumerate(q):
+            where = f"[{k}][j]" if batch else f"[{k}]"
+            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
+    block, in_place = _batch_block(angles, sum(p.size for p in f.outputs)) if batch else (0, False)
     used_symbols = set()
     for _, e in program.assignments:
         used_symbols |= e.free_symbols
@@ -93,10 +159,15 @@ def function_view(program: Program, dialect: Dialect, prefix: str) -> FunctionVi
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "?" in text),
+        angles=angles,
+        lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
+        block=block,
+        in_place=in_place,
+        batch=function_view(program, dialect, prefix, trig, batch=True) if dialect is C and not batch else None,
     )
 
 
-def _context(model: RobotModel, programs, dialect: Dialect) -> dict:
+def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") -> dict:
     return {
         "robot": model.identifier,
         "robot_name": model.name,
@@ -105,14 +176,20 @@ def _context(model: RobotModel, programs, dialect: Dialect) -> dict:
         "convention": model.convention,
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
-        "functions": [function_view(p, dialect, model.identifier) for p in programs],
+        "functions": [function_view(p, dialect, model.identifier, trig) for p in programs],
+        "trig": trig,
+        "trig_bound": TRIG_BOUND,
+        "trig_max_ulp": TRIG_MAX_ULP,
+        "batch_block": BATCH_BLOCK,
+        "batch_stack": BATCH_STACK,
         "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None
     }
 
 
-def render_c(model: RobotModel, programs) -> dict[str, str]:
-    """Header, source and CMakeLists.txt of the C99 library."""
-    env, ctx = _environment(), _context(model, programs, C)
+def render_c(model: RobotModel, programs, trig: str = "kernel") -> dict[str, str]:
+    """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/c_trig.py."""
+    env, ctx = _environment(), _context(model, programs, C, trig)
+    ctx["sincos_kernel"] = kernel_c()
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
             f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
             "CMakeLists.txt": env.get_template("c/CMakeLists.txt.j2").render(ctx)}
@@ -128,4 +205,4 @@ def render_casadi(model: RobotModel, programs) -> dict[str, str]:
     return {f"{model.identifier}_casadi.py": env.get_template("casadi/module.py.j2").render(ctx)}
 
 
-RENDERERS = {"c": render_c, "python": render_python, "casadi": render_casadi}
+RENDERERS = {"c": render_c, "python": render_python, "casadi": render_casadi, "python_c": render_python_c}

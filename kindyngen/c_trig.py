@@ -1,0 +1,192 @@
+"""The sine/cosine kernel emitted into generated C (``kindyngen generate --trig kernel``).
+
+Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by arithmetic
+(seven sincos pairs took 76 ns of lwr4's fk_hom, all its arithmetic 11 ns). The sines and
+cosines of the joint angles are therefore computed together, at the start of a function,
+by one loop of plain C99 that compilers vectorise:
+
+* range reduction x = k pi/2 + r, k the integer nearest x 2/pi, by Cody-Waite: pi/2 split
+  into four parts, the first three with 33 significant bits so that k times each is exact
+  for |k| < 2^20; the two roundings left are recovered (Fast2Sum), so r + rlo carries
+  x - k pi/2 to about 2^-140 absolute, enough even for the doubles closest to multiples of
+  pi/2 (their |r| is above 2^-62 in the kernel's range);
+* polynomials on |r| <= pi/4: sin r = r + r^3 S(r^2), cos r = 1 - r^2/2 + r^4 C(r^2), S and C
+  of degree 5, minimax (Remez, :func:`fit_coefficients`) for the relative error of sin and
+  the absolute error of cos; their own error is 2^-58 and 2^-64;
+* the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
+* |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
+
+Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
+practice) for every double, as tests/test_sincos_kernel.py checks on dense grids, near every
+multiple of pi/2 in range, at random and at the special values.
+
+The coefficients below are written out (generation must not depend on a fit's numerics);
+``fit_coefficients()`` and ``split_pio2()`` recompute them, and a test checks they agree.
+"""
+from __future__ import annotations
+
+TRIG_MODES = ("kernel", "libm")
+"""kernel: sin/cos of joint angles by the emitted kernel (default); libm: every sin/cos by libm."""
+
+BOUND = 1048576.0
+"""Largest |x| the kernel reduces itself (2^20 rad); beyond it, libm. Keeps |k| < 2^20."""
+
+MAX_ULP = 1
+"""Largest difference from glibc's sin/cos, in units in the last place of glibc's result."""
+
+TWO_OVER_PI = 0.6366197723675814
+PIO2_PARTS = (1.5707963267341256, 6.077100506303966e-11, 2.0222662487111665e-21, 8.4784276603689e-32)
+SIN_COEFFS = (-0.16666666666666632, 0.008333333333322424, -0.0001984126982981672,
+              2.7557313695144572e-06, -2.5050758640135855e-08, 1.5896827148989416e-10)
+COS_COEFFS = (0.0416666666666666, -0.0013888888888874138, 2.4801587289491644e-05,
+              -2.755731435518579e-07, 2.0875723676428724e-09, -1.1359669434575456e-11)
+
+R_MAX = "0.7854"
+"""Fit interval |r| <= R_MAX, a little over pi/4: k from x*(2/pi) rounded may be one off
+the nearest quadrant for x within a few ulp of an odd multiple of pi/4."""
+
+SHIFTER = 6755399441055744.0
+"""1.5 * 2^52: y + SHIFTER - SHIFTER rounds y (|y| < 2^51) to an integer in IEEE double."""
+
+TINY = 1.4901161193847656e-08
+"""2^-26: below it sin x = x and cos x = 1 after rounding; returning x keeps the sign of -0."""
+
+
+def split_pio2():
+    """pi/2 as four doubles: three of 33 significant bits (k * part exact for |k| < 2^20), then
+    the rounded rest."""
+    import mpmath as mp
+    with mp.workdps(60):
+        rest, parts = mp.pi / 2, []
+        for _ in range(3):
+            scale = mp.mpf(2) ** (32 - mp.floor(mp.log(abs(rest), 2)))
+            part = mp.floor(rest * scale) / scale
+            parts.append(float(part))
+            rest -= part
+        parts.append(float(rest))
+        return tuple(parts), float(2 / mp.pi)
+
+
+def _remez(f, weight, degree, a, b, grid=1500, iterations=20):
+    """Coefficients (low order first) of the polynomial minimising max |weight (f - p)| on
+    [a, b]: Remez exchange on a grid of ``grid`` + 1 points."""
+    import mpmath as mp
+    n = degree + 2
+    reference = [(a + b) / 2 - (b - a) / 2 * mp.cos(mp.pi * i / (n - 1)) for i in range(n)]
+    xs = [a + (b - a) * i / grid for i in range(grid + 1)]
+    fs, ws = [f(x) for x in xs], [weight(x) for x in xs]
+    index = {x: i for i, x in enumerate(xs)}
+    for _ in range(iterations):
+        matrix, rhs = mp.matrix(n, n), mp.matrix(n, 1)
+        for i, x in enumerate(reference):
+            for j in range(degree + 1):
+                matrix[i, j] = x ** j
+            matrix[i, degree + 1] = (-1) ** i / weight(x)
+            rhs[i] = fs[index[x]] if x in index else f(x)
+        solution = mp.lu_solve(matrix, rhs)
+        coeffs = [solution[j] for j in range(degree + 1)]
+        level = abs(solution[degree + 1])
+        errors = [w * (fx - mp.polyval(coeffs[::-1], x)) for x, fx, w in zip(xs, fs, ws)]
+        extrema, i = [], 0
+        while i < len(xs):       # the largest error of each run of one sign
+            j, best = i, i
+            while j < len(xs) and mp.sign(errors[j]) == mp.sign(errors[i]):
+                best = j if abs(errors[j]) > abs(errors[best]) else best
+                j += 1
+            extrema.append(best)
+            i = j
+        while len(extrema) > n:  # keep n alternating extrema: drop the smaller end
+            extrema.pop(0 if abs(errors[extrema[0]]) < abs(errors[extrema[-1]]) else -1)
+        worst = max(abs(e) for e in errors)
+        if len(extrema) < n or worst <= level * (1 + mp.mpf("1e-9")):
+            break
+        reference = [xs[k] for k in extrema]
+    return coeffs, worst
+
+
+def fit_coefficients():
+    """(S, C, error of S, error of C) as doubles: S(z) ~ (sin sqrt z - sqrt z) / z^1.5 weighted
+    by z (the relative error of sin), C(z) ~ (cos sqrt z - 1 + z/2) / z^2 weighted by z^2 (the
+    absolute error of cos), z in [z_max/1000, z_max] (below it the weight makes any error
+    negligible)."""
+    import mpmath as mp
+    with mp.workdps(50):
+        z_max = mp.mpf(R_MAX) ** 2
+
+        def s(z):
+            root = mp.sqrt(z)
+            return (mp.sin(root) - root) / (z * root)
+
+        def c(z):
+            return (mp.cos(mp.sqrt(z)) - 1 + z / 2) / (z * z)
+
+        sin_coeffs, sin_error = _remez(s, lambda z: z, 5, z_max / 1000, z_max)
+        cos_coeffs, cos_error = _remez(c, lambda z: z * z, 5, z_max / 1000, z_max)
+        return (tuple(float(v) for v in sin_coeffs), tuple(float(v) for v in cos_coeffs),
+                float(sin_error), float(cos_error))
+
+
+def _horner(coeffs, z: str) -> str:
+    text = repr(coeffs[-1])
+    for c in reversed(coeffs[:-1]):
+        text = f"{c!r} + {z}*({text})"
+    return text
+
+
+def kernel_c(name: str = "kdg_sincos") -> str:
+    """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
+    for i < n. The arrays must not overlap."""
+    p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
+    bound = repr(BOUND)
+    return f"""\
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/c_trig.py
+ * explains the method and where its constants come from). The first loop has no branch and no
+ * call, so compilers vectorise it; arguments beyond +-{BOUND:g}, infinities and NaN take libm in
+ * the second. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
+static void {name}(long n, const double *restrict x, double *restrict s, double *restrict c)
+{{
+    long i;
+    for (i = 0; i < n; ++i) {{
+        /* arguments out of range give garbage here (no undefined behaviour: all in double),
+           replaced in the second loop */
+        const double xi = x[i];
+        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^52 */
+        const double k = (xi*{TWO_OVER_PI!r} + {SHIFTER!r}) - {SHIFTER!r};
+        /* k mod 4 as m = k - 4 round(k/4) in -2..2, exact: doubles keep the quadrant select
+           free of int conversions, which some targets do not vectorise */
+        const double m = k - 4.0*((0.25*k + {SHIFTER!r}) - {SHIFTER!r});
+        /* r + rlo = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
+           two subtractions recovered exactly (Fast2Sum: |a| >= |k*p2| unless a - k*p2 is exact,
+           likewise for b) */
+        const double a = xi - k*{p1};
+        const double b = a - k*{p2};
+        const double b_err = (a - b) - k*{p2};
+        const double d = b - k*{p3};
+        const double d_err = (b - d) - k*{p3};
+        const double tail = (b_err + d_err) - k*{p4};
+        const double r = d + tail;
+        const double rlo = (d - r) + tail;
+        const double z = r*r;
+        /* sin(r + rlo) = r + r^3 S(z) + rlo (1 - z/2) */
+        const double sin_r = r + (r*z*({_horner(SIN_COEFFS, "z")}) + rlo*(1.0 - 0.5*z));
+        /* cos(r + rlo) = (1 - z/2) + z^2 C(z) - r rlo, the rounding of 1 - z/2 added back */
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double cos_r = w + (((1.0 - w) - half_z)
+                                  + (z*z*({_horner(COS_COEFFS, "z")}) - r*rlo));
+        /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s */
+        const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(m) == 1.0 ? sin_r : cos_r;
+        const int tiny = fabs(xi) < {TINY!r};
+        s[i] = tiny ? xi : ((m == 2.0 || m == -2.0 || m == -1.0) ? -sin_q : sin_q);
+        c[i] = tiny ? 1.0 : ((m == 2.0 || m == -2.0 || m == 1.0) ? -cos_q : cos_q);
+    }}
+    for (i = 0; i < n; ++i) {{
+        if (!(fabs(x[i]) <= {bound})) {{
+            s[i] = sin(x[i]);
+            c[i] = cos(x[i]);
+        }}
+    }}
+}}
+"""
