@@ -33,15 +33,21 @@ class Built:
     cached: bool
 
 
-def build(name: str, compiler: str, sources: list[Path], flags: list[str],
-          libs: tuple[str, ...] = (), extra: tuple[Path, ...] = ()) -> Built:
-    """Compile ``sources`` into an executable named after ``name`` and the hash."""
+def target(name: str, compiler: str, sources: list[Path], flags: list[str],
+           libs: tuple[str, ...] = (), extra: tuple[Path, ...] = ()) -> Path:
+    """The executable :func:`build` makes of these arguments (it exists once built)."""
     digest = hashlib.sha256()
     digest.update(compiler_version(compiler).encode())
     digest.update("\0".join(flags + list(libs)).encode())
     for path in list(sources) + list(extra):
         digest.update(Path(path).read_bytes())
-    out = BUILD / f"{name}-{digest.hexdigest()[:16]}"
+    return BUILD / f"{name}-{digest.hexdigest()[:16]}"
+
+
+def build(name: str, compiler: str, sources: list[Path], flags: list[str],
+          libs: tuple[str, ...] = (), extra: tuple[Path, ...] = ()) -> Built:
+    """Compile ``sources`` into an executable named after ``name`` and the hash."""
+    out = target(name, compiler, sources, flags, libs, extra)
     record = Path(f"{out}.seconds")  # the compile time, kept beside the binary
     if out.exists():
         seconds = float(record.read_text()) if record.exists() else None

@@ -1,17 +1,16 @@
 // Times Pinocchio's C++ algorithms on a DH arm read from a data file, in the same way the
 // C harness times the generated code (cycle over precomputed inputs, CLOCK_MONOTONIC,
 // outputs summed into a volatile sink).  The model is read at run time, not compiled in,
-// so that one (slow, ~70 s) header-only build serves every robot; benchmarks/pinocchio_cpp.py
+// so that one (slow: minutes) header-only build serves every robot; benchmarks/pinocchio_cpp.py
 // writes the model file and the inputs and parses the output.
 //
 // usage: pinocchio_bench MODEL.txt INPUTS.bin K REPEATS TARGET_NS
-//   MODEL.txt: n; gx gy gz; per joint: R(9, row-major) p(3) mass com(3) Ixx Ixy Ixz Iyy Iyz Izz
-//              (joint placement in the parent joint frame, inertia in the joint frame, about
-//              the CoM); then the flange placement R(9) p(3) in the last joint frame.
+//   MODEL.txt: the DH arm as numbers (format in pinocchio_model.hpp).
 //   INPUTS.bin: doubles q[K][n], qd[K][n], qdd[K][n], tau[K][n].
 // output: one line per algorithm "time name t1 ... tR" (ns per call in each repetition), then
-// "check name values..." lines with the results for input 0, so that Python can confirm this
-// is the same robot.
+// "check name values..." lines with the results for input 0 ("check name.output values..."
+// for each output of a function with several, in order), so that Python can confirm this is
+// the same robot.
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/frames.hpp>
@@ -20,12 +19,14 @@
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/regressor.hpp>
+#include <pinocchio/algorithm/rnea-derivatives.hpp>
+#include <pinocchio/algorithm/aba-derivatives.hpp>
+
+#include "pinocchio_model.hpp"
 
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
-#include <iostream>
 #include <string>
 #include <time.h>
 #include <vector>
@@ -86,51 +87,36 @@ static void measure(const char * name, long K, int repeats, double target_ns, Bo
   std::printf("\n");
 }
 
+static const char USAGE[] =
+  "usage: %s MODEL.txt INPUTS.bin K REPEATS TARGET_NS\n"
+  "Times Pinocchio's algorithms on the arm in MODEL.txt over the K inputs in INPUTS.bin (both\n"
+  "written by benchmarks/pinocchio_cpp.py): REPEATS repetitions of about TARGET_NS each; prints\n"
+  "\"time NAME ns...\" lines, then \"check NAME values...\" lines for input 0.\n";
+
 int main(int argc, char ** argv)
 {
+  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
+  {
+    std::printf(USAGE, argv[0]);
+    return 0;
+  }
   if (argc != 6)
   {
-    std::fprintf(stderr, "usage: %s MODEL.txt INPUTS.bin K REPEATS TARGET_NS\n", argv[0]);
+    std::fprintf(stderr, USAGE, argv[0]);
     return 2;
   }
   const long K = std::atol(argv[3]);
   const int repeats = std::atoi(argv[4]);
   const double target_ns = std::atof(argv[5]);
 
-  std::ifstream mf(argv[1]);
-  int n;
-  double gx, gy, gz;
-  mf >> n >> gx >> gy >> gz;
   Model model;
-  model.gravity.linear() = Eigen::Vector3d(gx, gy, gz);
-  JointIndex parent = 0;
-  for (int i = 0; i < n; ++i)
-  {
-    Eigen::Matrix3d R, I;
-    Eigen::Vector3d p, c;
-    double m;
-    for (int k = 0; k < 9; ++k)
-      mf >> R(k / 3, k % 3);
-    mf >> p[0] >> p[1] >> p[2] >> m >> c[0] >> c[1] >> c[2];
-    mf >> I(0, 0) >> I(0, 1) >> I(0, 2) >> I(1, 1) >> I(1, 2) >> I(2, 2);
-    I(1, 0) = I(0, 1);
-    I(2, 0) = I(0, 2);
-    I(2, 1) = I(1, 2);
-    parent = model.addJoint(parent, JointModelRZ(), SE3(R, p), "joint" + std::to_string(i + 1));
-    model.appendBodyToJoint(parent, Inertia(m, c, Symmetric3(I)), SE3::Identity());
-  }
-  Eigen::Matrix3d Rf;
-  Eigen::Vector3d pf;
-  for (int k = 0; k < 9; ++k)
-    mf >> Rf(k / 3, k % 3);
-  mf >> pf[0] >> pf[1] >> pf[2];
-  if (!mf)
+  FrameIndex flange;
+  if (!read_dh_model(argv[1], model, flange))
   {
     std::fprintf(stderr, "cannot read model file %s\n", argv[1]);
     return 1;
   }
-  const FrameIndex flange =
-    model.addFrame(Frame("flange", parent, 0, SE3(Rf, pf), FrameType::OP_FRAME));
+  const int n = model.nv;
   Data data(model);
 
   std::vector<double> raw(4 * K * n);
@@ -152,6 +138,10 @@ int main(int argc, char ** argv)
   }
   Data::Matrix6x J(6, n);
   J.setZero();
+  // Derivative outputs, zeroed once as computeRNEADerivatives asks: every call assigns the
+  // same entries (the others stay zero), so the timed calls need no reset, as in a user's loop.
+  Eigen::MatrixXd d_dq = Eigen::MatrixXd::Zero(n, n), d_dv = Eigen::MatrixXd::Zero(n, n),
+                  d_da = Eigen::MatrixXd::Zero(n, n);
 
   measure("fk", K, repeats, target_ns, [&](long k) {
     forwardKinematics(model, data, q[k]);
@@ -182,6 +172,14 @@ int main(int argc, char ** argv)
   });
   measure("fd", K, repeats, target_ns, [&](long k) {
     return aba(model, data, q[k], qd[k], tau[k])[0];
+  });
+  measure("tau_derivatives", K, repeats, target_ns, [&](long k) {
+    computeRNEADerivatives(model, data, q[k], qd[k], qdd[k], d_dq, d_dv, d_da);
+    return d_dq(0, 1);
+  });
+  measure("fd_derivatives", K, repeats, target_ns, [&](long k) {
+    computeABADerivatives(model, data, q[k], qd[k], tau[k], d_dq, d_dv, d_da);
+    return d_dq(0, 1);
   });
   // Full 10n-column regressor (the generated Y has the base-parameter columns only).
   measure("Y", K, repeats, target_ns, [&](long k) {
@@ -214,5 +212,19 @@ int main(int argc, char ** argv)
   print("g", g);
   print("c", nonLinearEffects(model, data, q[0], qd[0]) - g); // Coriolis/centrifugal alone
   print("fd", aba(model, data, q[0], qd[0], tau[0]));
+  // Derivative checks in the generated layout: one line per output, row-major.
+  d_dq.setZero();
+  d_dv.setZero();
+  d_da.setZero();
+  computeRNEADerivatives(model, data, q[0], qd[0], qdd[0], d_dq, d_dv, d_da);
+  print("tau_derivatives.dtau_dq", d_dq);
+  print("tau_derivatives.dtau_dqd", d_dv);
+  d_dq.setZero();
+  d_dv.setZero();
+  d_da.setZero();
+  computeABADerivatives(model, data, q[0], qd[0], tau[0], d_dq, d_dv, d_da); // Minv full
+  print("fd_derivatives.dqdd_dq", d_dq);
+  print("fd_derivatives.dqdd_dqd", d_dv);
+  print("fd_derivatives.Minv", d_da);
   return sink == 12345.678 ? 3 : 0; // read the sink so it cannot be optimised out
 }

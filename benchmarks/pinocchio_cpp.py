@@ -12,15 +12,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .build import Built, build
+from .build import Built, build, target
 
 SOURCE = Path(__file__).resolve().parent / "pinocchio_bench.cpp"
-FLAGS = ["-std=c++17", "-O3", "-march=native", "-DNDEBUG",
-         "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-         "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12"]
+HEADER = SOURCE.with_name("pinocchio_model.hpp")  # the model reader, shared with the SX tracer
+# Pinocchio's joint variant needs Boost's MPL/Fusion limits raised.
+BOOST_FLAGS = ["-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+               "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12"]
+FLAGS = ["-std=c++17", "-O3", "-march=native", "-DNDEBUG", *BOOST_FLAGS]
 # Generated function name -> the algorithm in pinocchio_bench.cpp that computes the same.
 ALGORITHM = {"fk_hom": "fk", "fk_dq": "fk", "jacobian": "jacobian", "tau": "tau", "M": "M",
-             "g": "g", "c": "c", "S": "S", "fd": "fd", "Y": "Y"}
+             "g": "g", "c": "c", "S": "S", "fd": "fd", "Y": "Y",
+             "tau_derivatives": "tau_derivatives", "fd_derivatives": "fd_derivatives"}
+# Timed even when generated/ has no such function (yet): the peers' figures stand on their own.
+ALWAYS = ("tau_derivatives", "fd_derivatives")
 FAMILIES = ("M", "g", "c", "tau")  # M_lagrange, c_christoffel, ...: other routes, same quantity
 
 
@@ -42,6 +47,8 @@ NOTES = {
     "c": "nonLinearEffects (c + g: no Coriolis-only call)",
     "S": "computeCoriolisMatrix",
     "Y": "computeJointTorqueRegressor (all 10n columns)",
+    "tau_derivatives": "computeRNEADerivatives (dtau/dq, dtau/dqd; dtau/dqdd = M comes along)",
+    "fd_derivatives": "computeABADerivatives (dqdd/dq, dqdd/dqd, Minv)",
 }
 
 
@@ -63,9 +70,17 @@ def include_dirs() -> list[Path]:
     return dirs
 
 
+def _build_args() -> tuple:
+    return ("pinocchio_bench", "g++", [SOURCE], FLAGS + [f"-I{d}" for d in include_dirs()], (), (HEADER,))
+
+
 def build_binary() -> Built:
-    flags = FLAGS + [f"-I{d}" for d in include_dirs()]
-    return build("pinocchio_bench", "g++", [SOURCE], flags)
+    return build(*_build_args())
+
+
+def binary_cached() -> bool:
+    """Whether build_binary() would return at once (its slow cold build is done)."""
+    return target(*_build_args()).exists()
 
 
 # --- the robot as numbers: the same construction as tests/reference.py ----------------------
@@ -126,13 +141,17 @@ def prepare(robot, inputs: dict, workdir: Path) -> tuple[Path, Path, int]:
 
 def measure(binary: Path, prepared: tuple, repeats: int, target_ns: float) -> tuple[dict, dict]:
     """Run once: ({algorithm: [ns per call per repetition]}, {algorithm: [flat row-major
-    result for input 0]}), where "fk" holds the top three rows of the flange pose and "c" is
-    nonLinearEffects - gravity."""
+    result for input 0, one per output]}), where "fk" holds the top three rows of the flange
+    pose and "c" is nonLinearEffects - gravity."""
     model_file, input_file, K = prepared
     out = subprocess.run([str(binary), str(model_file), str(input_file), str(K), str(repeats), str(target_ns)],
                          capture_output=True, text=True, check=True)
     times, checks = {}, {}
-    for line in out.stdout.splitlines():  # "time NAME t1 .. tR" / "check NAME v1 .. vm"
+    # "time NAME t1 .. tR" / "check NAME v1 .. vm" / "check NAME.OUTPUT v1 .. vm" (outputs in order)
+    for line in out.stdout.splitlines():
         kind, name, *values = line.split()
-        (times if kind == "time" else checks)[name] = np.array([float(v) for v in values])
-    return {k: list(v) for k, v in times.items()}, checks
+        if kind == "time":
+            times[name] = [float(v) for v in values]
+        else:
+            checks.setdefault(name.split(".", 1)[0], []).append(np.array([float(v) for v in values]))
+    return times, checks

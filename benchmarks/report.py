@@ -23,10 +23,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 from . import paper, scaling  # noqa: E402
 from .common import GENERATED, RESULTS, manifest  # noqa: E402
 
-IMPL_ORDER = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "python", "python_batch",
+IMPL_ORDER = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "pinocchio_casadi_c", "python", "python_batch",
               "python_batch_1000", "casadi")
 IMPL_LABEL = {"c": "C -O3", "c_native": "C -O3 -march=native", "casadi_codegen": "CasADi codegen C -O3",
-              "pinocchio_cpp": "Pinocchio C++", "python": "numpy, 1 config/call",
+              "pinocchio_cpp": "Pinocchio C++", "pinocchio_casadi_c": "Pinocchio in CasADi SX, C -O3 -march=native",
+              "python": "numpy, 1 config/call",
               "python_batch": "numpy batch (per config)", "python_batch_1000": "numpy batch N=1000 (per config)",
               "casadi": "CasADi Function from Python"}
 RATIO_IMPLS = ("c", "c_native", "casadi_codegen")
@@ -78,7 +79,7 @@ def opcount_markdown(rows: list[dict]) -> list[str]:
     return out
 
 
-COMPILED = ("c", "c_native", "casadi_codegen", "pinocchio_cpp")
+COMPILED = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "pinocchio_casadi_c")
 
 
 def speed_markdown(functions: dict, ratios: dict, compiled: bool) -> list[str]:

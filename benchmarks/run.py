@@ -6,9 +6,15 @@ plus Pinocchio C++ for the same computations; write results/timings.json.
 Implementations: "c" (-O3), "c_native" (-O3 -march=native), "casadi_codegen" (CasADi's C,
 -O3), "python" (numpy, one configuration per call), "python_batch" / "python_batch_<N>"
 (numpy on N configurations, time per configuration), "casadi" (saved Function called from
-Python), "pinocchio_cpp". All comparisons are ratios within one run on one machine; nothing
-here asserts on a time. --quick is the smoke-test setting: tiny counts, lwr4 only, and no
-Pinocchio C++ (its build alone takes about a minute).
+Python), "pinocchio_cpp" (Pinocchio's C++ algorithms in double), "pinocchio_casadi_c" (Pinocchio
+traced with casadi::SX, CasADi's C, -O3 -march=native: the strongest Pinocchio-based peer),
+"c_batch" (the <name>_batch variants, -O3 -march=native, N configurations per call, time per
+configuration, with the single-call time of the same run), "python_c" (the generated C as a
+Python extension, one configuration per call) against "pinocchio_python" (Pinocchio's Python
+bindings). All
+comparisons are ratios within one run on one machine; nothing here asserts on a time. --quick
+is the smoke-test setting: tiny counts, lwr4 only, neither Pinocchio peer (their header-only
+builds take minutes), no c_batch and no python_c.
 """
 from __future__ import annotations
 
@@ -23,18 +29,23 @@ import numpy as np
 
 from kindyngen.robot import load_robot
 
-from . import casadi_codegen, compiled, inputs, pinocchio_cpp, python_timing, scaling
+from . import (c_batch, casadi_codegen, compiled, inputs, pinocchio_casadi, pinocchio_cpp, python_c_timing,
+               python_timing, scaling)
 from .build import BUILD
 from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
 
 FULL = dict(K=1000, repeats=15, rounds=3, c_target_ns=2e7, py_target_s=0.05, batch_sizes=(1000, 100_000),
-            batch_repeats=5, robots=("lwr4", "panda"), pinocchio=True, c_native=True,
+            batch_repeats=5, robots=("lwr4", "panda"), pinocchio=True, c_native=True, c_batch_n=1000,
+            compiled_python=True,
             scaling_max_n=12, scaling_budget_s=60.0)
 QUICK = dict(K=50, repeats=3, rounds=1, c_target_ns=2e5, py_target_s=0.002, batch_sizes=(200,),
-             batch_repeats=2, robots=("lwr4",), pinocchio=False, c_native=False,
+             batch_repeats=2, robots=("lwr4",), pinocchio=False, c_native=False, c_batch_n=None,
+             compiled_python=False,
              scaling_max_n=3, scaling_budget_s=5.0)
 PRIMARY = "lwr4"          # the robot of the paper: every implementation
-SECONDARY_IMPLS = ("c", "c_native", "pinocchio_cpp")  # other robots: the ratio comparison only
+SECONDARY_IMPLS = ("c", "c_native", "pinocchio_cpp", pinocchio_casadi.IMPL,  # other robots: the ratios only
+                   c_batch.IMPL, "python_c")
+PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL)  # the implementations the ratios divide by
 
 
 def log(message: str) -> None:
@@ -75,6 +86,7 @@ class Bench:
         self.notes: list[str] = []
         self.robots: dict = {}
         self.pinocchio_build: dict | None = None
+        self.pinocchio_casadi_build: dict | None = None
 
     def note(self, text: str) -> None:
         log("note: " + text)
@@ -102,6 +114,10 @@ class Bench:
             self._guarded(name, "python", self._python, name, module, model, functions, samples, entry)
         if wanted("casadi"):
             self._guarded(name, "casadi", self._casadi_python, name, robot_dir, functions, samples, refs, entry)
+        if wanted(c_batch.IMPL):
+            self._guarded(name, c_batch.IMPL, self._c_batch, name, model, module, robot_dir, functions, entry)
+        if wanted("python_c"):
+            self._guarded(name, "python_c", self._python_c, name, entry)
         entry["ratios"] = ratios(entry["functions"])
 
     def _guarded(self, robot, impl, method, *args):
@@ -133,17 +149,26 @@ class Bench:
         if wanted("pinocchio_cpp"):
             timers["pinocchio_cpp"] = self._guarded(name, "pinocchio_cpp", self._pinocchio_timer, name, model,
                                                     functions, data, work)
+        peer = pinocchio_casadi.IMPL
+        if wanted(peer):
+            timers[peer] = self._guarded(name, peer, self._pinocchio_casadi_timer, name, model, samples, work)
         timers = {impl: t for impl, t in timers.items() if t is not None}
         if not timers:
             return
         log(f"{name}: timing {', '.join(timers)} in {s['rounds']} interleaved rounds")
         pooled, outputs = compiled.interleave(timers, s["repeats"], s["rounds"], s["c_target_ns"],
                                               lambda impl, exc: self._failed(name, impl, exc))
+        peer_notes = {}
+        if peer in pooled:  # its derivative candidates: the faster one stays
+            pooled[peer], outputs[peer], peer_notes = pinocchio_casadi.keep_faster(pooled[peer], outputs[peer])
         for impl, per_function in pooled.items():
             for fname, values in per_function.items():
-                entry["functions"][fname][impl] = summary(values)
+                # A peer may time a function generated/ does not have (yet): it gets a row.
+                stats = entry["functions"].setdefault(fname, {})[impl] = summary(values)
                 if impl == "pinocchio_cpp":
-                    entry["functions"][fname][impl]["note"] = pinocchio_cpp.note_for(fname)
+                    stats["note"] = pinocchio_cpp.note_for(fname)
+                elif impl == peer:
+                    stats["note"] = peer_notes.get(fname, "")
             if timers[impl].build_seconds is not None:
                 entry["build_seconds"][impl] = round(timers[impl].build_seconds, 2)
         # Wiring checks: every output for input 0 against the generated numpy code (Pinocchio:
@@ -154,23 +179,42 @@ class Bench:
                         if f["name"] in got and module is not None and {p["name"] for p in f["inputs"]} <= data.keys()}
                 if "fk_hom" in want:
                     want["fk_hom"] = [want["fk_hom"][0][:12]]  # Pinocchio prints the top 3 rows
+            elif impl == peer:  # where it computes the same function, on the same inputs
+                want = {f: w for f, w in refs.items() if f in got}
             else:
                 want = refs
             entry["checks"][impl] = {f: _max_error(got.get(f, []), w) for f, w in want.items()}
 
     def _pinocchio_timer(self, name, model, functions, data, work):
         if not self.settings["pinocchio"]:
-            self.note("Pinocchio C++ skipped (--quick: its header-only build takes about a minute)")
+            self.note("Pinocchio C++ skipped (--quick: its header-only build takes minutes)")
             return None
         if model.length_symbols:
             self.note(f"{name}: symbolic DH lengths, no Pinocchio model, pinocchio_cpp skipped")
             return None
-        log("pinocchio_cpp: building (header-only, about two minutes unless cached)")
+        log("pinocchio_cpp: building (header-only, minutes unless cached)")
         built = pinocchio_cpp.build_binary()
         if self.pinocchio_build is None:
             self.pinocchio_build = {"binary": built.path.name, "cached": built.cached, "seconds": _seconds(built)}
             log(f"pinocchio_cpp: {'cached' if built.cached else 'new'} build, {_seconds(built)} s to compile")
         return compiled.pinocchio(model, functions, data, built.path, work)
+
+    def _pinocchio_casadi_timer(self, name, model, samples, work):
+        if not self.settings["pinocchio"]:
+            self.note("pinocchio_casadi_c skipped (--quick: its header-only tracer build takes minutes)")
+            return None
+        if model.length_symbols:
+            self.note(f"{name}: symbolic DH lengths, no Pinocchio model, pinocchio_casadi_c skipped")
+            return None
+        log("pinocchio_casadi_c: building the tracer (header-only Pinocchio with casadi::SX, minutes unless cached)")
+        built = pinocchio_casadi.build_tracer()
+        if self.pinocchio_casadi_build is None:
+            self.pinocchio_casadi_build = {"binary": built.path.name, "cached": built.cached, "seconds": _seconds(built),
+                                           "tracer_flags": " ".join(pinocchio_casadi.FLAGS),
+                                           "c_flags": " ".join(compiled.C_FLAGS[pinocchio_casadi.IMPL])}
+            log(f"pinocchio_casadi_c: {'cached' if built.cached else 'new'} tracer build, {_seconds(built)} s to compile")
+        log(f"{name}: pinocchio_casadi_c: tracing, generating C and building")
+        return pinocchio_casadi.timer(model, built.path, samples, self.settings["K"], work)
 
     # -- from Python -------------------------------------------------------------------------
     def _python(self, name, module, model, functions, samples, entry):
@@ -207,6 +251,38 @@ class Bench:
                 got = [_flat(np.array(o)) for o in out]
                 entry["checks"].setdefault("casadi", {})[f["name"]] = _max_error(got, refs[f["name"]])
 
+    def _c_batch(self, name, model, module, robot_dir, functions, entry):
+        """The batch variants against single calls of the same library (-O3 -march=native), N
+        configurations per batch call; stored per configuration with the single-call time of
+        the same run and their ratio."""
+        n = self.settings["c_batch_n"]
+        if n is None:
+            self.note(f"{name}: c_batch skipped (--quick: two more builds of the whole library)")
+            return
+        log(f"{name}: c_batch: building and timing N = {n}")
+        results = c_batch.time_batch(robot_dir, model, functions, n=n, repeats=self.settings["repeats"] // 3 or 1,
+                                     rounds=self.settings["rounds"], target_ns=self.settings["c_target_ns"] / 10,
+                                     workdir=self.workdir / name / "c_batch", python_module=module)
+        for fname, row in results.items():
+            entry["functions"][fname][c_batch.IMPL] = dict(row[c_batch.IMPL], n=n,
+                                                           single_median_ns=row["c_single"]["median_ns"],
+                                                           single_over_batch=row["ratio"])
+            entry["checks"].setdefault(c_batch.IMPL, {})[fname] = row["max_error"]
+
+    def _python_c(self, name, entry):
+        """The generated C called from Python (python_c) against Pinocchio's Python bindings
+        (pinocchio_python), one configuration per call, repeats taken in turn."""
+        if not self.settings["compiled_python"]:
+            self.note(f"{name}: python_c skipped (--quick: its extension build takes seconds)")
+            return
+        log(f"{name}: python_c and pinocchio_python")
+        results = python_c_timing.measure(name, K=self.settings["K"], repeats=max(5, self.settings["repeats"] // 2),
+                                          target_s=self.settings["py_target_s"], generated=self.generated,
+                                          progress=log)
+        for fname, row in results.items():
+            for impl, stats in row.items():
+                entry["functions"].setdefault(fname, {})[impl] = stats
+
     def warn_on_checks(self) -> None:
         for robot, entry in self.robots.items():
             for impl, per_function in entry["checks"].items():
@@ -217,21 +293,25 @@ class Bench:
 
 
 def ratios(functions: dict) -> dict:
-    """t(pinocchio_cpp) / t(impl): above 1 means the generated implementation is faster."""
+    """t(peer) / t(impl) for each peer in PEERS, keyed "peer/impl": above 1 means the
+    generated implementation is faster."""
     out = {}
     for fname, impls in functions.items():
-        pin = impls.get("pinocchio_cpp")
-        if not pin:
-            continue
-        out[fname] = {f"pinocchio_cpp/{impl}": pin["median_ns"] / st["median_ns"]
-                      for impl, st in impls.items()
-                      if impl in ("c", "c_native", "casadi_codegen") and st["median_ns"] > 0}
+        row = {f"{peer}/{impl}": impls[peer]["median_ns"] / st["median_ns"]
+               for peer in PEERS if peer in impls
+               for impl, st in impls.items()
+               if impl in ("c", "c_native", "casadi_codegen") and st["median_ns"] > 0}
+        if impls.get("pinocchio_python") and impls.get("python_c"):
+            row["pinocchio_python/python_c"] = impls["pinocchio_python"]["median_ns"] / impls["python_c"]["median_ns"]
+        if row:
+            out[fname] = row
     return out
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="tiny smoke-test setting, no Pinocchio C++")
+    parser.add_argument("--quick", action="store_true",
+                        help="tiny smoke-test setting, no Pinocchio C++ and no pinocchio_casadi_c")
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for timings.json and scaling.json")
     parser.add_argument("--generated", type=Path, default=GENERATED, help="generated code (default generated/)")
     parser.add_argument("--no-scaling", action="store_true", help="skip the generation-time scaling study")
@@ -240,7 +320,8 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     bench = Bench(settings, args.generated, BUILD / ("work-quick" if args.quick else "work"))
     if args.quick:
-        bench.note("quick mode: few repeats, small N, lwr4 only, no c_native, Pinocchio C++ skipped")
+        bench.note("quick mode: few repeats, small N, lwr4 only, no c_native, Pinocchio C++ and "
+                   "pinocchio_casadi_c skipped")
     for robot in settings["robots"]:
         bench.robot(robot, None if robot == PRIMARY else SECONDARY_IMPLS)
     bench.warn_on_checks()
@@ -258,6 +339,7 @@ def main(argv=None) -> int:
         "build_seconds": primary.get("build_seconds", {}),
         "robots": {k: v for k, v in bench.robots.items() if k != PRIMARY},
         "pinocchio_build": bench.pinocchio_build,
+        "pinocchio_casadi_build": bench.pinocchio_casadi_build,
         "notes": bench.notes,
     }
     args.out.mkdir(parents=True, exist_ok=True)
