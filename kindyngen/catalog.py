@@ -11,6 +11,7 @@ from typing import Callable, Optional
 
 import symengine as se
 
+from .dynamics_derivatives import fd_derivatives, tau_derivatives
 from .dynamics_dualquat import coriolis_dq, gravity_dq, inverse_dynamics_dq, mass_matrix_dq, regressor_dq
 from .dynamics_lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
 from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
@@ -39,6 +40,9 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("S", lambda model, params: coriolis_matrix(model, params, "S")),
     ("tau", lambda model, params: inverse_dynamics(model, params, "tau")),
     ("fd", lambda model, params: forward_dynamics(model, params, "fd")),
+    # their partial derivatives, for optimal control (kindyngen/dynamics_derivatives.py)
+    ("tau_derivatives", lambda model, params: tau_derivatives(model, params, "tau_derivatives")),
+    ("fd_derivatives", lambda model, params: fd_derivatives(model, params, "fd_derivatives")),
     ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
     ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
     ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),

@@ -24,12 +24,17 @@ from .symbolic import Port, SymbolicFunction, port_symbols
 
 def ldlt_solve(M, b):
     """Solve ``M x = b`` for a symmetric positive definite M (nested lists) by an unrolled
-    ``M = L D L^T`` (unit lower L, diagonal D); returns x as a list of expressions.
+    ``M = L D L^T`` (unit lower L, diagonal D); returns x as a list of expressions."""
+    return ldlt_substitute(*ldlt_factor(M), b)
+
+
+def ldlt_factor(M):
+    """The unrolled ``M = L D L^T`` of a symmetric positive definite M (nested lists):
+    ``(L, inv_d)``, L's entries below the diagonal and the reciprocals ``1 / D_j``.
 
     ``E_ij = L_ij D_j = M_ij - sum_{k<j} E_ik L_jk``, ``D_j = M_jj - sum_{k<j} E_jk L_jk``,
-    ``L_ij = E_ij / D_j`` (one reciprocal per column), then ``L y = b``, ``z = y / D``,
-    ``L^T x = z``."""
-    n = len(b)
+    ``L_ij = E_ij / D_j`` (one reciprocal per column)."""
+    n = len(M)
     L = [[None] * n for _ in range(n)]
     E = [[None] * n for _ in range(n)]
     inv_d = [None] * n
@@ -39,6 +44,13 @@ def ldlt_solve(M, b):
         for i in range(j + 1, n):
             E[i][j] = se.Add(M[i][j], *(-E[i][k] * L[j][k] for k in range(j)))
             L[i][j] = E[i][j] * inv_d[j]
+    return L, inv_d
+
+
+def ldlt_substitute(L, inv_d, b):
+    """``x = M^-1 b`` from the factors of :func:`ldlt_factor`: ``L y = b``, ``z = y / D``,
+    ``L^T x = z``."""
+    n = len(b)
     y = [None] * n
     for i in range(n):
         y[i] = se.Add(b[i], *(-L[i][k] * y[k] for k in range(i)))
