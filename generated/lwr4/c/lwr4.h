@@ -6,7 +6,30 @@
  * Conventions: arrays are row-major; angles in rad, lengths in m, SI units throughout.
  * Gravity in the base frame: (0.0, 0.0, -9.81) m/s^2.
  * Every function is re-entrant: no globals, no allocation, no static state; outputs must
- * not alias inputs.
+ * not alias inputs nor each other (the definitions declare the pointers restrict).
+ *
+ * Trigonometry (generated with --trig kernel): the sines and cosines of the joint angles q
+ * are computed together at the start of a function by a polynomial kernel in the .c file
+ * that compilers vectorise (kdg_sincos: Cody-Waite reduction, minimax polynomials). Its
+ * largest error against glibc's sin and cos over the whole finite range is 1 ulp (checked
+ * on dense grids, at the doubles nearest every multiple of pi/2 up to 1048576, at random
+ * doubles of random exponent and at +-0, subnormals, inf and NaN); |q| > 1048576 rad,
+ * infinities and NaN are passed to libm sin/cos. Other sin/cos, e.g. of half angles, are libm
+ * calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
+ * -ffast-math (-ffp-contract=fast is fine).
+ *
+ * Fused multiply-adds: strict C99 (gcc -std=c99) keeps every product rounded; on FMA targets
+ * -ffp-contract=fast lets the compiler fuse them, faster (lwr4, gcc -O3 -march=native: fk_hom
+ * and jacobian about 1.2-1.5x), with results that differ by roundings only.
+ *
+ * Batch variants: <name>_batch(count, ...) evaluates <name> for count configurations
+ * (count <= 0: nothing) in structure-of-arrays layout: entry k of a port of size m, for
+ * configuration i, is port[k*count + i] (each port is m rows of count values). Results equal
+ * count single calls, bit for bit when both are compiled without contraction (strict C99).
+ * Work is done in blocks of up to 64 configurations looping over the configurations
+ * innermost, so that compilers vectorise the arithmetic across them; each call uses at most
+ * 32 KiB of stack for a block's sin/cos and outputs (smaller blocks for larger outputs; functions
+ * with too many output entries for that store them in place, and gain little from batching).
  *
  * Operation counts: add = additions/subtractions, mul = multiplications/divisions,
  * call = sin, cos, sqrt, atan2, ... (rule in the project README), after CSE.
@@ -30,8 +53,10 @@ extern "C" {
  *
  * Cost: 31 add, 67 mul, 14 call
  * (as derived, before CSE: 88 add, 238 mul, 332 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_fk_hom(const double *q, double *T);
+void lwr4_fk_hom_batch(long count, const double *q, double *T);
 
 /*
  * fk_dq: Forward kinematics: flange pose as a unit dual quaternion.
@@ -47,6 +72,7 @@ void lwr4_fk_hom(const double *q, double *T);
  * (as derived, before CSE: 184 add, 560 mul, 304 call).
  */
 void lwr4_fk_dq(const double *q, double *x);
+void lwr4_fk_dq_batch(long count, const double *q, double *x);
 
 /*
  * jacobian: Geometric Jacobian of the flange: [v; w] = J(q) qd.
@@ -59,8 +85,10 @@ void lwr4_fk_dq(const double *q, double *x);
  *
  * Cost: 36 add, 76 mul, 12 call
  * (as derived, before CSE: 226 add, 613 mul, 795 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_jacobian(const double *q, double *J);
+void lwr4_jacobian_batch(long count, const double *q, double *J);
 
 /*
  * pose_jacobian_dq: Pose Jacobian of the flange dual quaternion: vec8(xdot) = Jx(q) qd.
@@ -76,6 +104,7 @@ void lwr4_jacobian(const double *q, double *J);
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call).
  */
 void lwr4_pose_jacobian_dq(const double *q, double *Jx);
+void lwr4_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
 
 /*
  * jacobian_dq: Geometric Jacobian of the flange: [v; w] = J(q) qd (dual-quaternion route).
@@ -92,6 +121,7 @@ void lwr4_pose_jacobian_dq(const double *q, double *Jx);
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call).
  */
 void lwr4_jacobian_dq(const double *q, double *J);
+void lwr4_jacobian_dq_batch(long count, const double *q, double *J);
 
 /*
  * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
@@ -106,8 +136,10 @@ void lwr4_jacobian_dq(const double *q, double *J);
  *
  * Cost: 157 add, 172 mul, 12 call
  * (as derived, before CSE: 5919 add, 8715 mul, 6724 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_M(const double *q, double *M);
+void lwr4_M_batch(long count, const double *q, double *M);
 
 /*
  * g: Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
@@ -122,8 +154,10 @@ void lwr4_M(const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_g(const double *q, double *g);
+void lwr4_g_batch(long count, const double *q, double *g);
 
 /*
  * c: Newton-Euler route (joint frames, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
@@ -139,8 +173,10 @@ void lwr4_g(const double *q, double *g);
  *
  * Cost: 241 add, 311 mul, 12 call
  * (as derived, before CSE: 42081 add, 81748 mul, 70825 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_c(const double *q, const double *qd, double *c);
+void lwr4_c_batch(long count, const double *q, const double *qd, double *c);
 
 /*
  * S: Christoffel route: Coriolis/centrifugal matrix S from the Christoffel symbols (paper eq. 16) of the composite-rigid-body M, differentiated on the DAG; c = S qd, Mdot - 2 S is skew-symmetric.
@@ -156,8 +192,10 @@ void lwr4_c(const double *q, const double *qd, double *c);
  *
  * Cost: 766 add, 862 mul, 12 call
  * (as derived, before CSE: 55151 add, 91314 mul, 68639 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_S(const double *q, const double *qd, double *S);
+void lwr4_S_batch(long count, const double *q, const double *qd, double *S);
 
 /*
  * tau: Newton-Euler route (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.
@@ -174,8 +212,10 @@ void lwr4_S(const double *q, const double *qd, double *S);
  *
  * Cost: 263 add, 330 mul, 12 call
  * (as derived, before CSE: 49900 add, 87783 mul, 76848 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_tau(const double *q, const double *qd, const double *qdd, double *tau);
+void lwr4_tau_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
 
 /*
  * fd: Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).
@@ -192,8 +232,55 @@ void lwr4_tau(const double *q, const double *qd, const double *qdd, double *tau)
  *
  * Cost: 512 add, 647 mul, 12 call
  * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_fd(const double *q, const double *qd, const double *tau, double *qdd);
+void lwr4_fd_batch(long count, const double *q, const double *qd, const double *tau, double *qdd);
+
+/*
+ * tau_derivatives: Partial derivatives of the inverse dynamics tau(q, qd, qdd) (the function tau, effects included): dtau/dq and dtau/dqd by one adjoint (reverse) sweep per joint over the Newton-Euler pass (plus the friction derivative on the diagonal of dtau/dqd); dtau/dqdd is M.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in. Matrices are row-major, row i the
+ * output of joint i, column j the input of joint j (d out_i / d in_j).
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
+ * out dtau_dq[49]: 7 x 7 double, dtau_i / dq_j (row-major) [N m/rad]
+ * out dtau_dqd[49]: 7 x 7 double, dtau_i / dqd_j (row-major) [N m s/rad]
+ *
+ * Cost: 1809 add, 2314 mul, 12 call
+ * (as derived, before CSE: 434960 add, 832852 mul, 833128 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
+ */
+void lwr4_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
+void lwr4_tau_derivatives_batch(long count, const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
+
+/*
+ * fd_derivatives: Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd, effects included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c + g)/dq (one tangent sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2 S(q, qd) (Christoffel symbols) plus the friction derivative, and M^-1 and the products from one unrolled LDL^T factorisation of M (no square roots); dqdd/dtau is Minv.
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in. Matrices are row-major, row i the
+ * output of joint i, column j the input of joint j (d out_i / d in_j).
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  tau[7]: 7 double, applied joint torques [N m]
+ * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
+ * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
+ * out Minv[49]: 7 x 7 double, inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major) [1/(kg m^2)]
+ *
+ * Cost: 3030 add, 3580 mul, 12 call
+ * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
+ */
+void lwr4_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
+void lwr4_fd_derivatives_batch(long count, const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
 
 /*
  * M_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, M = Hessian of T in qd.
@@ -208,8 +295,10 @@ void lwr4_fd(const double *q, const double *qd, const double *tau, double *qdd);
  *
  * Cost: 750 add, 1042 mul, 12 call
  * (as derived, before CSE: 5133 add, 14904 mul, 16343 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_M_lagrange(const double *q, double *M);
+void lwr4_M_lagrange_batch(long count, const double *q, double *M);
 
 /*
  * g_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, g = gradient of the potential energy U.
@@ -224,8 +313,10 @@ void lwr4_M_lagrange(const double *q, double *M);
  *
  * Cost: 81 add, 131 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_g_lagrange(const double *q, double *g);
+void lwr4_g_lagrange_batch(long count, const double *q, double *g);
 
 /*
  * c_christoffel: Christoffel route: Coriolis and centrifugal torques c = S qd (paper eq. 15), S from the Christoffel symbols (eq. 16) of the composite-rigid-body M.
@@ -241,8 +332,10 @@ void lwr4_g_lagrange(const double *q, double *g);
  *
  * Cost: 807 add, 916 mul, 12 call
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_c_christoffel(const double *q, const double *qd, double *c);
+void lwr4_c_christoffel_batch(long count, const double *q, const double *qd, double *c);
 
 /*
  * M_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): inertia matrix M(q), composite inertia operators carried by the joint adjoints.
@@ -259,6 +352,7 @@ void lwr4_c_christoffel(const double *q, const double *qd, double *c);
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call).
  */
 void lwr4_M_dq(const double *q, double *M);
+void lwr4_M_dq_batch(long count, const double *q, double *M);
 
 /*
  * g_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): gravity torques g = tau(q, 0, 0) by dual-quaternion Newton-Euler.
@@ -275,6 +369,7 @@ void lwr4_M_dq(const double *q, double *M);
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call).
  */
 void lwr4_g_dq(const double *q, double *g);
+void lwr4_g_dq_batch(long count, const double *q, double *g);
 
 /*
  * c_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by dual-quaternion Newton-Euler.
@@ -292,6 +387,7 @@ void lwr4_g_dq(const double *q, double *g);
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call).
  */
 void lwr4_c_dq(const double *q, const double *qd, double *c);
+void lwr4_c_dq_batch(long count, const double *q, const double *qd, double *c);
 
 /*
  * tau_dq: Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): inverse dynamics tau = M qdd + c + g by dual-quaternion Newton-Euler.
@@ -310,6 +406,7 @@ void lwr4_c_dq(const double *q, const double *qd, double *c);
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call).
  */
 void lwr4_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
+void lwr4_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
 
 /*
  * Y_dq: Torque regressor on base parameters from the dual-quaternion route: tau = Y_dq(q, qd, qdd) pi (the columns and values of Y).
@@ -330,6 +427,7 @@ void lwr4_tau_dq(const double *q, const double *qd, const double *qdd, double *t
  * (as derived, before CSE: 115759 add, 499001 mul, 168182 call).
  */
 void lwr4_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
+void lwr4_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
 
 /*
  * ik_hom: Closed-form inverse kinematics (all eight branches) from a 4x4 flange pose, with theta3 = q3 as the redundancy parameter.
@@ -356,6 +454,7 @@ void lwr4_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
  * (as derived, before CSE: 53666888 add, 54617352 mul, 5069232 call).
  */
 void lwr4_ik_hom(const double *T, const double *theta3, double *q, int *status);
+void lwr4_ik_hom_batch(long count, const double *T, const double *theta3, double *q, int *status);
 
 /*
  * ik_dq: Closed-form inverse kinematics (all eight branches) from a unit dual quaternion, with theta3 = q3 as the redundancy parameter.
@@ -383,6 +482,7 @@ void lwr4_ik_hom(const double *T, const double *theta3, double *q, int *status);
  * (as derived, before CSE: 5130962184 add, 5224650480 mul, 565628768 call).
  */
 void lwr4_ik_dq(const double *x, const double *theta3, double *q, int *status);
+void lwr4_ik_dq_batch(long count, const double *x, const double *theta3, double *q, int *status);
 
 /*
  * Y_g: Gravity regressor on base parameters: g(q) = Y_g(q) pi_g (identification paper eq. 17).
@@ -399,8 +499,10 @@ void lwr4_ik_dq(const double *x, const double *theta3, double *q, int *status);
  *
  * Cost: 31 add, 70 mul, 12 call
  * (as derived, before CSE: 110 add, 500 mul, 500 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_Y_g(const double *q, double *Y);
+void lwr4_Y_g_batch(long count, const double *q, double *Y);
 
 /*
  * Y_m: Inertia-stack regressor on base parameters: the lower triangle of M row by row (M00, M10, M11, M20, ...) = Y_m(q) pi_m (identification paper eq. 18).
@@ -418,8 +520,10 @@ void lwr4_Y_g(const double *q, double *Y);
  *
  * Cost: 328 add, 764 mul, 12 call
  * (as derived, before CSE: 2057 add, 6856 mul, 8366 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_Y_m(const double *q, double *Y);
+void lwr4_Y_m_batch(long count, const double *q, double *Y);
 
 /*
  * Y: Torque regressor on base parameters: tau = M(q) qdd + c(q, qd) + g(q) = Y(q, qd, qdd) pi.
@@ -438,8 +542,10 @@ void lwr4_Y_m(const double *q, double *Y);
  *
  * Cost: 512 add, 719 mul, 12 call
  * (as derived, before CSE: 53080 add, 94170 mul, 83708 call).
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_Y(const double *q, const double *qd, const double *qdd, double *Y);
+void lwr4_Y_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
 
 /*
  * ik_dls: Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T
