@@ -29,7 +29,8 @@ IMPL_LABEL = {"c": "C -O3", "c_native": "C -O3 -march=native", "casadi_codegen":
               "pinocchio_cpp": "Pinocchio C++", "pinocchio_casadi_c": "Pinocchio in CasADi SX, C -O3 -march=native",
               "python": "numpy, 1 config/call",
               "python_batch": "numpy batch (per config)", "python_batch_1000": "numpy batch N=1000 (per config)",
-              "casadi": "CasADi Function from Python"}
+              "casadi": "CasADi Function from Python", "c_batch": "C batch -O3 -march=native (per config)",
+              "python_c": "python_c (generated C from Python)", "pinocchio_python": "Pinocchio's Python bindings"}
 RATIO_IMPLS = ("c", "c_native", "casadi_codegen")
 
 
@@ -79,7 +80,7 @@ def opcount_markdown(rows: list[dict]) -> list[str]:
     return out
 
 
-COMPILED = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "pinocchio_casadi_c")
+COMPILED = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "pinocchio_casadi_c", "c_batch")
 
 
 def speed_markdown(functions: dict, ratios: dict, compiled: bool) -> list[str]:
@@ -130,6 +131,36 @@ def fig1(functions: dict, path: Path) -> dict:
     return {"computations": computations, "series_ns": series}
 
 
+PEER_FUNCTIONS = ("fk_hom", "fk_dq", "jacobian", "M", "g", "c", "tau", "fd", "tau_derivatives", "fd_derivatives")
+PEER_IMPLS = ("c", "c_native", "c_batch", "pinocchio_casadi_c", "pinocchio_cpp")
+
+
+def peers_plot(functions: dict, path: Path) -> dict:
+    """Median time per call (c_batch: per configuration) of the generated C and of both
+    Pinocchio peers, function by function (log scale: FK and the derivatives are two decades
+    apart)."""
+    names = [f for f in PEER_FUNCTIONS if f in functions]
+    series = {i: [functions[f].get(i, {}).get("median_ns") for f in names] for i in PEER_IMPLS
+              if any(i in functions[f] for f in names)}
+    fig, ax = plt.subplots(figsize=(11, 4.8))
+    width = 0.8 / max(len(series), 1)
+    for k, (impl, values) in enumerate(series.items()):
+        xs = [j + (k - (len(series) - 1) / 2) * width for j in range(len(names))]
+        ax.bar([x for x, v in zip(xs, values) if v], [v for v in values if v], width,
+               label=IMPL_LABEL.get(impl, impl), edgecolor="black", linewidth=0.4)
+    ax.set_xticks(range(len(names)))
+    ax.set_xticklabels(names, rotation=20)
+    ax.set_yscale("log")
+    ax.set_ylabel("ns per call (batch: per configuration)")
+    ax.set_title("LWR4: generated C against Pinocchio C++ and Pinocchio traced into CasADi's C (one run)")
+    ax.grid(axis="y", which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return {"functions": names, "series_ns": series}
+
+
 def scaling_plot(study: dict, path: Path) -> None:
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
     for route, entry in study.get("routes", {}).items():
@@ -172,6 +203,7 @@ def build_report(timings: dict, study: dict, out: Path, counts: dict | None = No
     rows = opcount_rows(counts if counts is not None else timings.get("opcounts", {}))
     figure = fig1(functions, out / "fig1_times.png")
     scaling_plot(study, out / "scaling.png")
+    peers = peers_plot(functions, out / "peers.png")
     m = timings.get("machine", {})
     md = [f"# KinDynGen benchmark report ({timings.get('robot', 'lwr4')})", "",
           f"Run {timings.get('date', '?')} on {m.get('cpu', '?')} ({m.get('cores', '?')} cores), "
@@ -204,6 +236,7 @@ def build_report(timings: dict, study: dict, out: Path, counts: dict | None = No
                + ", ".join(f"{IMPL_LABEL.get(i, i)} {s} s" for i, s in timings["build_seconds"].items() if s is not None) + ".", ""]
     for robot, entry in timings.get("robots", {}).items():
         md += [f"### {robot}", ""] + speed_markdown(entry["functions"], entry.get("ratios", {}), compiled=True)
+    md += ["## Against the peers, per function (LWR4)", "", "![peers](peers.png)", ""]
     md += ["## Time per computation (cf. the paper's Fig. 1)", "", "![Fig. 1](fig1_times.png)", "",
            "The paper's bars are MATLAB 2017b on an i7-6700K at 4 GHz (FK 3.642 / 4.398 us, "
            "IK 86.138 / 173.104 us, homogeneous / dual quaternion): another machine and language, "
@@ -222,7 +255,7 @@ def build_report(timings: dict, study: dict, out: Path, counts: dict | None = No
               "disagreements: " + ", ".join(f"{impl} {f} ({e})" for impl, f, e in bad)), ""]
     (out / "report.md").write_text("\n".join(md))
     summary = {"date": timings.get("date"), "machine": m, "opcounts": rows, "speed": functions, "ratios": ratios,
-               "fig1": figure, "scaling": study, "checks": checks}
+               "fig1": figure, "peers": peers, "scaling": study, "checks": checks}
     (out / "report.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary
 
@@ -249,7 +282,7 @@ def main(argv=None) -> int:
     counts = {f["name"]: f.get("opcount") for f in spec["functions"]} if spec else None
     out = args.out or args.results
     build_report(timings, study, out, counts)
-    print(f"wrote {out / 'report.md'}, report.json, fig1_times.png, scaling.png")
+    print(f"wrote {out / 'report.md'}, report.json, fig1_times.png, peers.png, scaling.png")
     return 0
 
 

@@ -43,7 +43,7 @@ def test_bench_quick_and_report(tmp_path):
         assert all(error is not None and error <= 1e-6 for error in per_function.values()), (impl, per_function)
 
     _run("benchmarks.report", "--results", str(tmp_path), "--out", str(tmp_path), timeout=15)
-    for name in ("report.md", "report.json", "fig1_times.png", "scaling.png"):
+    for name in ("report.md", "report.json", "fig1_times.png", "peers.png", "scaling.png"):
         assert (tmp_path / name).stat().st_size > 0, name
     report = (tmp_path / "report.md").read_text()
     assert "Table II" in report and "40 / 87 / 14" in report
