@@ -62,7 +62,7 @@ from dataclasses import replace
 
 import symengine as se
 
-from .dynamics_newton_euler import crba, setup
+from .dynamics_newton_euler import NewtonEulerPass, crba, mat3, setup, u_matrix
 from .forward_dynamics import ldlt_factor, ldlt_substitute
 from .joint_effects import coulomb_shape, effect_torques, with_armature
 from .kinematics_homogeneous import q_port
@@ -138,49 +138,9 @@ def solve_columns(L, inv_d, B):
 
 # ----------------------------------------------------------------------------- tangent Newton-Euler
 
-class _NewtonEuler:
-    """The joint-frame Newton-Euler pass of :func:`kindyngen.dynamics_newton_euler.rnea` (same
-    operations), its intermediates kept for the sweeps of :meth:`tangent` and :meth:`adjoint`."""
-
-    def __init__(self, joints, bodies, qd, qdd, gam):
-        n = len(joints)
-        self.joints, self.bodies, self.qd = joints, bodies, qd
-        self.wr, self.wdr, self.ar, self.w, self.U, self.Iw = ([None] * n for _ in range(6))
-        w, wd = [ZERO] * 3, [ZERO] * 3
-        a = [-x for x in gam] if gam is not None else [ZERO] * 3
-        U = None
-        forces = []
-        for j, (joint, body) in enumerate(zip(joints, bodies)):
-            a_in = a if U is None else vadd(a, _mat3(U, joint.t))
-            self.ar[j] = a = joint.rot_t(a_in)
-            self.wr[j] = wr = joint.rot_t(w)
-            self.wdr[j] = wdr = joint.rot_t(wd)
-            qdj = qd[j] if qd is not None else ZERO
-            qddj = qdd[j] if qdd is not None else ZERO
-            if joint.prismatic:
-                w, wd = wr, wdr
-                a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
-            else:
-                w = [wr[0], wr[1], wr[2] + qdj]
-                wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
-            self.w[j] = w
-            self.U[j] = U = _u_matrix(w, wd, _products(w))
-            h, I, m = body.h, body.I, body.m
-            self.Iw[j] = Iw = _mat3(I, w)
-            forces.append((vadd(vscale(m, a), _mat3(U, h)), vadd(_mat3(I, wd), cross(w, Iw), cross(h, a))))
-        self.f, self.nn, self.tau = [None] * n, [None] * n, [None] * n
-        f, nn = [ZERO] * 3, [ZERO] * 3
-        for j in range(n - 1, -1, -1):
-            F, N = forces[j]
-            if j + 1 < n:
-                joint = joints[j + 1]
-                fr = joint.rot(f)
-                nn = vadd(N, joint.rot(nn), cross(joint.t, fr))
-                f = vadd(F, fr)
-            else:
-                f, nn = F, N
-            self.f[j], self.nn[j] = f, nn
-            self.tau[j] = f[2] if joints[j].prismatic else nn[2]
+class _NewtonEuler(NewtonEulerPass):
+    """:class:`kindyngen.dynamics_newton_euler.NewtonEulerPass` with the sweeps of
+    :meth:`tangent` and :meth:`adjoint` over its intermediates."""
 
     def seed(self, m: int):
         """The tangents ``(dw, dw', da)`` of link m's velocity, angular and linear
@@ -192,7 +152,7 @@ class _NewtonEuler:
         if joint.prismatic:
             if m == 0:      # the base does not move: U = 0
                 return zero, zero, zero
-            return zero, zero, joint.rot_t(_mat3(self.U[m - 1], [joint.C[r][2] for r in range(3)]))
+            return zero, zero, joint.rot_t(mat3(self.U[m - 1], [joint.C[r][2] for r in range(3)]))
         wr, wdr, ar = self.wr[m], self.wdr[m], self.ar[m]
         qdm = self.qd[m] if self.qd is not None else ZERO
         return [wr[1], -wr[0], ZERO], [wdr[1] - qdm * wr[0], -wdr[0] - qdm * wr[1], ZERO], [ar[1], -ar[0], ZERO]
@@ -211,7 +171,7 @@ class _NewtonEuler:
         for k in range(m, n):
             if k > m:
                 joint = joints[k]
-                da = joint.rot_t(vadd(da, _mat3(dU, joint.t)))
+                da = joint.rot_t(vadd(da, mat3(dU, joint.t)))
                 dwr, dwdr = joint.rot_t(dw), joint.rot_t(dwd)
                 qdk = qd[k] if qd is not None else ZERO
                 if joint.prismatic:
@@ -221,11 +181,11 @@ class _NewtonEuler:
                     dw = dwr
                     dwd = [dwdr[0] + qdk * dwr[1], dwdr[1] - qdk * dwr[0], dwdr[2]]
             w = self.w[k]
-            dU = _u_matrix(dw, dwd, _product_tangents(w, dw))
+            dU = u_matrix(dw, dwd, _product_tangents(w, dw))
             body = bodies[k]
             h, I = body.h, body.I
-            dforces[k] = (vadd(vscale(body.m, da), _mat3(dU, h)),
-                          vadd(_mat3(I, dwd), cross(dw, self.Iw[k]), cross(w, _mat3(I, dw)), cross(h, da)))
+            dforces[k] = (vadd(vscale(body.m, da), mat3(dU, h)),
+                          vadd(mat3(I, dwd), cross(dw, self.Iw[k]), cross(w, mat3(I, dw)), cross(h, da)))
         out = [None] * n
         df, dnn = zero, zero
         for k in range(n - 1, -1, -1):
@@ -278,9 +238,9 @@ class _NewtonEuler:
             if k >= i:
                 F, N, h, I = lf[k], ln[k], body.h, body.I
                 La = vadd(La, vscale(body.m, F), cross(N, h))
-                Lwd = vadd(Lwd, cross(h, F), _mat3(I, N))
+                Lwd = vadd(Lwd, cross(h, F), mat3(I, N))
                 Lw = vadd(Lw, vscale(dot(w, h), F), vscale(dot(F, w), h), vscale(-2 * dot(F, h), w),
-                          cross(self.Iw[k], N), _mat3(I, cross(N, w)))
+                          cross(self.Iw[k], N), mat3(I, cross(N, w)))
             wr, qdk = self.wr[k], qd[k] if qd is not None else ZERO
             dw, dwd, da = self.seed(k)
             dq[k] = se.Add(dot(Lw, dw), dot(Lwd, dwd), dot(La, da))
@@ -311,27 +271,16 @@ def _columns(columns):
     return [list(row) for row in zip(*columns)]
 
 
-def _mat3(A, v):
-    return [se.Add(*(A[r][k] * v[k] for k in range(3))) for r in range(3)]
 
 
-def _products(w):
-    wx, wy, wz = w
-    return wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
 
 
 def _product_tangents(w, dw):
-    """Tangents of (xx, yy, zz, xy, xz, yz) of :func:`_products`."""
+    """Tangents of (xx, yy, zz, xy, xz, yz) of :func:`kindyngen.dynamics_newton_euler.omega_products`."""
     (x, y, z), (dx, dy, dz) = w, dw
     return 2 * x * dx, 2 * y * dy, 2 * z * dz, dx * y + x * dy, dx * z + x * dz, dy * z + y * dz
 
 
-def _u_matrix(w, wd, products):
-    """``skew(wd) + skew(w)^2`` from the products of w's components."""
-    xx, yy, zz, xy, xz, yz = products
-    return [[-(yy + zz), xy - wd[2], xz + wd[1]],
-            [xy + wd[2], -(xx + zz), yz - wd[0]],
-            [xz - wd[1], yz + wd[0], -(xx + yy)]]
 
 
 def _rot_ez_cross(joint, v):

@@ -73,50 +73,73 @@ def rnea(joints, bodies, qd, qdd, gam):
     the next origin's acceleration is ``R^T (a + U t)``, plus ``qdd e_z + 2 w x (qd e_z)``
     after a prismatic joint, whose torque is the force along its axis.  (Variants with cross products for
     F, or products of w for ``w x I w``, cost more after CSE on the LWR and Panda.)"""
-    n = len(joints)
-    w, wd = [ZERO] * 3, [ZERO] * 3
-    a = [-x for x in gam] if gam is not None else [ZERO] * 3
-    U = None
-    forces = []
-    for j, (joint, body) in enumerate(zip(joints, bodies)):
-        if U is not None:
-            a = joint.rot_t(vadd(a, [se.Add(*(U[r][k] * joint.t[k] for k in range(3))) for r in range(3)]))
-        else:
-            a = joint.rot_t(a)
-        wr = joint.rot_t(w)
-        wdr = joint.rot_t(wd)
-        qdj = qd[j] if qd is not None else ZERO
-        qddj = qdd[j] if qdd is not None else ZERO
-        if joint.prismatic:
-            w, wd = wr, wdr
-            a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
-        else:
-            w = [wr[0], wr[1], wr[2] + qdj]
-            wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
-        wx, wy, wz = w
-        xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
-        U = [[-(yy + zz), xy - wd[2], xz + wd[1]],
-             [xy + wd[2], -(xx + zz), yz - wd[0]],
-             [xz - wd[1], yz + wd[0], -(xx + yy)]]
-        h, I, m = body.h, body.I, body.m
-        F = vadd(vscale(m, a), [se.Add(*(U[r][k] * h[k] for k in range(3))) for r in range(3)])
-        Iw = [se.Add(*(I[r][k] * w[k] for k in range(3))) for r in range(3)]
-        Iwd = [se.Add(*(I[r][k] * wd[k] for k in range(3))) for r in range(3)]
-        N = vadd(Iwd, cross(w, Iw), cross(h, a))
-        forces.append((F, N))
-    tau = [None] * n
-    f, nn = [ZERO] * 3, [ZERO] * 3
-    for j in range(n - 1, -1, -1):
-        F, N = forces[j]
-        if j + 1 < n:
-            joint = joints[j + 1]
-            fr = joint.rot(f)
-            nn = vadd(N, joint.rot(nn), cross(joint.t, fr))
-            f = vadd(F, fr)
-        else:
-            f, nn = F, N
-        tau[j] = f[2] if joints[j].prismatic else nn[2]
-    return tau
+    return NewtonEulerPass(joints, bodies, qd, qdd, gam).tau
+
+
+class NewtonEulerPass:
+    """The pass of :func:`rnea`, its intermediates kept per link j (in frame j): the incoming
+    velocity, angular and linear acceleration rotated into frame j (``wr``, ``wdr``, ``ar``),
+    the angular velocity ``w``, ``U``, ``Iw = I w``, the wrench ``f``, ``nn`` link j passes on
+    and ``tau``. :mod:`kindyngen.dynamics_derivatives` sweeps over them."""
+
+    def __init__(self, joints, bodies, qd, qdd, gam):
+        n = len(joints)
+        self.joints, self.bodies, self.qd = joints, bodies, qd
+        self.wr, self.wdr, self.ar, self.w, self.U, self.Iw = ([None] * n for _ in range(6))
+        w, wd = [ZERO] * 3, [ZERO] * 3
+        a = [-x for x in gam] if gam is not None else [ZERO] * 3
+        U = None
+        forces = []
+        for j, (joint, body) in enumerate(zip(joints, bodies)):
+            a_in = a if U is None else vadd(a, mat3(U, joint.t))
+            self.ar[j] = a = joint.rot_t(a_in)
+            self.wr[j] = wr = joint.rot_t(w)
+            self.wdr[j] = wdr = joint.rot_t(wd)
+            qdj = qd[j] if qd is not None else ZERO
+            qddj = qdd[j] if qdd is not None else ZERO
+            if joint.prismatic:
+                w, wd = wr, wdr
+                a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
+            else:
+                w = [wr[0], wr[1], wr[2] + qdj]
+                wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
+            self.w[j] = w
+            self.U[j] = U = u_matrix(w, wd, omega_products(w))
+            h, I, m = body.h, body.I, body.m
+            self.Iw[j] = Iw = mat3(I, w)
+            forces.append((vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, Iw), cross(h, a))))
+        self.f, self.nn, self.tau = [None] * n, [None] * n, [None] * n
+        f, nn = [ZERO] * 3, [ZERO] * 3
+        for j in range(n - 1, -1, -1):
+            F, N = forces[j]
+            if j + 1 < n:
+                joint = joints[j + 1]
+                fr = joint.rot(f)
+                nn = vadd(N, joint.rot(nn), cross(joint.t, fr))
+                f = vadd(F, fr)
+            else:
+                f, nn = F, N
+            self.f[j], self.nn[j] = f, nn
+            self.tau[j] = f[2] if joints[j].prismatic else nn[2]
+
+
+def mat3(A, v):
+    """``A v`` for a 3 x 3 nested list, one sum per row."""
+    return [se.Add(*(A[r][k] * v[k] for k in range(3))) for r in range(3)]
+
+
+def omega_products(w):
+    """The six products (xx, yy, zz, xy, xz, yz) of w's components that ``skew(w)^2`` needs."""
+    wx, wy, wz = w
+    return wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
+
+
+def u_matrix(w, wd, products):
+    """``skew(wd) + skew(w)^2`` from :func:`omega_products` of w."""
+    xx, yy, zz, xy, xz, yz = products
+    return [[-(yy + zz), xy - wd[2], xz + wd[1]],
+            [xy + wd[2], -(xx + zz), yz - wd[0]],
+            [xz - wd[1], yz + wd[0], -(xx + yy)]]
 
 
 def gravity_composite(joints, bodies, gam):
