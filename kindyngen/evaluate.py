@@ -19,10 +19,11 @@ import importlib.util
 import json
 import os
 import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .python_c import cache_root
 
 
 class EvaluationError(ValueError):
@@ -104,8 +105,9 @@ class _PythonBackend:
 
 
 def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(tempfile.gettempdir(), f"kindyngen-{os.getuid()}")
-    path = Path(base) / "kindyngen" if "XDG_CACHE_HOME" in os.environ else Path(base)
+    """``eval``'s libraries live under the one cache root of compiled generated code, beside
+    the python_c extensions (:func:`kindyngen.python_c.cache_root`, ``$KINDYNGEN_CACHE``)."""
+    path = cache_root() / "eval"
     path.mkdir(parents=True, exist_ok=True)
     return path
 
