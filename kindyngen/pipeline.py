@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from .catalog import derive_all
-from .ik_dls import applies as dls_applies, dls_manifest_entry
+from .interface import manifest
 from .optimize import Program, optimize
 from .regressors import base_params_document, undecided_notes
 from .render import RENDERERS
@@ -56,27 +56,6 @@ def build_programs(model: RobotModel, params: str = "numeric", only=None, progre
     if bar:
         bar.close()
     return programs
-
-
-def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel") -> dict:
-    return {
-        "robot": model.identifier,
-        "name": model.name,
-        "n": model.n,
-        "convention": model.convention,
-        "gravity": [float(v) for v in model.gravity],
-        "params": params,
-        "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/c_trig.py)
-        "functions": [{
-            "name": p.function.name,
-            "summary": p.function.summary,
-            "conventions": p.function.conventions,
-            "c_symbol": f"{model.identifier}_{p.function.name}",
-            "inputs": [port.to_json() for port in p.function.inputs],
-            "outputs": [port.to_json() for port in p.function.outputs],
-            "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
-        } for p in programs] + ([dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []),
-    }
 
 
 def _write(path: Path, text: str) -> None:

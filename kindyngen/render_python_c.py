@@ -17,6 +17,7 @@ from pathlib import Path
 import jinja2
 
 from . import __version__
+from .interface import manifest
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
@@ -139,7 +140,6 @@ def render_extension(interface: dict) -> dict[str, str]:
 
 def render_python_c(model, programs) -> dict[str, str]:
     """The extension source of ``model``'s optimised ``programs`` (render.RENDERERS entry)."""
-    from .pipeline import manifest   # pipeline imports render, which imports this module
     # the renderer reads no top-level entry but robot, name, n, convention, gravity and functions:
     # "params" (and how the C computes sin/cos) are in the ports and the C already
     return render_extension(manifest(model, programs, params="numeric"))
