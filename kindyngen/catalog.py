@@ -23,6 +23,10 @@ from .kinematics_homogeneous import fk_hom, jacobian
 from .regressors import regressor
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
+from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
+                            inverse_dynamics_tree, mass_matrix_tree)
+from .tree_kinematics import fk_hom_tree, jacobian_tree
+from .tree_model import TreeModel
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -63,11 +67,29 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
 )
 
 
+# the functions of a kinematic tree (kindyngen/tree_*.py): numeric parameters only
+TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] = (
+    ("fk_hom", fk_hom_tree),
+    ("jacobian", jacobian_tree),
+    ("M", mass_matrix_tree),
+    ("g", gravity_tree),
+    ("c", coriolis_tree),
+    ("tau", inverse_dynamics_tree),
+    ("fd", forward_dynamics_tree),
+    ("com", centre_of_mass_tree),
+)
+
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
+TREE_NAMES: tuple[str, ...] = tuple(name for name, _ in TREE_BUILDERS)
 
 
-def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
+def derive_all(model: RobotModel | TreeModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
     """All applicable functions for ``model`` (optionally only the named ones)."""
+    if isinstance(model, TreeModel):
+        if params != "numeric":
+            raise ValueError("a kinematic tree is generated with its description's parameters only "
+                             "(--params numeric)")
+        return [build(model) for name, build in TREE_BUILDERS if only is None or name in only]
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:

@@ -18,6 +18,8 @@ from .c_trig import TRIG_MODES
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot
+from .tree_model import TreeModel
+from .urdf import load_urdf_tree
 
 
 LANGS = ("c", "python", "casadi")
@@ -47,10 +49,39 @@ def _robot_options(command: argparse.ArgumentParser) -> None:
                               "with a note); within 1e-12 they are always read as the exact multiple")
 
 
+def _tree_options(command: argparse.ArgumentParser) -> None:
+    """Reading a whole URDF as a kinematic tree."""
+    command.add_argument("--tree", action="store_true",
+                         help="URDF: every branch (a humanoid, a quadruped, a dual arm), not one chain")
+    command.add_argument("--floating-base", action="store_true",
+                         help="the root link moves freely (implies --tree): Pinocchio's free-flyer layout, q = "
+                              "base position, quaternion (x, y, z, w), joints; qd = base twist in the base "
+                              "frame, joint velocities")
+    command.add_argument("--frames", type=_names, metavar="LINK,LINK,...",
+                         help="links whose poses and Jacobians fk_hom and jacobian return, in this order "
+                              "(implies --tree; default: the tips, the links of joints without children)")
+
+
+def _names(text: str) -> list[str]:
+    names = [name.strip() for name in text.split(",")]
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected comma-separated link names, got {text!r}")
+    return names
+
+
 def load(path, args):
     """A robot description read with the command's robot options; what reading changed
     (snapped angles, zero-mass links) is printed to standard error."""
-    model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
+    if getattr(args, "tree", False) or getattr(args, "floating_base", False) or getattr(args, "frames", None):
+        if args.base or args.tip:
+            raise UsageError("--base and --tip choose one chain; a tree (--tree, --floating-base, --frames) "
+                             "has every branch")
+        if Path(path).suffix.lower() != ".urdf":
+            raise UsageError(f"{path}: trees (--tree, --floating-base, --frames) are read from URDF files")
+        model = load_urdf_tree(path, frames=args.frames, floating_base=args.floating_base,
+                               snap_angles=not args.keep_angles)
+    else:
+        model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
     for note in model.notes:
         print(f"note: {note}", file=sys.stderr)
     return model
@@ -88,7 +119,7 @@ def _cmd_describe(args) -> int:
 
 
 def _cmd_count(args) -> int:
-    from .catalog import NAMES
+    from .catalog import NAMES, TREE_NAMES
     from .pipeline import build_programs
     from .regressors import undecided_notes
     from .report import opcounts_json, opcounts_markdown
@@ -96,14 +127,15 @@ def _cmd_count(args) -> int:
     if args.only is not None:
         if not args.only:
             raise UsageError("--only needs at least one function name")
-        unknown = [name for name in args.only if name not in NAMES]
+        known = NAMES + tuple(name for name in TREE_NAMES if name not in NAMES)
+        unknown = [name for name in args.only if name not in known]
         if unknown:
-            raise UsageError(f"--only: unknown function(s) {', '.join(unknown)}; known: {', '.join(NAMES)}")
+            raise UsageError(f"--only: unknown function(s) {', '.join(unknown)}; known: {', '.join(known)}")
         only = set(args.only)
     for path in args.robots:
         model = load(path, args)
         programs = build_programs(model, args.params, only=only, progress=False)
-        for note in undecided_notes(model, only):
+        for note in undecided_notes(model, only) if not isinstance(model, TreeModel) else ():
             print(f"note: {note}", file=sys.stderr)
         missing = sorted(only - {p.function.name for p in programs}) if only else []
         if missing:
@@ -356,6 +388,7 @@ def parser() -> argparse.ArgumentParser:
                        description="Derive, optimise and render every function of each robot into OUT/<robot>/.")
     g.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
     _robot_options(g)
+    _tree_options(g)
     g.add_argument("--out", required=True, metavar="DIR", help="output root; each robot goes to DIR/<robot>/")
     g.add_argument("--lang", type=_languages, default=GENERATE_LANGS,
                    help="comma-separated subset of c,python,casadi,python_c (default: all; python_c needs c)")
@@ -371,6 +404,7 @@ def parser() -> argparse.ArgumentParser:
                        description="Derive each robot's functions and print their operation counts.")
     c.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
     _robot_options(c)
+    _tree_options(c)
     c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric")
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")

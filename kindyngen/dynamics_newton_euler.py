@@ -36,7 +36,7 @@ from .symbolic import Port, SymbolicFunction, port_symbols
 NE = "Newton-Euler route (joint frames, grouped parameters): "
 
 
-def _rotate_body(joint, body: Body) -> Body:
+def rotate_body(joint, body: Body) -> Body:
     """Body seen from frame j-1 when given in frame j: ``Rz(q)`` by double angles
     (``I'xx = Ixx - s^2 (Ixx - Iyy) - 2 cs Ixy``, ``I'yy = Ixx + Iyy - I'xx``,
     ``I'xy = cs (Ixx - Iyy) + (1 - 2 s^2) Ixy``), then the constant C and translation t
@@ -174,7 +174,7 @@ def crba(joints, bodies):
     M = [[None] * n for _ in range(n)]
     comp = None
     for j in range(n - 1, -1, -1):
-        comp = bodies[j] if comp is None else bodies[j] + _rotate_body(joints[j + 1], comp)
+        comp = bodies[j] if comp is None else bodies[j] + rotate_body(joints[j + 1], comp)
         if joints[j].prismatic:     # the wrench of a unit acceleration along z
             f = [ZERO, ZERO, comp.m]
             nn = [comp.h[1], -comp.h[0], ZERO]

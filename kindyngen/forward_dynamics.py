@@ -60,6 +60,42 @@ def ldlt_substitute(L, inv_d, b):
     return x
 
 
+def tree_ldlt_solve(M, parents, b):
+    """Solve ``M x = b`` for a symmetric positive definite M whose nonzeros lie between a
+    coordinate and its ancestors in a tree (``parents[k] < k``, -1 at a root), by ``M = L^T
+    D L`` with L unit lower triangular and as sparse as M (Featherstone, *Rigid Body Dynamics
+    Algorithms*, sec. 6.5: no fill-in), unrolled: O(n d^2) for depth d instead of O(n^3).
+
+    >>> [float(v) for v in tree_ldlt_solve([[4, 1, 1], [1, 2, 0], [1, 0, 2]], (-1, 0, 0), [6, 3, 3])]
+    [1.0, 1.0, 1.0]
+    """
+    n = len(M)
+    H = [list(row) for row in M]
+    ancestors = []
+    for k in range(n):
+        up, i = [], parents[k]
+        while i >= 0:
+            up.append(i)
+            i = parents[i]
+        ancestors.append(up)
+    inv_d = [None] * n
+    for k in range(n - 1, -1, -1):
+        inv_d[k] = se.Pow(H[k][k], -1)
+        for pos, i in enumerate(ancestors[k]):
+            a = H[k][i] * inv_d[k]
+            for j in [i] + ancestors[k][pos + 1:]:
+                H[i][j] = H[i][j] - a * H[k][j]
+            H[k][i] = a
+    x = list(b)                        # L^T y = b, leaves first
+    for k in range(n - 1, -1, -1):
+        for i in ancestors[k]:
+            x[i] = x[i] - H[k][i] * x[k]
+    x = [x[k] * inv_d[k] for k in range(n)]
+    for k in range(n):                 # L x = y / D, root first
+        x[k] = se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k]))
+    return x
+
+
 def forward_dynamics(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
     """``fd(q, qd, tau) -> qdd``."""
     q, joints, bodies, ports, syms = setup(model, params)

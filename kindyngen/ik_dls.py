@@ -160,6 +160,8 @@ def _extra_inputs(programs) -> tuple[ExtraInput, ...] | None:
     if fk is None or jac is None:
         return None
     fk_in, jac_in = fk.function.inputs, jac.function.inputs
+    if fk.function.outputs[0].shape != (4, 4):      # several frames (a tree): no single pose to reach
+        return None
     if not fk_in or fk_in[0].name != "q" or [p.to_json() for p in fk_in] != [p.to_json() for p in jac_in]:
         return None
     return tuple(ExtraInput(p.name, p.shape, p.size, p.unit, p.description) for p in fk_in[1:])

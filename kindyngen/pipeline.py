@@ -18,6 +18,7 @@ from .regressors import base_params_document, undecided_notes
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
+from .tree_model import TreeModel
 
 LANGUAGES = ("c", "python", "casadi", "python_c")
 
@@ -78,8 +79,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
-    base_params = base_params_document(model)   # None for robots with symbolic lengths
-    for note in undecided_notes(model, only) if progress else ():
+    tree = isinstance(model, TreeModel)
+    base_params = None if tree else base_params_document(model)   # None for robots with symbolic lengths
+    for note in undecided_notes(model, only) if progress and not tree else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")

@@ -73,10 +73,24 @@ class FunctionView:
     batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
 
 
+def _index(k: int, shape) -> str:
+    """The row-major multi-index of flat entry k, as numpy subscripts.
+
+    >>> _index(7, (2, 2, 3))
+    '1, 0, 1'
+    """
+    out = []
+    for size in reversed(shape):
+        out.append(k % size)
+        k //= size
+    return ", ".join(str(i) for i in reversed(out))
+
+
 def _environment() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["shape"] = lambda shape: " x ".join(str(s) for s in shape)
+    env.filters["index"] = _index
     return env
 
 
@@ -172,8 +186,10 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
         "robot": model.identifier,
         "robot_name": model.name,
         "source": Path(model.source).name,
-        "n": model.n,
+        "n": getattr(model, "nv", model.n),      # velocity coordinates (a floating base: 6 + joints)
+        "nq": getattr(model, "nq", model.n),
         "convention": model.convention,
+        "structure": getattr(model, "structure_text", None),   # a tree says what it is; an arm: n and DH
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
         "functions": [function_view(p, dialect, model.identifier, trig) for p in programs],

@@ -56,6 +56,7 @@ import sympy
 
 from .model import Joint, Link, RobotDescriptionError, RobotModel, check_inertia
 from .placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
+from .tree_model import Frame, TreeModel
 
 GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
@@ -339,7 +340,7 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Join
     after the fixed placement ``fixed`` on the previous link frame."""
     if joint.kind in UNSUPPORTED:
         raise _error(reading, f"joint '{joint.name}' type",
-                            f"a {joint.kind} joint cannot be part of a serial arm (only revolute, continuous, "
+                            f"a {joint.kind} joint is not supported (only revolute, continuous, "
                             f"prismatic and fixed joints)")
     if joint.mimic is not None:
         reading.note(f"{reading.source}: joint '{joint.name}' mimics '{joint.mimic}' in the URDF; "
@@ -457,9 +458,74 @@ def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = N
 def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None,
               snap_angles: bool = True) -> RobotModel:
     """Read a URDF file: :func:`parse_urdf` of its text, errors naming the file."""
-    path = Path(path)
+    return parse_urdf(_file_text(path), str(path), base=base, tip=tip, snap_angles=snap_angles)
+
+
+def _file_text(path: str | Path) -> bytes:
     try:
-        text = path.read_bytes()       # bytes: the XML declaration names the encoding
+        return Path(path).read_bytes()       # bytes: the XML declaration names the encoding
     except OSError as exc:
         raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc
-    return parse_urdf(text, str(path), base=base, tip=tip, snap_angles=snap_angles)
+
+
+# ------------------------------------------------------------------ the whole tree
+
+def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, floating_base: bool = False,
+                    snap_angles: bool = True) -> TreeModel:
+    """Every moving joint of a URDF text as a :class:`kindyngen.tree_model.TreeModel`.
+
+    Joints are numbered depth first from the root link, children in the order Pinocchio's
+    ``buildModelFromUrdf`` takes them (urdfdom's: by joint name), so that q, qd and tau line
+    up with Pinocchio's (after its free-flyer part). Links fixed to a body are lumped into
+    it; ``frames`` names the links whose poses and Jacobians are wanted (default: the link
+    of every joint without children, the tips).
+
+    >>> from kindyngen.tree_model import TWO_PENDULUMS
+    >>> tree = parse_urdf_tree(TWO_PENDULUMS, frames=["right", "body"])
+    >>> [j.name for j in tree.joints], [(f.name, f.body) for f in tree.frames]
+    (['left_joint', 'right_joint'], [('right', 1), ('body', -1)])
+    """
+    reading = Reading(source, snap_angles)
+    robot = _read_xml(text, reading)
+    name = (robot.get("name") or "").strip()
+    if not name:
+        raise _error(reading, "<robot> name", "missing (the model's name)")
+    tree = _read_tree(robot, reading)
+    moving = {joint.name for joint in tree.parent_joint.values() if joint.kind != "fixed"}
+    joints, parents, bodies, placed = [], [], [], {}
+
+    def visit(link: str, body: int, placement: Placement) -> None:
+        """Place ``link`` (on ``body`` by ``placement``) and everything below it, depth first."""
+        placed[link] = Frame(link, body, placement)
+        for joint in sorted(tree.child_joints[link], key=lambda joint: joint.name):
+            if joint.kind == "fixed":
+                visit(joint.child, body, placement * _placement(joint.origin, reading))
+                continue
+            joints.append(_moving_joint(joint, placement, reading))
+            parents.append(body)
+            bodies.append(joint.child)
+            visit(joint.child, len(joints) - 1, Placement())
+
+    visit(tree.root, -1, Placement())
+    if not joints:
+        raise _error(reading, "<robot>", "no moving joint (revolute, continuous or prismatic)")
+    links = tuple(_combine(_rigid_body(tree, child, moving, reading), reading) for child in bodies)
+    root = _combine(_rigid_body(tree, tree.root, moving, reading), reading)
+    if frames is None:
+        leaves = [j for j in range(len(joints)) if j not in parents]
+        frames = [bodies[j] for j in leaves]
+    chosen = []
+    for frame in frames:
+        if frame not in placed:
+            raise _error(reading, "--frames", f"no link named '{frame}' in the URDF{_closest(frame, placed)}")
+        chosen.append(placed[frame])
+    return TreeModel(name=name, joints=tuple(joints), parents=tuple(parents), links=links, root=root,
+                     frames=tuple(chosen), floating_base=floating_base, gravity=GRAVITY, source=source,
+                     base_name=tree.root, notes=tuple(reading.notes))
+
+
+def load_urdf_tree(path: str | Path, frames=None, floating_base: bool = False,
+                   snap_angles: bool = True) -> TreeModel:
+    """Read a URDF file as a tree: :func:`parse_urdf_tree` of its text, errors naming the file."""
+    return parse_urdf_tree(_file_text(path), str(path), frames=frames, floating_base=floating_base,
+                           snap_angles=snap_angles)
