@@ -27,6 +27,7 @@ from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics
                             inverse_dynamics_tree, mass_matrix_tree)
 from .tree_kinematics import fk_hom_tree, jacobian_tree
 from .tree_model import TreeModel
+from .tree_regressors import tree_regressor
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -77,6 +78,7 @@ TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] =
     ("tau", inverse_dynamics_tree),
     ("fd", forward_dynamics_tree),
     ("com", centre_of_mass_tree),
+    ("Y", tree_regressor),          # None where the base parameters cannot be decided
 )
 
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
@@ -89,7 +91,8 @@ def derive_all(model: RobotModel | TreeModel, params: str = "numeric", only=None
         if params != "numeric":
             raise ValueError("a kinematic tree is generated with its description's parameters only "
                              "(--params numeric)")
-        return [build(model) for name, build in TREE_BUILDERS if only is None or name in only]
+        found = (build(model) for name, build in TREE_BUILDERS if only is None or name in only)
+        return [function for function in found if function is not None]
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:

@@ -19,6 +19,7 @@ from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
 from .tree_model import TreeModel
+from .tree_regressors import tree_base_params_document
 
 LANGUAGES = ("c", "python", "casadi", "python_c")
 
@@ -80,7 +81,8 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
     tree = isinstance(model, TreeModel)
-    base_params = None if tree else base_params_document(model)   # None for robots with symbolic lengths
+    # None for robots with symbolic lengths
+    base_params = tree_base_params_document(model) if tree else base_params_document(model)
     for note in undecided_notes(model, only) if progress and not tree else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:

@@ -171,8 +171,11 @@ def joint_frames(model: TreeModel, joint_q) -> tuple[JointFrame, ...]:
     return tuple(out)
 
 
-def _body(link, after: Placement | None = None) -> Body:
-    m, mx, my, mz, ixx, ixy, iyy, ixz, iyz, izz = (se.sympify(v) for v in barycentric(link))
+def frame_body(values, after: Placement | None = None) -> Body:
+    """A body from its 10 barycentric parameters (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz
+    in its link frame), seen from the joint frame (``after``: the link frame's placement
+    there; None or the identity for the root)."""
+    m, mx, my, mz, ixx, ixy, iyy, ixz, iyz, izz = (se.sympify(v) for v in values)
     body = Body(m, [mx, my, mz], [[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
     if after is None or after.is_identity:
         return body
@@ -207,16 +210,16 @@ def setup(model: TreeModel) -> TreeSetup:
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)
-    bodies = [_body(link, joint.after) for link, joint in zip(model.links, model.joints)]
+    bodies = [frame_body(barycentric(link), joint.after) for link, joint in zip(model.links, model.joints)]
     empty = Body(ZERO, [ZERO] * 3, [[ZERO] * 3 for _ in range(3)])
-    bodies, root = grouped(model, joints, bodies, _body(model.root) if model.floating_base else empty)
+    bodies, root = grouped(model, joints, bodies, frame_body(barycentric(model.root)) if model.floating_base else empty)
     rotation = quaternion_rotation(*q[3:7]) if model.floating_base else None
     return TreeSetup(model, q, joints, tuple(bodies), root, rotation, list(q[0:3]) if model.floating_base else None)
 
 
 # ----------------------------------------------------------------------------- algorithms
 
-def _wrench(body: Body, a, w, wd, U):
+def wrench(body: Body, a, w, wd, U):
     """Force and moment about the frame origin of a body with origin acceleration a, angular
     velocity w and acceleration wd (``U = skew(wd) + skew(w)^2``, None when both are zero)."""
     h, I, m = body.h, body.I, body.m
@@ -225,12 +228,13 @@ def _wrench(body: Body, a, w, wd, U):
     return (vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a)))
 
 
-def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
-    """tau (size nv) by recursive Newton-Euler over the tree; ``qd``/``qdd`` None are zero.
-
-    The forward pass is the serial one's (Khalil-Kleinfinger form, each joint starting from
-    its parent's state); the backward pass sums each joint's children's wrenches."""
-    model, n = ts.model, ts.model.n
+def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True):
+    """The forward pass of :func:`rnea`: (root state, state of each joint frame), a state
+    being (origin acceleration a, angular velocity w, angular acceleration wd, ``U =
+    skew(wd) + skew(w)^2`` or None when w and wd are exact zeros), gravity entering as the
+    root's acceleration ``-gamma``; ``qd``/``qdd`` None are zero (Khalil-Kleinfinger form,
+    each joint starting from its parent's state)."""
+    model = ts.model
     base = FREE_FLYER_NV if model.floating_base else 0
     gam = ts.gravity_in_base() if with_gravity else [ZERO] * 3
     a0 = [-x for x in gam]
@@ -242,9 +246,8 @@ def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
         a0, wd0 = vadd(a0, list(qdd[0:3])), list(qdd[3:6])
     moving = any(x != 0 for x in w0 + wd0)
     root_state = (a0, w0, wd0, u_matrix(w0, wd0, omega_products(w0)) if moving else None)
-    state = [None] * n
-    forces = [None] * n
-    for j, (joint, body, parent) in enumerate(zip(ts.joints, ts.bodies, model.parents)):
+    state = [None] * model.n
+    for j, (joint, parent) in enumerate(zip(ts.joints, model.parents)):
         a, w, wd, U = state[parent] if parent >= 0 else root_state
         a = joint.rot_t(a if U is None else vadd(a, mat3(U, joint.t)))
         wr, wdr = joint.rot_t(w), joint.rot_t(wd)
@@ -258,7 +261,15 @@ def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
             wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
         U = u_matrix(w, wd, omega_products(w)) if any(x != 0 for x in w + wd) else None
         state[j] = (a, w, wd, U)
-        forces[j] = _wrench(body, a, w, wd, U)
+    return root_state, state
+
+
+def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
+    """tau (size nv) by recursive Newton-Euler over the tree; ``qd``/``qdd`` None are zero:
+    :func:`motion_states`, then each joint's wrench plus its children's, tip first."""
+    model, n = ts.model, ts.model.n
+    root_state, state = motion_states(ts, qd, qdd, with_gravity)
+    forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
     f_parts = [[F] for F, _ in forces]
     n_parts = [[N] for _, N in forces]
     root_f, root_n = [], []
@@ -267,14 +278,20 @@ def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
         joint, parent = ts.joints[j], model.parents[j]
         f, nn = vadd(*f_parts[j]), vadd(*n_parts[j])
         tau[j] = f[2] if joint.prismatic else nn[2]
-        fr = joint.rot(f)
+        fr, nr = carry(joint, f, nn)
         targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
         targets[0].append(fr)
-        targets[1].extend((joint.rot(nn), cross(joint.t, fr)))
+        targets[1].append(nr)
     if not model.floating_base:
         return tau
-    F, N = _wrench(ts.root, a0, w0, wd0, root_state[3])
+    F, N = wrench(ts.root, *root_state)
     return vadd(F, *root_f) + vadd(N, *root_n) + tau
+
+
+def carry(joint: JointFrame, f, nn):
+    """A wrench (force, moment about the origin) in joint frame j seen in its parent's frame."""
+    fr = joint.rot(f)
+    return fr, vadd(joint.rot(nn), cross(joint.t, fr))
 
 
 def composites(ts: TreeSetup) -> tuple[list[Body], Body]:
@@ -315,9 +332,7 @@ def crba(ts: TreeSetup):
             M[base + j][base + j] = nn[2]
         node = j
         while True:
-            frame = ts.joints[node]
-            fr = frame.rot(f)
-            nn, f = vadd(frame.rot(nn), cross(frame.t, fr)), fr
+            f, nn = carry(ts.joints[node], f, nn)
             node = model.parents[node]
             if node < 0:
                 break
@@ -407,7 +422,8 @@ def centroidal(ts: TreeSetup, root_columns, whole: Body, M):
 
 # ----------------------------------------------------------------------------- functions
 
-def _function(name, summary, model, inputs, input_symbols, outputs, output_exprs) -> SymbolicFunction:
+def tree_function(name, summary, model, inputs, input_symbols, outputs, output_exprs) -> SymbolicFunction:
+    """A tree dynamics SymbolicFunction with the shared conventions text."""
     return SymbolicFunction(
         name=name, summary=summary, inputs=tuple(inputs), outputs=tuple(outputs),
         input_symbols=tuple(input_symbols),
@@ -423,7 +439,7 @@ def inverse_dynamics_tree(model: TreeModel, name: str = "tau") -> SymbolicFuncti
     """``tau(q, qd, qdd) -> tau = M qdd + c + g`` by recursive Newton-Euler (O(n))."""
     ts = setup(model)
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
-    return _function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
+    return tree_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
                      model, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
                      (force_port(model, "tau", "torque"),), (rnea(ts, qd, qdd),))
 
@@ -432,7 +448,7 @@ def coriolis_tree(model: TreeModel, name: str = "c") -> SymbolicFunction:
     """``c(q, qd) -> tau(q, qd, 0)`` without gravity."""
     ts = setup(model)
     qd = port_symbols("qd", (model.nv,))
-    return _function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
+    return tree_function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
                      "recursive Newton-Euler.", model, (q_port(model), qd_port(model)), (ts.q, qd),
                      (force_port(model, "c", "Coriolis and centrifugal torque"),), (rnea(ts, qd, None, False),))
 
@@ -440,7 +456,7 @@ def coriolis_tree(model: TreeModel, name: str = "c") -> SymbolicFunction:
 def gravity_tree(model: TreeModel, name: str = "g") -> SymbolicFunction:
     """``g(q) -> tau(q, 0, 0)`` by composite first moments."""
     ts = setup(model)
-    return _function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", model,
+    return tree_function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", model,
                      (q_port(model),), (ts.q,), (force_port(model, "g", "gravity torque"),), (gravity_composite(ts),))
 
 
@@ -448,7 +464,7 @@ def mass_matrix_tree(model: TreeModel, name: str = "M") -> SymbolicFunction:
     """``M(q) -> M`` by composite rigid bodies over the tree."""
     ts = setup(model)
     M, _, _ = crba(ts)
-    return _function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
+    return tree_function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
                      "branch (entries between branches are exact zeros).", model, (q_port(model),), (ts.q,),
                      (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
                            "kg, kg m, kg m^2"),), (_flat(M),))
@@ -461,7 +477,7 @@ def forward_dynamics_tree(model: TreeModel, name: str = "fd") -> SymbolicFunctio
     M, _, _ = crba(ts)
     bias = rnea(ts, qd, None)
     qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)])
-    return _function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
+    return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
                      "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
                      "and the two sparse triangular solves.", model,
                      (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
@@ -475,7 +491,7 @@ def centre_of_mass_tree(model: TreeModel, name: str = "com") -> SymbolicFunction
     com, jac, ag = centroidal(ts, root_columns, whole, M)
     frame = "world" if model.floating_base else f"root link '{model.base_name}'"
     counted = "" if model.floating_base else " (the fixed root link not counted, as in Pinocchio)"
-    return _function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
+    return tree_function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
                      "(from the base rows of composite rigid bodies).", model, (q_port(model),), (ts.q,),
                      (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
                       Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),

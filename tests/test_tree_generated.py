@@ -17,6 +17,7 @@ Tolerance: per state, |ours - Pinocchio| <= 1e-9 * max(1, max |Pinocchio's value
 from __future__ import annotations
 
 import importlib.metadata
+import json
 from pathlib import Path
 
 import numpy as np
@@ -158,3 +159,18 @@ def test_inertia_between_branches_is_exactly_zero(case):
             if not related:
                 assert M[base + i, base + j] == 0.0
     assert np.all(np.linalg.eigvalsh(M) > 0)
+
+
+@pytest.mark.parametrize("lang", ("c", "python"))
+def test_tree_regressor_on_base_parameters_equals_pinocchio(case, lang):
+    """Y(q, qd, qdd) times the base values of base_params.json is Pinocchio's rnea; the base
+    parameters are fewer than the full 10 per body and Y has full column rank on the samples."""
+    document = json.loads((case["folder"] / "base_params.json").read_text())["Y"]
+    assert "unavailable" not in document, document.get("unavailable")
+    inputs, expected = case["calls"]["tau"]
+    Y = load_generated(case["folder"], lang).call("Y", inputs)["Y"]
+    assert Y.shape[2] == len(document["names"]) == document["rank"] < document["full_columns"]
+    error = scaled_error(Y @ np.array(document["values"]), expected["tau"])
+    assert error <= TOLERANCE, f"{case['key']} {lang}: max scaled error {error:.3e}"
+    stacked = Y[:40].reshape(-1, Y.shape[2])
+    assert np.linalg.matrix_rank(stacked) == Y.shape[2]

@@ -1,0 +1,190 @@
+"""The torque regressor of a kinematic tree on its base parameters: ``tau = Y(q, qd, qdd) pi``.
+
+tau is linear in the bodies' barycentric parameters (10 per body: m, mx, my, mz, Ixx, Ixy,
+Iyy, Ixz, Iyz, Izz in the link frame, inertia about its origin; a floating base's root body
+is body 0 and comes first, then the link of joint j as body j + 1). Column k of the full
+regressor is the torque a unit parameter k causes: that body's wrench in its joint frame
+(``F = m a + U h``, ``N = I wd + w x I w + h x a`` with the motion of
+:func:`kindyngen.tree_dynamics.motion_states`; each unit parameter gives one term) carried up
+to every ancestor joint (and the floating base), so entries for joints off the body's branch
+are exact zeros and nothing is differentiated. The base parameters are found by
+:func:`kindyngen.base_parameters.find_base_parameters` (independent columns in parameter
+order, the others grouped into them, every decision with its stated margin), and ``Y`` keeps
+the base columns.
+
+Example:
+
+>>> from kindyngen.urdf import parse_urdf_tree
+>>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> b = tree_base_parameters(parse_urdf_tree(TWO_PENDULUMS))
+>>> b.rank, b.names
+(6, ('mx1', 'my1', 'Ixx1R', 'mx2', 'mz2', 'Iyy2R'))
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import symengine as se
+
+from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
+from .inertial_parameters import NAMES, barycentric
+from .printer import NUMPY
+from .rigid_bodies import ZERO, cross, vadd, vscale
+from .dynamics_newton_euler import mat3
+from .symbolic import Port, SymbolicFunction, port_symbols
+from .tree_dynamics import carry, conventions, frame_body, motion_states, q_port, qd_port, qdd_port, setup
+from .tree_model import FREE_FLYER_NV, TreeModel
+
+SAMPLES, SEEDS = 40, (20140, 20141)      # random states for the rank analysis; analysis, verification
+
+
+def body_labels(model: TreeModel) -> tuple[str, ...]:
+    """The link each parameter block belongs to, in column order."""
+    return ((model.base_name,) if model.floating_base else ()) + tuple(
+        _link_name(model, j) for j in range(model.n))
+
+
+def _link_name(model: TreeModel, j: int) -> str:
+    names = [f.name for f in model.frames if f.body == j and f.placement.is_identity]
+    return names[0] if names else model.joints[j].name
+
+
+def parameter_names(model: TreeModel) -> tuple[str, ...]:
+    """``m0 .. Izz0`` for a floating base's root body, then ``m1 .. Izz1`` for joint 0's link, ..."""
+    first = 0 if model.floating_base else 1
+    return tuple(f"{name}{first + b}" for b in range(len(body_labels(model))) for name in NAMES)
+
+
+def parameter_values(model: TreeModel) -> tuple:
+    """The description's barycentric parameters, exact, in :func:`parameter_names` order."""
+    links = ((model.root,) if model.floating_base else ()) + tuple(model.links)
+    return tuple(v for link in links for v in barycentric(link))
+
+
+def _unit_wrenches(after, a, w, wd, U):
+    """The wrench in the joint frame of each of a body's 10 unit parameters."""
+    out = []
+    for k in range(10):
+        body = frame_body([1 if i == k else 0 for i in range(10)], after)
+        h, I, m = body.h, body.I, body.m
+        F = vscale(m, a) if U is None else vadd(vscale(m, a), mat3(U, h))
+        N = cross(h, a) if U is None else vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a))
+        out.append((F, N))
+    return out
+
+
+@lru_cache(maxsize=None)
+def full_tree_regressor(model: TreeModel):
+    """(q, qd, qdd symbols, rows: nv lists of 10 B expressions) of the full regressor."""
+    ts = setup(model)
+    qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
+    root_state, state = motion_states(ts, qd, qdd)
+    base = FREE_FLYER_NV if model.floating_base else 0
+    blocks = ((None, -1, root_state),) if model.floating_base else ()
+    blocks += tuple((model.joints[j].after, j, state[j]) for j in range(model.n))
+    columns = []
+    for after, j, motion in blocks:
+        for F, N in _unit_wrenches(after, *motion):
+            column = [ZERO] * model.nv
+            node = j
+            while node >= 0:
+                column[base + node] = F[2] if model.joints[node].prismatic else N[2]
+                F, N = carry(ts.joints[node], F, N)
+                node = model.parents[node]
+            if model.floating_base:
+                column[0:6] = list(F) + list(N)
+            columns.append(column)
+    rows = tuple(tuple(column[r] for column in columns) for r in range(model.nv))
+    return (ts.q, qd, qdd), rows
+
+
+def random_states(model: TreeModel, count: int, seed: int) -> np.ndarray:
+    """q (joints within limits, clipped to +-pi; a floating base anywhere within 1 m with a
+    random unit quaternion), qd and qdd standard normal, stacked per sample."""
+    rng = np.random.default_rng(seed)
+    lower = np.array([max(j.lower, -np.pi) for j in model.joints])
+    upper = np.array([min(j.upper, np.pi) for j in model.joints])
+    q = rng.uniform(lower, upper, size=(count, model.n))
+    if model.floating_base:
+        quat = rng.standard_normal((count, 4))
+        q = np.hstack([rng.uniform(-1, 1, (count, 3)), quat / np.linalg.norm(quat, axis=1, keepdims=True), q])
+    return np.hstack([q, rng.standard_normal((count, 2 * model.nv))])
+
+
+@lru_cache(maxsize=None)
+def _evaluator(model: TreeModel):
+    """The full regressor as a numpy function of stacked states (samples x (nq + 2 nv)):
+    symengine's CSE printed as vectorised numpy (4x faster to build than se.Lambdify here,
+    whose set-up dominates at a few thousand outputs)."""
+    symbols, rows = full_tree_regressor(model)
+    args = [s for group in symbols for s in group]
+    outputs = [e for row in rows for e in row]
+    nonzero = [k for k, e in enumerate(outputs) if e != 0]
+    replacements, reduced = se.cse([outputs[k] for k in nonzero])
+    names = {s: f"x[:, {k}]" for k, s in enumerate(args)}
+    lines = ["def evaluate(x):", f"    out = np.zeros((x.shape[0], {len(outputs)}))"]
+    for k, (symbol, expr) in enumerate(replacements):
+        lines.append(f"    r{k} = {NUMPY.expr(expr, names)}")
+        names[symbol] = f"r{k}"
+    lines += [f"    out[:, {k}] = {NUMPY.expr(e, names)}" for k, e in zip(nonzero, reduced)]
+    lines.append("    return out")
+    namespace = {"np": np}
+    exec(compile("\n".join(lines), f"<full regressor of {model.name}>", "exec"), namespace)
+    return namespace["evaluate"]
+
+
+@lru_cache(maxsize=None)
+def tree_base_parameters(model: TreeModel) -> BaseParameters:
+    """Rank analysis and grouping of the full regressor (see the module text)."""
+    names = parameter_names(model)
+    fn = _evaluator(model)
+
+    def evaluate(seed):
+        x = random_states(model, SAMPLES, seed)
+        return np.asarray(fn(x), float).reshape(SAMPLES, model.nv, len(names))
+
+    return find_base_parameters(evaluate, names, SEEDS, None)
+
+
+def unavailable(model: TreeModel) -> str | None:
+    """Why Y is not generated (a rank or column decision the samples cannot make with the
+    stated margin), or None."""
+    try:
+        tree_base_parameters(model)
+    except BaseParameterError as exc:
+        return f"base parameters undecided ({exc})"
+    return None
+
+
+def tree_regressor(model: TreeModel, name: str = "Y") -> SymbolicFunction | None:
+    """``Y(q, qd, qdd)`` on the base parameters (None where :func:`unavailable` says why not)."""
+    if unavailable(model):
+        return None
+    (q, qd, qdd), rows = full_tree_regressor(model)
+    b = tree_base_parameters(model)
+    exprs = tuple(row[k] for row in rows for k in b.base)
+    port = Port("Y", (model.nv, len(b.base)), "regressor of tau on the base parameters (row-major; columns: "
+                + ", ".join(b.names) + ")", "tau's units per base parameter")
+    text = (f"{conventions(model).split(' Inertial parameters')[0]} Columns: the {len(b.base)} base parameters "
+            f"(rank of the full {len(b.full_names)}-column regressor), named after the barycentric parameter each "
+            "is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz per body, inertia about the link frame origin "
+            "in link-frame axes; body 0 the floating base, body j + 1 the link of joint j; suffix R: parameters "
+            "grouped into it); expressions and the robot's values in base_params.json. Y times those values is tau.")
+    return SymbolicFunction(name, "Torque regressor on base parameters: tau = M qdd + c + g = Y(q, qd, qdd) pi.",
+                            (q_port(model), qd_port(model), qdd_port(model)), (port,),
+                            (q, qd, qdd), (exprs,), conventions=text,
+                            metadata={"params": "none", "base_parameters": b.names})
+
+
+def tree_base_params_document(model: TreeModel) -> dict:
+    """Content of ``base_params.json`` for a tree: Y's base parameters, their expressions in the
+    barycentric symbols, their values for the description, and which link each body is."""
+    reason = unavailable(model)
+    if reason:
+        return {"Y": {"unavailable": reason}}
+    b = tree_base_parameters(model)
+    return {"Y": {"names": list(b.names), "expressions": list(b.expression_strings()),
+                  "values": [float(v) for v in b.exact_values(parameter_values(model))],
+                  "rank": b.rank, "full_columns": len(b.full_names), "exact": b.exact,
+                  "bodies": list(body_labels(model))}}
