@@ -17,7 +17,7 @@ Example:
 >>> from kindyngen.urdf import parse_urdf_tree
 >>> from kindyngen.tree_model import TWO_PENDULUMS
 >>> b = tree_base_parameters(parse_urdf_tree(TWO_PENDULUMS))
->>> b.rank, b.names
+>>> b.rank, b.names      # left turns about y: mx, mz, Iyy act; right about x: my, mz, Ixx
 (6, ('mx1', 'my1', 'Ixx1R', 'mx2', 'mz2', 'Iyy2R'))
 """
 from __future__ import annotations
