@@ -18,7 +18,7 @@ Example:
 >>> from kindyngen.tree_model import TWO_PENDULUMS
 >>> b = tree_base_parameters(parse_urdf_tree(TWO_PENDULUMS))
 >>> b.rank, b.names      # left turns about y: mx, mz, Iyy act; right about x: my, mz, Ixx
-(6, ('mx1', 'my1', 'Ixx1R', 'mx2', 'mz2', 'Iyy2R'))
+(6, ('mx1', 'mz1', 'Iyy1', 'my2', 'mz2', 'Ixx2'))
 """
 from __future__ import annotations
 
