@@ -78,6 +78,9 @@ def load(path, args):
                              "has every branch")
         if Path(path).suffix.lower() != ".urdf":
             raise UsageError(f"{path}: trees (--tree, --floating-base, --frames) are read from URDF files")
+        if getattr(args, "params", "numeric") != "numeric":
+            raise UsageError("--params symbolic: a kinematic tree is generated with its description's "
+                             "parameters only (the regressor Y is the identification route)")
         model = load_urdf_tree(path, frames=args.frames, floating_base=args.floating_base,
                                snap_angles=not args.keep_angles)
     else:
