@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -55,6 +57,12 @@ def test_generate_floating_base_tree(tmp_path, capsys, monkeypatch):
     assert "quaternion (x, y, z, w)" in header
     base = json.loads((folder / "base_params.json").read_text())["Y"]
     assert base["bodies"][0] == "chassis" and base["rank"] == len(base["names"])
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler:        # strict C99, no warning (-O2: the optimiser's own warnings too)
+        run = subprocess.run([compiler, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-c",
+                              str(folder / "c" / "mobile_slider_tree.c"), "-o", str(tmp_path / "tree.o")],
+                             capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr
 
 
 def test_count_tree(capsys, monkeypatch):
