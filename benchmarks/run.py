@@ -30,7 +30,7 @@ import numpy as np
 from kindyngen.robot import load_robot
 
 from . import (c_batch, casadi_codegen, compiled, inputs, pinocchio_casadi, pinocchio_cpp, python_c_timing,
-               python_timing, scaling)
+               python_timing, scaling, tree_scaling, trees)
 from .build import BUILD
 from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
 
@@ -346,10 +346,18 @@ def main(argv=None) -> int:
     (args.out / "timings.json").write_text(json.dumps(result, indent=1) + "\n")
     log(f"wrote {args.out / 'timings.json'} ({time.perf_counter() - started:.0f} s)")
 
+    # kinematic trees with a floating base against both Pinocchio peers (results/trees.json)
+    trees.write(trees.run(dict(trees.QUICK if args.quick else trees.FULL), log), args.out, log)
+
     if not args.no_scaling:
         study = scaling.study(range(2, settings["scaling_max_n"] + 1), settings["scaling_budget_s"], log=log)
         (args.out / "scaling.json").write_text(json.dumps(study, indent=1) + "\n")
         log(f"wrote {args.out / 'scaling.json'} ({time.perf_counter() - started:.0f} s)")
+        # trees: generation time and counts against n, and against Featherstone's formulas
+        study = tree_scaling.study(dict(tree_scaling.QUICK if args.quick else tree_scaling.FULL), log=log)
+        (args.out / "tree_scaling.json").write_text(json.dumps(study, indent=1) + "\n")
+        tree_scaling.plot(study, args.out / "tree_scaling.png")
+        log(f"wrote {args.out / 'tree_scaling.json'} ({time.perf_counter() - started:.0f} s)")
     return 0
 
 

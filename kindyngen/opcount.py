@@ -53,11 +53,16 @@ class OpCount:
 ZERO = OpCount()
 COMPARISONS = (se.StrictLessThan, se.LessThan, se.Equality, se.Unequality)
 LOGIC = (se.And, se.Or, se.Not, type(se.true).__mro__[1])  # BooleanAtom: true/false
+_NOT_LITERAL = (se.Piecewise,) + COMPARISONS + LOGIC
 
 
 def is_literal(e: se.Basic) -> bool:
     """A numeric constant, printed as one literal."""
-    return e.is_Number or (not isinstance(e, (se.Piecewise,) + COMPARISONS + LOGIC) and not _has_symbol(e))
+    if e.is_Number:
+        return True
+    if e.is_Symbol:         # the common case in printed programs: a temporary or an input
+        return False
+    return not isinstance(e, _NOT_LITERAL) and not _has_symbol(e)
 
 
 def _has_symbol(e: se.Basic) -> bool:
@@ -72,26 +77,26 @@ def _has_symbol(e: se.Basic) -> bool:
     return False
 
 
-def add_parts(e: se.Add) -> tuple[float, list[se.Basic]]:
+def add_parts(e: se.Add, literal=is_literal) -> tuple[float, list[se.Basic]]:
     """(constant term, non-constant terms) of a sum, in symengine's stable order."""
     const = 0.0
     terms = []
     for a in e.args:
-        if is_literal(a):
+        if literal(a):
             const += float(a)
         else:
             terms.append(a)
     return const, terms
 
 
-def mul_parts(e: se.Mul) -> tuple[float, list[se.Basic], list[se.Basic]]:
+def mul_parts(e: se.Mul, literal=is_literal) -> tuple[float, list[se.Basic], list[se.Basic]]:
     """(numeric factor, numerator factors, divisors) of a product.
 
     A divisor is returned as its positive power: ``x*y**-2`` gives ``(1.0, [x], [y**2])``."""
     coeff = 1.0
     numer, denom = [], []
     for a in e.args:
-        if is_literal(a):
+        if literal(a):
             coeff *= float(a)
         elif isinstance(a, se.Pow) and a.args[1].is_Integer and a.args[1] < 0:
             base, exp = a.args
@@ -101,15 +106,16 @@ def mul_parts(e: se.Mul) -> tuple[float, list[se.Basic], list[se.Basic]]:
     return coeff, numer, denom
 
 
-def own_cost(e: se.Basic) -> OpCount:
-    """Cost of the node ``e`` itself; its arguments (as returned by :func:`children`) excluded."""
-    if is_literal(e) or e.is_Symbol:
+def own_cost(e: se.Basic, literal=is_literal) -> OpCount:
+    """Cost of the node ``e`` itself; its arguments (as returned by :func:`children`) excluded.
+    ``literal``: :func:`is_literal` or a memoised twin of it."""
+    if literal(e) or e.is_Symbol:
         return ZERO
     if isinstance(e, se.Add):
-        const, terms = add_parts(e)
+        const, terms = add_parts(e, literal)
         return OpCount(add=len(terms) - 1 + (const != 0.0))
     if isinstance(e, se.Mul):
-        coeff, numer, denom = mul_parts(e)
+        coeff, numer, denom = mul_parts(e, literal)
         factors = len(numer) + (abs(coeff) != 1.0)
         return OpCount(mul=max(factors - 1, 0) + len(denom))
     if isinstance(e, se.Pow):
@@ -133,14 +139,14 @@ def own_cost(e: se.Basic) -> OpCount:
     raise TypeError(f"no cost rule for {type(e).__name__}: {e}")
 
 
-def children(e: se.Basic) -> tuple:
+def children(e: se.Basic, literal=is_literal) -> tuple:
     """The sub-expressions that are evaluated separately (divisors as positive powers)."""
-    if is_literal(e) or e.is_Symbol:
+    if literal(e) or e.is_Symbol:
         return ()
     if isinstance(e, se.Add):
-        return tuple(add_parts(e)[1])
+        return tuple(add_parts(e, literal)[1])
     if isinstance(e, se.Mul):
-        _, numer, denom = mul_parts(e)
+        _, numer, denom = mul_parts(e, literal)
         return tuple(numer) + tuple(denom)
     if isinstance(e, se.Pow):
         return (e.args[0],)
@@ -155,13 +161,20 @@ def tree_count(exprs) -> OpCount:
     Memoised on the DAG (plain integer triples inside), so tens of millions of operations
     are counted in milliseconds."""
     memo: dict = {}
+    literals: dict = {}     # each node's is_literal, asked by its parents' and its own rules
+
+    def literal(e) -> bool:
+        known = literals.get(e)
+        if known is None:
+            known = literals[e] = is_literal(e)
+        return known
 
     def visit(e) -> tuple[int, int, int]:
         hit = memo.get(e)
         if hit is None:
-            own = own_cost(e)
+            own = own_cost(e, literal)
             add, mul, call = own.add, own.mul, own.call
-            for child in children(e):
+            for child in children(e, literal):
                 a, m, c = visit(child)
                 add, mul, call = add + a, mul + m, call + c
             hit = memo[e] = (add, mul, call)

@@ -43,6 +43,7 @@ Example: the two pendulums on a floating body of :mod:`kindyngen.tree_model`:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import symengine as se
 
@@ -205,8 +206,11 @@ def grouped(model: TreeModel, joints, bodies, root: Body) -> tuple[list[Body], B
     return bodies, root
 
 
+@lru_cache(maxsize=4)
 def setup(model: TreeModel) -> TreeSetup:
-    """Joint frames, grouped bodies and base pose of ``model`` on fresh ``q`` symbols."""
+    """Joint frames, grouped bodies and base pose of ``model`` on ``q`` symbols; cached: every
+    tree function starts from it (its exact constant transforms cost a tenth of a second on a
+    humanoid) and nothing changes it."""
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)

@@ -29,7 +29,6 @@ import symengine as se
 
 from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
 from .inertial_parameters import NAMES, barycentric
-from .printer import NUMPY
 from .rigid_bodies import ZERO, cross, vadd, vscale
 from .dynamics_newton_euler import mat3
 from .symbolic import Port, SymbolicFunction, port_symbols
@@ -112,37 +111,66 @@ def random_states(model: TreeModel, count: int, seed: int) -> np.ndarray:
     return np.hstack([q, rng.standard_normal((count, 2 * model.nv))])
 
 
-@lru_cache(maxsize=None)
-def _evaluator(model: TreeModel):
-    """The full regressor as a numpy function of stacked states (samples x (nq + 2 nv)):
-    symengine's CSE printed as vectorised numpy (4x faster to build than se.Lambdify here,
-    whose set-up dominates at a few thousand outputs)."""
+_FUNCTIONS = {"sin": np.sin, "cos": np.cos}
+
+
+def evaluate_dag(exprs, values: dict) -> list:
+    """Numeric values of symengine expressions at arrays of ``values`` (symbol -> array), each
+    shared node evaluated once, in one walk of the DAG (cheaper than compiling it here: the
+    full regressor is evaluated at one batch of samples only).
+
+    >>> x = se.Symbol("x")
+    >>> evaluate_dag([se.sin(x) ** 2 + 3 * x], {x: np.array([0.0, 1.0])})[0].tolist()
+    [0.0, 3.708073418273571]
+    """
+    done = {k: np.asarray(v, float) for k, v in values.items()}
+    stack = list(exprs)
+    while stack:
+        e = stack[-1]
+        if e in done:
+            stack.pop()
+            continue
+        if e.is_Number:
+            done[e] = float(e)
+            stack.pop()
+            continue
+        pending = [a for a in e.args if a not in done]
+        if pending:
+            stack.extend(pending)
+            continue
+        stack.pop()
+        args = [done[a] for a in e.args]
+        if isinstance(e, se.Add):
+            done[e] = sum(args[1:], args[0])
+        elif isinstance(e, se.Mul):
+            value = args[0]
+            for a in args[1:]:
+                value = value * a
+            done[e] = value
+        elif isinstance(e, se.Pow):
+            done[e] = args[0] ** args[1]
+        else:
+            done[e] = _FUNCTIONS[type(e).__name__.lower()](args[0])
+    return [done[e] for e in exprs]
+
+
+def _full_numeric(model: TreeModel, states: np.ndarray) -> np.ndarray:
+    """The full regressor at stacked states (samples x (nq + 2 nv)): samples x nv x 10 B."""
     symbols, rows = full_tree_regressor(model)
     args = [s for group in symbols for s in group]
-    outputs = [e for row in rows for e in row]
-    nonzero = [k for k, e in enumerate(outputs) if e != 0]
-    replacements, reduced = se.cse([outputs[k] for k in nonzero])
-    names = {s: f"x[:, {k}]" for k, s in enumerate(args)}
-    lines = ["def evaluate(x):", f"    out = np.zeros((x.shape[0], {len(outputs)}))"]
-    for k, (symbol, expr) in enumerate(replacements):
-        lines.append(f"    r{k} = {NUMPY.expr(expr, names)}")
-        names[symbol] = f"r{k}"
-    lines += [f"    out[:, {k}] = {NUMPY.expr(e, names)}" for k, e in zip(nonzero, reduced)]
-    lines.append("    return out")
-    namespace = {"np": np}
-    exec(compile("\n".join(lines), f"<full regressor of {model.name}>", "exec"), namespace)
-    return namespace["evaluate"]
+    entries = [e for row in rows for e in row]
+    values = evaluate_dag(entries, {s: states[:, k] for k, s in enumerate(args)})
+    out = np.stack([np.broadcast_to(v, (states.shape[0],)) for v in values], axis=1)
+    return out.reshape(states.shape[0], model.nv, -1)
 
 
 @lru_cache(maxsize=None)
 def tree_base_parameters(model: TreeModel) -> BaseParameters:
     """Rank analysis and grouping of the full regressor (see the module text)."""
     names = parameter_names(model)
-    fn = _evaluator(model)
 
     def evaluate(seed):
-        x = random_states(model, SAMPLES, seed)
-        return np.asarray(fn(x), float).reshape(SAMPLES, model.nv, len(names))
+        return _full_numeric(model, random_states(model, SAMPLES, seed))
 
     return find_base_parameters(evaluate, names, SEEDS, None)
 

@@ -1,0 +1,218 @@
+// Traces one of Pinocchio's algorithms on a floating-base tree with casadi::SX as the scalar
+// and saves it as a casadi::Function (<OUTDIR>/<NAME>.casadi): the "pinocchio_casadi_c" column
+// of benchmarks/trees.py, which code-generates it with CasADi and times the C.  One function
+// per run, so that Python can give each trace its own time limit (the graphs of a 35-dof
+// humanoid are large).
+//
+// usage: pinocchio_tree_trace MODEL.bin FRAMES OUTDIR NAME
+//   MODEL.bin: Model::saveToBinary of the floating-base model (see pinocchio_tree_bench.cpp
+//              for why the model is serialized rather than parsed here).
+//   FRAMES: comma-separated frame names (the k frames of fk_hom and jacobian).
+//   NAME: one of
+//     fk_hom(q) -> T            4k x 4: the k poses stacked (forwardKinematics +
+//                               updateFramePlacement of the k frames)
+//     jacobian(q) -> J          6k x nv: the k Jacobians stacked (computeJointJacobians +
+//                               getFrameJacobian, LOCAL_WORLD_ALIGNED)
+//     M(q) -> M                 crba, mirrored to the full symmetric matrix
+//     g(q) -> g                 computeGeneralizedGravity
+//     c(q, qd) -> c             nonLinearEffects on a gravity-free copy
+//     tau(q, qd, qdd) -> tau    rnea
+//     fd(q, qd, tau) -> qdd     aba
+//     com(q) -> com, J_com, A_g jacobianCenterOfMass (com on the way) + computeCentroidalMap
+// q has Pinocchio's nq entries (a continuous joint is cos, sin), the others nv.  Stacking the
+// k frames' matrices vertically gives, read row-major, the generated (k, 4, 4) / (k, 6, nv).
+#include <pinocchio/autodiff/casadi.hpp> // must precede the other Pinocchio headers
+
+#include <pinocchio/multibody.hpp>
+#include <pinocchio/serialization.hpp>
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/center-of-mass.hpp>
+#include <pinocchio/algorithm/centroidal.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+using namespace pinocchio;
+using SX = ::casadi::SX;
+using ADModel = ModelTpl<SX>;
+using ADData = DataTpl<SX>;
+using VectorXs = Eigen::Matrix<SX, Eigen::Dynamic, 1>;
+using MatrixXs = Eigen::Matrix<SX, Eigen::Dynamic, Eigen::Dynamic>;
+using Port = std::pair<std::string, SX>;
+
+// A symbolic input: the CasADi column vector and the same symbols as an Eigen vector.
+struct Symbol
+{
+  SX sx;
+  VectorXs eigen;
+};
+
+static Symbol symbol(const std::string & name, int n)
+{
+  Symbol s{SX::sym(name, n), VectorXs(n)};
+  for (int i = 0; i < n; ++i)
+    s.eigen[i] = s.sx(i);
+  return s;
+}
+
+template<typename Derived>
+static SX to_sx(const Eigen::MatrixBase<Derived> & m)
+{
+  SX out;
+  pinocchio::casadi::copy(m, out);
+  return out;
+}
+
+static void save(const std::string & path, const std::string & name, const std::vector<Port> & inputs,
+                 const std::vector<Port> & outputs)
+{
+  std::vector<SX> in, out;
+  std::vector<std::string> in_names, out_names;
+  for (const Port & p : inputs)
+  {
+    in_names.push_back(p.first);
+    in.push_back(p.second);
+  }
+  for (const Port & p : outputs)
+  {
+    out_names.push_back(p.first);
+    out.push_back(p.second);
+  }
+  // cse: the traced graph repeats sub-expressions; a user after speed would merge them.
+  const ::casadi::Dict options{{"cse", true}};
+  ::casadi::Function(name, in, out, in_names, out_names, options).save(path);
+}
+
+static std::vector<FrameIndex> frame_ids(const Model & model, const std::string & list)
+{
+  std::vector<FrameIndex> ids;
+  std::stringstream stream(list);
+  std::string name;
+  while (std::getline(stream, name, ','))
+  {
+    if (!model.existFrame(name))
+      throw std::invalid_argument("no frame named " + name);
+    ids.push_back(model.getFrameId(name));
+  }
+  return ids;
+}
+
+// The traced outputs of function `name` (empty: unknown name).
+static std::vector<Port> trace(const std::string & name, const ADModel & ad, const std::vector<FrameIndex> & frames,
+                               const Symbol & q, const Symbol & qd, const Symbol & qdd, const Symbol & tau)
+{
+  ADData data(ad);
+  const int nv = ad.nv, k = (int)frames.size();
+  if (name == "fk_hom")
+  {
+    forwardKinematics(ad, data, q.eigen);
+    MatrixXs T(4 * k, 4);
+    for (int i = 0; i < k; ++i)
+      T.middleRows(4 * i, 4) = updateFramePlacement(ad, data, frames[i]).toHomogeneousMatrix();
+    return {{"T", to_sx(T)}};
+  }
+  if (name == "jacobian")
+  {
+    computeJointJacobians(ad, data, q.eigen);
+    MatrixXs J = MatrixXs::Zero(6 * k, nv);
+    for (int i = 0; i < k; ++i)
+    {
+      ADData::Matrix6x Ji = ADData::Matrix6x::Zero(6, nv);
+      getFrameJacobian(ad, data, frames[i], LOCAL_WORLD_ALIGNED, Ji);
+      J.middleRows(6 * i, 6) = Ji;
+    }
+    return {{"J", to_sx(J)}};
+  }
+  if (name == "M")
+  {
+    MatrixXs M = crba(ad, data, q.eigen);
+    M.triangularView<Eigen::StrictlyLower>() = M.transpose().triangularView<Eigen::StrictlyLower>();
+    return {{"M", to_sx(M)}};
+  }
+  if (name == "g")
+    return {{"g", to_sx(computeGeneralizedGravity(ad, data, q.eigen))}};
+  if (name == "c")
+  {
+    ADModel gravity_free = ad;
+    gravity_free.gravity.setZero();
+    ADData free_data(gravity_free);
+    return {{"c", to_sx(nonLinearEffects(gravity_free, free_data, q.eigen, qd.eigen))}};
+  }
+  if (name == "tau")
+    return {{"tau", to_sx(rnea(ad, data, q.eigen, qd.eigen, qdd.eigen))}};
+  if (name == "fd")
+    return {{"qdd", to_sx(aba(ad, data, q.eigen, qd.eigen, tau.eigen))}};
+  if (name == "com")
+  {
+    const MatrixXs Jcom = jacobianCenterOfMass(ad, data, q.eigen);
+    const VectorXs com = data.com[0];
+    const MatrixXs Ag = computeCentroidalMap(ad, data, q.eigen);
+    return {{"com", to_sx(com)}, {"J_com", to_sx(Jcom)}, {"A_g", to_sx(Ag)}};
+  }
+  return {};
+}
+
+static const char USAGE[] =
+  "usage: %s MODEL.bin FRAMES OUTDIR NAME\n"
+  "Traces Pinocchio's algorithm NAME (fk_hom, jacobian, M, g, c, tau, fd or com) on the serialized\n"
+  "floating-base model MODEL.bin (written by benchmarks/trees.py) with casadi::SX and saves it as\n"
+  "OUTDIR/NAME.casadi (casadi.Function.load reads it).\n";
+
+int main(int argc, char ** argv)
+{
+  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
+  {
+    std::printf(USAGE, argv[0]);
+    return 0;
+  }
+  if (argc != 5)
+  {
+    std::fprintf(stderr, USAGE, argv[0]);
+    return 2;
+  }
+  const std::string dir = argv[3], name = argv[4];
+  if (!std::filesystem::is_directory(dir)) // Function::save would fail silently
+  {
+    std::fprintf(stderr, "no such directory: %s\n", argv[3]);
+    return 1;
+  }
+  try
+  {
+    Model model;
+    model.loadFromBinary(argv[1]);
+    const std::vector<FrameIndex> frames = frame_ids(model, argv[2]);
+    const ADModel ad = model.cast<SX>();
+    const Symbol q = symbol("q", model.nq), qd = symbol("qd", model.nv), qdd = symbol("qdd", model.nv),
+                 tau = symbol("tau", model.nv);
+    const std::vector<Port> outputs = trace(name, ad, frames, q, qd, qdd, tau);
+    if (outputs.empty())
+    {
+      std::fprintf(stderr, "unknown function %s\n", name.c_str());
+      return 2;
+    }
+    std::vector<Port> inputs{{"q", q.sx}};
+    if (name == "c" || name == "tau" || name == "fd")
+      inputs.push_back({"qd", qd.sx});
+    if (name == "tau")
+      inputs.push_back({"qdd", qdd.sx});
+    if (name == "fd")
+      inputs.push_back({"tau", tau.sx});
+    save(dir + "/" + name + ".casadi", name, inputs, outputs);
+  }
+  catch (const std::exception & e)
+  {
+    std::fprintf(stderr, "tracing %s failed: %s\n", name.c_str(), e.what());
+    return 1;
+  }
+  return 0;
+}
