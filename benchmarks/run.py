@@ -346,8 +346,11 @@ def main(argv=None) -> int:
     (args.out / "timings.json").write_text(json.dumps(result, indent=1) + "\n")
     log(f"wrote {args.out / 'timings.json'} ({time.perf_counter() - started:.0f} s)")
 
-    # kinematic trees with a floating base against both Pinocchio peers (results/trees.json)
-    trees.write(trees.run(dict(trees.QUICK if args.quick else trees.FULL), log), args.out, log)
+    # kinematic trees with a floating base against both Pinocchio peers (results/trees.json);
+    # not in --quick: compiling a humanoid's C takes minutes (python -m benchmarks.trees --quick
+    # is its own smoke run)
+    if not args.quick:
+        trees.write(trees.run(dict(trees.FULL), log), args.out, log)
 
     if not args.no_scaling:
         study = scaling.study(range(2, settings["scaling_max_n"] + 1), settings["scaling_budget_s"], log=log)

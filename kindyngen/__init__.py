@@ -1,4 +1,4 @@
-"""KinDynGen: symbolic kinematics and dynamics of serial arms, generated as C, Python and CasADi.
+"""KinDynGen: symbolic kinematics and dynamics of serial arms and kinematic trees, generated as C, Python and CasADi.
 
 The package is the pipeline, one module per stage:
 

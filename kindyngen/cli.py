@@ -382,7 +382,7 @@ def _log_arguments(command: argparse.ArgumentParser) -> None:
 
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
-        "KinDynGen: derive the kinematics and dynamics of a serial arm from its YAML or URDF description "
+        "KinDynGen: derive the kinematics and dynamics of a serial arm (YAML or URDF) or a kinematic tree (URDF) "
         "and generate C, Python and CasADi code with operation counts. Bad input: one line on "
         "standard error and exit code 2."))
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)

@@ -95,14 +95,8 @@ class NewtonEulerPass:
             self.ar[j] = a = joint.rot_t(a_in)
             self.wr[j] = wr = joint.rot_t(w)
             self.wdr[j] = wdr = joint.rot_t(wd)
-            qdj = qd[j] if qd is not None else ZERO
-            qddj = qdd[j] if qdd is not None else ZERO
-            if joint.prismatic:
-                w, wd = wr, wdr
-                a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
-            else:
-                w = [wr[0], wr[1], wr[2] + qdj]
-                wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
+            a, w, wd = joint_step(joint, a, wr, wdr, qd[j] if qd is not None else ZERO,
+                                  qdd[j] if qdd is not None else ZERO)
             self.w[j] = w
             self.U[j] = U = u_matrix(w, wd, omega_products(w))
             h, I, m = body.h, body.I, body.m
@@ -121,6 +115,16 @@ class NewtonEulerPass:
                 f, nn = F, N
             self.f[j], self.nn[j] = f, nn
             self.tau[j] = f[2] if joints[j].prismatic else nn[2]
+
+
+def joint_step(joint, a, wr, wdr, qdj, qddj):
+    """Link j's origin acceleration, angular velocity and acceleration in frame j from the
+    incoming ones already turned into frame j (``a``, ``wr``, ``wdr``) and the joint's rate
+    and acceleration: a revolute joint adds ``qd e_z`` to w and ``qdd e_z + wr x qd e_z`` to
+    w'; a prismatic one ``qdd e_z + 2 w x qd e_z`` to a."""
+    if joint.prismatic:
+        return [a[0] + 2 * qdj * wr[1], a[1] - 2 * qdj * wr[0], a[2] + qddj], wr, wdr
+    return a, [wr[0], wr[1], wr[2] + qdj], [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
 
 
 def mat3(A, v):

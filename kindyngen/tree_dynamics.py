@@ -47,10 +47,11 @@ from functools import lru_cache
 
 import symengine as se
 
-from .dynamics_newton_euler import mat3, omega_products, rotate_body, u_matrix
+from .dynamics_newton_euler import joint_step, mat3, omega_products, rotate_body, u_matrix
 from .forward_dynamics import tree_ldlt_solve
 from .geometry import constant, exact, joint_cos_sin
 from .inertial_parameters import barycentric
+from .kinematics_homogeneous import joint_units
 from .placement import Placement
 from .rigid_bodies import ZERO, Body, JointFrame, cross, vadd, vscale
 from .symbolic import Port, SymbolicFunction, port_symbols
@@ -61,21 +62,12 @@ ROUTE = "Tree route (joint frames, grouped parameters): "
 
 # ----------------------------------------------------------------------------- ports
 
-def joint_unit(model: TreeModel, revolute: str, prismatic: str) -> str:
-    kinds = {j.kind for j in model.joints}
-    if kinds == {"revolute"}:
-        return revolute
-    if kinds == {"prismatic"}:
-        return prismatic
-    return f"{revolute} ({prismatic} for prismatic joints)"
-
-
 def q_port(model: TreeModel) -> Port:
     joints = f"joint positions in {model.order_text}"
     if model.floating_base:
         return Port("q", (model.nq,), "base position in the world, base orientation as a unit quaternion "
-                    f"(x, y, z, w), then {joints}", "m, 1, " + joint_unit(model, "rad", "m"))
-    return Port("q", (model.nq,), joints, joint_unit(model, "rad", "m"))
+                    f"(x, y, z, w), then {joints}", "m, 1, " + joint_units(model, "rad", "m"))
+    return Port("q", (model.nq,), joints, joint_units(model, "rad", "m"))
 
 
 def _velocity_text(model: TreeModel, what: str, base: str) -> str:
@@ -85,19 +77,19 @@ def _velocity_text(model: TreeModel, what: str, base: str) -> str:
 
 def qd_port(model: TreeModel) -> Port:
     return Port("qd", (model.nv,), _velocity_text(model, "velocity", "linear and angular velocity"),
-                ("m/s, rad/s, " if model.floating_base else "") + joint_unit(model, "rad/s", "m/s"))
+                ("m/s, rad/s, " if model.floating_base else "") + joint_units(model, "rad/s", "m/s"))
 
 
 def qdd_port(model: TreeModel, name: str = "qdd") -> Port:
     return Port(name, (model.nv,), _velocity_text(model, "acceleration", "linear and angular acceleration "
                                                   "(the derivative of its twist)"),
-                ("m/s^2, rad/s^2, " if model.floating_base else "") + joint_unit(model, "rad/s^2", "m/s^2"))
+                ("m/s^2, rad/s^2, " if model.floating_base else "") + joint_units(model, "rad/s^2", "m/s^2"))
 
 
 def force_port(model: TreeModel, name: str, what: str) -> Port:
     text = (f"base {what} (force, then moment about the base origin) in the base frame, then joint {what}s"
             if model.floating_base else f"joint {what}s")
-    return Port(name, (model.nv,), text, ("N, N m, " if model.floating_base else "") + joint_unit(model, "N m", "N"))
+    return Port(name, (model.nv,), text, ("N, N m, " if model.floating_base else "") + joint_units(model, "N m", "N"))
 
 
 def conventions(model: TreeModel) -> str:
@@ -255,14 +247,8 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True):
         a, w, wd, U = state[parent] if parent >= 0 else root_state
         a = joint.rot_t(a if U is None else vadd(a, mat3(U, joint.t)))
         wr, wdr = joint.rot_t(w), joint.rot_t(wd)
-        qdj = qd[base + j] if qd is not None else ZERO
-        qddj = qdd[base + j] if qdd is not None else ZERO
-        if joint.prismatic:
-            w, wd = wr, wdr
-            a = [a[0] + 2 * qdj * w[1], a[1] - 2 * qdj * w[0], a[2] + qddj]
-        else:
-            w = [wr[0], wr[1], wr[2] + qdj]
-            wd = [wdr[0] + qdj * wr[1], wdr[1] - qdj * wr[0], wdr[2] + qddj]
+        a, w, wd = joint_step(joint, a, wr, wdr, qd[base + j] if qd is not None else ZERO,
+                              qdd[base + j] if qdd is not None else ZERO)
         U = u_matrix(w, wd, omega_products(w)) if any(x != 0 for x in w + wd) else None
         state[j] = (a, w, wd, U)
     return root_state, state

@@ -264,6 +264,15 @@ def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
     return _Tree(links, parent_joint, child_joints, roots[0])
 
 
+def _read_robot(text: str | bytes, reading: Reading) -> tuple[str, _Tree]:
+    """The robot's name and its tree of links and joints."""
+    robot = _read_xml(text, reading)
+    name = (robot.get("name") or "").strip()
+    if not name:
+        raise _error(reading, "<robot> name", "missing (the model's name)")
+    return name, _read_tree(robot, reading)
+
+
 def _descendants(child_joints: dict, link: str, follow=lambda joint: True) -> list:
     """``link`` and the links below it (through joints accepted by ``follow``), depth first."""
     out, stack = [], [link]
@@ -341,7 +350,7 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Join
     if joint.kind in UNSUPPORTED:
         raise _error(reading, f"joint '{joint.name}' type",
                             f"a {joint.kind} joint is not supported (only revolute, continuous, "
-                            f"prismatic and fixed joints)")
+                            f"prismatic and fixed joints; a free root body is --floating-base)")
     if joint.mimic is not None:
         reading.note(f"{reading.source}: joint '{joint.name}' mimics '{joint.mimic}' in the URDF; "
                      f"here it is an independent joint")
@@ -432,11 +441,7 @@ def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = N
     """The serial chain from link ``base`` (default: the root) to link ``tip`` (default: the
     only leaf reached through a moving joint) of a URDF text (see the module docstring)."""
     reading = Reading(source, snap_angles)
-    robot = _read_xml(text, reading)
-    name = (robot.get("name") or "").strip()
-    if not name:
-        raise _error(reading, "<robot> name", "missing (the model's name)")
-    tree = _read_tree(robot, reading)
+    name, tree = _read_robot(text, reading)
     base = tree.root if base is None else _link_name(tree, base, "--base", reading)
     tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
     path = _path(tree, base, tip, reading)
@@ -486,11 +491,7 @@ def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, fl
     (['left_joint', 'right_joint'], [('right', 1), ('body', -1)])
     """
     reading = Reading(source, snap_angles)
-    robot = _read_xml(text, reading)
-    name = (robot.get("name") or "").strip()
-    if not name:
-        raise _error(reading, "<robot> name", "missing (the model's name)")
-    tree = _read_tree(robot, reading)
+    name, tree = _read_robot(text, reading)
     moving = {joint.name for joint in tree.parent_joint.values() if joint.kind != "fixed"}
     joints, parents, bodies, placed = [], [], [], {}
 

@@ -265,7 +265,8 @@ ERRORS = {
                            "link 'spacer' inertial inertia", "triangle inequality"),
     "missing moment": (_arm_with(' iyz="0.003"', ""), "link 'plate' inertial inertia iyz", "missing"),
     "floating joint": (_arm_with('name="j2" type="revolute"', 'name="j2" type="floating"'), "joint 'j2' type",
-                       "a floating joint cannot be part of a serial arm"),
+                       "a floating joint is not supported (only revolute, continuous, prismatic and fixed joints; "
+                       "a free root body is --floating-base)"),
     "unknown type": (_arm_with('name="j2" type="revolute"', 'name="j2" type="hinge"'), "joint 'j2' type",
                      "expected one of"),
     "zero axis": (_arm_with('axis xyz="0 0.6 0.8"', 'axis xyz="0 0 0"'), "joint 'j2' axis xyz", "no direction"),
