@@ -17,9 +17,8 @@ from .base_parameters import BaseParameterError
 from .c_trig import TRIG_MODES
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
-from .robot import RobotDescriptionError, load_robot
+from .robot import RobotDescriptionError, load_robot, load_robot_tree
 from .tree_model import TreeModel
-from .urdf import load_urdf_tree
 
 
 LANGS = ("c", "python", "casadi")
@@ -52,14 +51,15 @@ def _robot_options(command: argparse.ArgumentParser) -> None:
 def _tree_options(command: argparse.ArgumentParser) -> None:
     """Reading a whole URDF as a kinematic tree."""
     command.add_argument("--tree", action="store_true",
-                         help="URDF: every branch (a humanoid, a quadruped, a dual arm), not one chain")
+                         help="every branch of a URDF (a humanoid, a quadruped, a dual arm), or a YAML tree "
+                              "(joints with parent)")
     command.add_argument("--floating-base", action="store_true",
                          help="the root link moves freely (implies --tree): Pinocchio's free-flyer layout, q = "
                               "base position, quaternion (x, y, z, w), joints; qd = base twist in the base "
                               "frame, joint velocities")
     command.add_argument("--frames", type=_names, metavar="LINK,LINK,...",
-                         help="links whose poses and Jacobians fk_hom and jacobian return, in this order "
-                              "(implies --tree; default: the tips, the links of joints without children)")
+                         help="links (a YAML tree: joints) whose poses and Jacobians fk_hom and jacobian return, "
+                              "in this order (implies --tree; default: the tips, the links of joints without children)")
 
 
 def _names(text: str) -> list[str]:
@@ -76,13 +76,11 @@ def load(path, args):
         if args.base or args.tip:
             raise UsageError("--base and --tip choose one chain; a tree (--tree, --floating-base, --frames) "
                              "has every branch")
-        if Path(path).suffix.lower() != ".urdf":
-            raise UsageError(f"{path}: trees (--tree, --floating-base, --frames) are read from URDF files")
         if getattr(args, "params", "numeric") != "numeric":
             raise UsageError("--params symbolic: a kinematic tree is generated with its description's "
                              "parameters only (the regressor Y is the identification route)")
-        model = load_urdf_tree(path, frames=args.frames, floating_base=args.floating_base,
-                               snap_angles=not args.keep_angles)
+        model = load_robot_tree(path, frames=args.frames, floating_base=args.floating_base,
+                                snap_angles=not args.keep_angles)
     else:
         model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
     for note in model.notes:
@@ -382,7 +380,7 @@ def _log_arguments(command: argparse.ArgumentParser) -> None:
 
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
-        "KinDynGen: derive the kinematics and dynamics of a serial arm (YAML or URDF) or a kinematic tree (URDF) "
+        "KinDynGen: derive the kinematics and dynamics of a serial arm or a kinematic tree (YAML or URDF) "
         "and generate C, Python and CasADi code with operation counts. Bad input: one line on "
         "standard error and exit code 2."))
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)

@@ -28,7 +28,8 @@ from .model import (CONVENTIONS, DHRow, Friction, Joint, Link, RobotDescriptionE
                     check_inertia)
 from .placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                         unit_axis)
-from .urdf import load_urdf
+from .tree_model import Frame, TreeModel
+from .urdf import load_urdf, load_urdf_tree
 
 _SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
                     "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan,
@@ -344,15 +345,101 @@ def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = No
         return load_urdf(path, base=base, tip=tip, snap_angles=snap_angles)
     if base is not None or tip is not None:
         raise RobotDescriptionError(source, "<file>", "--base and --tip apply to URDF files only")
+    return parse_robot(_read_yaml(path), source, snap_angles)
+
+
+def _read_yaml(path: Path):
+    source = str(path)
     try:
         text = path.read_text()
     except OSError as exc:
         raise RobotDescriptionError(source, "<file>", f"cannot read: {exc.strerror}") from exc
     try:
-        data = yaml.safe_load(text)
+        return yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
         raise RobotDescriptionError(source, "<yaml>", f"malformed YAML{where}: {problem}") from exc
-    return parse_robot(data, source, snap_angles)
+
+
+# ----------------------------------------------------------------------------- trees
+
+TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
+TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent")
+BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
+
+
+def parse_robot_tree(data, source: str = "<memory>", frames=None, floating_base: bool = False,
+                     snap_angles: bool = True) -> TreeModel:
+    """A kinematic tree from already-parsed YAML data: joints by origin and axis (``dh:
+    none``), each with a unique ``name`` and an optional ``parent`` (an earlier joint's name;
+    absent: the base), and an optional ``base`` body (mass, com, inertia; the root body of a
+    floating base, massless if absent). A link's frame is named after its joint; ``frames``
+    names joints (or ``base``), default the joints without children. Joint effects, payload
+    and tool are arm features and refused here.
+
+    >>> tree = parse_robot_tree({"name": "two", "dh": "none", "gravity": [0, 0, -9.81],
+    ...     "joints": [{"name": "a", "lower": -1, "upper": 1},
+    ...                {"name": "b", "parent": "a", "origin": {"xyz": [0, 0, 0.5]}, "lower": -1, "upper": 1}],
+    ...     "links": [{"mass": 1, "com": [0, 0, 0.2], "inertia": [0.01, 0.01, 0.001, 0, 0, 0]}] * 2})
+    >>> tree.parents, [f.name for f in tree.frames]
+    ((-1, 0), ['b'])
+    """
+    reading = Reading(source, snap_angles)
+    if not isinstance(data, dict):
+        raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
+    _check_keys(data, TREE_TOP_KEYS, source, "")
+    name = _require(data, "name", source, "")
+    if not isinstance(name, str) or not name.strip():
+        raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
+    if _require(data, "dh", source, "") != FRAMES:
+        raise RobotDescriptionError(source, "dh", "a tree gives its joints by origin and axis: dh: none")
+    gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
+    rows = _require(data, "joints", source, "")
+    if not isinstance(rows, list) or not rows:
+        raise RobotDescriptionError(source, "joints", "expected a non-empty list of joints")
+    joints, parents, index = [], [], {}
+    for k, row in enumerate(rows):
+        field = f"joints[{k}]"
+        if not isinstance(row, dict):
+            raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+        _check_keys(row, TREE_JOINT_KEYS, source, field + ".")
+        joint = _parse_joint({key: v for key, v in row.items() if key != "parent"}, FRAMES, reading, field)
+        if not joint.name or joint.name in index or joint.name == BASE_NAME:
+            raise RobotDescriptionError(source, f"{field}.name", "a tree's joints need unique names (not "
+                                        f"'{BASE_NAME}'), got {joint.name!r}")
+        parent = row.get("parent", BASE_NAME)
+        if parent != BASE_NAME and parent not in index:
+            close = difflib.get_close_matches(str(parent), list(index), n=1)
+            hint = f"; closest: {close[0]}" if close else ""
+            raise RobotDescriptionError(source, f"{field}.parent", f"{parent!r} is not an earlier joint{hint}")
+        index[joint.name] = k
+        joints.append(joint)
+        parents.append(-1 if parent == BASE_NAME else index[parent])
+    links_data = _require(data, "links", source, "")
+    if not isinstance(links_data, list) or len(links_data) != len(joints):
+        raise RobotDescriptionError(source, "links", f"expected {len(joints)} entries (one per joint)")
+    links = tuple(_parse_link(row, source, f"links[{k}]") for k, row in enumerate(links_data))
+    zero = sympy.Integer(0)
+    root = (_parse_link(data["base"], source, "base") if "base" in data
+            else Link(mass=zero, com=(zero,) * 3, inertia=(zero,) * 6))
+    named = {BASE_NAME: -1, **index}
+    wanted = frames if frames is not None else [j.name for k, j in enumerate(joints) if k not in parents]
+    for frame in wanted:
+        if frame not in named:
+            close = difflib.get_close_matches(str(frame), list(named), n=1)
+            raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
+                                        + (f"; closest: {close[0]}" if close else ""))
+    return TreeModel(name=name.strip(), joints=tuple(joints), parents=tuple(parents), links=links, root=root,
+                     frames=tuple(Frame(frame, named[frame]) for frame in wanted), floating_base=floating_base,
+                     gravity=gravity, source=source, base_name=BASE_NAME, notes=tuple(reading.notes))
+
+
+def load_robot_tree(path: str | Path, frames=None, floating_base: bool = False, snap_angles: bool = True) -> TreeModel:
+    """Read a kinematic tree: a URDF (every branch, :func:`kindyngen.urdf.load_urdf_tree`) or a
+    YAML tree (:func:`parse_robot_tree`)."""
+    path = Path(path)
+    if path.suffix.lower() == ".urdf":
+        return load_urdf_tree(path, frames=frames, floating_base=floating_base, snap_angles=snap_angles)
+    return parse_robot_tree(_read_yaml(path), str(path), frames, floating_base, snap_angles)
