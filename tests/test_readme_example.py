@@ -20,7 +20,7 @@ G0 = 9.81
 
 def _example() -> dict:
     text = (ROOT / "README.md").read_text()
-    section = text[text.index("## Robot description"):]
+    section = text[text.index("## Robot description (YAML)"):]
     block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
     return yaml.safe_load(block)
 

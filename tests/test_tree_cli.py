@@ -197,3 +197,14 @@ def test_yaml_tree_equals_pinocchio(floating, tmp_path):
         assert np.allclose(lib.call("tau", {"q": q[None], "qd": v[None], "qdd": a[None]})["tau"][0], tau, rtol=0, atol=1e-9)
         assert np.allclose(lib.call("M", {"q": q[None]})["M"][0], M, rtol=0, atol=1e-9)
         assert np.allclose(lib.call("fk_hom", {"q": q[None]})["T"][0], T, rtol=0, atol=1e-9)
+
+
+def test_readme_tree_example_loads():
+    """The README's YAML tree is a working description (a hip and its knee below the base)."""
+    import re
+    from kindyngen.robot import parse_robot_tree
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text[text.index("## Kinematic trees and floating bases"):]
+    block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
+    model = parse_robot_tree(yaml.safe_load(block), "README.md", floating_base=True)
+    assert model.parents == (-1, 0) and model.nv == 8 and float(model.root.mass) == 4.0
