@@ -297,16 +297,22 @@ def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) 
     return link
 
 
+def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
+    """The description's name, after checking it is a mapping with only ``keys``."""
+    if not isinstance(data, dict):
+        raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
+    _check_keys(data, keys, source, "")
+    name = _require(data, "name", source, "")
+    if not isinstance(name, str) or not name.strip():
+        raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
+    return name
+
+
 def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> RobotModel:
     """Build a :class:`RobotModel` from already-parsed YAML data (``snap_angles``: see
     :func:`kindyngen.placement.clean_angle`; what was snapped is in ``model.notes``)."""
     reading = Reading(source, snap_angles)
-    if not isinstance(data, dict):
-        raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
-    _check_keys(data, TOP_KEYS, source, "")
-    name = _require(data, "name", source, "")
-    if not isinstance(name, str) or not name.strip():
-        raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
+    name = _named_mapping(data, TOP_KEYS, source)
     convention = _require(data, "dh", source, "")
     if convention not in CONVENTIONS + (FRAMES,):
         raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS + (FRAMES,)}, got {convention!r}")
@@ -387,12 +393,7 @@ def parse_robot_tree(data, source: str = "<memory>", frames=None, floating_base:
     ((-1, 0), ['b'])
     """
     reading = Reading(source, snap_angles)
-    if not isinstance(data, dict):
-        raise RobotDescriptionError(source, "<top level>", "expected a mapping with name, dh, gravity, joints, links")
-    _check_keys(data, TREE_TOP_KEYS, source, "")
-    name = _require(data, "name", source, "")
-    if not isinstance(name, str) or not name.strip():
-        raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
+    name = _named_mapping(data, TREE_TOP_KEYS, source)
     if _require(data, "dh", source, "") != FRAMES:
         raise RobotDescriptionError(source, "dh", "a tree gives its joints by origin and axis: dh: none")
     gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
