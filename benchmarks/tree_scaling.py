@@ -531,11 +531,28 @@ def study(settings: dict, log=print) -> dict:
             "seconds": time.perf_counter() - started}
 
 
+def _update_g1(path: Path, log) -> int:
+    """The G1 part of the study again, written into ``path`` beside the series it keeps."""
+    result = json.loads(path.read_text())
+    g1 = g1_generate(5, log)
+    g1["measured"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    result["g1"], result["robotran"] = g1, robotran(g1, result["tree"])
+    path.write_text(json.dumps(result, indent=1) + "\n")
+    log(f"G1: median {g1['median_s']:.2f} s wall over {len(g1['seconds'])} runs; derive + CSE, CPU s: "
+        + ", ".join(f"{k} {v['cpu_s']:.2f}" for k, v in g1["functions"].items()) + f"; wrote {path}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.tree_scaling", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="tiny sizes, no G1 (a smoke test, under 30 s)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for tree_scaling.json and .png")
+    parser.add_argument("--g1-only", action="store_true",
+                        help="re-measure only the G1 generate (5 runs) and its functions, updating the G1 and "
+                             "Robotran entries of the existing tree_scaling.json (the series stay as measured)")
     args = parser.parse_args(argv)
+    if args.g1_only:
+        return _update_g1(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     settings = QUICK if args.quick else FULL
     result = study(settings, log=lambda text: print(text, flush=True))
     args.out.mkdir(parents=True, exist_ok=True)

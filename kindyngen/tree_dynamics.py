@@ -119,10 +119,6 @@ class TreeSetup:
     rotation: list | None        # R (world <- base), 3x3 nested lists, from the quaternion
     position: list | None
 
-    @property
-    def parents(self) -> tuple[int, ...]:
-        return self.model.parents
-
     def gravity_in_base(self) -> list:
         """The gravity vector in the root frame (R^T gamma with a floating base)."""
         gam = [se.sympify(v) for v in self.model.gravity]

@@ -85,15 +85,6 @@ class TreeModel:
     def nv(self) -> int:
         return self.n + (FREE_FLYER_NV if self.floating_base else 0)
 
-    @property
-    def children(self) -> tuple[tuple[int, ...], ...]:
-        """The child joints of each joint."""
-        out = [[] for _ in self.joints]
-        for j, p in enumerate(self.parents):
-            if p >= 0:
-                out[p].append(j)
-        return tuple(tuple(c) for c in out)
-
     def ancestors(self, j: int) -> tuple[int, ...]:
         """Joint j and the joints above it, from j up (frame bodies: -1 gives ())."""
         out = []
