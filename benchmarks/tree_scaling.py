@@ -163,17 +163,26 @@ def measure(build, model) -> dict | None:
     cpu_done, done = time.process_time(), time.perf_counter()
     return {"derive_s": derived - start, "optimize_s": done - derived, "total_s": done - start,
             "derive_cpu_s": cpu_derived - cpu_start, "optimize_cpu_s": cpu_done - cpu_derived,
-            "cpu_s": cpu_done - cpu_start, "before": program.before.to_json(), "after": program.after.to_json()}
+            "cpu_s": cpu_done - cpu_start, "before": program.before.to_json(), "after": program.after.to_json(),
+            # a function with several routes (fd): what each costs; the time covers them all
+            **({"route": program.function.metadata.get("route"),
+                "routes": {name: count.to_json() for name, count in program.routes}} if program.routes else {})}
 
 
 def m_and_c(model) -> dict:
     """M and c as one function under one CSE (what Robotran's 'M and c' figure counts)."""
     from dataclasses import replace
 
+    import symengine as se
+
     from kindyngen.tree_dynamics import coriolis_tree, mass_matrix_tree
     mass, bias = mass_matrix_tree(model), coriolis_tree(model)
+    # both name their intermediates from _s0: give c's their own names
+    rename = {symbol: se.Symbol(f"_c{symbol}") for symbol, _ in bias.stages}
     both = replace(bias, name="M_c", outputs=mass.outputs + bias.outputs,
-                   output_exprs=mass.output_exprs + bias.output_exprs)
+                   output_exprs=mass.output_exprs + tuple(tuple(e.xreplace(rename) for e in port)
+                                                          for port in bias.output_exprs),
+                   stages=mass.stages + tuple((rename[s], e.xreplace(rename)) for s, e in bias.stages))
     return _program(both).after.to_json()
 
 

@@ -25,6 +25,7 @@ from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
 from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
                             inverse_dynamics_tree, mass_matrix_tree)
+from .tree_articulated import forward_dynamics_aba
 from .tree_kinematics import fk_hom_tree, jacobian_tree
 from .tree_model import TreeModel
 from .tree_regressors import tree_regressor
@@ -68,6 +69,12 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
 )
 
 
+def forward_dynamics_routes(model: TreeModel) -> SymbolicFunction:
+    """fd of a tree by the sparse L^T D L route, with the articulated-body route as its
+    alternative: optimisation keeps whichever has fewer operations after CSE on this tree."""
+    return replace(forward_dynamics_tree(model), alternatives=(forward_dynamics_aba(model),))
+
+
 # the functions of a kinematic tree (kindyngen/tree_*.py): numeric parameters only
 TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] = (
     ("fk_hom", fk_hom_tree),
@@ -76,7 +83,7 @@ TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] =
     ("g", gravity_tree),
     ("c", coriolis_tree),
     ("tau", inverse_dynamics_tree),
-    ("fd", forward_dynamics_tree),
+    ("fd", forward_dynamics_routes),
     ("com", centre_of_mass_tree),
     ("Y", tree_regressor),          # None where the base parameters cannot be decided
 )

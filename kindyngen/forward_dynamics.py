@@ -60,7 +60,7 @@ def ldlt_substitute(L, inv_d, b):
     return x
 
 
-def tree_ldlt_solve(M, parents, b):
+def tree_ldlt_solve(M, parents, b, stages=None):
     """Solve ``M x = b`` for a symmetric positive definite M whose nonzeros lie between a
     coordinate and its ancestors in a tree (``parents[k] < k``, -1 at a root), by ``M = L^T
     D L`` with L unit lower triangular and as sparse as M (Featherstone, *Rigid Body Dynamics
@@ -68,7 +68,11 @@ def tree_ldlt_solve(M, parents, b):
 
     >>> [float(v) for v in tree_ldlt_solve([[4, 1, 1], [1, 2, 0], [1, 0, 2]], (-1, 0, 0), [6, 3, 3])]
     [1.0, 1.0, 1.0]
+
+    With ``stages`` (:class:`kindyngen.symbolic.Stages`) every updated entry and every
+    intermediate of the solves is a named intermediate.
     """
+    name = stages.cut if stages is not None else (lambda e: e)
     n = len(M)
     H = [list(row) for row in M]
     ancestors = []
@@ -80,19 +84,19 @@ def tree_ldlt_solve(M, parents, b):
         ancestors.append(up)
     inv_d = [None] * n
     for k in range(n - 1, -1, -1):
-        inv_d[k] = se.Pow(H[k][k], -1)
+        inv_d[k] = name(se.Pow(H[k][k], -1))
         for pos, i in enumerate(ancestors[k]):
-            a = H[k][i] * inv_d[k]
+            a = name(H[k][i] * inv_d[k])
             for j in [i] + ancestors[k][pos + 1:]:
-                H[i][j] = H[i][j] - a * H[k][j]
+                H[i][j] = name(H[i][j] - a * H[k][j])
             H[k][i] = a
-    x = list(b)                        # L^T y = b, leaves first
+    x = [name(e) for e in b]           # L^T y = b, leaves first
     for k in range(n - 1, -1, -1):
         for i in ancestors[k]:
-            x[i] = x[i] - H[k][i] * x[k]
-    x = [x[k] * inv_d[k] for k in range(n)]
+            x[i] = name(x[i] - H[k][i] * x[k])
+    x = [name(x[k] * inv_d[k]) for k in range(n)]
     for k in range(n):                 # L x = y / D, root first
-        x[k] = se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k]))
+        x[k] = name(se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k])))
     return x
 
 

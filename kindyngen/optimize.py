@@ -16,7 +16,7 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import symengine as se
 
@@ -34,12 +34,27 @@ class Program:
     outputs: tuple[tuple[se.Basic, ...], ...]
     before: OpCount
     after: OpCount
+    # (route, operations after CSE) of every route that was optimised, chosen one included
+    routes: tuple[tuple[str, OpCount], ...] = ()
 
 
 def optimize(function: SymbolicFunction) -> Program:
-    """CSE over all outputs of ``function`` together, with temporaries named t0, t1, ..."""
+    """CSE over all outputs of ``function`` together, with temporaries named t0, t1, ...
+
+    A function with named intermediates (``function.stages``) is reduced as one list of its
+    intermediates' and outputs' expressions; the intermediates become temporaries like CSE's
+    own. Its count before CSE counts each intermediate once (the algorithm as derived).
+
+    A function with ``alternatives`` is optimised by every route, and the route with the
+    fewest additions and multiplications after CSE (the first one on a tie) is kept; its
+    summary says what the others cost."""
+    if function.alternatives:
+        return _cheapest((replace(function, alternatives=()),) + function.alternatives)
     flat = [e for port in function.output_exprs for e in port]
-    replacements, reduced = se.cse(flat)
+    staged = [e for _, e in function.stages]
+    replacements, reduced = se.cse(staged + flat)
+    if function.stages:
+        replacements, reduced = _merged(replacements, function.stages, reduced)
     rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
     assignments = tuple((rename[sym], _renamed(expr, rename)) for sym, expr in replacements)
     reduced = [_renamed(e, rename) for e in reduced]
@@ -53,9 +68,61 @@ def optimize(function: SymbolicFunction) -> Program:
         function=function,
         assignments=assignments,
         outputs=tuple(outputs),
-        before=tree_count(flat),
+        before=tree_count(staged + flat),
         after=program_count(assignments, reduced),
     )
+
+
+def _cheapest(routes) -> Program:
+    programs = [optimize(route) for route in routes]
+    best = min(range(len(programs)), key=lambda k: (programs[k].after.add + programs[k].after.mul, k))
+    counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)
+    text = ("Route chosen by the fewest additions + multiplications after CSE: "
+            + "; ".join(f"{name} {count.add} + {count.mul}" for name, count in counted) + ".")
+    chosen = programs[best]
+    return replace(chosen, function=replace(chosen.function, summary=f"{chosen.function.summary} {text}"),
+                   routes=counted)
+
+
+def _merged(replacements, stages, reduced):
+    """CSE's replacements and the reduced intermediates as one list of assignments in an
+    order that defines every symbol before its use (depth first, in the intermediates' order),
+    and the reduced outputs. An intermediate that CSE reduced to a symbol or a number is not
+    assigned but substituted."""
+    definitions = dict(replacements)
+    alias = {}
+    for (symbol, _), expr in zip(stages, reduced):
+        if expr.is_Symbol or expr.is_Number:
+            alias[symbol] = expr
+        else:
+            definitions[symbol] = expr
+
+    def resolve(sym):
+        while sym in alias:
+            sym = alias[sym]
+        return sym
+
+    if alias:
+        resolved = {s: resolve(s) for s in alias}
+        definitions = {s: _renamed(e, resolved) for s, e in definitions.items()}
+        reduced = [_renamed(e, resolved) for e in reduced]
+    order, placed = [], set()
+    for root in [s for s, _ in stages] + [s for s, _ in replacements]:
+        if root in placed or root not in definitions:
+            continue
+        stack = [(root, False)]
+        while stack:                 # iterative post-order: chains of intermediates are long
+            sym, expanded = stack.pop()
+            if sym in placed:
+                continue
+            if expanded:
+                placed.add(sym)
+                order.append((sym, definitions[sym]))
+                continue
+            stack.append((sym, True))
+            deps = [d for d in definitions[sym].free_symbols if d in definitions and d not in placed]
+            stack.extend((d, False) for d in sorted(deps, key=str, reverse=True))
+    return order, reduced[len(stages):]
 
 
 def _renamed(expr, rename):

@@ -50,12 +50,59 @@ class SymbolicFunction:
     output_exprs: tuple[tuple[se.Basic, ...], ...]
     conventions: str = ""
     metadata: dict = field(default_factory=dict, compare=False)
+    # named intermediates (symbol, expression), in evaluation order, that outputs and later
+    # intermediates refer to: see :class:`Stages`
+    stages: tuple[tuple[se.Symbol, se.Basic], ...] = ()
+    # other derivations of the same function (routes, named by metadata["route"]):
+    # optimisation keeps the one with the fewest operations after CSE
+    alternatives: tuple["SymbolicFunction", ...] = ()
 
     def __post_init__(self):
         for port, syms in zip(self.inputs, self.input_symbols):
             assert len(syms) == port.size, f"{self.name}: input {port.name} has {len(syms)} symbols"
         for port, exprs in zip(self.outputs, self.output_exprs):
             assert len(exprs) == port.size, f"{self.name}: output {port.name} has {len(exprs)} entries"
+
+
+class Stages:
+    """The named intermediates of a recursive derivation (velocities, forces, articulated
+    inertias of each body). Handing CSE many small expressions over named symbols instead of
+    one DAG whose sub-expressions are shared across many outputs keeps CSE near-linear in the
+    size of the algorithm: symengine's cse is superlinear in the sharing of a large DAG.
+
+    ``cut`` names an expression unless it is a number, a symbol or a constant (those stay
+    inline, so exact zeros and constants still fold).
+
+    >>> import symengine as se
+    >>> stages = Stages()
+    >>> a, b = se.symbols("a b")
+    >>> x = stages.cut(a * b + 1)
+    >>> stages.cut(a), stages.cut(se.Integer(0)), x
+    (a, 0, _s0)
+    >>> stages.definitions
+    ((_s0, 1 + a*b),)
+    """
+
+    def __init__(self):
+        self._definitions: list = []
+
+    def cut(self, expr):
+        expr = se.sympify(expr)
+        if expr.is_Number or expr.is_Symbol or not expr.free_symbols:
+            return expr
+        if isinstance(expr, se.Mul) and len(expr.args) == 2 and expr.args[0].is_Number \
+                and expr.args[1].is_Symbol:
+            return expr          # c * s: one multiplication wherever it is used
+        symbol = se.Symbol(f"_s{len(self._definitions)}")
+        self._definitions.append((symbol, expr))
+        return symbol
+
+    def cut_all(self, exprs) -> list:
+        return [self.cut(e) for e in exprs]
+
+    @property
+    def definitions(self) -> tuple:
+        return tuple(self._definitions)
 
 
 def port_symbols(name: str, shape: tuple[int, ...]) -> tuple[se.Symbol, ...]:

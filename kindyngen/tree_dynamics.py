@@ -54,7 +54,7 @@ from .inertial_parameters import barycentric
 from .kinematics_homogeneous import joint_units
 from .placement import Placement
 from .rigid_bodies import ZERO, Body, JointFrame, cross, vadd, vscale
-from .symbolic import Port, SymbolicFunction, port_symbols
+from .symbolic import Port, Stages, SymbolicFunction, port_symbols
 from .tree_model import FREE_FLYER_NV, TreeModel
 
 ROUTE = "Tree route (joint frames, grouped parameters): "
@@ -211,6 +211,10 @@ def setup(model: TreeModel) -> TreeSetup:
 
 # ----------------------------------------------------------------------------- algorithms
 
+def _unnamed(expr):
+    return expr
+
+
 def wrench(body: Body, a, w, wd, U):
     """Force and moment about the frame origin of a body with origin acceleration a, angular
     velocity w and acceleration wd (``U = skew(wd) + skew(w)^2``, None when both are zero)."""
@@ -220,13 +224,15 @@ def wrench(body: Body, a, w, wd, U):
     return (vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a)))
 
 
-def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True):
+def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None):
     """The forward pass of :func:`rnea`: (root state, state of each joint frame), a state
     being (origin acceleration a, angular velocity w, angular acceleration wd, ``U =
     skew(wd) + skew(w)^2`` or None when w and wd are exact zeros), gravity entering as the
     root's acceleration ``-gamma``; ``qd``/``qdd`` None are zero (Khalil-Kleinfinger form,
-    each joint starting from its parent's state)."""
+    each joint starting from its parent's state). With ``stages``, every joint's state is
+    named there."""
     model = ts.model
+    name = stages.cut if stages is not None else _unnamed
     base = FREE_FLYER_NV if model.floating_base else 0
     gam = ts.gravity_in_base() if with_gravity else [ZERO] * 3
     a0 = [-x for x in gam]
@@ -245,16 +251,19 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True):
         wr, wdr = joint.rot_t(w), joint.rot_t(wd)
         a, w, wd = joint_step(joint, a, wr, wdr, qd[base + j] if qd is not None else ZERO,
                               qdd[base + j] if qdd is not None else ZERO)
+        a, w, wd = ([name(e) for e in v] for v in (a, w, wd))
         U = u_matrix(w, wd, omega_products(w)) if any(x != 0 for x in w + wd) else None
-        state[j] = (a, w, wd, U)
+        state[j] = (a, w, wd, None if U is None else [[name(e) for e in row] for row in U])
     return root_state, state
 
 
-def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
+def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None) -> list:
     """tau (size nv) by recursive Newton-Euler over the tree; ``qd``/``qdd`` None are zero:
-    :func:`motion_states`, then each joint's wrench plus its children's, tip first."""
+    :func:`motion_states`, then each joint's wrench plus its children's, tip first (with
+    ``stages``, every state and summed wrench named there)."""
     model, n = ts.model, ts.model.n
-    root_state, state = motion_states(ts, qd, qdd, with_gravity)
+    name = stages.cut if stages is not None else _unnamed
+    root_state, state = motion_states(ts, qd, qdd, with_gravity, stages)
     forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
     f_parts = [[F] for F, _ in forces]
     n_parts = [[N] for _, N in forces]
@@ -262,7 +271,7 @@ def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True) -> list:
     tau = [None] * n
     for j in range(n - 1, -1, -1):
         joint, parent = ts.joints[j], model.parents[j]
-        f, nn = vadd(*f_parts[j]), vadd(*n_parts[j])
+        f, nn = [name(e) for e in vadd(*f_parts[j])], [name(e) for e in vadd(*n_parts[j])]
         tau[j] = f[2] if joint.prismatic else nn[2]
         fr, nr = carry(joint, f, nn)
         targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
@@ -280,32 +289,37 @@ def carry(joint: JointFrame, f, nn):
     return fr, vadd(joint.rot(nn), cross(joint.t, fr))
 
 
-def composites(ts: TreeSetup) -> tuple[list[Body], Body]:
+def composites(ts: TreeSetup, stages: Stages | None = None) -> tuple[list[Body], Body]:
     """The composite body of each joint's subtree in its joint frame, and of the whole tree
-    in the root frame (the root body included)."""
+    in the root frame (the root body included); each named in ``stages`` if given."""
     model = ts.model
+    name = stages.cut if stages is not None else _unnamed
     parts = [[b] for b in ts.bodies]
     root = [ts.root]
     comp = [None] * model.n
     for j in range(model.n - 1, -1, -1):
-        comp[j] = _sum_bodies(parts[j])
+        comp[j] = _sum_bodies(parts[j], name)
         parent = model.parents[j]
         (parts[parent] if parent >= 0 else root).append(rotate_body(ts.joints[j], comp[j]))
-    return comp, _sum_bodies(root)
+    return comp, _sum_bodies(root, name)
 
 
-def _sum_bodies(bodies: list[Body]) -> Body:
-    return Body(se.Add(*(b.m for b in bodies)), vadd(*(b.h for b in bodies)),
-                [[se.Add(*(b.I[r][c] for b in bodies)) for c in range(3)] for r in range(3)])
+def _sum_bodies(bodies: list[Body], name=_unnamed) -> Body:
+    """The sum of ``bodies``, its entries passed through ``name`` (I by its upper triangle)."""
+    upper = {(r, c): name(se.Add(*(b.I[r][c] for b in bodies))) for r in range(3) for c in range(r, 3)}
+    return Body(name(se.Add(*(b.m for b in bodies))), [name(e) for e in vadd(*(b.h for b in bodies))],
+                [[upper[min(r, c), max(r, c)] for c in range(3)] for r in range(3)])
 
 
-def crba(ts: TreeSetup):
+def crba(ts: TreeSetup, stages: Stages | None = None):
     """(M as nv x nv nested lists, the root wrench of every joint column as (f, n), the
     composite of the whole tree at the root). Each column is carried up its branch only:
-    entries between joints on different branches are exact zeros."""
+    entries between joints on different branches are exact zeros. With ``stages``, the
+    composites and every carried wrench are named intermediates."""
     model = ts.model
     nv, base = model.nv, FREE_FLYER_NV if model.floating_base else 0
-    comp, whole = composites(ts)
+    name = stages.cut if stages is not None else _unnamed
+    comp, whole = composites(ts, stages)
     M = [[ZERO] * nv for _ in range(nv)]
     root_columns = []
     for j in range(model.n):
@@ -319,6 +333,7 @@ def crba(ts: TreeSetup):
         node = j
         while True:
             f, nn = carry(ts.joints[node], f, nn)
+            f, nn = [name(e) for e in f], [name(e) for e in nn]
             node = model.parents[node]
             if node < 0:
                 break
@@ -408,13 +423,16 @@ def centroidal(ts: TreeSetup, root_columns, whole: Body, M):
 
 # ----------------------------------------------------------------------------- functions
 
-def tree_function(name, summary, model, inputs, input_symbols, outputs, output_exprs) -> SymbolicFunction:
-    """A tree dynamics SymbolicFunction with the shared conventions text."""
+def tree_function(name, summary, model, inputs, input_symbols, outputs, output_exprs,
+                  stages: Stages | None = None, route: str | None = None) -> SymbolicFunction:
+    """A tree dynamics SymbolicFunction with the shared conventions text (and the named
+    intermediates of ``stages``; ``route`` names the algorithm where a function has several)."""
     return SymbolicFunction(
         name=name, summary=summary, inputs=tuple(inputs), outputs=tuple(outputs),
         input_symbols=tuple(input_symbols),
         output_exprs=tuple(tuple(se.sympify(e) for e in exprs) for exprs in output_exprs),
-        conventions=conventions(model), metadata={"params": "numeric"})
+        conventions=conventions(model), metadata={"params": "numeric", **({"route": route} if route else {})},
+        stages=stages.definitions if stages is not None else ())
 
 
 def _flat(matrix):
@@ -423,20 +441,21 @@ def _flat(matrix):
 
 def inverse_dynamics_tree(model: TreeModel, name: str = "tau") -> SymbolicFunction:
     """``tau(q, qd, qdd) -> tau = M qdd + c + g`` by recursive Newton-Euler (O(n))."""
-    ts = setup(model)
+    ts, stages = setup(model), Stages()
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     return tree_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
                      model, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
-                     (force_port(model, "tau", "torque"),), (rnea(ts, qd, qdd),))
+                     (force_port(model, "tau", "torque"),), (rnea(ts, qd, qdd, True, stages),), stages)
 
 
 def coriolis_tree(model: TreeModel, name: str = "c") -> SymbolicFunction:
     """``c(q, qd) -> tau(q, qd, 0)`` without gravity."""
-    ts = setup(model)
+    ts, stages = setup(model), Stages()
     qd = port_symbols("qd", (model.nv,))
     return tree_function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
                      "recursive Newton-Euler.", model, (q_port(model), qd_port(model)), (ts.q, qd),
-                     (force_port(model, "c", "Coriolis and centrifugal torque"),), (rnea(ts, qd, None, False),))
+                     (force_port(model, "c", "Coriolis and centrifugal torque"),), (rnea(ts, qd, None, False, stages),),
+                     stages)
 
 
 def gravity_tree(model: TreeModel, name: str = "g") -> SymbolicFunction:
@@ -448,32 +467,33 @@ def gravity_tree(model: TreeModel, name: str = "g") -> SymbolicFunction:
 
 def mass_matrix_tree(model: TreeModel, name: str = "M") -> SymbolicFunction:
     """``M(q) -> M`` by composite rigid bodies over the tree."""
-    ts = setup(model)
-    M, _, _ = crba(ts)
+    ts, stages = setup(model), Stages()
+    M, _, _ = crba(ts, stages)
     return tree_function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
                      "branch (entries between branches are exact zeros).", model, (q_port(model),), (ts.q,),
                      (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
-                           "kg, kg m, kg m^2"),), (_flat(M),))
+                           "kg, kg m, kg m^2"),), (_flat(M),), stages)
 
 
 def forward_dynamics_tree(model: TreeModel, name: str = "fd") -> SymbolicFunction:
     """``fd(q, qd, tau) -> qdd = M^-1 (tau - c - g)`` by the tree-sparse ``L^T D L``."""
     ts = setup(model)
     qd, tau = port_symbols("qd", (model.nv,)), port_symbols("tau", (model.nv,))
-    M, _, _ = crba(ts)
-    bias = rnea(ts, qd, None)
-    qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)])
+    stages = Stages()
+    M, _, _ = crba(ts, stages)
+    bias = rnea(ts, qd, None, True, stages)
+    qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)], stages)
     return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
                      "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
                      "and the two sparse triangular solves.", model,
                      (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
-                     (qdd_port(model),), (qdd,))
+                     (qdd_port(model),), (qdd,), stages, route="sparse L^T D L")
 
 
 def centre_of_mass_tree(model: TreeModel, name: str = "com") -> SymbolicFunction:
     """``com(q) -> c, J_c, A_g``: centre of mass, its Jacobian and the centroidal momentum matrix."""
-    ts = setup(model)
-    M, root_columns, whole = crba(ts)
+    ts, stages = setup(model), Stages()
+    M, root_columns, whole = crba(ts, stages)
     com, jac, ag = centroidal(ts, root_columns, whole, M)
     frame = "world" if model.floating_base else f"root link '{model.base_name}'"
     counted = "" if model.floating_base else " (the fixed root link not counted, as in Pinocchio)"
@@ -483,4 +503,4 @@ def centre_of_mass_tree(model: TreeModel, name: str = "com") -> SymbolicFunction
                       Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),
                       Port("A_g", (6, model.nv), "centroidal momentum matrix: h_G = A_g qd, linear then angular "
                            f"momentum about the CoM, {frame} axes (Pinocchio's ccrba)", "kg m, kg m^2 per unit of qd")),
-                     (com, _flat(jac), _flat(ag)))
+                     (com, _flat(jac), _flat(ag)), stages)

@@ -24,7 +24,12 @@ import numpy as np
 import pytest
 
 from kindyngen.evaluate import load_generated
+from kindyngen.interface import manifest
+from kindyngen.optimize import optimize
 from kindyngen.pipeline import generate
+from kindyngen.render import RENDERERS
+from kindyngen.tree_articulated import forward_dynamics_aba
+from kindyngen.tree_dynamics import forward_dynamics_tree
 from kindyngen.urdf import load_urdf_tree
 
 pin = pytest.importorskip("pinocchio")
@@ -174,3 +179,30 @@ def test_tree_regressor_on_base_parameters_equals_pinocchio(case, lang):
     assert error <= TOLERANCE, f"{case['key']} {lang}: max scaled error {error:.3e}"
     stacked = Y[:40].reshape(-1, Y.shape[2])
     assert np.linalg.matrix_rank(stacked) == Y.shape[2]
+
+
+def test_both_fd_routes_equal_pinocchio_and_the_cheaper_is_generated(case, tmp_path):
+    """fd's two routes, the sparse L^T D L and the articulated-body algorithm, each rendered
+    as its own function (C and Python), equal Pinocchio's aba; the generated ``fd`` is the
+    route with fewer additions + multiplications after CSE, and its header says so."""
+    model = case["model"]
+    programs = [optimize(forward_dynamics_tree(model, "fd_ltdl")), optimize(forward_dynamics_aba(model, "fd_aba"))]
+    (tmp_path / "functions.json").write_text(json.dumps(manifest(model, programs, "numeric")))
+    for lang in ("c", "python"):
+        for filename, text in RENDERERS[lang](model, programs).items():
+            (tmp_path / lang).mkdir(exist_ok=True)
+            (tmp_path / lang / filename).write_text(text)
+    inputs, expected = case["calls"]["fd"]
+    for lang in ("c", "python"):
+        library = load_generated(tmp_path, lang)
+        for program in programs:
+            error = scaled_error(library.call(program.function.name, inputs)["qdd"], expected["qdd"])
+            assert error <= TOLERANCE, f"{case['key']} {program.function.name} {lang}: {error:.3e}"
+    costs = [p.after.add + p.after.mul for p in programs]
+    generated = json.loads((case["folder"] / "opcounts.json").read_text())
+    after = generated["fd"]["after"]
+    assert after["add"] + after["mul"] == min(costs)
+    header = (case["folder"] / "c" / f"{model.identifier}.h").read_text()
+    assert "Route chosen by the fewest additions + multiplications after CSE: sparse L^T D L " \
+        f"{programs[0].after.add} + {programs[0].after.mul}; articulated-body " \
+        f"{programs[1].after.add} + {programs[1].after.mul}." in " ".join(header.split())
