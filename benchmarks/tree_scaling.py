@@ -43,7 +43,7 @@ from pathlib import Path
 
 from .common import RESULTS, machine
 
-FULL = dict(tree_limbs=4, tree_per_limb=tuple(range(2, 16)), chain_sizes=tuple(range(4, 61, 4)),
+FULL = dict(tree_limbs=4, tree_per_limb=tuple(range(2, 16)), chain_sizes=tuple(range(4, 61, 4)) + (80, 100),
             budget_s=60.0, repeats=2, g1_repeats=3)
 QUICK = dict(tree_limbs=4, tree_per_limb=(1, 2), chain_sizes=(2, 4), budget_s=10.0, repeats=1, g1_repeats=0)
 
@@ -322,15 +322,19 @@ def loglog_slope(xs: list, ys: list) -> float | None:
 
 def slopes(study: dict) -> dict:
     """Growth exponent of generation (CPU) time per function against nv: over all sizes and over
-    the upper half (where the constant start-up share no longer flattens the curve); and over
-    all sizes against the number of joints (the floating base's six not counted)."""
+    the upper half (where the constant start-up share no longer flattens the curve); over all
+    sizes against the number of joints (the floating base's six not counted); and, over the
+    upper half, against the size of the generated code (add + mul after CSE): 1 is a
+    derivation linear in what it produces."""
     out = {}
     for name, entry in study["functions"].items():
         rows = entry["rows"]
         xs, ys = [r["nv"] for r in rows], [r["cpu_s"] for r in rows]
+        ops = [r["after"]["add"] + r["after"]["mul"] for r in rows]
         half = len(rows) // 2
         out[name] = {"all": loglog_slope(xs, ys), "upper_half": loglog_slope(xs[half:], ys[half:]),
                      "all_vs_joints": loglog_slope([r["joints"] for r in rows], ys),
+                     "upper_half_vs_code_size": loglog_slope(ops[half:], ys[half:]),
                      "nv_range": [xs[0], xs[-1]] if xs else None}
     return out
 
@@ -498,12 +502,13 @@ def markdown(result: dict) -> str:
                 a = r["after"]
                 lines.append(f"| {series} | {r['nv']} | {r['joints']} | {name} | {r['cpu_s']:.2f} | {r['total_s']:.2f} | "
                              f"{a['add']} | {a['mul']} | {a['call']} |")
-    lines += ["", "| series | function | slope (all) | slope (upper half) | stopped |", "|---|---|---|---|---|"]
+    lines += ["", "| series | function | slope (all) | slope (upper half) | slope vs code size (upper half) | stopped |",
+              "|---|---|---|---|---|---|"]
     for series in ("tree", "chain"):
         for name, s in result[series]["slopes"].items():
             fmt = (lambda v: "-" if v is None else f"{v:.2f}")
             lines.append(f"| {series} | {name} | {fmt(s['all'])} | {fmt(s['upper_half'])} | "
-                         f"{result[series]['functions'][name]['stopped'] or ''} |")
+                         f"{fmt(s['upper_half_vs_code_size'])} | {result[series]['functions'][name]['stopped'] or ''} |")
     lines += ["", "| series | function | nv | mul ours/ref | add ours/ref | mul/add vs tree CRBA or CRBA+RNEA+F&S |",
               "|---|---|---|---|---|---|"]
     for series in ("tree", "chain"):

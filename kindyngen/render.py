@@ -66,7 +66,8 @@ class FunctionView:
     before: dict
     after: dict
     has_select: bool
-    angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel
+    angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
+    first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
     block: int = 0                # C batch: configurations per block
     in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
@@ -108,18 +109,26 @@ def input_names(program: Program, dialect: Dialect) -> dict:
     return names
 
 
-def kernel_angles(program: Program) -> int:
-    """How many sines/cosines the C sincos kernel computes: the size of the ``q`` port if some
-    sin or cos has exactly one of its entries as argument (others, e.g. sin(q_1/2), stay
-    libm calls), else 0."""
+def kernel_angles(program: Program) -> tuple[int, int]:
+    """Which sines/cosines the C sincos kernel computes: ``(first, count)``, the entries
+    ``q[first:]``, or (0, 0) when no sin or cos has an entry of the ``q`` port exactly as its
+    argument (others, e.g. sin(q_1/2), stay libm calls). Leading entries that are no such
+    argument (a floating base's position and quaternion) are left out where that saves a
+    group of KERNEL_LANES lanes, else the kernel starts at q[0]."""
     f = program.function
     if "q" not in [p.name for p in f.inputs]:
-        return 0
-    q = set(f.input_symbols[[p.name for p in f.inputs].index("q")])
+        return 0, 0
+    q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+    index = {sym: k for k, sym in enumerate(q)}
+    used = set()
     for e in [e for _, e in program.assignments] + [e for port in program.outputs for e in port]:
-        if any(a.args[0] in q for a in e.atoms(se.sin, se.cos)):
-            return len(q)
-    return 0
+        used |= {index[a.args[0]] for a in e.atoms(se.sin, se.cos) if a.args[0] in index}
+    if not used:
+        return 0, 0
+    first = min(used)
+    if -(-(len(q) - first) // KERNEL_LANES) == -(-len(q) // KERNEL_LANES):
+        first = 0
+    return first, len(q) - first
 
 
 def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
@@ -144,10 +153,10 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     if batch:
         names = {sym: f"{port.name}[{k}*count + start + j]"
                  for port, symbols in zip(f.inputs, f.input_symbols) for k, sym in enumerate(symbols)}
-    angles = kernel_angles(program) if (trig == "kernel" or batch) else 0
+    first, angles = kernel_angles(program) if (trig == "kernel" or batch) else (0, 0)
     if angles:
         q = f.input_symbols[[p.name for p in f.inputs].index("q")]
-        for k, sym in enumerate(q):
+        for k, sym in enumerate(q[first:]):
             where = f"[{k}][j]" if batch else f"[{k}]"
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
     block, in_place = _batch_block(angles, sum(p.size for p in f.outputs)) if batch else (0, False)
@@ -174,6 +183,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "?" in text),
         angles=angles,
+        first_angle=first,
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
         block=block,
         in_place=in_place,

@@ -17,8 +17,17 @@ PAPER_TABLE_II = {
 
 
 def opcounts_json(programs: list[Program]) -> dict:
-    """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order."""
-    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json()} for p in programs}
+    """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order; a function
+    chosen among routes also has ``"route"`` (the chosen one) and ``"routes"`` (each one's
+    count after CSE)."""
+    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(), **_routes_json(p)}
+            for p in programs}
+
+
+def _routes_json(p: Program) -> dict:
+    if not p.routes:
+        return {}
+    return {"route": p.function.metadata.get("route"), "routes": {name: c.to_json() for name, c in p.routes}}
 
 
 def _row(values) -> str:
@@ -29,12 +38,24 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
     lines = [f"# Operation counts: {robot_name}", "",
              "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
              "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
-             "after = the generated straight-line code after CSE.", "",
+             "after = the generated straight-line code after CSE."
+             + (" Functions derived with named intermediates (a recursion's per-body quantities: "
+                "tree dynamics) count each intermediate's expression once before CSE."
+                if any(p.function.stages for p in programs) else ""), "",
              "| function | add before | mul before | call before | add after | mul after | call after |",
              "|---|---|---|---|---|---|---|"]
     for p in programs:
         b, a = p.before, p.after
         lines.append(f"| {p.function.name} | {_row([b.add, b.mul, b.call, a.add, a.mul, a.call])} |")
+    chosen = [p for p in programs if p.routes]
+    if chosen:
+        lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "
+                  "additions + multiplications after CSE.", "",
+                  "| function | route | add after | mul after | call after | kept |", "|---|---|---|---|---|---|"]
+        for p in chosen:
+            for name, c in p.routes:
+                kept = "yes" if name == p.function.metadata.get("route") else ""
+                lines.append(f"| {p.function.name} | {name} | {_row([c.add, c.mul, c.call])} | {kept} |")
     if compare_with_paper:
         lines += ["", "## Beside the kinematics paper (Table II, Maple 2018)", "",
                   "| function | KinDynGen after CSE (add / mul / call) | paper optimised | "

@@ -137,3 +137,40 @@ def test_generate_help_and_bad_trig():
     bad = subprocess.run(cli + ["robots/lwr4.yaml", "--out", "/nonexistent", "--trig", "fast"],
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.startswith("error:") and "Traceback" not in bad.stderr
+
+
+def test_floating_tree_kernel_skips_the_base(tmp_path):
+    """A floating tree's q starts with position and quaternion, which no sin/cos takes: the
+    kernel starts at the first angle (here q[8]: q[7] is a prismatic lift), where that saves a
+    group of lanes. Single calls and batches (both trig modes) equal the numpy module, which
+    calls numpy's sin/cos on every entry."""
+    from kindyngen.evaluate import load_generated
+    from kindyngen.urdf import load_urdf_tree
+    model = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    assert model.nq == 12
+    rng = np.random.default_rng(3)
+    count = 37
+    q = np.hstack([rng.uniform(-1, 1, (count, 3)), rng.standard_normal((count, 4)), rng.uniform(-2, 2, (count, 5))])
+    q[:, 3:7] /= np.linalg.norm(q[:, 3:7], axis=1, keepdims=True)
+    arrays = {"q": q, "qd": rng.uniform(-2, 2, (count, model.nv)), "tau": rng.uniform(-9, 9, (count, model.nv))}
+    for trig in ("kernel", "libm"):
+        folder = generate(model, tmp_path / trig, languages=("c", "python"), progress=False,
+                          only={"fk_hom", "M", "fd"}, trig=trig)
+        manifest = json.loads((folder / "functions.json").read_text())
+        source = (folder / "c" / f"{model.identifier}.c").read_text()
+        if trig == "kernel":
+            assert "const double angles[8] = {q[8], q[9], q[10], q[11], 0.0," in source
+            assert "served by one run of the sincos kernel over q[8:]" in " ".join(
+                (folder / "c" / f"{model.identifier}.h").read_text().split())
+        assert "q + (8 + k)*count + start" in source or "q[(8 + k)*count + start + j]" in source
+        dll = ctypes.CDLL(str(compile_shared_library(folder / "c", model.identifier, ("-O2",))))
+        reference = load_generated(folder, "python")
+        for spec in manifest["functions"]:
+            inputs = [arrays[p["name"]] for p in spec["inputs"]]
+            expected = reference.call(spec["name"], {p["name"]: arrays[p["name"]] for p in spec["inputs"]})
+            single, batch = call_single(dll, spec, inputs), call_batch(dll, spec, inputs)
+            for port, s, b in zip(spec["outputs"], single, batch):
+                np.testing.assert_array_equal(b, s, err_msg=f"{trig} {spec['name']}.{port['name']}")
+                want = expected[port["name"]].reshape(count, -1)
+                np.testing.assert_allclose(s, want, rtol=1e-12, atol=1e-12 * np.abs(want).max(),
+                                           err_msg=f"{trig} {spec['name']}.{port['name']}")
