@@ -324,13 +324,14 @@ def slopes(study: dict) -> dict:
     """Growth exponent of generation (CPU) time per function against nv: over all sizes and over
     the upper half (where the constant start-up share no longer flattens the curve); over all
     sizes against the number of joints (the floating base's six not counted); and, over the
-    upper half, against the size of the generated code (add + mul after CSE): 1 is a
-    derivation linear in what it produces."""
+    upper half, against the size of the code derived (add + mul after CSE, all routes of
+    fd): 1 is a derivation linear in what it produces."""
     out = {}
     for name, entry in study["functions"].items():
         rows = entry["rows"]
         xs, ys = [r["nv"] for r in rows], [r["cpu_s"] for r in rows]
-        ops = [r["after"]["add"] + r["after"]["mul"] for r in rows]
+        # the code derived: a function with several routes derives (and CSEs) each of them
+        ops = [sum(c["add"] + c["mul"] for c in r.get("routes", {"": r["after"]}).values()) for r in rows]
         half = len(rows) // 2
         out[name] = {"all": loglog_slope(xs, ys), "upper_half": loglog_slope(xs[half:], ys[half:]),
                      "all_vs_joints": loglog_slope([r["joints"] for r in rows], ys),

@@ -20,7 +20,8 @@ from .ik_lwr_dualquat import ik_dq
 from .ik_lwr_homogeneous import ik_hom
 from .kinematics_dualquat import fk_dq, jacobian_dq, pose_jacobian_dq
 from .kinematics_homogeneous import fk_hom, jacobian
-from .regressors import regressor
+from .regressors import base_params_document as arm_base_params_document, regressor
+from .regressors import undecided_notes as arm_undecided_notes
 from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
 from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
@@ -28,7 +29,7 @@ from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics
 from .tree_articulated import forward_dynamics_aba
 from .tree_kinematics import fk_hom_tree, jacobian_tree
 from .tree_model import TreeModel
-from .tree_regressors import tree_regressor
+from .tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -108,6 +109,21 @@ def derive_all(model: RobotModel | TreeModel, params: str = "numeric", only=None
         if function is not None:
             out.append(with_lengths_port(function, model))
     return out
+
+
+def base_params_document(model: RobotModel | TreeModel) -> dict | None:
+    """Content of ``base_params.json`` for either kind of model (None for an arm with symbolic
+    lengths)."""
+    return tree_base_params_document(model) if isinstance(model, TreeModel) else arm_base_params_document(model)
+
+
+def undecided_notes(model: RobotModel | TreeModel, only=None) -> list[str]:
+    """One line per regressor (of ``only``, default all) left out because its base parameters
+    could not be decided."""
+    if not isinstance(model, TreeModel):
+        return arm_undecided_notes(model, only)
+    reason = tree_regressor_unavailable(model) if only is None or "Y" in only else None
+    return [f"{model.identifier}: regressor Y not generated: {reason}"] if reason else []
 
 
 def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

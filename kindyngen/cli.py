@@ -18,7 +18,6 @@ from .c_trig import TRIG_MODES
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot, load_robot_tree
-from .tree_model import TreeModel
 
 
 LANGS = ("c", "python", "casadi")
@@ -120,9 +119,8 @@ def _cmd_describe(args) -> int:
 
 
 def _cmd_count(args) -> int:
-    from .catalog import NAMES, TREE_NAMES
+    from .catalog import NAMES, TREE_NAMES, undecided_notes
     from .pipeline import build_programs
-    from .regressors import undecided_notes
     from .report import opcounts_json, opcounts_markdown
     only = None
     if args.only is not None:
@@ -136,7 +134,7 @@ def _cmd_count(args) -> int:
     for path in args.robots:
         model = load(path, args)
         programs = build_programs(model, args.params, only=only, progress=False)
-        for note in undecided_notes(model, only) if not isinstance(model, TreeModel) else ():
+        for note in undecided_notes(model, only):
             print(f"note: {note}", file=sys.stderr)
         missing = sorted(only - {p.function.name for p in programs}) if only else []
         if missing:

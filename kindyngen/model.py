@@ -179,6 +179,21 @@ class RobotModel:
         return len(self.joints)
 
     @property
+    def nq(self) -> int:
+        """Configuration coordinates: the joint positions (as a kinematic tree names them)."""
+        return self.n
+
+    @property
+    def nv(self) -> int:
+        """Velocity coordinates: the joint velocities."""
+        return self.n
+
+    @property
+    def structure_text(self) -> None:
+        """A tree's generated files say what it is; an arm's state n and its convention."""
+        return None
+
+    @property
     def lower(self) -> np.ndarray:
         return np.array([j.lower for j in self.joints])
 

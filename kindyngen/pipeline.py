@@ -11,15 +11,13 @@ import sys
 import time
 from pathlib import Path
 
-from .catalog import derive_all
+from .catalog import base_params_document, derive_all, undecided_notes
 from .interface import manifest
 from .optimize import Program, optimize
-from .regressors import base_params_document, undecided_notes
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
 from .tree_model import TreeModel
-from .tree_regressors import tree_base_params_document
 
 LANGUAGES = ("c", "python", "casadi", "python_c")
 
@@ -46,7 +44,7 @@ class Progress:
             self.stream.write("\n")
 
 
-def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
+def build_programs(model: RobotModel | TreeModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
     """Derive and optimise every applicable function of ``model``."""
     functions = derive_all(model, params, only)
     bar = Progress(f"{model.identifier}", len(functions)) if progress else None
@@ -73,17 +71,15 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
         build().save(str(directory / f"{name}.casadi"))
 
 
-def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
+def generate(model: RobotModel | TreeModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel") -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES."""
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
     _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
-    tree = isinstance(model, TreeModel)
-    # None for robots with symbolic lengths
-    base_params = tree_base_params_document(model) if tree else base_params_document(model)
-    for note in undecided_notes(model, only) if progress and not tree else ():
+    base_params = base_params_document(model)          # None for robots with symbolic lengths
+    for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")

@@ -196,10 +196,10 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
         "robot": model.identifier,
         "robot_name": model.name,
         "source": Path(model.source).name,
-        "n": getattr(model, "nv", model.n),      # velocity coordinates (a floating base: 6 + joints)
-        "nq": getattr(model, "nq", model.n),
+        "n": model.nv,                           # velocity coordinates (a floating base: 6 + joints)
+        "nq": model.nq,
         "convention": model.convention,
-        "structure": getattr(model, "structure_text", None),   # a tree says what it is; an arm: n and DH
+        "structure": model.structure_text,       # a tree says what it is; an arm: None
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
         "functions": [function_view(p, dialect, model.identifier, trig) for p in programs],

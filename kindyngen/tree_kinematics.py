@@ -23,7 +23,7 @@ from __future__ import annotations
 import symengine as se
 
 from .geometry import compose, constant_transform, motion
-from .symbolic import Port, SymbolicFunction, flatten, port_symbols
+from .symbolic import Port, Stages, SymbolicFunction, flatten, port_symbols
 from .tree_dynamics import q_port, quaternion_rotation
 from .tree_model import FREE_FLYER_NV, TreeModel
 
@@ -34,9 +34,9 @@ def _root_pose(model: TreeModel, q):
     return se.Matrix(quaternion_rotation(*q[3:7])), se.Matrix(list(q[0:3]))
 
 
-def link_poses(model: TreeModel, q):
+def link_poses(model: TreeModel, q, stages: Stages | None = None):
     """(root pose, [(R, p) of each joint's link frame], [(axis, origin) of each joint]) in
-    the world (root) frame."""
+    the world (root) frame; with ``stages``, each link pose is named there."""
     joint_q = q[7:] if model.floating_base else q
     root = _root_pose(model, q)
     links, axes = [], []
@@ -44,13 +44,16 @@ def link_poses(model: TreeModel, q):
         above = links[parent] if parent >= 0 else root
         frame = compose(above, constant_transform(joint.before))
         axes.append((frame[0][:, 2], frame[1]))
-        links.append(compose(compose(frame, motion(joint, qj)), constant_transform(joint.after)))
+        link = compose(compose(frame, motion(joint, qj)), constant_transform(joint.after))
+        if stages is not None:
+            link = tuple(se.Matrix(m.rows, m.cols, stages.cut_all(list(m))) for m in link)
+        links.append(link)
     return root, links, axes
 
 
-def frame_poses(model: TreeModel, q):
+def frame_poses(model: TreeModel, q, stages: Stages | None = None):
     """(R, p) of each requested frame, and the poses of :func:`link_poses`."""
-    root, links, axes = link_poses(model, q)
+    root, links, axes = link_poses(model, q, stages)
     poses = [compose(links[f.body] if f.body >= 0 else root, constant_transform(f.placement))
              for f in model.frames]
     return poses, root, axes
@@ -81,7 +84,8 @@ def fk_hom_tree(model: TreeModel, name: str = "fk_hom") -> SymbolicFunction:
 def jacobian_tree(model: TreeModel, name: str = "jacobian") -> SymbolicFunction:
     """``jacobian(q) -> J``: the requested frames' geometric Jacobians (module text)."""
     q = port_symbols("q", (model.nq,))
-    poses, root, axes = frame_poses(model, q)
+    stages = Stages()
+    poses, root, axes = frame_poses(model, q, stages)
     base = FREE_FLYER_NV if model.floating_base else 0
     out = []
     for frame, (_, p) in zip(model.frames, poses):
@@ -109,4 +113,5 @@ def jacobian_tree(model: TreeModel, name: str = "jacobian") -> SymbolicFunction:
         (Port("J", (k, 6, model.nv), f"Jacobians of {_frame_text(model)}: rows linear velocity of the frame "
               "origin, then angular velocity, world-aligned (Pinocchio's LOCAL_WORLD_ALIGNED); [v; w] = J qd",
               "m or 1 per unit of qd"),),
-        (q,), (tuple(out),), conventions=f"{model.frames_text} Lengths in m, angles in rad.")
+        (q,), (tuple(out),), conventions=f"{model.frames_text} Lengths in m, angles in rad.",
+        stages=stages.definitions)

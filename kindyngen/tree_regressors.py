@@ -31,7 +31,7 @@ from .base_parameters import BaseParameterError, BaseParameters, find_base_param
 from .inertial_parameters import NAMES, barycentric
 from .rigid_bodies import ZERO, cross, vadd, vscale
 from .dynamics_newton_euler import mat3
-from .symbolic import Port, SymbolicFunction, port_symbols
+from .symbolic import Port, Stages, SymbolicFunction, port_symbols
 from .tree_dynamics import carry, conventions, frame_body, motion_states, q_port, qd_port, qdd_port, setup
 from .tree_model import FREE_FLYER_NV, TreeModel
 
@@ -76,26 +76,37 @@ def _unit_wrenches(after, a, w, wd, U):
 @lru_cache(maxsize=None)
 def full_tree_regressor(model: TreeModel):
     """(q, qd, qdd symbols, rows: nv lists of 10 B expressions) of the full regressor."""
+    symbols, columns = _regressor_columns(model)
+    return symbols, tuple(tuple(column[r] for column in columns) for r in range(model.nv))
+
+
+def _regressor_columns(model: TreeModel, wanted=None, stages: Stages | None = None):
+    """(q, qd, qdd symbols, the regressor's columns in parameter order, only those in
+    ``wanted`` if given); with ``stages``, every motion state and carried wrench is named
+    there."""
+    name = stages.cut if stages is not None else (lambda e: e)
     ts = setup(model)
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
-    root_state, state = motion_states(ts, qd, qdd)
+    root_state, state = motion_states(ts, qd, qdd, True, stages)
     base = FREE_FLYER_NV if model.floating_base else 0
     blocks = ((None, -1, root_state),) if model.floating_base else ()
     blocks += tuple((model.joints[j].after, j, state[j]) for j in range(model.n))
     columns = []
-    for after, j, motion in blocks:
-        for F, N in _unit_wrenches(after, *motion):
+    for index, (after, j, motion) in enumerate(blocks):
+        for k, (F, N) in enumerate(_unit_wrenches(after, *motion)):
+            if wanted is not None and 10 * index + k not in wanted:
+                continue
             column = [ZERO] * model.nv
             node = j
             while node >= 0:
                 column[base + node] = F[2] if model.joints[node].prismatic else N[2]
                 F, N = carry(ts.joints[node], F, N)
+                F, N = [name(e) for e in F], [name(e) for e in N]
                 node = model.parents[node]
             if model.floating_base:
                 column[0:6] = list(F) + list(N)
             columns.append(column)
-    rows = tuple(tuple(column[r] for column in columns) for r in range(model.nv))
-    return (ts.q, qd, qdd), rows
+    return (ts.q, qd, qdd), columns
 
 
 def random_states(model: TreeModel, count: int, seed: int) -> np.ndarray:
@@ -189,9 +200,11 @@ def tree_regressor(model: TreeModel, name: str = "Y") -> SymbolicFunction | None
     """``Y(q, qd, qdd)`` on the base parameters (None where :func:`unavailable` says why not)."""
     if unavailable(model):
         return None
-    (q, qd, qdd), rows = full_tree_regressor(model)
     b = tree_base_parameters(model)
-    exprs = tuple(row[k] for row in rows for k in b.base)
+    stages = Stages()
+    (q, qd, qdd), columns = _regressor_columns(model, frozenset(b.base), stages)
+    column = {k: columns[i] for i, k in enumerate(sorted(b.base))}
+    exprs = tuple(column[k][r] for r in range(model.nv) for k in b.base)
     port = Port("Y", (model.nv, len(b.base)), "regressor of tau on the base parameters (row-major; columns: "
                 + ", ".join(b.names) + ")", "tau's units per base parameter")
     text = (f"{conventions(model).split(' Inertial parameters')[0]} Columns: the {len(b.base)} base parameters "
@@ -202,7 +215,7 @@ def tree_regressor(model: TreeModel, name: str = "Y") -> SymbolicFunction | None
     return SymbolicFunction(name, "Torque regressor on base parameters: tau = M qdd + c + g = Y(q, qd, qdd) pi.",
                             (q_port(model), qd_port(model), qdd_port(model)), (port,),
                             (q, qd, qdd), (exprs,), conventions=text,
-                            metadata={"params": "none", "base_parameters": b.names})
+                            metadata={"params": "none", "base_parameters": b.names}, stages=stages.definitions)
 
 
 def tree_base_params_document(model: TreeModel) -> dict:

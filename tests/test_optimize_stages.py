@@ -110,3 +110,21 @@ def test_the_route_with_fewer_operations_is_kept_and_named():
         assert np.isclose(run_program(program, ((0.3, 1.7),))[0], direct(costly, ((0.3, 1.7),))[0])
     tie = optimize(replace(costly, alternatives=(replace(costly, summary="second.", metadata={"route": "copy"}),)))
     assert tie.function.summary.startswith("costly.")      # on a tie, the first route
+
+
+def test_long_staged_lists_are_reduced_in_chunks_without_repeating_calls(monkeypatch):
+    """Beyond CSE_CHUNK expressions CSE runs chunk by chunk: the values stay, every sin/cos is
+    still evaluated once, and the operations grow only by what chunks could have shared."""
+    import kindyngen.optimize as optimize_module
+    rng = np.random.default_rng(3)
+    whole = optimize(chain_function(12, Stages()))
+    monkeypatch.setattr(optimize_module, "CSE_CHUNK", 7)
+    staged = chain_function(12, Stages())
+    assert len(staged.stages) + 15 > 3 * 7                  # several chunks
+    chunked = optimize(staged)
+    assert chunked.after.call == whole.after.call == 24
+    assert whole.after.add + whole.after.mul <= chunked.after.add + chunked.after.mul
+    plain = chain_function(12, None)
+    for _ in range(3):
+        q = rng.uniform(-3, 3, 12)
+        assert np.allclose(run_program(chunked, (q,)), direct(plain, (q,)), rtol=1e-12, atol=1e-12)
