@@ -22,7 +22,12 @@ The serial routes of :mod:`kindyngen.dynamics_newton_euler` generalised to a par
 * **tau** by recursive Newton-Euler in O(n); **g** by composite first moments; **c** =
   tau(q, qd, 0) without gravity; **M** by composite rigid bodies, each column carried up
   its own branch only (O(n d), d the depth); **fd** by ``M = L^T D L`` with L as sparse as
-  the tree (Featherstone's LTDL, O(n d^2), no fill-in), see :func:`tree_ldlt_solve`.
+  the tree (Featherstone's LTDL, O(n d^2), no fill-in), see :func:`tree_ldlt_solve` (the
+  catalog sets the articulated-body route of :mod:`kindyngen.tree_articulated` beside it and
+  keeps the cheaper).
+* **Named intermediates.** Each recursion names its per-body quantities in a
+  :class:`kindyngen.symbolic.Stages` (states, summed wrenches, composites, carried columns,
+  factor entries): CSE then stays linear in the code it produces.
 * **Centroidal quantities** come out of M's base rows: with a floating base ``M[0:6, :]
   qd`` is the spatial momentum about the base origin in the base frame (with a fixed base
   the same rows are the root wrenches CRBA carries its columns to). The centre of mass is
