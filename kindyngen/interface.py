@@ -15,6 +15,8 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
         "name": model.name,
         "n": model.n,
         "convention": model.convention,
+        # a kinematic tree: what it is, and its configuration and velocity sizes
+        **({"structure": model.structure_text, "nq": model.nq, "nv": model.nv} if model.structure_text else {}),
         "gravity": [float(v) for v in model.gravity],
         "params": params,
         "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/c_trig.py)

@@ -282,6 +282,23 @@ def test_urdf_arm_with_a_prismatic_joint(tmp_path_factory):
     assert _compare_with_numpy(ext, ref, interface, np.random.default_rng(5), 10) == set(ref.FUNCTIONS)
 
 
+def test_floating_tree(tmp_path_factory):
+    """A floating-base tree through the pipeline with python_c: every function equals the numpy
+    module, and the module says what the robot is and that gravity is in the world frame."""
+    from kindyngen.pipeline import generate
+    from kindyngen.urdf import load_urdf_tree
+    model = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    folder = generate(model, tmp_path_factory.mktemp("tree"), languages=("c", "python", "python_c"),
+                      progress=False)
+    ext, ref = python_c.load(folder), _numpy_module(folder)
+    interface = json.loads((folder / "functions.json").read_text())
+    assert (interface["nq"], interface["nv"]) == (12, 11) and "floating base" in interface["structure"]
+    assert list(ext.FUNCTIONS) == list(ref.FUNCTIONS)
+    assert _compare_with_numpy(ext, ref, interface, np.random.default_rng(5), 10) == set(ref.FUNCTIONS)
+    doc = " ".join(ext.__doc__.split())
+    assert f"({model.structure_text})" in doc and "gravity in the world frame" in doc
+
+
 def test_load_caches_and_reuses(lwr4):
     _, _, folder = lwr4
     target = python_c.build(folder)
