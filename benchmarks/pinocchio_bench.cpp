@@ -22,70 +22,16 @@
 #include <pinocchio/algorithm/rnea-derivatives.hpp>
 #include <pinocchio/algorithm/aba-derivatives.hpp>
 
+#include "bench_timing.hpp"
+#include "program_args.hpp"
 #include "pinocchio_model.hpp"
 
-#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
-#include <time.h>
 #include <vector>
 
 using namespace pinocchio;
-
-static volatile double sink;
-
-static double now_ns()
-{
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e9 + ts.tv_nsec;
-}
-
-// One timed repetition runs `iters` calls cycling over the K inputs; the iteration count is
-// calibrated once so that a repetition lasts about target_ns (long enough to swamp the
-// clock's resolution, short enough that a noisy neighbour spoils few of them).
-template<typename Body>
-static void measure(const char * name, long K, int repeats, double target_ns, Body body)
-{
-  long iters = 16;
-  for (;;)
-  {
-    double t0 = now_ns();
-    double acc = 0;
-    for (long i = 0; i < iters; ++i)
-      acc += body(i % K);
-    sink = sink + acc;
-    double dt = now_ns() - t0;
-    if (dt > 0.2 * target_ns || iters > (1L << 30))
-    {
-      iters = std::max(1L, (long)(iters * target_ns / std::max(dt, 1.0)));
-      break;
-    }
-    iters *= 4;
-  }
-  std::vector<double> per_call;
-  for (int r = 0; r < repeats; ++r)
-  {
-    double acc = 0;
-    long k = 0;
-    double t0 = now_ns();
-    for (long i = 0; i < iters; ++i)
-    {
-      acc += body(k);
-      if (++k == K)
-        k = 0;
-    }
-    double dt = now_ns() - t0;
-    sink = sink + acc;
-    per_call.push_back(dt / iters);
-  }
-  // Every repetition is printed: Python pools them over interleaved runs.
-  std::printf("time %s", name);
-  for (double t : per_call)
-    std::printf(" %.3f", t);
-  std::printf("\n");
-}
 
 static const char USAGE[] =
   "usage: %s MODEL.txt INPUTS.bin K REPEATS TARGET_NS\n"
@@ -95,16 +41,8 @@ static const char USAGE[] =
 
 int main(int argc, char ** argv)
 {
-  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
-  {
-    std::printf(USAGE, argv[0]);
-    return 0;
-  }
-  if (argc != 6)
-  {
-    std::fprintf(stderr, USAGE, argv[0]);
-    return 2;
-  }
+  if (const int code = check_args(argc, argv, 6, USAGE); code >= 0)
+    return code;
   const long K = std::atol(argv[3]);
   const int repeats = std::atoi(argv[4]);
   const double target_ns = std::atof(argv[5]);

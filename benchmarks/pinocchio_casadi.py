@@ -24,7 +24,7 @@ from .compiled import C_FLAGS, Timer
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "pinocchio_casadi_trace.cpp"
-HEADERS = (pinocchio_cpp.HEADER,)
+HEADERS = (pinocchio_cpp.HEADER, pinocchio_cpp.ARGS, HERE / "sx_trace.hpp")
 IMPL = "pinocchio_casadi_c"
 # -O0: the tracer runs once per robot for well under a second, while optimising the heavily
 # templated Pinocchio/Eigen/SX code would add minutes to its cold build.

@@ -24,7 +24,7 @@
 //   fd_derivatives(q, qd, tau) -> (dqdd_dq, dqdd_dqd, Minv)       computeABADerivatives
 //   fd_derivatives_ad(...)       casadi jacobian of traced aba; Minv by computeMinverse
 // Units are those of the model file (SI, rad).
-#include <pinocchio/autodiff/casadi.hpp> // must precede the other Pinocchio headers
+#include "sx_trace.hpp" // Pinocchio on casadi::SX: must precede the other Pinocchio headers
 
 #include <pinocchio/algorithm/aba-derivatives.hpp>
 #include <pinocchio/algorithm/aba.hpp>
@@ -35,45 +35,15 @@
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include "pinocchio_model.hpp"
+#include "program_args.hpp"
 
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <string>
-#include <utility>
 #include <vector>
 
 using namespace pinocchio;
-using SX = ::casadi::SX;
-using ADModel = ModelTpl<SX>;
-using ADData = DataTpl<SX>;
-using VectorXs = Eigen::Matrix<SX, Eigen::Dynamic, 1>;
-using MatrixXs = Eigen::Matrix<SX, Eigen::Dynamic, Eigen::Dynamic>;
-using Port = std::pair<std::string, SX>;
-
-// A symbolic input: the CasADi column vector and the same symbols as an Eigen vector.
-struct Symbol
-{
-  SX sx;
-  VectorXs eigen;
-};
-
-static Symbol symbol(const std::string & name, int n)
-{
-  Symbol s{SX::sym(name, n), VectorXs(n)};
-  for (int i = 0; i < n; ++i)
-    s.eigen[i] = s.sx(i);
-  return s;
-}
-
-template<typename Derived>
-static SX to_sx(const Eigen::MatrixBase<Derived> & m)
-{
-  SX out;
-  pinocchio::casadi::copy(m, out);
-  return out;
-}
-
 static MatrixXs mirrored(MatrixXs m)
 {
   mirror_upper(m);
@@ -83,22 +53,7 @@ static MatrixXs mirrored(MatrixXs m)
 static void save(const std::string & dir, const std::string & name, const std::vector<Port> & inputs,
                  const std::vector<Port> & outputs)
 {
-  std::vector<SX> in, out;
-  std::vector<std::string> in_names, out_names;
-  for (const Port & p : inputs)
-  {
-    in_names.push_back(p.first);
-    in.push_back(p.second);
-  }
-  for (const Port & p : outputs)
-  {
-    out_names.push_back(p.first);
-    out.push_back(p.second);
-  }
-  // cse: the traced graph repeats sub-expressions (the same spatial products are formed in
-  // several places); merging them is one option away, and a user after speed would set it.
-  const ::casadi::Dict options{{"cse", true}};
-  ::casadi::Function(name, in, out, in_names, out_names, options).save(dir + "/" + name + ".casadi");
+  save_function(dir + "/" + name + ".casadi", name, inputs, outputs);
 }
 
 static const char USAGE[] =
@@ -109,16 +64,8 @@ static const char USAGE[] =
 
 int main(int argc, char ** argv)
 {
-  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
-  {
-    std::printf(USAGE, argv[0]);
-    return 0;
-  }
-  if (argc != 3)
-  {
-    std::fprintf(stderr, USAGE, argv[0]);
-    return 2;
-  }
+  if (const int code = check_args(argc, argv, 3, USAGE); code >= 0)
+    return code;
   Model model;
   FrameIndex flange;
   if (!read_dh_model(argv[1], model, flange))

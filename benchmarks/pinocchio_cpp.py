@@ -16,6 +16,8 @@ from .build import Built, build, target
 
 SOURCE = Path(__file__).resolve().parent / "pinocchio_bench.cpp"
 HEADER = SOURCE.with_name("pinocchio_model.hpp")  # the model reader, shared with the SX tracer
+TIMING = SOURCE.with_name("bench_timing.hpp")       # the timing loop, shared with the tree bench
+ARGS = SOURCE.with_name("program_args.hpp")         # the command-line check of every benchmark program
 # Pinocchio's joint variant needs Boost's MPL/Fusion limits raised.
 BOOST_FLAGS = ["-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
                "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12"]
@@ -71,7 +73,7 @@ def include_dirs() -> list[Path]:
 
 
 def _build_args() -> tuple:
-    return ("pinocchio_bench", "g++", [SOURCE], FLAGS + [f"-I{d}" for d in include_dirs()], (), (HEADER,))
+    return ("pinocchio_bench", "g++", [SOURCE], FLAGS + [f"-I{d}" for d in include_dirs()], (), (HEADER, TIMING, ARGS))
 
 
 def build_binary() -> Built:

@@ -28,65 +28,16 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
-#include <algorithm>
+#include "bench_timing.hpp"
+#include "program_args.hpp"
+#include "frame_list.hpp"
+
 #include <cstdio>
 #include <cstdlib>
-#include <sstream>
 #include <string>
-#include <time.h>
 #include <vector>
 
 using namespace pinocchio;
-
-static volatile double sink;
-
-static double now_ns()
-{
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e9 + ts.tv_nsec;
-}
-
-// As in pinocchio_bench.cpp: calibrate the iteration count once so that a repetition lasts
-// about target_ns, then print the per-call time of every repetition (Python pools them over
-// interleaved runs).
-template<typename Body>
-static void measure(const char * name, long K, int repeats, double target_ns, Body body)
-{
-  long iters = 16;
-  for (;;)
-  {
-    double t0 = now_ns();
-    double acc = 0;
-    for (long i = 0; i < iters; ++i)
-      acc += body(i % K);
-    sink = sink + acc;
-    double dt = now_ns() - t0;
-    if (dt > 0.2 * target_ns || iters > (1L << 30))
-    {
-      iters = std::max(1L, (long)(iters * target_ns / std::max(dt, 1.0)));
-      break;
-    }
-    iters *= 4;
-  }
-  std::printf("time %s", name);
-  for (int r = 0; r < repeats; ++r)
-  {
-    double acc = 0;
-    long k = 0;
-    double t0 = now_ns();
-    for (long i = 0; i < iters; ++i)
-    {
-      acc += body(k);
-      if (++k == K)
-        k = 0;
-    }
-    double dt = now_ns() - t0;
-    sink = sink + acc;
-    std::printf(" %.3f", dt / iters); // stdout is buffered: no I/O inside the timing
-  }
-  std::printf("\n");
-}
 
 static void print(const char * name, int port, const Eigen::MatrixXd & m)
 {
@@ -95,20 +46,6 @@ static void print(const char * name, int port, const Eigen::MatrixXd & m)
     for (Eigen::Index c = 0; c < m.cols(); ++c)
       std::printf(" %.17g", m(r, c));
   std::printf("\n");
-}
-
-static std::vector<FrameIndex> frame_ids(const Model & model, const std::string & list)
-{
-  std::vector<FrameIndex> ids;
-  std::stringstream stream(list);
-  std::string name;
-  while (std::getline(stream, name, ','))
-  {
-    if (!model.existFrame(name))
-      throw std::invalid_argument("no frame named " + name);
-    ids.push_back(model.getFrameId(name));
-  }
-  return ids;
 }
 
 static const char USAGE[] =
@@ -120,16 +57,8 @@ static const char USAGE[] =
 
 int main(int argc, char ** argv)
 {
-  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
-  {
-    std::printf(USAGE, argv[0]);
-    return 0;
-  }
-  if (argc != 7)
-  {
-    std::fprintf(stderr, USAGE, argv[0]);
-    return 2;
-  }
+  if (const int code = check_args(argc, argv, 7, USAGE); code >= 0)
+    return code;
   const long K = std::atol(argv[4]);
   const int repeats = std::atoi(argv[5]);
   const double target_ns = std::atof(argv[6]);

@@ -21,7 +21,7 @@
 //     com(q) -> com, J_com, A_g jacobianCenterOfMass (com on the way) + computeCentroidalMap
 // q has Pinocchio's nq entries (a continuous joint is cos, sin), the others nv.  Stacking the
 // k frames' matrices vertically gives, read row-major, the generated (k, 4, 4) / (k, 6, nv).
-#include <pinocchio/autodiff/casadi.hpp> // must precede the other Pinocchio headers
+#include "sx_trace.hpp" // Pinocchio on casadi::SX: must precede the other Pinocchio headers
 
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/serialization.hpp>
@@ -34,79 +34,16 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
+#include "frame_list.hpp"
+#include "program_args.hpp"
+
 #include <cstdio>
 #include <exception>
 #include <filesystem>
-#include <sstream>
 #include <string>
-#include <utility>
 #include <vector>
 
 using namespace pinocchio;
-using SX = ::casadi::SX;
-using ADModel = ModelTpl<SX>;
-using ADData = DataTpl<SX>;
-using VectorXs = Eigen::Matrix<SX, Eigen::Dynamic, 1>;
-using MatrixXs = Eigen::Matrix<SX, Eigen::Dynamic, Eigen::Dynamic>;
-using Port = std::pair<std::string, SX>;
-
-// A symbolic input: the CasADi column vector and the same symbols as an Eigen vector.
-struct Symbol
-{
-  SX sx;
-  VectorXs eigen;
-};
-
-static Symbol symbol(const std::string & name, int n)
-{
-  Symbol s{SX::sym(name, n), VectorXs(n)};
-  for (int i = 0; i < n; ++i)
-    s.eigen[i] = s.sx(i);
-  return s;
-}
-
-template<typename Derived>
-static SX to_sx(const Eigen::MatrixBase<Derived> & m)
-{
-  SX out;
-  pinocchio::casadi::copy(m, out);
-  return out;
-}
-
-static void save(const std::string & path, const std::string & name, const std::vector<Port> & inputs,
-                 const std::vector<Port> & outputs)
-{
-  std::vector<SX> in, out;
-  std::vector<std::string> in_names, out_names;
-  for (const Port & p : inputs)
-  {
-    in_names.push_back(p.first);
-    in.push_back(p.second);
-  }
-  for (const Port & p : outputs)
-  {
-    out_names.push_back(p.first);
-    out.push_back(p.second);
-  }
-  // cse: the traced graph repeats sub-expressions; a user after speed would merge them.
-  const ::casadi::Dict options{{"cse", true}};
-  ::casadi::Function(name, in, out, in_names, out_names, options).save(path);
-}
-
-static std::vector<FrameIndex> frame_ids(const Model & model, const std::string & list)
-{
-  std::vector<FrameIndex> ids;
-  std::stringstream stream(list);
-  std::string name;
-  while (std::getline(stream, name, ','))
-  {
-    if (!model.existFrame(name))
-      throw std::invalid_argument("no frame named " + name);
-    ids.push_back(model.getFrameId(name));
-  }
-  return ids;
-}
-
 // The traced outputs of function `name` (empty: unknown name).
 static std::vector<Port> trace(const std::string & name, const ADModel & ad, const std::vector<FrameIndex> & frames,
                                const Symbol & q, const Symbol & qd, const Symbol & qdd, const Symbol & tau)
@@ -170,16 +107,8 @@ static const char USAGE[] =
 
 int main(int argc, char ** argv)
 {
-  if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h"))
-  {
-    std::printf(USAGE, argv[0]);
-    return 0;
-  }
-  if (argc != 5)
-  {
-    std::fprintf(stderr, USAGE, argv[0]);
-    return 2;
-  }
+  if (const int code = check_args(argc, argv, 5, USAGE); code >= 0)
+    return code;
   const std::string dir = argv[3], name = argv[4];
   if (!std::filesystem::is_directory(dir)) // Function::save would fail silently
   {
@@ -207,7 +136,7 @@ int main(int argc, char ** argv)
       inputs.push_back({"qdd", qdd.sx});
     if (name == "fd")
       inputs.push_back({"tau", tau.sx});
-    save(dir + "/" + name + ".casadi", name, inputs, outputs);
+    save_function(dir + "/" + name + ".casadi", name, inputs, outputs);
   }
   catch (const std::exception & e)
   {

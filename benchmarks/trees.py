@@ -44,6 +44,9 @@ WORK = BUILD / "trees"
 HERE = Path(__file__).resolve().parent
 BENCH_SOURCE = HERE / "pinocchio_tree_bench.cpp"
 TRACE_SOURCE = HERE / "pinocchio_tree_trace.cpp"
+# headers the two include (part of their build cache keys)
+BENCH_HEADERS = (HERE / "bench_timing.hpp", HERE / "frame_list.hpp", HERE / "program_args.hpp")
+TRACE_HEADERS = (HERE / "sx_trace.hpp", HERE / "frame_list.hpp", HERE / "program_args.hpp")
 # key -> (URDF under example-robot-data's robots folder, frames (None: the tree's tips))
 ROBOTS = {
     "g1": ("g1_description/urdf/g1_29dof_rev_1_0.urdf", None),
@@ -153,7 +156,7 @@ def _pinocchio_flags(optimise: list) -> list:
 
 def build_bench(log):
     args = ("pinocchio_tree_bench", "g++", [BENCH_SOURCE], _pinocchio_flags(["-O3", "-march=native"]),
-            SERIALIZATION_LIBS)
+            SERIALIZATION_LIBS, BENCH_HEADERS)
     if not target(*args).exists():
         log("pinocchio_cpp: building pinocchio_tree_bench (header-only Pinocchio, minutes)")
     return build(*args)
@@ -163,7 +166,7 @@ def build_tracer(log):
     # -O0: the tracer runs a few times per robot, optimising the templated SX code costs minutes.
     lib = pinocchio_casadi.casadi_dir()
     args = ("pinocchio_tree_trace", "g++", [TRACE_SOURCE], _pinocchio_flags(["-O0"]) + [f"-I{lib / 'include'}"],
-            (f"-L{lib}", "-lcasadi", f"-Wl,-rpath,{lib}", *SERIALIZATION_LIBS))
+            (f"-L{lib}", "-lcasadi", f"-Wl,-rpath,{lib}", *SERIALIZATION_LIBS), TRACE_HEADERS)
     if not target(*args).exists():
         log("pinocchio_casadi_c: building pinocchio_tree_trace (header-only Pinocchio with casadi::SX, minutes)")
     return build(*args)
