@@ -35,11 +35,10 @@ Example:
 """
 from __future__ import annotations
 
-
 import symengine as se
 
 from .forward_dynamics import ldlt_solve
-from .rigid_bodies import ZERO, cross, dot, vadd, vscale
+from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, vadd, vscale
 from .symbolic import Stages, SymbolicFunction, port_symbols
 from .tree_dynamics import ROUTE, TreeSetup, force_port, q_port, qd_port, qdd_port, setup, tree_function
 from .tree_model import FREE_FLYER_NV, TreeModel
@@ -47,14 +46,6 @@ from .tree_model import FREE_FLYER_NV, TreeModel
 
 def _skew(v):
     return [[ZERO, -v[2], v[1]], [v[2], ZERO, -v[0]], [-v[1], v[0], ZERO]]
-
-
-def _matvec(M, v):
-    return [se.Add(*(M[r][k] * v[k] for k in range(3))) for r in range(3)]
-
-
-def _matTvec(M, v):
-    return [se.Add(*(M[k][r] * v[k] for k in range(3))) for r in range(3)]
 
 
 def _matmul(P, Q):
@@ -88,7 +79,7 @@ class Inertia6:
 
     def times(self, w, v):
         """The force of motion (w, v)."""
-        return vadd(_matvec(self.A, w), _matvec(self.B, v)), vadd(_matTvec(self.B, w), _matvec(self.C, v))
+        return vadd(matvec(self.A, w), matvec(self.B, v)), vadd(matTvec(self.B, w), matvec(self.C, v))
 
     def column(self, k):
         """Column k (0-2: angular, 3-5: linear) as a force (n, f)."""
