@@ -19,7 +19,7 @@ from .joint_effects import effect_torques, with_armature
 from .kinematics_homogeneous import q_port
 from .rigid_bodies import dynamics_function, gravity, qd_port, tau_port
 from .robot import RobotModel
-from .symbolic import Port, SymbolicFunction, port_symbols
+from .symbolic import Port, SymbolicFunction, naming, port_symbols
 
 
 def ldlt_solve(M, b):
@@ -72,7 +72,7 @@ def tree_ldlt_solve(M, parents, b, stages=None):
     With ``stages`` (:class:`kindyngen.symbolic.Stages`) every updated entry and every
     intermediate of the solves is a named intermediate.
     """
-    name = stages.cut if stages is not None else (lambda e: e)
+    name = naming(stages)
     n = len(M)
     H = [list(row) for row in M]
     ancestors = []

@@ -105,6 +105,19 @@ class Stages:
         return tuple(self._definitions)
 
 
+def naming(stages: Stages | None):
+    """``stages.cut``, or the identity when a derivation runs without named intermediates.
+
+    >>> naming(None)(se.Symbol("x") + 1)
+    x + 1
+    """
+    return stages.cut if stages is not None else _unnamed
+
+
+def _unnamed(expr):
+    return expr
+
+
 def port_symbols(name: str, shape: tuple[int, ...]) -> tuple[se.Symbol, ...]:
     """Flat, row-major symbols for an input port; names cannot clash with CSE temporaries.
 

@@ -40,7 +40,7 @@ import symengine as se
 from .forward_dynamics import ldlt_solve
 from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, vadd, vscale
 from .symbolic import Stages, SymbolicFunction, port_symbols
-from .tree_dynamics import ROUTE, TreeSetup, force_port, q_port, qd_port, qdd_port, setup, tree_function
+from .tree_dynamics import ROUTE, TreeSetup, carry, force_port, q_port, qd_port, qdd_port, setup, tree_function
 from .tree_model import FREE_FLYER_NV, TreeModel
 
 
@@ -130,11 +130,6 @@ def _motion_to_child(joint, w, v):
     return joint.rot_t(w), joint.rot_t(vadd(v, [-x for x in cross(joint.t, w)]))
 
 
-def _force_to_parent(joint, n, f):
-    fr = joint.rot(f)
-    return vadd(joint.rot(n), cross(joint.t, fr)), fr
-
-
 def aba(ts: TreeSetup, qd, tau, stages: Stages) -> list:
     """qdd (size nv) by the articulated-body algorithm (module text), its intermediates named
     in ``stages``."""
@@ -182,7 +177,8 @@ def aba(ts: TreeSetup, qd, tau, stages: Stages) -> list:
         scale = stages.cut(u[j] * inv_d[j])
         pa = _named_pair(stages, (vadd(pn, cn, vscale(scale, U[j][0])), vadd(pf, cf, vscale(scale, U[j][1]))))
         (IA[parent] if parent >= 0 else root_I).append(Ia.to_parent(joint).named(stages))
-        (pA[parent] if parent >= 0 else root_p).append(_named_pair(stages, _force_to_parent(joint, *pa)))
+        fr, nr = carry(joint, pa[1], pa[0])
+        (pA[parent] if parent >= 0 else root_p).append(_named_pair(stages, (nr, fr)))
     # 3. accelerations, root first
     gam = ts.gravity_in_base()
     out = [None] * base

@@ -59,7 +59,7 @@ from .inertial_parameters import barycentric
 from .kinematics_homogeneous import joint_units
 from .placement import Placement
 from .rigid_bodies import ZERO, Body, JointFrame, cross, vadd, vscale
-from .symbolic import Port, Stages, SymbolicFunction, port_symbols
+from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from .tree_model import FREE_FLYER_NV, TreeModel
 
 ROUTE = "Tree route (joint frames, grouped parameters): "
@@ -216,10 +216,6 @@ def setup(model: TreeModel) -> TreeSetup:
 
 # ----------------------------------------------------------------------------- algorithms
 
-def _unnamed(expr):
-    return expr
-
-
 def wrench(body: Body, a, w, wd, U):
     """Force and moment about the frame origin of a body with origin acceleration a, angular
     velocity w and acceleration wd (``U = skew(wd) + skew(w)^2``, None when both are zero)."""
@@ -237,7 +233,7 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Sta
     each joint starting from its parent's state). With ``stages``, every joint's state is
     named there."""
     model = ts.model
-    name = stages.cut if stages is not None else _unnamed
+    name = naming(stages)
     base = FREE_FLYER_NV if model.floating_base else 0
     gam = ts.gravity_in_base() if with_gravity else [ZERO] * 3
     a0 = [-x for x in gam]
@@ -267,7 +263,7 @@ def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | Non
     :func:`motion_states`, then each joint's wrench plus its children's, tip first (with
     ``stages``, every state and summed wrench named there)."""
     model, n = ts.model, ts.model.n
-    name = stages.cut if stages is not None else _unnamed
+    name = naming(stages)
     root_state, state = motion_states(ts, qd, qdd, with_gravity, stages)
     forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
     f_parts = [[F] for F, _ in forces]
@@ -298,7 +294,7 @@ def composites(ts: TreeSetup, stages: Stages | None = None) -> tuple[list[Body],
     """The composite body of each joint's subtree in its joint frame, and of the whole tree
     in the root frame (the root body included); each named in ``stages`` if given."""
     model = ts.model
-    name = stages.cut if stages is not None else _unnamed
+    name = naming(stages)
     parts = [[b] for b in ts.bodies]
     root = [ts.root]
     comp = [None] * model.n
@@ -309,7 +305,7 @@ def composites(ts: TreeSetup, stages: Stages | None = None) -> tuple[list[Body],
     return comp, _sum_bodies(root, name)
 
 
-def _sum_bodies(bodies: list[Body], name=_unnamed) -> Body:
+def _sum_bodies(bodies: list[Body], name) -> Body:
     """The sum of ``bodies``, its entries passed through ``name`` (I by its upper triangle)."""
     upper = {(r, c): name(se.Add(*(b.I[r][c] for b in bodies))) for r in range(3) for c in range(r, 3)}
     return Body(name(se.Add(*(b.m for b in bodies))), [name(e) for e in vadd(*(b.h for b in bodies))],
@@ -323,7 +319,7 @@ def crba(ts: TreeSetup, stages: Stages | None = None):
     composites and every carried wrench are named intermediates."""
     model = ts.model
     nv, base = model.nv, FREE_FLYER_NV if model.floating_base else 0
-    name = stages.cut if stages is not None else _unnamed
+    name = naming(stages)
     comp, whole = composites(ts, stages)
     M = [[ZERO] * nv for _ in range(nv)]
     root_columns = []

@@ -31,7 +31,7 @@ from .base_parameters import BaseParameterError, BaseParameters, find_base_param
 from .inertial_parameters import NAMES, barycentric
 from .rigid_bodies import ZERO, cross, vadd, vscale
 from .dynamics_newton_euler import mat3
-from .symbolic import Port, Stages, SymbolicFunction, port_symbols
+from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from .tree_dynamics import carry, conventions, frame_body, motion_states, q_port, qd_port, qdd_port, setup
 from .tree_model import FREE_FLYER_NV, TreeModel
 
@@ -84,7 +84,7 @@ def _regressor_columns(model: TreeModel, wanted=None, stages: Stages | None = No
     """(q, qd, qdd symbols, the regressor's columns in parameter order, only those in
     ``wanted`` if given); with ``stages``, every motion state and carried wrench is named
     there."""
-    name = stages.cut if stages is not None else (lambda e: e)
+    name = naming(stages)
     ts = setup(model)
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     root_state, state = motion_states(ts, qd, qdd, True, stages)
