@@ -9,7 +9,9 @@ formulas, which are stated for unbranched chains. Every function of
 :data:`kindyngen.catalog.TREE_BUILDERS` is derived and optimised (CSE) separately, each size in
 a fresh forked worker so that one that blows up can be stopped; a function stops growing once
 its next size is predicted to exceed the budget. The whole ``kindyngen generate`` of the 29-joint
-Unitree G1 (example-robot-data, floating base, all languages) is timed as a command.
+Unitree G1 (example-robot-data, floating base, all languages) is timed as a command
+(``--g1-only`` re-measures just that), and :func:`cse_study` measures what chunking CSE
+(:data:`kindyngen.optimize.CSE_CHUNK`) gains and costs (``--cse-only``).
 
 Reference counts (m = multiplications, a = additions, n = degrees of freedom = nv):
 
@@ -537,13 +539,72 @@ def study(settings: dict, log=print) -> dict:
         series["slopes"] = slopes(series)
         series["comparisons"] = comparisons(series)
     g1 = g1_generate(settings["g1_repeats"], log) if settings["g1_repeats"] else None
+    cse = cse_study(log) if settings["g1_repeats"] else None
     return {"settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
             "machine": machine(), "tree": tree, "chain": chain, "g1": g1, "robotran": robotran(g1, tree),
-            "featherstone_note": "Table 10.1 of Rigid Body Dynamics Algorithms, unbranched chains, n = nv; "
+            "cse": cse, "featherstone_note": "Table 10.1 of Rigid Body Dynamics Algorithms, unbranched chains, n = nv; "
                                  "CRBA/ABA add formulas from an unchecked transcription; tree CRBA = 20 P + 32n - 32 "
                                  "m, 12 P + 43n - 43 a with P the ancestor pairs (our reading)",
             "load_average": {"start": load_start, "end": os.getloadavg()[0]},
             "seconds": time.perf_counter() - started}
+
+
+# ------------------------------------------------------------------ CSE chunks
+
+CSE_CHAINS = (40, 80, 120)          # chain M: its named intermediates and outputs, one cse or chunked
+CSE_G1_CHUNKS = (1024, 2048, 4096)  # what the chunk size costs on the G1
+
+
+def cse_study(log) -> dict:
+    """Why :data:`kindyngen.optimize.CSE_CHUNK` is what it is: CPU time of ``optimize`` on a
+    chain's M with one symengine cse call and with chunks (how cse grows with the number of
+    expressions), and the G1's add + mul summed over every function (both fd routes) and the
+    CPU time, per chunk size."""
+    import kindyngen.optimize as optimize_module
+    from kindyngen.catalog import TREE_BUILDERS
+    from kindyngen.tree_articulated import forward_dynamics_aba
+    from kindyngen.tree_dynamics import forward_dynamics_tree, mass_matrix_tree
+    from kindyngen.urdf import load_urdf_tree
+    default = optimize_module.CSE_CHUNK
+
+    def timed(function, chunk):
+        optimize_module.CSE_CHUNK = chunk
+        start = time.process_time()
+        try:
+            program = optimize_module.optimize(function)
+        finally:
+            optimize_module.CSE_CHUNK = default
+        return time.process_time() - start, program.after
+
+    chains = []
+    for n in CSE_CHAINS:
+        f = mass_matrix_tree(synthetic_chain(n))
+        exprs = [e for _, e in f.stages] + [e for port in f.output_exprs for e in port]
+        row = {"joints": n, "expressions": sum(1 for e in exprs if not (e.is_Symbol or e.is_Number))}
+        for key, chunk in (("one_cse", 10 ** 9), ("chunked", default)):
+            seconds, after = timed(f, chunk)
+            row[key] = {"cpu_s": seconds, "after": after.to_json()}
+        log(f"tree_scaling: cse, chain M of {n}: {row['expressions']} expressions, one cse "
+            f"{row['one_cse']['cpu_s']:.2f} s, chunks of {default} {row['chunked']['cpu_s']:.2f} s")
+        chains.append(row)
+    model = load_urdf_tree(g1_urdf(), floating_base=True)
+    functions = [build(model) for name, build in TREE_BUILDERS if name != "fd"]
+    functions += [forward_dynamics_tree(model), forward_dynamics_aba(model)]
+    g1 = []
+    for chunk in CSE_G1_CHUNKS:
+        runs = [timed(f, chunk) for f in functions if f is not None]
+        g1.append({"chunk": chunk, "cpu_s": sum(t for t, _ in runs), "add_mul": sum(a.add + a.mul for _, a in runs)})
+        log(f"tree_scaling: cse, G1 with chunks of {chunk}: {g1[-1]['add_mul']} add + mul, {g1[-1]['cpu_s']:.2f} s")
+    return {"chunk": default, "chain_M": chains, "g1_chunks": g1}
+
+
+def _update_cse(path: Path, log) -> int:
+    """The CSE-chunk part of the study again, written into ``path``."""
+    result = json.loads(path.read_text())
+    result["cse"] = cse_study(log)
+    path.write_text(json.dumps(result, indent=1) + "\n")
+    log(f"wrote {path}")
+    return 0
 
 
 def _update_g1(path: Path, log) -> int:
@@ -565,7 +626,12 @@ def main(argv=None) -> int:
     parser.add_argument("--g1-only", action="store_true",
                         help="re-measure only the G1 generate (5 runs) and its functions, updating the G1 and "
                              "Robotran entries of the existing tree_scaling.json (the series stay as measured)")
+    parser.add_argument("--cse-only", action="store_true",
+                        help="re-measure only the CSE-chunk study (a chain's M with one cse call and in chunks; "
+                             "the G1 per chunk size), updating the existing tree_scaling.json")
     args = parser.parse_args(argv)
+    if args.cse_only:
+        return _update_cse(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     if args.g1_only:
         return _update_g1(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     settings = QUICK if args.quick else FULL
