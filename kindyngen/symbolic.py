@@ -109,7 +109,7 @@ def naming(stages: Stages | None):
     """``stages.cut``, or the identity when a derivation runs without named intermediates.
 
     >>> naming(None)(se.Symbol("x") + 1)
-    x + 1
+    1 + x
     """
     return stages.cut if stages is not None else _unnamed
 
