@@ -34,8 +34,9 @@ class Timer:
     build_seconds: float | None = None
 
 
-def generated_c(robot: str, impl: str, robot_dir: Path, functions: list, samples: dict, workdir: Path) -> Timer:
-    """The generated C99 of one robot, compiled with the flags of ``impl``."""
+def generated_c(robot: str, impl: str, robot_dir: Path, functions: list, samples: dict, workdir: Path,
+                flags: list | None = None) -> Timer:
+    """The generated C99 of one robot, compiled with the flags of ``impl`` (or ``flags``)."""
     source = robot_dir / "c" / f"{robot}.c"
     if not source.exists():
         raise FileNotFoundError(f"no generated C: {source}")
@@ -47,20 +48,23 @@ def generated_c(robot: str, impl: str, robot_dir: Path, functions: list, samples
             name=f["name"], call=f"{f['c_symbol']}({', '.join(args)})",
             inputs=[a.reshape(a.shape[0], -1) for a in arrays],
             outputs=[(int(np.prod(p["shape"])), p.get("dtype", "double")) for p in f["outputs"]]))
-    prepared = c_harness.prepare(f"{robot}_{impl}", targets, f'#include "{robot}.h"', [source], C_FLAGS[impl], workdir)
+    prepared = c_harness.prepare(f"{robot}_{impl}", targets, f'#include "{robot}.h"', [source],
+                                 flags or C_FLAGS[impl], workdir)
     return Timer(run=lambda repeats, target: c_harness.measure(prepared, repeats, target),
                  outputs=lambda raw: raw, build_seconds=prepared.built.seconds)
 
 
-def casadi_c(robot: str, robot_dir: Path, functions: list, samples: dict, workdir: Path) -> Timer | None:
-    """CasADi's own C for the saved Functions (None when there are none)."""
+def casadi_c(robot: str, robot_dir: Path, functions: list, samples: dict, workdir: Path,
+             flags: list | None = None) -> Timer | None:
+    """CasADi's own C for the saved Functions (None when there are none), compiled with
+    ``flags`` (default its C_FLAGS)."""
     loaded = {f["name"]: casadi_codegen.load(robot_dir, f["name"]) for f in functions}
     loaded = {k: v for k, v in loaded.items() if v is not None}
     if not loaded:
         return None
     stem = f"{robot}_casadi_codegen"
     source, prelude, targets = casadi_codegen.generate(loaded, samples, workdir, stem)
-    prepared = c_harness.prepare(stem, targets, prelude, [source], C_FLAGS["casadi_codegen"], workdir)
+    prepared = c_harness.prepare(stem, targets, prelude, [source], flags or C_FLAGS["casadi_codegen"], workdir)
 
     def outputs(raw):  # CasADi's non-zeros, column-major -> dense row-major
         return {name: [casadi_codegen.from_casadi_layout(v, loaded[name].sparsity_out(i)) for i, v in enumerate(values)]

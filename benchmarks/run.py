@@ -37,11 +37,13 @@ from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
 FULL = dict(K=1000, repeats=15, rounds=3, c_target_ns=2e7, py_target_s=0.05, batch_sizes=(1000, 100_000),
             batch_repeats=5, robots=("lwr4", "panda"), pinocchio=True, c_native=True, c_batch_n=1000,
             compiled_python=True,
-            scaling_max_n=12, scaling_budget_s=60.0)
+            scaling_max_n=12, scaling_budget_s=60.0, c_flags=None)
 QUICK = dict(K=50, repeats=3, rounds=1, c_target_ns=2e5, py_target_s=0.002, batch_sizes=(200,),
              batch_repeats=2, robots=("lwr4",), pinocchio=False, c_native=False, c_batch_n=None,
              compiled_python=False,
-             scaling_max_n=3, scaling_budget_s=5.0)
+             scaling_max_n=3, scaling_budget_s=5.0,
+             # a smoke run: times are not meant, and -O3 of the whole lwr4 C alone takes 35 s cold
+             c_flags=["-O0"])
 PRIMARY = "lwr4"          # the robot of the paper: every implementation
 SECONDARY_IMPLS = ("c", "c_native", "pinocchio_cpp", pinocchio_casadi.IMPL,  # other robots: the ratios only
                    c_batch.IMPL, "python_c")
@@ -140,11 +142,11 @@ class Bench:
             if wanted(impl) and (impl != "c_native" or s["c_native"]):
                 log(f"{name}: {impl}: building")
                 timers[impl] = self._guarded(name, impl, compiled.generated_c, name, impl, robot_dir,
-                                             functions, samples, work)
+                                             functions, samples, work, s["c_flags"])
         if wanted("casadi_codegen"):
             log(f"{name}: casadi_codegen: generating and building")
             timers["casadi_codegen"] = self._guarded(name, "casadi_codegen", compiled.casadi_c, name, robot_dir,
-                                                     functions, samples, work)
+                                                     functions, samples, work, s["c_flags"])
         data = inputs.dynamics_inputs(model, s["K"])
         if wanted("pinocchio_cpp"):
             timers["pinocchio_cpp"] = self._guarded(name, "pinocchio_cpp", self._pinocchio_timer, name, model,
@@ -320,8 +322,8 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     bench = Bench(settings, args.generated, BUILD / ("work-quick" if args.quick else "work"))
     if args.quick:
-        bench.note("quick mode: few repeats, small N, lwr4 only, no c_native, Pinocchio C++ and "
-                   "pinocchio_casadi_c skipped")
+        bench.note("quick mode: few repeats, small N, lwr4 only, C and CasADi's C at -O0 (times not meant), "
+                   "no c_native, Pinocchio C++ and pinocchio_casadi_c skipped")
     for robot in settings["robots"]:
         bench.robot(robot, None if robot == PRIMARY else SECONDARY_IMPLS)
     bench.warn_on_checks()
