@@ -72,12 +72,15 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
 
 
 def generate(model: RobotModel | TreeModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
-             progress: bool = True, only=None, trig: str = "kernel") -> Path:
+             progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
+             batch: bool = True) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
-    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES."""
+    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
+    (the C's type, render.SCALARS) and ``batch`` (C batch variants): see render.render_c."""
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
-    _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch)
+    _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
@@ -86,7 +89,7 @@ def generate(model: RobotModel | TreeModel, out_root: Path, languages=LANGUAGES,
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     for lang in languages:
-        options = {"trig": trig} if lang == "c" else {}
+        options = {"trig": trig, "scalar": scalar, "batch": batch} if lang == "c" else {}
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
             if lang == "casadi":
