@@ -219,7 +219,7 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
 
 
 def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True) -> dict[str, str]:
+             batch: bool = True, float_error: dict | None = None) -> dict[str, str]:
     """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/c_trig.py;
     ``scalar``: one of SCALARS (float: no ik_dls, whose tolerances are double's); ``batch``:
     whether the <name>_batch variants are written."""
@@ -229,7 +229,8 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
                sincos="kdg_sincosf" if single else "kdg_sincos",
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
-               sincos_kernel=kernel_c_float() if single else kernel_c())
+               sincos_kernel=kernel_c_float() if single else kernel_c(),
+               float_error={name: e.text() for name, e in (float_error or {}).items()})
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
