@@ -38,6 +38,7 @@ class FloatError:
     p99: float | None
     int_mismatch: int          # states where an integer output (an IK status) differs
     states: int
+    scales: tuple = ()         # (output port, its scale), the scales the errors are relative to
 
     @property
     def acceptable(self) -> bool:
@@ -63,7 +64,7 @@ class FloatError:
 
     def to_json(self) -> dict:
         return {"max": self.max, "p99": self.p99, "acceptable": self.acceptable,
-                "int_mismatch": self.int_mismatch, "states": self.states}
+                "int_mismatch": self.int_mismatch, "states": self.states, "scale": dict(self.scales)}
 
 
 def _round2(value: float) -> float:
@@ -101,7 +102,7 @@ def random_inputs(model, double_lib, spec: dict, rng: np.random.Generator, count
 
 
 def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatError:
-    errors, mismatch = [], np.zeros(count, bool)
+    errors, mismatch, scales = [], np.zeros(count, bool), []
     for port in spec["outputs"]:
         d, f = np.asarray(double_out[port["name"]]), np.asarray(float_out[port["name"]])
         if port["dtype"] == "int":
@@ -109,7 +110,8 @@ def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatE
             continue
         d, f = d.reshape(count, -1).astype(float), f.reshape(count, -1).astype(float)
         scale = np.max(np.abs(d[np.isfinite(d)])) if np.isfinite(d).any() else 1.0
-        scale = scale if scale > 0 else 1.0
+        scale = _round2(float(scale)) if scale > 0 else 1.0
+        scales.append((port["name"], scale))
         e = np.abs(f - d) / scale
         e[~np.isfinite(d) & ~np.isfinite(f)] = 0.0          # both non-finite: no error
         e[np.isfinite(d) & ~np.isfinite(f)] = np.inf
@@ -117,7 +119,8 @@ def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatE
     if not errors:
         return FloatError(None, None, int(mismatch.sum()), count)
     e = np.concatenate(errors)
-    return FloatError(_round2(float(e.max())), _round2(float(np.percentile(e, 99))), int(mismatch.sum()), count)
+    return FloatError(_round2(float(e.max())), _round2(float(np.percentile(e, 99))), int(mismatch.sum()), count,
+                      tuple(scales))
 
 
 def measure(model, programs, double_files: dict, float_files: dict, manifest: dict,
