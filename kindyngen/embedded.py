@@ -67,12 +67,9 @@ def missing_tools() -> str | None:
 def fixed_inputs(manifest: dict, host_lib, lower, upper, seed: int = 7) -> dict:
     """``{function: {input: array}}``: one state per function, within the limits (poses from
     the host's fk of random angles), rounded to the C's scalar type."""
+    from types import SimpleNamespace
     from .float_accuracy import random_inputs
-
-    class Model:           # what random_inputs reads of a model
-        pass
-    model = Model()
-    model.lower, model.upper = lower, upper
+    model = SimpleNamespace(lower=lower, upper=upper)     # all random_inputs reads of a model
     rng = np.random.default_rng(seed)
     real = np.float32 if manifest.get("c_scalar") == "float" else np.float64
     out = {}
@@ -275,10 +272,29 @@ def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper
     return result
 
 
-if __name__ == "__main__":
+def main(argv=None) -> int:
+    import argparse
     import tempfile
-    if len(sys.argv) != 3 or sys.argv[2] not in TARGETS:
-        sys.exit(f"usage: python -m kindyngen.embedded GENERATED_DIR {{{','.join(TARGETS)}}}")
-    with tempfile.TemporaryDirectory() as tmp:
-        r = figures(Path(sys.argv[1]), sys.argv[2], Path(tmp))
+    from .evaluate import EvaluationError
+    parser = argparse.ArgumentParser(prog="python -m kindyngen.embedded", description=(
+        "Cross-build a generated robot folder's C for an emulated Cortex-M board, run every function "
+        "there (QEMU) and print its flash, stack and instruction figures as JSON. m4f: mps2-an386, "
+        "float C (generate --scalar float); m7: mps2-an500, double C."))
+    parser.add_argument("generated_dir", metavar="GENERATED_DIR", help="e.g. firmware/lwr4 (generate --no-batch)")
+    parser.add_argument("target", choices=sorted(TARGETS))
+    args = parser.parse_args(argv)
+    reason = missing_tools()
+    try:
+        if reason:
+            raise EmbeddedError(reason)
+        with tempfile.TemporaryDirectory() as tmp:
+            r = figures(Path(args.generated_dir), args.target, Path(tmp))
+    except (EmbeddedError, EvaluationError, OSError) as exc:
+        print(f"error: {args.generated_dir}: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
     print(json.dumps({k: r[k] for k in ("flash", "stack", "instructions", "batch_stack", "undefined")}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -228,3 +228,15 @@ def test_bad_generate_options_are_refused(tmp_path):
         done = subprocess.run(base + extra, capture_output=True, text=True)
         assert done.returncode == 2 and needle in done.stderr and "Traceback" not in done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_float_generation_is_deterministic(generated, tmp_path):
+    """Generating the float code again gives the same bytes (code, header with its measured
+    float error, opcounts)."""
+    model = generated["lwr4", "model"]
+    again = generate(model, tmp_path, ("c", "python"), progress=False, only=FUNCTIONS, scalar="float", batch=False)
+    first = generated["lwr4", "float"]
+    names = sorted(p.relative_to(first) for p in first.rglob("*") if p.is_file())
+    assert names == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    for name in names:
+        assert (first / name).read_bytes() == (again / name).read_bytes(), name
