@@ -123,7 +123,7 @@ def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatE
                       tuple(scales))
 
 
-def measure(model, programs, double_files: dict, float_files: dict, manifest: dict,
+def measure(model, double_files: dict, float_files: dict, manifest: dict,
             states: int = STATES, seed: int = SEED) -> dict:
     """``{name: FloatError}`` for every C function of ``manifest`` in float: the rendered double
     and float C (``{filename: text}``) compiled in a scratch folder and called on the same
@@ -136,8 +136,9 @@ def measure(model, programs, double_files: dict, float_files: dict, manifest: di
             (folder / "c").mkdir(parents=True)
             for name, text in files.items():
                 (folder / "c" / name).write_text(text)
-            document = dict(manifest, **({"c_scalar": "float"} if scalar == "float" else {}))
-            document.pop("c_scalar", None) if scalar == "double" else None
+            document = {k: v for k, v in manifest.items() if k != "c_scalar"}
+            if scalar == "float":
+                document["c_scalar"] = "float"
             (folder / "functions.json").write_text(json.dumps(document))
             libs[scalar] = load_generated(folder, "c")
         rng = np.random.default_rng(seed)

@@ -80,7 +80,7 @@ def measure_float_error(model, programs, document: dict, trig: str) -> dict:
     double = render_c(model, programs, trig, "double", batch=False)
     single = render_c(model, programs, trig, "float", batch=False)
     try:
-        return measure(model, programs, double, single, document)
+        return measure(model, double, single, document)
     except (EvaluationError, OSError) as exc:
         print(f"note: float error not measured (no working host C compiler): {str(exc).splitlines()[0]}",
               file=sys.stderr)
