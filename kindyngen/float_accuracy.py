@@ -18,6 +18,7 @@ error exceeds ACCEPTABLE.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import tempfile
 from dataclasses import dataclass
@@ -27,6 +28,11 @@ import numpy as np
 
 STATES = 1000
 SEED = 0
+NEAR_ZERO = 1e-3
+"""The second set of states ("near singular"): as the random set, but one joint angle (each
+joint in turn) within +-NEAR_ZERO rad of zero, where serial arms are singular (a stretched
+elbow, aligned wrist axes: the LWR's and the Panda's q4 and q6) and the closed-form IK
+switches branches."""
 ACCEPTABLE = 1e-3
 """Largest error (relative to the output's scale) called acceptable for float: about 2^13
 float roundings (float's unit roundoff is 6e-8); beyond it the header says so."""
@@ -39,9 +45,11 @@ class FloatError:
     int_mismatch: int          # states where an integer output (an IK status) differs
     states: int
     scales: tuple = ()         # (output port, its scale), the scales the errors are relative to
+    near: "FloatError | None" = None   # the same at the near-singular states (NEAR_ZERO)
 
     @property
     def acceptable(self) -> bool:
+        """Within ACCEPTABLE at the random states (the near-singular figure is reported beside)."""
         return bool(self.max is not None and np.isfinite(self.max) and self.max <= ACCEPTABLE)
 
     def text(self) -> str:
@@ -60,23 +68,39 @@ class FloatError:
                 body += f" (NOT ACCEPTABLE in float: above {ACCEPTABLE:.0e})"
         if self.int_mismatch:
             body += f"; integer output differs in {self.int_mismatch} of {self.states} states"
-        return body + f" ({self.states} random states)"
+        text = body + f" ({self.states} random states)"
+        if self.near is not None and self.near.max is not None:
+            n = self.near
+            text += (f"; with one joint within {NEAR_ZERO:g} rad of 0 (singular arm): max {n.max:.1e}, "
+                     f"99th percentile {n.p99:.1e}" + ("" if n.acceptable else " (NOT ACCEPTABLE in float)")
+                     + (f", integer output differs in {n.int_mismatch} of {n.states}" if n.int_mismatch else ""))
+        return text
 
     def to_json(self) -> dict:
-        return {"max": self.max, "p99": self.p99, "acceptable": self.acceptable,
-                "int_mismatch": self.int_mismatch, "states": self.states, "scale": dict(self.scales)}
+        out = {"max": self.max, "p99": self.p99, "acceptable": self.acceptable,
+               "int_mismatch": self.int_mismatch, "states": self.states, "scale": dict(self.scales)}
+        if self.near is not None:
+            out["near_singular"] = {"max": self.near.max, "p99": self.near.p99, "acceptable": self.near.acceptable,
+                                    "int_mismatch": self.near.int_mismatch, "states": self.near.states}
+        return out
 
 
 def _round2(value: float) -> float:
     return float(f"{value:.1e}") if np.isfinite(value) else float("inf")
 
 
-def random_inputs(model, double_lib, spec: dict, rng: np.random.Generator, count: int) -> dict:
-    """Named double inputs of ``count`` states for ``spec`` (a functions.json entry)."""
+def random_inputs(model, double_lib, spec: dict, rng: np.random.Generator, count: int,
+                  near_zero: bool = False) -> dict:
+    """Named double inputs of ``count`` states for ``spec`` (a functions.json entry);
+    ``near_zero``: joint k % n of state k within +-NEAR_ZERO of 0 (clipped to the limits)."""
     lower, upper = np.asarray(model.lower, float), np.asarray(model.upper, float)
 
     def angles():
-        return rng.uniform(lower, upper, size=(count, lower.size))
+        q = rng.uniform(lower, upper, size=(count, lower.size))
+        if near_zero:
+            rows, joints = np.arange(count), np.arange(count) % lower.size
+            q[rows, joints] = np.clip(rng.uniform(-NEAR_ZERO, NEAR_ZERO, count), lower[joints], upper[joints])
+        return q
 
     out = {}
     for port in spec["inputs"]:
@@ -101,7 +125,9 @@ def random_inputs(model, double_lib, spec: dict, rng: np.random.Generator, count
     return out
 
 
-def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatError:
+def compare(double_out: dict, float_out: dict, spec: dict, count: int, given_scales: dict | None = None) -> FloatError:
+    """The errors of one function's outputs; ``given_scales``: the ports' scales to use (the
+    random states' for the near-singular set), else each port's largest |entry| here."""
     errors, mismatch, scales = [], np.zeros(count, bool), []
     for port in spec["outputs"]:
         d, f = np.asarray(double_out[port["name"]]), np.asarray(float_out[port["name"]])
@@ -111,6 +137,7 @@ def compare(double_out: dict, float_out: dict, spec: dict, count: int) -> FloatE
         d, f = d.reshape(count, -1).astype(float), f.reshape(count, -1).astype(float)
         scale = np.max(np.abs(d[np.isfinite(d)])) if np.isfinite(d).any() else 1.0
         scale = _round2(float(scale)) if scale > 0 else 1.0
+        scale = given_scales[port["name"]] if given_scales else scale
         scales.append((port["name"], scale))
         e = np.abs(f - d) / scale
         e[~np.isfinite(d) & ~np.isfinite(f)] = 0.0          # both non-finite: no error
@@ -146,9 +173,12 @@ def measure(model, double_files: dict, float_files: dict, manifest: dict,
         for spec in manifest["functions"]:
             if "c" not in spec.get("languages", ("c",)):
                 continue
-            inputs = random_inputs(model, libs["double"], spec, rng, states)
-            with np.errstate(all="ignore"):
-                d = libs["double"].call(spec["name"], inputs)
-                f = libs["float"].call(spec["name"], inputs)
-            result[spec["name"]] = compare(d, f, spec, states)
+            errors = []
+            for near in (False, True):
+                inputs = random_inputs(model, libs["double"], spec, rng, states, near_zero=near)
+                with np.errstate(all="ignore"):
+                    d = libs["double"].call(spec["name"], inputs)
+                    f = libs["float"].call(spec["name"], inputs)
+                errors.append(compare(d, f, spec, states, dict(errors[0].scales) if near else None))
+            result[spec["name"]] = dataclasses.replace(errors[0], near=errors[1])
     return result

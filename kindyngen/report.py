@@ -76,15 +76,20 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
             der = " / ".join(map(str, paper["derived"])) if "derived" in paper else "-"
             lines.append(f"| {name} | {ours_after} | {opt} | {ours_before} | {der} |")
     if float_error:
-        from .float_accuracy import ACCEPTABLE, SEED
+        from .float_accuracy import ACCEPTABLE, NEAR_ZERO, SEED
         lines += ["", "## Float error (--scalar float)", "",
                   f"The float C against the double C at {next(iter(float_error.values())).states} random states "
                   f"within the limits (seed {SEED}): |float - double| / the output's scale (its largest "
                   f"|entry|), over all entries and states; acceptable: max <= {ACCEPTABLE:.0e}. Integer "
-                  "outputs (IK status): states where they differ.", "",
-                  "| function | max | 99th percentile | acceptable | integer outputs differ |", "|---|---|---|---|---|"]
+                  "outputs (IK status): states where they differ. Near singular: as many states with one "
+                  f"joint (each in turn) within {NEAR_ZERO:g} rad of 0, errors relative to the same scales.", "",
+                  "| function | max | 99th percentile | acceptable | integer outputs differ | "
+                  "near singular: max | 99th percentile | acceptable | integer outputs differ |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        fmt = (lambda v: "-" if v is None else f"{v:.1e}")
         for name, e in float_error.items():
-            fmt = (lambda v: "-" if v is None else f"{v:.1e}")
+            n = e.near
             lines.append(f"| {name} | {fmt(e.max)} | {fmt(e.p99)} | {'yes' if e.acceptable else 'NO'} | "
-                         f"{e.int_mismatch} of {e.states} |")
+                         f"{e.int_mismatch} of {e.states} | {fmt(n.max)} | {fmt(n.p99)} | "
+                         f"{'yes' if n.acceptable else 'NO'} | {n.int_mismatch} of {n.states} |")
     return "\n".join(lines) + "\n"
