@@ -272,6 +272,36 @@ def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper
     return result
 
 
+def agreement(result: dict) -> dict:
+    """``{function: "bit-exact" | largest |board - host| relative to the host output's largest
+    entry}``: how the board's outputs compare with the host's, over all output ports."""
+    out = {}
+    for fn, ports in result["outputs"].items():
+        exact, worst = True, 0.0
+        for port, board in ports.items():
+            host = np.ravel(result["host"][fn][port]).astype(board.dtype)
+            if np.array_equal(host, board):
+                continue
+            exact = False
+            scale = max(float(np.max(np.abs(host))), np.finfo(float).tiny)
+            worst = max(worst, float(np.max(np.abs(host.astype(float) - board.astype(float)))) / scale)
+        out[fn] = "bit-exact" if exact else float(f"{worst:.1e}")
+    return out
+
+
+def markdown(result: dict, robot: str, target: Target) -> str:
+    """The per-function table of one run."""
+    lines = [f"# {robot} on {target.board} ({target.name}, {target.scalar} C)", "",
+             f"Flags: {' '.join(target.cpu_flags + C_FLAGS)}; instructions executed per call "
+             f"(QEMU -icount, SysTick, {REPS} calls); agreement with the host's C on the same inputs.", "",
+             "| function | flash bytes | stack bytes | instructions | vs host |", "|---|---|---|---|---|"]
+    agree = agreement(result)
+    for fn in result["flash"]:
+        lines.append(f"| {fn} | {result['flash'][fn]} | {result['stack'][fn]} | {result['instructions'][fn]} | "
+                     f"{agree[fn]} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     import argparse
     import tempfile
@@ -282,6 +312,8 @@ def main(argv=None) -> int:
         "float C (generate --scalar float); m7: mps2-an500, double C."))
     parser.add_argument("generated_dir", metavar="GENERATED_DIR", help="e.g. firmware/lwr4 (generate --no-batch)")
     parser.add_argument("target", choices=sorted(TARGETS))
+    parser.add_argument("--write", action="store_true",
+                        help="also write GENERATED_DIR/embedded_<target>.json and .md (the figures, the table)")
     args = parser.parse_args(argv)
     reason = missing_tools()
     try:
@@ -292,7 +324,15 @@ def main(argv=None) -> int:
     except (EmbeddedError, EvaluationError, OSError) as exc:
         print(f"error: {args.generated_dir}: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
-    print(json.dumps({k: r[k] for k in ("flash", "stack", "instructions", "batch_stack", "undefined")}, indent=1))
+    document = {k: r[k] for k in ("flash", "stack", "instructions", "batch_stack", "undefined")}
+    document["vs_host"] = agreement(r)
+    text = json.dumps(document, indent=1) + "\n"
+    print(text, end="")
+    if args.write:
+        folder = Path(args.generated_dir)
+        robot = json.loads((folder / "functions.json").read_text())["robot"]
+        (folder / f"embedded_{args.target}.json").write_text(text)
+        (folder / f"embedded_{args.target}.md").write_text(markdown(r, robot, TARGETS[args.target]))
     return 0
 
 

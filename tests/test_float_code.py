@@ -240,3 +240,22 @@ def test_float_generation_is_deterministic(generated, tmp_path):
     assert names == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
     for name in names:
         assert (first / name).read_bytes() == (again / name).read_bytes(), name
+
+
+def test_cmake_toolchain_cross_builds_the_library(generated, tmp_path):
+    """The CMake toolchain example builds the generated CMakeLists.txt for Cortex-M4F with
+    the measured flags (no -fPIC, no contraction) into a library free of double soft-float."""
+    import shutil
+    if SKIP or shutil.which("cmake") is None:
+        pytest.skip(SKIP or "cmake not found")
+    toolchain = embedded.HERE / "arm-none-eabi.cmake"
+    source, build = generated["lwr4", "float"] / "c", tmp_path / "build"
+    subprocess.run(["cmake", "-S", str(source), "-B", str(build), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}"],
+                   check=True, capture_output=True)
+    flags = next(build.rglob("flags.make")).read_text()
+    assert "-mfpu=fpv4-sp-d16" in flags and "-ffp-contract=off" in flags and "-fPIC" not in flags
+    subprocess.run(["cmake", "--build", str(build)], check=True, capture_output=True)
+    undefined = subprocess.run(["arm-none-eabi-nm", "-u", str(build / "libkindyngen_lwr4.a")],
+                               capture_output=True, text=True, check=True).stdout
+    assert "sinf" in undefined or "sqrtf" in undefined
+    assert "__aeabi_d" not in undefined
