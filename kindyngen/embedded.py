@@ -257,7 +257,8 @@ def libm_calls(generated_dir: Path) -> dict:
 
 def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper=None) -> dict:
     """Build, run and compare one generated folder on one target (see the module docstring):
-    build_and_run's result plus "host" (the same calls on the host) and "libm" (libm_calls).
+    build_and_run's result plus "inputs" (the fixed inputs), "host" (the same calls on the host)
+    and "libm" (libm_calls).
     Joint angles of the fixed inputs: within ``lower``/``upper`` (default +-1 rad)."""
     from .evaluate import load_generated
     generated_dir = Path(generated_dir)
@@ -267,6 +268,7 @@ def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper
     upper = np.full(n, 1.0) if upper is None else np.asarray(upper, float)
     inputs = fixed_inputs(manifest, load_generated(generated_dir, "c"), lower, upper)
     result = build_and_run(generated_dir, TARGETS[target_name], Path(work), inputs)
+    result["inputs"] = inputs
     result["host"] = host_outputs(generated_dir, inputs)
     result["libm"] = libm_calls(generated_dir)
     return result

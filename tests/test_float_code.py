@@ -217,6 +217,17 @@ def test_on_emulated_board(boards, generated, robot, target):
         assert r["flash"][fn] and r["instructions"][fn] > 0
     if target == "m4f":
         assert not [s for s in r["undefined"] if s.startswith("__aeabi_d")], r["undefined"]
+        # the board's float results against the host's double code, within the reported error
+        double = load_generated(generated[robot, "double"], "c")
+        for fn, ports in r["outputs"].items():
+            reference = double.call(fn, {k: v.astype(float) for k, v in r["inputs"][fn].items()})
+            e = report[fn]["float_error"]
+            for port, board in ports.items():
+                if board.dtype == np.int32:
+                    assert np.array_equal(board, np.ravel(reference[port])), (fn, port)
+                else:
+                    diff = np.max(np.abs(board - np.ravel(reference[port])))
+                    assert diff <= 4 * e["max"] * e["scale"][port], (fn, port, diff)
 
 
 def test_bad_generate_options_are_refused(tmp_path):
