@@ -190,3 +190,129 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
     }}
 }}
 """
+
+
+# -- single precision (``generate --scalar float``) -------------------------------------------
+# The same method in float arithmetic: the float kernel is the double one with its constants
+# rounded once to float from their exact values (pi/2 split for float, minimax polynomials of
+# degree 3 fitted for float's precision), a range of +-FLOAT_BOUND and libm's sinf/cosf beyond.
+
+FLOAT_BOUND = 1024.0
+"""Largest |x| the float kernel reduces itself (2^10 rad): |k| < 2^10, so k times each of the
+first three parts of pi/2 (14 significant bits) is exact in float."""
+
+FLOAT_MAX_ULP = 1
+"""Largest difference of the float kernel from the correctly rounded sin and cos, in ulp of the
+float result (tests/test_float_code.py checks it)."""
+
+FLOAT_TWO_OVER_PI = "0.63661975f"
+FLOAT_PIO2_PARTS = ("1.5706787f", "0.000117614865f", "9.920313e-10f", "6.223372e-14f")
+FLOAT_SIN_COEFFS = ("-0.16666667f", "0.008333329f", "-0.00019839335f", "2.7183114e-06f")
+FLOAT_COS_COEFFS = ("0.041666668f", "-0.0013888883f", "2.479952e-05f", "-2.7210237e-07f")
+
+FLOAT_SHIFTER = "12582912.0f"
+"""1.5 * 2^23: y + SHIFTER - SHIFTER rounds y (|y| < 2^22) to an integer in IEEE float."""
+
+FLOAT_TINY = "0.00024414062f"
+"""2^-12: below it sinf x = x and cosf x = 1 after rounding."""
+
+
+def split_pio2_float():
+    """pi/2 as four floats, three of 14 significant bits, then the rest rounded; and 2/pi
+    rounded; as C literals."""
+    import mpmath as mp
+    from fractions import Fraction
+    from .float32 import c_float
+    with mp.workdps(60):
+        rest, parts = mp.pi / 2, []
+        for _ in range(3):
+            scale = mp.mpf(2) ** (13 - mp.floor(mp.log(abs(rest), 2)))
+            part = mp.floor(rest * scale) / scale
+            parts.append(c_float(_fraction(part)))
+            rest -= part
+        parts.append(c_float(_fraction(rest)))
+        return tuple(parts), c_float(_fraction(2 / mp.pi))
+
+
+def _fraction(value):
+    """An mpmath number as an exact Fraction."""
+    from fractions import Fraction
+    sign, man, exp, _ = value._mpf_
+    return (-1) ** sign * Fraction(int(man)) * Fraction(2) ** int(exp)
+
+
+def fit_coefficients_float():
+    """(S, C) for float: minimax of degree 3 on the same intervals as :func:`fit_coefficients`,
+    each coefficient rounded once to float, as C literals."""
+    import mpmath as mp
+    from .float32 import c_float
+    with mp.workdps(50):
+        z_max = mp.mpf(R_MAX) ** 2
+
+        def s(z):
+            root = mp.sqrt(z)
+            return (mp.sin(root) - root) / (z * root)
+
+        def c(z):
+            return (mp.cos(mp.sqrt(z)) - 1 + z / 2) / (z * z)
+
+        sin_coeffs, _ = _remez(s, lambda z: z, 3, z_max / 1000, z_max)
+        cos_coeffs, _ = _remez(c, lambda z: z * z, 3, z_max / 1000, z_max)
+        return (tuple(c_float(_fraction(mp.mpf(v))) for v in sin_coeffs),
+                tuple(c_float(_fraction(mp.mpf(v))) for v in cos_coeffs))
+
+
+def _horner_text(coeffs, z: str) -> str:
+    text = coeffs[-1]
+    for c in reversed(coeffs[:-1]):
+        text = f"{c} + {z}*({text})"
+    return text
+
+
+def kernel_c_float(name: str = "kdg_sincosf") -> str:
+    """The float kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sinf x[i],
+    c[i] = cosf x[i] for i < n; the double kernel's steps in float (see kernel_c)."""
+    p1, p2, p3, p4 = FLOAT_PIO2_PARTS
+    sh = FLOAT_SHIFTER
+    return f"""\
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n in float, within {FLOAT_MAX_ULP} ulp of the correctly
+ * rounded values (kindyngen/c_trig.py: the double kernel's method, its constants rounded to
+ * float). The first loop has no branch and no call; arguments beyond +-{FLOAT_BOUND:g}, infinities and
+ * NaN take libm's sinf/cosf in the second. Needs IEEE float arithmetic: no -ffast-math. */
+static void {name}(long n, const float *restrict x, float *restrict s, float *restrict c)
+{{
+    long i;
+    for (i = 0; i < n; ++i) {{
+        const float xi = x[i];
+        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^23; m = k mod 4 in -2..2 */
+        const float k = (xi*{FLOAT_TWO_OVER_PI} + {sh}) - {sh};
+        const float m = k - 4.0f*((0.25f*k + {sh}) - {sh});
+        /* r + rlo = xi - k*pi/2 (Cody-Waite, the roundings recovered by Fast2Sum) */
+        const float a = xi - k*{p1};
+        const float b = a - k*{p2};
+        const float b_err = (a - b) - k*{p2};
+        const float d = b - k*{p3};
+        const float d_err = (b - d) - k*{p3};
+        const float tail = (b_err + d_err) - k*{p4};
+        const float r = d + tail;
+        const float rlo = (d - r) + tail;
+        const float z = r*r;
+        const float sin_r = r + (r*z*({_horner_text(FLOAT_SIN_COEFFS, "z")}) + rlo*(1.0f - 0.5f*z));
+        const float half_z = 0.5f*z;
+        const float w = 1.0f - half_z;
+        const float cos_r = w + (((1.0f - w) - half_z)
+                                 + (z*z*({_horner_text(FLOAT_COS_COEFFS, "z")}) - r*rlo));
+        const float sin_q = fabsf(m) == 1.0f ? cos_r : sin_r;
+        const float cos_q = fabsf(m) == 1.0f ? sin_r : cos_r;
+        const int tiny = fabsf(xi) < {FLOAT_TINY};
+        s[i] = tiny ? xi : ((m == 2.0f || m == -2.0f || m == -1.0f) ? -sin_q : sin_q);
+        c[i] = tiny ? 1.0f : ((m == 2.0f || m == -2.0f || m == 1.0f) ? -cos_q : cos_q);
+    }}
+    for (i = 0; i < n; ++i) {{
+        if (!(fabsf(x[i]) <= {FLOAT_BOUND!r}f)) {{
+            s[i] = sinf(x[i]);
+            c[i] = cosf(x[i]);
+        }}
+    }}
+}}
+"""

@@ -15,6 +15,7 @@ import numpy as np
 
 from .base_parameters import BaseParameterError
 from .c_trig import TRIG_MODES
+from .render import SCALARS
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot, load_robot_tree
@@ -89,9 +90,19 @@ def load(path, args):
 
 def _cmd_generate(args) -> int:
     from .pipeline import generate
+    only = set(args.functions) if args.functions else None
+    if args.scalar == "float" and "python_c" in args.lang:
+        if args.lang is not GENERATE_LANGS:      # asked for explicitly
+            raise UsageError("--lang python_c: the CPython extension wraps double C; "
+                             "drop python_c from --lang or use --scalar double")
+        args.lang = tuple(lang for lang in args.lang if lang != "python_c")
     for path in args.robots:
         model = load(path, args)
-        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig)
+        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
+                       only=only, scalar=args.scalar, batch=not args.no_batch)
+        written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
+        for name in sorted((only or set()) - written):
+            print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -202,6 +213,11 @@ def _cmd_build_python(args) -> int:
     return 0
 
 
+def _all_function_names() -> tuple[str, ...]:
+    from .catalog import NAMES, TREE_NAMES
+    return NAMES + tuple(name for name in TREE_NAMES if name not in NAMES)
+
+
 def _names_argument(what: str, known, allow_empty: bool = False):
     """An argparse type: comma-separated names, each one of ``known()`` (called when parsing,
     so the measured-data modules are imported only by the commands that use them)."""
@@ -227,6 +243,7 @@ def _candidate_names():
 
 
 _languages = _names_argument("language", lambda: GENERATE_LANGS)
+_function_names = _names_argument("function", _all_function_names)
 _effects = _names_argument("effect", _effect_names, allow_empty=True)
 _candidates = _names_argument("candidate", _candidate_names)
 
@@ -396,6 +413,14 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--trig", choices=TRIG_MODES, default="kernel",
                    help="C: sin/cos of joint angles by a vectorisable polynomial kernel emitted into the .c, "
                         "within 1 ulp of glibc (kernel, default), or every sin/cos by libm (libm)")
+    g.add_argument("--scalar", choices=SCALARS, default="double",
+                   help="C scalar type: double (default), or float for single-precision FPUs such as "
+                        "Cortex-M4F (float literals, sinf/cosf/sqrtf, a float sincos kernel; no ik_dls; "
+                        "python_c is left out)")
+    g.add_argument("--functions", type=_function_names, metavar="NAME,NAME,...",
+                   help="generate only these functions, e.g. fk_hom,jacobian,tau (default: all that apply)")
+    g.add_argument("--no-batch", action="store_true",
+                   help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
     g.set_defaults(run=_cmd_generate)
 

@@ -137,13 +137,15 @@ class _CBackend:
     def __init__(self, lib: GeneratedLibrary):
         robot = lib.manifest["robot"]
         self.dll = ctypes.CDLL(str(compile_shared_library(lib.directory / "c", robot)))
+        # --scalar float: every C port is float; inputs are rounded to float, outputs widened
+        self.real = np.float32 if lib.manifest.get("c_scalar", "double") == "float" else np.float64
 
     def call(self, spec, arrays, batch):
         fn = getattr(self.dll, spec["c_symbol"])
         fn.restype = None
         count = arrays[0].shape[0]
-        ins = [np.ascontiguousarray(a.reshape(count, -1), dtype=np.float64) for a in arrays]
-        outs = [np.zeros((count, int(np.prod(p["shape"]))), dtype=np.intc if p["dtype"] == "int" else np.float64)
+        ins = [np.ascontiguousarray(a.reshape(count, -1), dtype=self.real) for a in arrays]
+        outs = [np.zeros((count, int(np.prod(p["shape"]))), dtype=np.intc if p["dtype"] == "int" else self.real)
                 for p in spec["outputs"]]
         for k in range(count):
             fn(*[a[k].ctypes.data_as(ctypes.c_void_p) for a in ins],

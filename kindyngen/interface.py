@@ -9,7 +9,16 @@ from .model import RobotModel
 from .optimize import Program
 
 
-def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel") -> dict:
+def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
+             scalar: str = "double", batch: bool = True) -> dict:
+    """The interface document. A C library generated with ``--scalar float`` says so
+    ("c_scalar": "float": every C port is float; Python and CasADi stay double) and has no
+    ik_dls in C; ``--no-batch`` adds "c_batch": false. Default (double, batch) documents carry
+    neither key."""
+    dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
+    if scalar == "float":
+        for entry in dls:
+            entry["languages"] = [lang for lang in entry["languages"] if lang != "c"]
     return {
         "robot": model.identifier,
         "name": model.name,
@@ -20,6 +29,8 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
         "gravity": [float(v) for v in model.gravity],
         "params": params,
         "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/c_trig.py)
+        **({"c_scalar": scalar} if scalar != "double" else {}),
+        **({"c_batch": False} if not batch else {}),
         "functions": [{
             "name": p.function.name,
             "summary": p.function.summary,
@@ -28,5 +39,5 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "inputs": [port.to_json() for port in p.function.inputs],
             "outputs": [port.to_json() for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
-        } for p in programs] + ([dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []),
+        } for p in programs] + dls,
     }

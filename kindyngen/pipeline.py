@@ -71,22 +71,43 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
         build().save(str(directory / f"{name}.casadi"))
 
 
+def measure_float_error(model, programs, document: dict, trig: str) -> dict:
+    """Float C against double C (kindyngen/float_accuracy.py): ``{name: FloatError}``, or
+    ``{}`` with a note when no host C compiler can build them."""
+    from .evaluate import EvaluationError
+    from .float_accuracy import measure
+    from .render import render_c
+    double = render_c(model, programs, trig, "double", batch=False)
+    single = render_c(model, programs, trig, "float", batch=False)
+    try:
+        return measure(model, double, single, document)
+    except (EvaluationError, OSError) as exc:
+        print(f"note: float error not measured (no working host C compiler): {str(exc).splitlines()[0]}",
+              file=sys.stderr)
+        return {}
+
+
 def generate(model: RobotModel | TreeModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
-             progress: bool = True, only=None, trig: str = "kernel") -> Path:
+             progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
+             batch: bool = True) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
-    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES."""
+    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
+    (the C's type, render.SCALARS) and ``batch`` (C batch variants): see render.render_c."""
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
-    _write(out / "functions.json", json.dumps(manifest(model, programs, params, trig), indent=1) + "\n")
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch)
+    _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
-    _write(out / "opcounts.json", json.dumps(opcounts_json(programs), indent=1) + "\n")
-    _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
+    float_error = measure_float_error(model, programs, document, trig) if scalar == "float" and "c" in languages else None
+    _write(out / "opcounts.json", json.dumps(opcounts_json(programs, float_error), indent=1) + "\n")
+    _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
+                                                  float_error))
     for lang in languages:
-        options = {"trig": trig} if lang == "c" else {}
+        options = {"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error} if lang == "c" else {}
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
             if lang == "casadi":

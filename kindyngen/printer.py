@@ -14,9 +14,11 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 
 import symengine as se
 
+from .float32 import c_float
 from .opcount import COMPARISONS, add_parts, is_literal, mul_parts
 
 ATOM, MUL, NEG, ADD, CMP, AND, OR, SELECT = 100, 50, 45, 40, 30, 20, 10, 5
@@ -34,12 +36,29 @@ class Dialect:
     logic_not: str
     select_is_call: bool  # numpy/casadi selects are calls (no precedence issue)
     booleans: tuple = ("0", "1")  # spelling of (false, true)
+    single: bool = False  # C float: constants rounded once from their exact values, f-suffixed
 
-    def literal(self, value: float) -> str:
+    def literal(self, value) -> str:
+        """A non-negative constant: a float, or (single) its exact value as a Fraction."""
+        if self.single:
+            return c_float(value)
         text = repr(float(value))
         if text in ("inf", "-inf", "nan"):
             raise ValueError(f"non-finite constant {text} in generated code")
         return text
+
+    def _value(self, literals) -> "float | Fraction":
+        """The product of literal nodes: in double the product of their doubles, as the counts
+        take it (the value the double code always printed); single: exact."""
+        if not self.single:
+            value = 1.0
+            for a in literals:
+                value *= float(a)
+            return value
+        value = Fraction(1)
+        for a in literals:
+            value *= _exact(a)
+        return value
 
     def expr(self, e, names: dict) -> str:
         return self._print(se.sympify(e), names)[0]
@@ -51,7 +70,7 @@ class Dialect:
         if e == se.true or e == se.false:
             return self.booleans[e == se.true], ATOM
         if is_literal(e) or e.is_Number:
-            v = float(e)
+            v = _exact(e) if self.single else float(e)
             return (self.literal(v), ATOM) if v >= 0 else ("-" + self.literal(-v), NEG)
         if e.is_Symbol:
             raise KeyError(f"symbol {e} has no name in this function")
@@ -87,6 +106,8 @@ class Dialect:
 
     def _add(self, e, names):
         const, terms = add_parts(e)
+        if self.single:
+            const = sum((_exact(a) for a in e.args if is_literal(a)), Fraction(0))
         negative = [isinstance(t, se.Mul) and mul_parts(t)[0] < 0 for t in terms]
         if negative[0] and not all(negative):  # lead with a positive term: a - b, not -b + a
             first = negative.index(False)
@@ -105,9 +126,11 @@ class Dialect:
 
     def _mul(self, e, names):
         coeff, numer, denom = mul_parts(e)
-        factors = ([self.literal(abs(coeff))] if abs(coeff) != 1.0 else []) + \
+        if self.single:
+            coeff = self._value([a for a in e.args if is_literal(a)])
+        factors = ([self.literal(abs(coeff))] if abs(coeff) != 1 else []) + \
                   [self._wrap(f, names, MUL) for f in numer]
-        text = "*".join(factors) if factors else "1.0"
+        text = "*".join(factors) if factors else self.literal(1)
         if denom:
             divisor = "*".join(self._wrap(d, names, MUL) for d in denom)
             text += "/" + (divisor if len(denom) == 1 and self._print(denom[0], names)[1] == ATOM else f"({divisor})")
@@ -123,11 +146,11 @@ class Dialect:
             if k >= 2:
                 return "*".join([b] * k), MUL
             if k <= -1:
-                return "1.0/" + (b if k == -1 else "(" + "*".join([b] * -k) + ")"), MUL
+                return self.literal(1) + "/" + (b if k == -1 else "(" + "*".join([b] * -k) + ")"), MUL
         if exp == se.Rational(1, 2):
             return f"{self.functions['sqrt']}({self._print(base, names)[0]})", ATOM
         if exp == se.Rational(-1, 2):
-            return f"1.0/{self.functions['sqrt']}({self._print(base, names)[0]})", MUL
+            return f"{self.literal(1)}/{self.functions['sqrt']}({self._print(base, names)[0]})", MUL
         return f"{self.functions['pow']}({self._print(base, names)[0]}, {self._print(exp, names)[0]})", ATOM
 
     def _piecewise(self, e, names):
@@ -150,6 +173,21 @@ class Dialect:
         return out, (ATOM if fmt.endswith(")") else prec)
 
 
+def _exact(e) -> Fraction:
+    """The exact value of a literal node: a rational as it is, a double as the double, any
+    other constant (sqrt(2), pi, ...) from 40 significant digits (then rounded once to float).
+
+    >>> _exact(se.Rational(1, 3)), _exact(se.RealDouble(0.5))
+    (Fraction(1, 3), Fraction(1, 2))
+    """
+    if e.is_Rational or e.is_Integer:
+        return Fraction(int(e.p), int(e.q)) if e.is_Rational else Fraction(int(e))
+    if isinstance(e, se.RealDouble):
+        return Fraction(float(e))
+    import sympy
+    return Fraction(str(sympy.Float(sympy.sympify(e).evalf(40), 40)))
+
+
 _MATH = ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "exp", "log", "tanh")
 
 C = Dialect(
@@ -159,6 +197,15 @@ C = Dialect(
     select="({c} ? {a} : {b})", logic_and="{} && {}", logic_or="{} || {}", logic_not="!({})",
     select_is_call=False,
 )
+
+C_FLOAT = Dialect(
+    name="c",
+    functions={**{f: f + "f" for f in _MATH}, "atan2": "atan2f", "abs": "fabsf", "max": "fmaxf",
+               "min": "fminf", "pow": "powf"},
+    select="({c} ? {a} : {b})", logic_and="{} && {}", logic_or="{} || {}", logic_not="!({})",
+    select_is_call=False, single=True,
+)
+"""C with ``--scalar float``: float literals and the single-precision libm functions."""
 
 NUMPY = Dialect(
     name="numpy",

@@ -14,10 +14,11 @@ import jinja2
 import symengine as se
 
 from . import __version__
-from .c_trig import BOUND as TRIG_BOUND, MAX_ULP as TRIG_MAX_ULP, kernel_c
+from .c_trig import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, kernel_c,
+                     kernel_c_float)
 from .ik_dls import dls_view
 from .optimize import Program
-from .printer import C, CASADI, NUMPY, Dialect
+from .printer import C, C_FLOAT, CASADI, NUMPY, Dialect
 from .render_python_c import render_python_c
 from .robot import RobotModel
 
@@ -36,6 +37,9 @@ BATCH_MIN_BLOCK = 16
 """Fewest configurations per block worth a local output array; functions whose outputs need
 smaller blocks (regressors, hundreds of entries, mostly zeros: their time is the stores) write
 outputs in place instead, in blocks of BATCH_BLOCK."""
+
+SCALARS = ("double", "float")
+"""C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
 
 KERNEL_LANES = 8
 """Single calls run the sincos kernel over the angles padded with zeros to a multiple of this
@@ -170,10 +174,12 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     for sym, expr in program.assignments:
         names[sym] = str(sym)
         assignments.append((str(sym), dialect.expr(expr, names)))
-    inputs = tuple(PortView(p.name, p.shape, p.size, p.dtype, p.unit, p.description,
+    inputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
+                            p.unit, p.description,
                             used=any(s in used_symbols for s in syms))
                    for p, syms in zip(f.inputs, f.input_symbols))
-    outputs = tuple(PortView(p.name, p.shape, p.size, p.dtype, p.unit, p.description,
+    outputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
+                             p.unit, p.description,
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
@@ -187,7 +193,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
         block=block,
         in_place=in_place,
-        batch=function_view(program, dialect, prefix, trig, batch=True) if dialect is C and not batch else None,
+        batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
     )
 
 
@@ -212,10 +218,21 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
     }
 
 
-def render_c(model: RobotModel, programs, trig: str = "kernel") -> dict[str, str]:
-    """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/c_trig.py."""
-    env, ctx = _environment(), _context(model, programs, C, trig)
-    ctx["sincos_kernel"] = kernel_c()
+def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "double",
+             batch: bool = True, float_error: dict | None = None) -> dict[str, str]:
+    """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/c_trig.py;
+    ``scalar``: one of SCALARS (float: no ik_dls, whose tolerances are double's); ``batch``:
+    whether the <name>_batch variants are written."""
+    single = scalar == "float"
+    env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig)
+    ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
+               sincos="kdg_sincosf" if single else "kdg_sincos",
+               libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
+               float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
+               sincos_kernel=kernel_c_float() if single else kernel_c(),
+               float_error={name: e.text() for name, e in (float_error or {}).items()})
+    if single:
+        ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
             f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
             "CMakeLists.txt": env.get_template("c/CMakeLists.txt.j2").render(ctx)}

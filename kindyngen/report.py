@@ -16,11 +16,15 @@ PAPER_TABLE_II = {
 }
 
 
-def opcounts_json(programs: list[Program]) -> dict:
+def opcounts_json(programs: list[Program], float_error: dict | None = None) -> dict:
     """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order; a function
     chosen among routes also has ``"route"`` (the chosen one) and ``"routes"`` (each one's
-    count after CSE)."""
-    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(), **_routes_json(p)}
+    count after CSE); with ``--scalar float`` each measured function has ``"float_error"``
+    (kindyngen/float_accuracy.py)."""
+    float_error = float_error or {}
+    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(), **_routes_json(p),
+                              **({"float_error": float_error[p.function.name].to_json()}
+                                 if p.function.name in float_error else {})}
             for p in programs}
 
 
@@ -34,7 +38,8 @@ def _row(values) -> str:
     return " | ".join(str(v) for v in values)
 
 
-def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool) -> str:
+def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool,
+                      float_error: dict | None = None) -> str:
     lines = [f"# Operation counts: {robot_name}", "",
              "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
              "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
@@ -70,4 +75,21 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
             opt = " / ".join(map(str, paper["optimised"]))
             der = " / ".join(map(str, paper["derived"])) if "derived" in paper else "-"
             lines.append(f"| {name} | {ours_after} | {opt} | {ours_before} | {der} |")
+    if float_error:
+        from .float_accuracy import ACCEPTABLE, NEAR_ZERO, SEED
+        lines += ["", "## Float error (--scalar float)", "",
+                  f"The float C against the double C at {next(iter(float_error.values())).states} random states "
+                  f"within the limits (seed {SEED}): |float - double| / the output's scale (its largest "
+                  f"|entry|), over all entries and states; acceptable: max <= {ACCEPTABLE:.0e}. Integer "
+                  "outputs (IK status): states where they differ. Near singular: as many states with one "
+                  f"joint (each in turn) within {NEAR_ZERO:g} rad of 0, errors relative to the same scales.", "",
+                  "| function | max | 99th percentile | acceptable | integer outputs differ | "
+                  "near singular: max | 99th percentile | acceptable | integer outputs differ |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        fmt = (lambda v: "-" if v is None else f"{v:.1e}")
+        for name, e in float_error.items():
+            n = e.near
+            lines.append(f"| {name} | {fmt(e.max)} | {fmt(e.p99)} | {'yes' if e.acceptable else 'NO'} | "
+                         f"{e.int_mismatch} of {e.states} | {fmt(n.max)} | {fmt(n.p99)} | "
+                         f"{'yes' if n.acceptable else 'NO'} | {n.int_mismatch} of {n.states} |")
     return "\n".join(lines) + "\n"

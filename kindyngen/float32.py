@@ -1,0 +1,54 @@
+"""IEEE single precision for generated float code: exact rounding and the C spelling.
+
+Constants baked into ``--scalar float`` code are rounded once, from their exact value (a
+rational, or the double the description gave), to the nearest float (ties to even), and
+spelled with the fewest digits that read back as that float:
+
+>>> from fractions import Fraction
+>>> c_float(Fraction(1, 3)), c_float(0.1), c_float(1), c_float(Fraction(1, 2**30))
+('0.33333334f', '0.1f', '1.0f', '9.313226e-10f')
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+
+
+def nearest_float32(value) -> np.float32:
+    """The float nearest to the exact ``value`` (int, Fraction or float), ties to even.
+
+    >>> float(nearest_float32(Fraction(16777217)))   # 2^24 + 1: halfway, to the even 2^24
+    16777216.0
+    """
+    exact = Fraction(value)
+    if abs(exact) > FLT_MAX:
+        raise ValueError(f"constant {float(exact)!r} is outside the float range")
+    guess = np.float32(float(exact))       # within one float ulp of the answer (two roundings)
+    with np.errstate(over="ignore"):
+        candidates = (np.nextafter(guess, np.float32(-np.inf)), guess, np.nextafter(guess, np.float32(np.inf)))
+
+    def key(c):
+        odd = int(np.frombuffer(c.tobytes(), dtype=np.uint32)[0]) & 1
+        return abs(Fraction(float(c)) - exact), odd
+    return min((c for c in candidates if np.isfinite(c)), key=key)
+
+
+FLT_MAX = Fraction(float(np.finfo(np.float32).max))
+
+
+def c_float(value, saturate: bool = True) -> str:
+    """The C literal (``f`` suffix) of the float nearest to ``value``. Beyond float's range
+    (the closed-form IK's input bounds, 1e149 and 1e300: sums of squares that must not
+    overflow) ``saturate`` gives the largest float, the same test in float arithmetic (a sum
+    that overflowed is inf, which no comparison with it passes).
+
+    >>> c_float(1e300)
+    '3.4028235e+38f'
+    """
+    if saturate and abs(Fraction(value)) > FLT_MAX:
+        value = FLT_MAX if value > 0 else -FLT_MAX
+    text = str(nearest_float32(value))      # numpy: the shortest digits that round-trip
+    if "." not in text and "e" not in text:
+        text += ".0"
+    return text + "f"
