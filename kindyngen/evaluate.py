@@ -218,8 +218,9 @@ def _octave_layout(array: np.ndarray) -> np.ndarray:
 
 def run_octave(matlab_dir, calls, timeout: float = 600.0) -> list[list[np.ndarray]]:
     """Evaluate generated .m functions in one GNU Octave process. ``calls``: (function name as
-    the .m file is named, list of input arrays each (N,) + port shape, list of output shapes);
-    returns per call the output arrays, each (N,) + shape."""
+    the .m file is named, or an Octave function handle starting with ``@``; list of input
+    arrays, each (N,) + port shape or (1,) + port shape; list of output shapes); returns per
+    call the output arrays, each (N,) + shape."""
     octave = shutil.which("octave-cli") or shutil.which("octave")
     if octave is None:
         raise EvaluationError("--lang matlab runs the .m files in GNU Octave, which is not installed "
@@ -238,7 +239,8 @@ def run_octave(matlab_dir, calls, timeout: float = 600.0) -> list[list[np.ndarra
             outs = ", ".join(f"o{k}" for k in range(len(shapes)))
             writes = " ".join(f"fid = fopen('{tmp}/out{c}_{k}.bin', 'w'); fwrite(fid, double(o{k}), 'double'); fclose(fid);"
                               for k in range(len(shapes)))
-            lines.append(f"try\n  [{outs}] = {name}({', '.join(args)});\n  {writes}\ncatch err\n"
+            handle = name if name.startswith("@") else "@" + name
+            lines.append(f"try\n  fn = {handle};\n  [{outs}] = fn({', '.join(args)});\n  {writes}\ncatch err\n"
                          f"  fid = fopen('{tmp}/err{c}.txt', 'w'); fputs(fid, err.message); fclose(fid);\nend")
         (tmp / "run.m").write_text("\n".join(lines) + "\n")
         done = subprocess.run([octave, "--no-init-file", "--quiet", "--no-window-system", str(tmp / "run.m")],

@@ -194,7 +194,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
-        has_select=("where(" in text or "if_else(" in text or "?" in text),
+        has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
         angles=angles,
         first_angle=first,
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
