@@ -86,7 +86,7 @@ static void call_fk_dq(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[
     if (n_q > count)
         count = n_q;
     {
-        mwSize dims[3] = {8, 0};
+        mwSize dims[2] = {8, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_x = (double *)mxGetData(plhs[0]);
@@ -236,7 +236,7 @@ static void call_g(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     if (n_q > count)
         count = n_q;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_g = (double *)mxGetData(plhs[0]);
@@ -273,7 +273,7 @@ static void call_c(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     if (n_qd > count)
         count = n_qd;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_c = (double *)mxGetData(plhs[0]);
@@ -356,7 +356,7 @@ static void call_tau(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     if (n_qdd > count)
         count = n_qdd;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_tau = (double *)mxGetData(plhs[0]);
@@ -402,7 +402,7 @@ static void call_fd(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     if (n_tau > count)
         count = n_tau;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_qdd = (double *)mxGetData(plhs[0]);
@@ -586,7 +586,7 @@ static void call_g_lagrange(int nlhs, mxArray *plhs[], int nrhs, const mxArray *
     if (n_q > count)
         count = n_q;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_g = (double *)mxGetData(plhs[0]);
@@ -623,7 +623,7 @@ static void call_c_christoffel(int nlhs, mxArray *plhs[], int nrhs, const mxArra
     if (n_qd > count)
         count = n_qd;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_c = (double *)mxGetData(plhs[0]);
@@ -684,7 +684,7 @@ static void call_g_dq(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[]
     if (n_q > count)
         count = n_q;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_g = (double *)mxGetData(plhs[0]);
@@ -721,7 +721,7 @@ static void call_c_dq(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[]
     if (n_qd > count)
         count = n_qd;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_c = (double *)mxGetData(plhs[0]);
@@ -766,7 +766,7 @@ static void call_tau_dq(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs
     if (n_qdd > count)
         count = n_qdd;
     {
-        mwSize dims[3] = {7, 0};
+        mwSize dims[2] = {7, 0};
         dims[1] = (mwSize)count;
         plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
         to_tau = (double *)mxGetData(plhs[0]);
@@ -859,7 +859,7 @@ static void call_ik_hom(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs
         to_q = (double *)mxGetData(plhs[0]);
     }
     {
-        mwSize dims[3] = {8, 0};
+        mwSize dims[2] = {8, 0};
         dims[1] = (mwSize)count;
         plhs[1] = mxCreateNumericArray(2, dims, mxINT32_CLASS, mxREAL);
         to_status = (int *)mxGetData(plhs[1]);
@@ -907,7 +907,7 @@ static void call_ik_dq(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[
         to_q = (double *)mxGetData(plhs[0]);
     }
     {
-        mwSize dims[3] = {8, 0};
+        mwSize dims[2] = {8, 0};
         dims[1] = (mwSize)count;
         plhs[1] = mxCreateNumericArray(2, dims, mxINT32_CLASS, mxREAL);
         to_status = (int *)mxGetData(plhs[1]);
