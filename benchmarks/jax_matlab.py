@@ -203,13 +203,16 @@ def main(argv=None) -> int:
     def progress(text):
         print(f"jax_matlab: {text}", file=sys.stderr, flush=True)
 
+    import os
+    from importlib.metadata import version
     import jax
-    import adam
-    results = {"machine": {"cpu": cpu_model(), "jax": jax.__version__, "adam": getattr(adam, "__version__", "?")},
+    results = {"machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "jax": jax.__version__,
+                           "adam": version("adam-robotics"), "load_average_start": os.getloadavg()},
                "jax": [], "octave": []}
     for robot_name in args.robots.split(","):
         results["jax"].append(jax_run(robot_name, batches, progress))
         results["octave"].append(octave_run(robot_name, batches, progress))
+    results["machine"]["load_average_end"] = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "jax_matlab.json").write_text(json.dumps(results, indent=1) + "\n")
     plot(results, RESULTS / "jax_matlab.png")
