@@ -108,6 +108,44 @@ def test_octave_m_files_and_mex_equal_numpy(name, tmp_path):
     assert len(results) == len(calls) and len(expected) >= len(_straight_line(name))
 
 
+def test_tree_with_rank_3_outputs_in_octave_mex_and_jax(tmp_path, jax):
+    """A floating-base tree: fk_hom's T is k x 4 x 4 (rank 3, the MEX gateway's third layout),
+    q has the quaternion; .m, MEX and JAX equal the numpy module of the same generation."""
+    from kindyngen.evaluate import run_octave
+    from kindyngen.pipeline import generate
+    from kindyngen.robot import load_robot_tree
+    _octave()
+    if shutil.which("mkoctfile") is None:
+        pytest.skip("mkoctfile not installed (Debian: liboctave-dev)")
+    model = load_robot_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    out = generate(model, tmp_path, languages=("c", "python", "jax", "matlab"), progress=False,
+                   only={"fk_hom", "jacobian", "tau"})
+    robot_id = model.identifier
+    numpy_module = _module(out / "python" / f"{robot_id}.py", "kdg_test_tree_numpy")
+    jax_module = _module(out / "jax" / f"{robot_id}_jax.py", "kdg_test_tree_jax")
+    matlab = out / "matlab"
+    done = subprocess.run(["mkoctfile", "--mex", "-O0", "-I../c", f"{robot_id}_mex.c", f"../c/{robot_id}.c",
+                           "-o", f"{robot_id}_mex"], cwd=matlab, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    rng = np.random.default_rng(4)
+    calls, expected = [], []
+    for spec in json.loads((out / "functions.json").read_text())["functions"]:
+        inputs = [rng.normal(size=(COUNT,) + tuple(p["shape"])) for p in spec["inputs"]]
+        ref = numpy_module.FUNCTIONS[spec["name"]](*inputs)
+        ref = ref if isinstance(ref, tuple) else (ref,)
+        got = jax_module.FUNCTIONS[spec["name"]](*inputs)
+        for r, g in zip(ref, got if isinstance(got, tuple) else (got,)):
+            _assert_close(g, r, f"tree {spec['name']} (jax)")
+        shapes = [tuple(p["shape"]) for p in spec["outputs"]]
+        calls += [(f"{robot_id}_{spec['name']}", inputs, shapes),
+                  (f"@(varargin) {robot_id}_mex('{spec['name']}', varargin{{:}})", inputs, shapes)]
+        expected += [(spec["name"], ".m", ref), (spec["name"], "mex", ref)]
+    assert any(len(shape) == 3 for _, _, shapes in calls for shape in shapes)
+    for (fname, where, ref), outs in zip(expected, run_octave(matlab, calls)):
+        for r, o in zip(ref, outs):
+            _assert_close(o, r, f"tree {fname} ({where})")
+
+
 def test_octave_refuses_a_misshaped_input(tmp_path):
     from kindyngen.evaluate import EvaluationError, run_octave
     _octave()
