@@ -68,7 +68,10 @@ def test_page_commands_run_as_written(page, tmp_path):
     if shutil.which("cc") is None and "cc -std=c99" in "".join(blocks):
         pytest.skip("no C compiler")
     work = _workspace(tmp_path)
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "KINDYNGEN_CACHE": str(tmp_path / "cache")}
+    # no bytecode: `import lwr4` from generated/ (a link to the checkout's) would leave a
+    # __pycache__ there, and tests/test_reproducibility.py compares generated/ file by file
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "KINDYNGEN_CACHE": str(tmp_path / "cache"),
+           "PYTHONDONTWRITEBYTECODE": "1"}
     done = subprocess.run(["bash", "-c", "set -euo pipefail\n" + "\n".join(blocks)], cwd=work, env=env,
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, f"{page}:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"
