@@ -21,9 +21,9 @@ from .measured import MeasuredDataError
 from .robot import RobotDescriptionError, load_robot, load_robot_tree
 
 
-LANGS = ("c", "python", "casadi")
+LANGS = ("c", "python", "casadi", "jax", "matlab")
 # generate also writes the CPython extension source (python_c), which eval does not run
-GENERATE_LANGS = LANGS + ("python_c",)
+GENERATE_LANGS = ("c", "python", "casadi", "python_c", "jax", "matlab")
 EXIT_BAD_INPUT = 2
 
 
@@ -396,7 +396,7 @@ def _log_arguments(command: argparse.ArgumentParser) -> None:
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="kindyngen", description=(
         "KinDynGen: derive the kinematics and dynamics of a serial arm or a kinematic tree (YAML or URDF) "
-        "and generate C, Python and CasADi code with operation counts. Bad input: one line on "
+        "and generate C, Python, CasADi, JAX and MATLAB/Octave code with operation counts. Bad input: one line on "
         "standard error and exit code 2."))
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -407,7 +407,8 @@ def parser() -> argparse.ArgumentParser:
     _tree_options(g)
     g.add_argument("--out", required=True, metavar="DIR", help="output root; each robot goes to DIR/<robot>/")
     g.add_argument("--lang", type=_languages, default=GENERATE_LANGS,
-                   help="comma-separated subset of c,python,casadi,python_c (default: all; python_c needs c)")
+                   help="comma-separated subset of c,python,casadi,python_c,jax,matlab (default: all; python_c "
+                        "and matlab's MEX gateway need c)")
     g.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
                    help="inertial parameters baked in from the YAML (numeric) or an extra input p (symbolic)")
     g.add_argument("--trig", choices=TRIG_MODES, default="kernel",
@@ -453,7 +454,9 @@ def parser() -> argparse.ArgumentParser:
                                     "\"Infinity\" or \"-Infinity\" (JSON has no number for them)."))
     e.add_argument("generated_dir", metavar="GENERATED_DIR", help="a robot folder, e.g. generated/lwr4")
     e.add_argument("function", metavar="FUNCTION", help="e.g. fk_hom, fk_dq, jacobian")
-    e.add_argument("--lang", choices=LANGS, default="c")
+    e.add_argument("--lang", choices=LANGS, default="c",
+                   help="c (compiled on first use), python, casadi, jax (through jax.jit, 64-bit) or matlab "
+                        "(the .m files in GNU Octave)")
     e.set_defaults(run=_cmd_eval)
 
     b = sub.add_parser("build-python", help="compile a robot's python_c extension and print its path",

@@ -3,7 +3,9 @@
 ``load_generated(directory, lang).call(name, {"q": ...})`` evaluates the code that was
 written, not the derivation: the C through a shared library compiled on first use (cached
 by a hash of the sources), the Python module imported from its file, the CasADi Functions
-loaded from their ``.casadi`` files. Each input may carry one leading batch dimension.
+loaded from their ``.casadi`` files, the JAX module through ``jax.jit`` (64-bit), the MATLAB
+``.m`` files in GNU Octave (``octave-cli``, one process per call; :func:`run_octave` runs many
+calls in one). Each input may carry one leading batch dimension.
 
 Example:
 
@@ -18,7 +20,9 @@ import hashlib
 import importlib.util
 import json
 import os
+import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -44,15 +48,18 @@ class GeneratedLibrary:
             self.functions = {f["name"]: f for f in self.manifest["functions"]}
         except (json.JSONDecodeError, KeyError, TypeError) as exc:
             raise EvaluationError(f"{manifest_path}: not a KinDynGen interface file ({exc})") from None
-        self._impl = {"python": _PythonBackend, "c": _CBackend, "casadi": _CasadiBackend}[lang](self)
+        self._impl = {"python": _PythonBackend, "c": _CBackend, "casadi": _CasadiBackend,
+                      "jax": _JaxBackend, "matlab": _MatlabBackend}[lang](self)
 
     def call(self, name: str, inputs: dict) -> dict:
         """Evaluate ``name`` on named inputs; returns named outputs (numpy arrays)."""
         if name not in self.functions:
             raise EvaluationError(f"no function '{name}' in {self.directory}; available: {', '.join(self.functions)}")
         spec = self.functions[name]
-        if self.lang not in spec.get("languages", (self.lang,)):
-            raise EvaluationError(f"{name} is not generated for {self.lang} (it exists in {', '.join(spec['languages'])})")
+        if self.lang not in spec.get("languages", (self.lang,)) or (
+                self.lang in ("jax", "matlab") and spec.get("kind") == "iterative"):
+                raise EvaluationError(f"{name} is not generated for {self.lang} (it exists in "
+                                  f"{', '.join(spec.get('languages', ()))})")
         arrays, batch = _check_inputs(name, spec, inputs)
         outputs = self._impl.call(spec, arrays, batch)
         if batch is None:
@@ -183,7 +190,96 @@ class _CasadiBackend:
         return outs
 
 
+class _JaxBackend:
+    def __init__(self, lib: GeneratedLibrary):
+        try:
+            import jax
+        except ImportError:
+            raise EvaluationError("--lang jax needs JAX (pip install jax)") from None
+        jax.config.update("jax_enable_x64", True)   # the generated code is derived for doubles
+        self.jax = jax
+        robot = lib.manifest["robot"]
+        path = lib.directory / "jax" / f"{robot}_jax.py"
+        if not path.is_file():
+            raise EvaluationError(f"{path}: not found (generate the robot with --lang jax)")
+        spec = importlib.util.spec_from_file_location(f"kindyngen_generated_{robot}_jax", path)
+        self.module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(self.module)
+
+    def call(self, spec, arrays, batch):
+        result = self.jax.jit(self.module.FUNCTIONS[spec["name"]])(*arrays)
+        result = result if isinstance(result, tuple) else (result,)
+        return {p["name"]: np.asarray(r).astype(np.int64 if p["dtype"] == "int" else float)
+                for p, r in zip(spec["outputs"], result)}
+
+
+def _octave_layout(array: np.ndarray) -> np.ndarray:
+    """(N, s1, ..., sd) row-major as the bytes of MATLAB's s1 x ... x sd x N column-major array."""
+    return np.ascontiguousarray(np.transpose(array, (0,) + tuple(range(array.ndim - 1, 0, -1))), dtype=np.float64)
+
+
+def run_octave(matlab_dir, calls, timeout: float = 600.0) -> list[list[np.ndarray]]:
+    """Evaluate generated .m functions in one GNU Octave process. ``calls``: (function name as
+    the .m file is named, or an Octave function handle starting with ``@``; list of input
+    arrays, each (N,) + port shape or (1,) + port shape; list of output shapes); returns per
+    call the output arrays, each (N,) + shape."""
+    octave = shutil.which("octave-cli") or shutil.which("octave")
+    if octave is None:
+        raise EvaluationError("--lang matlab runs the .m files in GNU Octave, which is not installed "
+                              "(Debian: apt-get install octave)")
+    with tempfile.TemporaryDirectory(prefix="kindyngen-octave-") as tmp:
+        tmp = Path(tmp)
+        lines = [f"addpath('{Path(matlab_dir).resolve()}');"]
+        for c, (name, inputs, shapes) in enumerate(calls):
+            args = []
+            for k, a in enumerate(inputs):
+                _octave_layout(a).tofile(tmp / f"in{c}_{k}.bin")
+                dims = ", ".join(str(s) for s in (tuple(a.shape[1:]) + (a.shape[0],)))
+                lines.append(f"fid = fopen('{tmp}/in{c}_{k}.bin'); a{k} = reshape(fread(fid, Inf, 'double'), [{dims}]); "
+                             "fclose(fid);")
+                args.append(f"a{k}")
+            outs = ", ".join(f"o{k}" for k in range(len(shapes)))
+            writes = " ".join(f"fid = fopen('{tmp}/out{c}_{k}.bin', 'w'); fwrite(fid, double(o{k}), 'double'); fclose(fid);"
+                              for k in range(len(shapes)))
+            handle = name if name.startswith("@") else "@" + name
+            lines.append(f"try\n  fn = {handle};\n  [{outs}] = fn({', '.join(args)});\n  {writes}\ncatch err\n"
+                         f"  fid = fopen('{tmp}/err{c}.txt', 'w'); fputs(fid, err.message); fclose(fid);\nend")
+        (tmp / "run.m").write_text("\n".join(lines) + "\n")
+        done = subprocess.run([octave, "--no-init-file", "--quiet", "--no-window-system", str(tmp / "run.m")],
+                              capture_output=True, text=True, timeout=timeout)
+        results = []
+        for c, (name, inputs, shapes) in enumerate(calls):
+            if (tmp / f"err{c}.txt").exists():
+                raise EvaluationError(f"octave: {name}: {(tmp / f'err{c}.txt').read_text()}")
+            count = max([a.shape[0] for a in inputs] or [1])
+            outs = []
+            for k, shape in enumerate(shapes):
+                path = tmp / f"out{c}_{k}.bin"
+                if not path.exists():
+                    raise EvaluationError(f"octave failed on {name}: {done.stderr.strip()[-500:]}")
+                flat = np.fromfile(path, dtype=np.float64).reshape((count,) + tuple(reversed(shape)))
+                outs.append(np.transpose(flat, (0,) + tuple(range(len(shape), 0, -1))))
+            results.append(outs)
+        return results
+
+
+class _MatlabBackend:
+    def __init__(self, lib: GeneratedLibrary):
+        self.directory = lib.directory / "matlab"
+        self.robot = lib.manifest["robot"]
+        if not self.directory.is_dir():
+            raise EvaluationError(f"{self.directory}: not found (generate the robot with --lang matlab)")
+
+    def call(self, spec, arrays, batch):
+        shapes = [tuple(p["shape"]) for p in spec["outputs"]]
+        outs = run_octave(self.directory, [(f"{self.robot}_{spec['name']}", list(arrays), shapes)])[0]
+        return {p["name"]: o.astype(np.int64) if p["dtype"] == "int" else o for p, o in zip(spec["outputs"], outs)}
+
+
+EVAL_LANGS = ("c", "python", "casadi", "jax", "matlab")
+
+
 def load_generated(directory, lang: str) -> GeneratedLibrary:
-    if lang not in ("c", "python", "casadi"):
-        raise EvaluationError(f"unknown language '{lang}': choose c, python or casadi")
+    if lang not in EVAL_LANGS:
+        raise EvaluationError(f"unknown language '{lang}': choose {', '.join(EVAL_LANGS)}")
     return GeneratedLibrary(Path(directory), lang)

@@ -19,7 +19,7 @@ from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
 from .tree_model import TreeModel
 
-LANGUAGES = ("c", "python", "casadi", "python_c")
+LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
 
 
 class Progress:

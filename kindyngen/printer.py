@@ -37,6 +37,8 @@ class Dialect:
     select_is_call: bool  # numpy/casadi selects are calls (no precedence issue)
     booleans: tuple = ("0", "1")  # spelling of (false, true)
     single: bool = False  # C float: constants rounded once from their exact values, f-suffixed
+    times: str = "*"              # element-wise product and quotient (MATLAB: .* and ./)
+    divide: str = "/"
 
     def literal(self, value) -> str:
         """A non-negative constant: a float, or (single) its exact value as a Fraction."""
@@ -130,10 +132,10 @@ class Dialect:
             coeff = self._value([a for a in e.args if is_literal(a)])
         factors = ([self.literal(abs(coeff))] if abs(coeff) != 1 else []) + \
                   [self._wrap(f, names, MUL) for f in numer]
-        text = "*".join(factors) if factors else self.literal(1)
+        text = self.times.join(factors) if factors else self.literal(1)
         if denom:
-            divisor = "*".join(self._wrap(d, names, MUL) for d in denom)
-            text += "/" + (divisor if len(denom) == 1 and self._print(denom[0], names)[1] == ATOM else f"({divisor})")
+            divisor = self.times.join(self._wrap(d, names, MUL) for d in denom)
+            text += self.divide + (divisor if len(denom) == 1 and self._print(denom[0], names)[1] == ATOM else f"({divisor})")
         if coeff < 0:
             return "-" + text, NEG
         return text, MUL
@@ -144,13 +146,13 @@ class Dialect:
             k = int(exp)
             b = self._wrap(base, names, ATOM)
             if k >= 2:
-                return "*".join([b] * k), MUL
+                return self.times.join([b] * k), MUL
             if k <= -1:
-                return self.literal(1) + "/" + (b if k == -1 else "(" + "*".join([b] * -k) + ")"), MUL
+                return self.literal(1) + self.divide + (b if k == -1 else "(" + self.times.join([b] * -k) + ")"), MUL
         if exp == se.Rational(1, 2):
             return f"{self.functions['sqrt']}({self._print(base, names)[0]})", ATOM
         if exp == se.Rational(-1, 2):
-            return f"{self.literal(1)}/{self.functions['sqrt']}({self._print(base, names)[0]})", MUL
+            return f"{self.literal(1)}{self.divide}{self.functions['sqrt']}({self._print(base, names)[0]})", MUL
         return f"{self.functions['pow']}({self._print(base, names)[0]}, {self._print(exp, names)[0]})", ATOM
 
     def _piecewise(self, e, names):
@@ -223,4 +225,22 @@ CASADI = Dialect(
                "max": "ca.fmax", "min": "ca.fmin", "pow": "ca.power"},
     select="ca.if_else({c}, {a}, {b})", logic_and="ca.logic_and({}, {})",
     logic_or="ca.logic_or({}, {})", logic_not="ca.logic_not({})", select_is_call=True,
+)
+
+MATLAB = Dialect(
+    name="matlab",
+    functions={**{f: f for f in _MATH}, "atan2": "atan2", "abs": "abs", "max": "max",
+               "min": "min", "pow": "power"},
+    # no conditional expression in MATLAB: the generated .m file defines kdg_select
+    # (element-wise, both branches evaluated, like numpy's where)
+    select="kdg_select({c}, {a}, {b})", logic_and="{} & {}", logic_or="{} | {}", logic_not="~({})",
+    select_is_call=True, booleans=("false", "true"), times=".*", divide="./",
+)
+
+JAX = Dialect(
+    name="jax",
+    functions={f: v.replace("np.", "jnp.") for f, v in NUMPY.functions.items()},
+    select="jnp.where({c}, {a}, {b})", logic_and="jnp.logical_and({}, {})",
+    logic_or="jnp.logical_or({}, {})", logic_not="jnp.logical_not({})", select_is_call=True,
+    booleans=("False", "True"),
 )

@@ -18,7 +18,7 @@ from .c_trig import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as
                      kernel_c_float)
 from .ik_dls import dls_view
 from .optimize import Program
-from .printer import C, C_FLOAT, CASADI, NUMPY, Dialect
+from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
 from .robot import RobotModel
 
@@ -91,20 +91,33 @@ def _index(k: int, shape) -> str:
     return ", ".join(str(i) for i in reversed(out))
 
 
+def _matlab_index(k: int, shape) -> str:
+    """The MATLAB (1-based) subscripts of row-major flat entry k: a matrix entry is addressed
+    as written, row then column, whatever the memory order.
+
+    >>> _matlab_index(5, (4, 4)), _matlab_index(2, (7,))
+    ('2, 2', '3')
+    """
+    return ", ".join(str(int(i) + 1) for i in _index(k, shape).split(", "))
+
+
 def _environment() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["shape"] = lambda shape: " x ".join(str(s) for s in shape)
     env.filters["index"] = _index
+    env.filters["mindex"] = _matlab_index
+    env.filters["mshape"] = lambda port: " x ".join(str(s) for s in port.shape)
     return env
 
 
 def input_names(program: Program, dialect: Dialect) -> dict:
-    """How each input symbol is read: ``q[3]`` in C and CasADi, ``q_3`` (unpacked) in numpy."""
+    """How each input symbol is read: ``q[3]`` in C and CasADi, ``q_3`` (unpacked) in numpy,
+    JAX and MATLAB."""
     names = {}
     for port, symbols in zip(program.function.inputs, program.function.input_symbols):
         for k, sym in enumerate(symbols):
-            if dialect is NUMPY:
+            if dialect in (NUMPY, JAX, MATLAB):
                 names[sym] = f"{port.name}_{k}"
             elif dialect is CASADI and len(port.shape) == 2:
                 names[sym] = f"{port.name}[{k // port.shape[1]}, {k % port.shape[1]}]"
@@ -187,7 +200,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
-        has_select=("where(" in text or "if_else(" in text or "?" in text),
+        has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
         angles=angles,
         first_angle=first,
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
@@ -248,4 +261,24 @@ def render_casadi(model: RobotModel, programs) -> dict[str, str]:
     return {f"{model.identifier}_casadi.py": env.get_template("casadi/module.py.j2").render(ctx)}
 
 
-RENDERERS = {"c": render_c, "python": render_python, "casadi": render_casadi, "python_c": render_python_c}
+def render_jax(model: RobotModel, programs) -> dict[str, str]:
+    """A module of pure jax.numpy functions (jit, vmap, grad apply); the iterative ik_dls is
+    left out (its loop and restarts are host code in the numpy module)."""
+    env, ctx = _environment(), _context(model, programs, JAX)
+    return {f"{model.identifier}_jax.py": env.get_template("jax/module.py.j2").render(ctx)}
+
+
+def render_matlab(model: RobotModel, programs) -> dict[str, str]:
+    """One .m function per generated function, ``<robot>_<name>.m`` (vectorised over a trailing
+    batch dimension), a MEX gateway around the generated C and the .m that builds it; the
+    iterative ik_dls is left out."""
+    env, ctx = _environment(), _context(model, programs, MATLAB)
+    ctx["mex"] = f"{model.identifier}_mex"
+    files = {f"{f.c_symbol}.m": env.get_template("matlab/function.m.j2").render(ctx, f=f) for f in ctx["functions"]}
+    files[f"{ctx['mex']}.c"] = env.get_template("matlab/mex.c.j2").render(ctx)
+    files[f"{model.identifier}_build_mex.m"] = env.get_template("matlab/build_mex.m.j2").render(ctx)
+    return files
+
+
+RENDERERS = {"c": render_c, "python": render_python, "casadi": render_casadi, "python_c": render_python_c,
+             "jax": render_jax, "matlab": render_matlab}

@@ -1,4 +1,5 @@
-"""The README's complete robot-description example is a working description: it loads, it
+"""The handbook's complete robot-description example (docs/reference/description.md, moved
+there from the README) is a working description: it loads, it
 generates, and its kinematics, gravity torques and inertia matrix equal the textbook formulas
 of a planar two-link arm (derived by hand here, sharing nothing with the generator)."""
 from __future__ import annotations
@@ -19,14 +20,14 @@ G0 = 9.81
 
 
 def _example() -> dict:
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "reference" / "description.md").read_text()
     section = text[text.index("## Robot description (YAML)"):]
     block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
     return yaml.safe_load(block)
 
 
 def test_readme_example_matches_hand_derived_planar_arm(tmp_path):
-    model = parse_robot(_example(), "README.md")
+    model = parse_robot(_example(), "docs/reference/description.md")
     assert model.name == "planar2" and model.n == 2
     out = generate(model, tmp_path, languages=("python",), progress=False)
     lib = load_generated(out, "python")

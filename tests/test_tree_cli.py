@@ -200,11 +200,12 @@ def test_yaml_tree_equals_pinocchio(floating, tmp_path):
 
 
 def test_readme_tree_example_loads():
-    """The README's YAML tree is a working description (a hip and its knee below the base)."""
+    """The handbook's YAML tree (docs/reference/trees.md) is a working description (a hip and
+    its knee below the base)."""
     import re
     from kindyngen.robot import parse_robot_tree
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    text = (Path(__file__).resolve().parents[1] / "docs" / "reference" / "trees.md").read_text()
     section = text[text.index("## Kinematic trees and floating bases"):]
     block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
-    model = parse_robot_tree(yaml.safe_load(block), "README.md", floating_base=True)
+    model = parse_robot_tree(yaml.safe_load(block), "trees.md", floating_base=True)
     assert model.parents == (-1, 0) and model.nv == 8 and float(model.root.mass) == 4.0
