@@ -52,6 +52,45 @@ from .regressor_rows import torque_regressor
 
 #: Validation samples the figure keeps per run (every k-th sample, k a power of two).
 FIGURE_SAMPLES = 20000
+#: A position further than this outside a revolute joint's limits (rad, or this fraction of
+#: the joint's range if larger) is not a measurement of this robot: refused, with a hint when
+#: the numbers look like degrees.
+LIMIT_MARGIN_RAD = 0.35
+LIMIT_MARGIN_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class FitLimits:
+    """When a fit is refused: fewer than ``min_samples_per_column`` training samples per
+    regressor column (each sample gives n equations, but neighbouring samples of a 1 kHz log
+    are nearly copies: 10 per column, 430 samples for the Panda's 43 base columns, is a floor,
+    not a target), or a condition number of the stacked regressor above ``max_condition``
+    (1e6: parameters then move by up to a million times the relative torque error).
+    ``override``: fit anyway, the report saying which limit was overridden."""
+
+    min_samples_per_column: float = 10.0
+    max_condition: float = 1e6
+    override: bool = False
+
+
+def check_joint_limits(source: str, model, seg: Segment) -> None:
+    """Refuse positions far outside the description's joint limits (LogError naming the column)."""
+    for j, joint in enumerate(model.joints):
+        lo, hi = float(joint.lower), float(joint.upper)
+        if joint.kind != "revolute" or not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+            continue
+        margin = max(LIMIT_MARGIN_RAD, LIMIT_MARGIN_FRACTION * (hi - lo))
+        q = seg.q[:, j]
+        bad = np.flatnonzero((q < lo - margin) | (q > hi + margin))
+        if bad.size:
+            i = int(bad[np.argmax(np.abs(q[bad]))])
+            hint = ""
+            if np.abs(q).max() > 2 * math.pi:
+                hint = (f"; values up to {np.abs(q).max():.4g} look like degrees: the log must give "
+                        f"angles in radians (multiply by pi/180 = 0.01745)")
+            raise LogError(source, f"q{j + 1}", f"{q[i]:.4g} rad at t = {seg.t[i]:.6g} s is far outside the joint "
+                                                f"limits [{lo:.4g}, {hi:.4g}] rad of the description (more than "
+                                                f"{margin:.3g} rad beyond){hint}")
 
 
 def overlap_rows(settings: Preprocessing, dt: float) -> int:
@@ -280,6 +319,7 @@ def _accumulate(task, segments, rows_of, n, k, k_base, nominal_p, model, started
     valid_time = 0.0
     last = time.perf_counter()
     for seg in segments:
+        check_joint_limits(task.path, model, seg)
         Y, tau = rows_of(seg)
         if task.role == "train":
             is_valid = np.zeros(len(tau), bool)
@@ -353,7 +393,8 @@ def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], No
 # --------------------------------------------------------------------------- the whole run
 
 def identify_streamed(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
-                      workers: int = 1, client=None, chunk_rows: int = CHUNK_ROWS) -> Identification:
+                      workers: int = 1, client=None, chunk_rows: int = CHUNK_ROWS,
+                      limits: FitLimits = FitLimits()) -> Identification:
     """:func:`kindyngen.measured.identify.identify` in bounded memory (same request, same
     :class:`~kindyngen.measured.identify.Identification`; the validation arrays for the figure
     are decimated to at most about 2 x FIGURE_SAMPLES samples)."""
@@ -393,10 +434,31 @@ def identify_streamed(request: IdentificationRequest, progress: Callable[[str], 
              f"samples/s)")
     train = combine_in_order([f.train for f in folds])
     valid = combine_in_order([f.validation for f in folds])
-    return solve_folds(request, model, train, valid, folds, progress)
+    return solve_folds(request, model, train, valid, folds, progress, limits)
 
 
-def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progress) -> Identification:
+def _check_fit(train: LSFactor, limits: FitLimits) -> tuple[str, ...]:
+    """Refuse (IdentificationDataError) a fit below ``limits``; with ``override`` the reasons
+    come back as notes for the report instead."""
+    reasons = []
+    per_column = train.samples / train.k
+    if per_column < limits.min_samples_per_column:
+        reasons.append(f"{train.samples} training samples for {train.k} regressor columns ({per_column:.3g} per "
+                       f"column) is below the minimum of {limits.min_samples_per_column:g} per column "
+                       f"(--min-samples-per-column): give more data or a larger --split")
+    else:
+        cond = condition_number(train)
+        if cond > limits.max_condition:
+            reasons.append(f"the condition number of the stacked training regressor is {cond:.3g}, above the "
+                           f"limit {limits.max_condition:.3g} (--max-condition): the data do not excite every "
+                           f"parameter (use an excitation trajectory, see 'kindyngen excite', or more data)")
+    if reasons and not limits.override:
+        raise IdentificationDataError(reasons[0] + "; --accept-poor-fit fits anyway, flagged in the report")
+    return tuple(f"OVERRIDDEN REFUSAL (--accept-poor-fit): {reason}" for reason in reasons)
+
+
+def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progress,
+                limits: FitLimits = FitLimits()) -> Identification:
     """The fit and its report from the combined factors (the part of :func:`identify_streamed`
     after the data are folded)."""
     n = model.n
@@ -407,6 +469,7 @@ def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progres
     prior = parameter_vector(model)
     if train.samples == 0:
         raise IdentificationDataError("no training samples")
+    overridden = _check_fit(train, limits)
     if request.consistent:
         progress(f"solving the semidefinite program ({train.samples} samples, {10 * n + len(enames)} unknowns)")
         fit = identify_consistent_factor(train, P, enames, prior=prior)
@@ -426,6 +489,7 @@ def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progres
     values = np.concatenate([base, evalues])
     rms_train = train.rms(values)
     consistent, consistency_notes = _consistency(full, n, enames, evalues)
+    consistency_notes = overridden + consistency_notes
     text = None
     if consistent:
         try:
