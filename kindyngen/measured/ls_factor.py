@@ -33,19 +33,42 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import reduce
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import scipy.linalg
+from scipy.linalg.lapack import dgeqrf as _geqrf
 
 from .estimation import Fit, IdentificationDataError, RankDeficientError, check_identifiable, _effect_hint
 
 
 def _triangle(stacked: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """(R, c, r^2) of the QR factorisation of ``stacked = [A b]`` (rows x k + 1); rows below k + 1
-    are padded with zeros so a short stack still gives a k x k R."""
-    F = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0]
-    if F.shape[0] < k + 1:
-        F = np.vstack([F, np.zeros((k + 1 - F.shape[0], k + 1))])
+    """(R, c, r^2) of the QR factorisation of ``stacked = [A b]`` (rows x k + 1, overwritten;
+    Fortran order avoids a copy); rows below k + 1 are padded with zeros so a short stack still
+    gives a k x k R."""
+    if stacked.shape[0] < k + 1:
+        stacked = np.vstack([stacked, np.zeros((k + 1 - stacked.shape[0], k + 1))])
+    qr, _, _, info = _geqrf(stacked, overwrite_a=1)
+    if info != 0:
+        raise IdentificationDataError(f"QR factorisation failed (LAPACK geqrf info {info})")
+    F = np.triu(qr[:k + 1])
     return F[:k, :k], F[:k, k], float(F[k, k] ** 2)
+
+
+def _update(R: np.ndarray, c: np.ndarray, A: np.ndarray, b: np.ndarray):
+    """The triangle of ``[[R c], [A b]]``, stacked once in Fortran order."""
+    k = R.shape[0]
+    stacked = np.empty((k + len(A), k + 1), order="F")
+    stacked[:k, :k], stacked[:k, k] = R, c
+    stacked[k:, :k], stacked[k:, k] = A, b
+    return _triangle(stacked, k)
+
+
+def _map_joints(function, n: int):
+    """``[function(j) for j in range(n)]`` on two threads: LAPACK releases the GIL, and each
+    joint's factorisation is the same arithmetic whichever thread runs it."""
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        return list(pool.map(function, range(n)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,11 +110,10 @@ class LSFactor:
                                           f"{bad[:10].tolist()} of a chunk): remove or repair those samples first")
         if len(Y) == 0:
             return self
-        R, c, rss = np.empty_like(self.R), np.empty_like(self.c), self.rss.copy()
-        for j in range(self.n):
-            stacked = np.vstack([np.column_stack([self.R[j], self.c[j]]), np.column_stack([Y[:, j, :], tau[:, j]])])
-            R[j], c[j], extra = _triangle(stacked, self.k)
-            rss[j] += extra
+        parts = _map_joints(lambda j: _update(self.R[j], self.c[j], Y[:, j, :], tau[:, j]), self.n)
+        R = np.array([p[0] for p in parts])
+        c = np.array([p[1] for p in parts])
+        rss = self.rss + np.array([p[2] for p in parts])
         return LSFactor(R, c, rss, self.samples + len(Y), self.sum_tau2 + np.sum(tau ** 2, axis=0))
 
     def residual_sums(self, p) -> np.ndarray:
@@ -107,7 +129,7 @@ class LSFactor:
         """(R, c, rss) of all joints' equations together, joint j's multiplied by ``weights[j]``
         (default 1): the factor of the whole stacked (weighted) regressor."""
         w = np.ones(self.n) if weights is None else np.asarray(weights, float)
-        rows = np.vstack([w[j] * np.column_stack([self.R[j], self.c[j]]) for j in range(self.n)])
+        rows = np.asfortranarray(np.vstack([w[j] * np.column_stack([self.R[j], self.c[j]]) for j in range(self.n)]))
         R, c, extra = _triangle(rows, self.k)
         return R, c, extra + float(np.sum(w ** 2 * self.rss))
 
@@ -124,8 +146,7 @@ def combine(a: LSFactor, b: LSFactor) -> LSFactor:
         return b
     R, c, rss = np.empty_like(a.R), np.empty_like(a.c), a.rss + b.rss
     for j in range(a.n):
-        stacked = np.vstack([np.column_stack([a.R[j], a.c[j]]), np.column_stack([b.R[j], b.c[j]])])
-        R[j], c[j], extra = _triangle(stacked, a.k)
+        R[j], c[j], extra = _update(a.R[j], a.c[j], b.R[j], b.c[j])
         rss[j] += extra
     return LSFactor(R, c, rss, a.samples + b.samples, a.sum_tau2 + b.sum_tau2)
 

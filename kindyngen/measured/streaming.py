@@ -51,7 +51,7 @@ from .model_writer import ModelWriteError, model_yaml
 from .regressor_rows import torque_regressor
 
 #: Validation samples the figure keeps per run (every k-th sample, k a power of two).
-FIGURE_SAMPLES = 20000
+FIGURE_SAMPLES = 4000
 #: A position further than this outside a revolute joint's limits (rad, or this fraction of
 #: the joint's range if larger) is not a measurement of this robot: refused, with a hint when
 #: the numbers look like degrees.
@@ -100,7 +100,7 @@ def overlap_rows(settings: Preprocessing, dt: float) -> int:
     period for the reflection padding and two samples for the differences on top.
 
     >>> overlap_rows(Preprocessing(), 0.001)
-    3528
+    3530
     """
     if settings.cutoff_hz is None:
         return 2
