@@ -109,7 +109,8 @@ def run(label: str, code_root: Path, log: Path, out: Path, extra=()) -> dict:
     env = dict(os.environ, PYTHONPATH=str(code_root))
     print(f"[{label}] {' '.join(argv[2:])}", flush=True)
     started = time.perf_counter()
-    proc = subprocess.run(argv, env=env, capture_output=True, text=True)
+    # cwd = the code's root: ``python -m`` puts the working folder before PYTHONPATH
+    proc = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=code_root)
     wall = time.perf_counter() - started
     peak_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
     progress = [line for line in proc.stderr.splitlines() if line.startswith("identify:")]
