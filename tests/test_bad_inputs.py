@@ -119,7 +119,7 @@ def test_nul_byte_csv_and_text_npz_are_named(log, capsys, tmp_path):
     fake = tmp_path / "fake.npz"
     fake.write_text("t,q1\n0,0\n")
     line = _refused(["identify", "--robot", PANDA, "--data", str(fake), "--split", "0.5", "--out", str(tmp_path / "o")],
-                    capsys, "not an .npz archive")
+                    capsys, "cannot read as an .npz archive: no zip signature")
     assert "pickle" not in line
 
 

@@ -448,8 +448,8 @@ def _csv_numbers(rows: list[list[str]], lines: list[int], names: list[str], sour
 def _read_npz(path: Path, n: int, source: str) -> RawLog:
     if path.is_file() and not zipfile.is_zipfile(path):
         # np.load would try it as a pickle and call it "pickled data"
-        raise LogError(source, "<file>", "not an .npz archive (no zip signature; np.savez writes zip archives "
-                                         "of .npy arrays)")
+        raise LogError(source, "<file>", "cannot read as an .npz archive: no zip signature (np.savez writes zip "
+                                         "archives of .npy arrays)")
     try:
         with np.load(path, allow_pickle=False) as archive:
             keys = list(archive.files)
