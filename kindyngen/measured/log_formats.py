@@ -113,6 +113,23 @@ def read_any(path, n: int, joint_names: Sequence[str] | None = None) -> RawLog:
     return RawLog(str(path), whole["t"], whole["q"], whole["tau"], whole["qd"], whole["qdd"])
 
 
+def time_column(path) -> np.ndarray | None:
+    """The ``t`` column alone of a Parquet or CSV file (None if it has none: the full reader
+    then names what is wrong)."""
+    import pyarrow as pa
+    try:
+        if log_kind(path) == "parquet":
+            import pyarrow.parquet as pq
+            table = pq.read_table(path, columns=["t"])
+        else:
+            import pyarrow.csv as pacsv
+            table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(include_columns=["t"],
+                                                                              column_types={"t": pa.float64()}))
+    except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError):
+        return None
+    return table.column("t").to_numpy()
+
+
 def _check_chunk(source: str, chunk: RawChunk, last_t, kind: str) -> None:
     row = "sample" if kind.startswith("rosbag") else "data row"
     for name, a in (("t", chunk.t),) + tuple((ch, getattr(chunk, ch)) for ch in _CHANNELS):

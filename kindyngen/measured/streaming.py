@@ -44,7 +44,8 @@ from .consistent import identify_consistent_factor, links_from_barycentric
 from .effects import coulomb_eps, effect_columns, effect_names
 from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, _consistency
-from .log_formats import CHUNK_ROWS, RawChunk, iter_chunks, joint_names_of, read_any
+from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
+                          time_column)
 from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess
 from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
 from .model_writer import ModelWriteError, model_yaml
@@ -350,7 +351,13 @@ def _accumulate(task, segments, rows_of, n, k, k_base, nominal_p, model, started
 
 
 def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> tuple[float, float]:
-    """(first, last) time stamp of a log (one pass over its chunks)."""
+    """(first, last) time stamp of a log: Parquet and large CSV files read their ``t`` column
+    alone; other formats take one pass over their chunks."""
+    kind = log_kind(path)
+    if kind == "parquet" or (kind == "csv" and Path(path).stat().st_size > SMALL_CSV_BYTES):
+        t = time_column(path)
+        if t is not None and len(t):
+            return float(t[0]), float(t[-1])
     first = last = None
     for chunk in iter_chunks(path, n, joint_names, chunk_rows):
         first = float(chunk.t[0]) if first is None else first
