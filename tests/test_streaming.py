@@ -2,7 +2,7 @@
 against the in-memory code path and plain numpy, on Panda logs simulated here with Pinocchio's
 rnea (nothing shared with the identification): the streamed fit equals the in-memory one, one
 file equals the same samples in ten files, Dask fleets of 1, 2 and 4 workers give the same bits,
-and Parquet and rosbag2 (MCAP, SQLite) files give the CSV's result."""
+and Parquet, rosbag2 (MCAP, SQLite) and ROS 1 bag files give the CSV's result."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,7 +12,7 @@ import pytest
 from harness import ROOT
 from kindyngen.measured.estimation import least_squares
 from kindyngen.measured.identify import IdentificationRequest, identify
-from kindyngen.measured.log_formats import joint_names_of, read_any, write_parquet, write_rosbag2
+from kindyngen.measured.log_formats import joint_names_of, read_any, write_parquet, write_rosbag1, write_rosbag2
 from kindyngen.measured.logs import LogError, Preprocessing, RawLog, preprocess
 from kindyngen.measured.ls_factor import LSFactor, combine, combine_in_order, least_squares_factor
 from kindyngen.measured.streaming import identify_streamed, stream_segments
@@ -169,7 +169,7 @@ def test_one_file_and_ten_files_and_dask_workers_agree(ten_files):
     assert np.array_equal(bits[0], _values(split))     # and the same as in this process
 
 
-def test_parquet_and_rosbag2_give_the_csv_result(log, tmp_path):
+def test_parquet_and_bags_give_the_csv_result(log, tmp_path):
     root, path, (t, q, qd, qdd, tau) = log
     raw = RawLog("sim", t[:8000], q[:8000], tau[:8000])
     csv = _csv(tmp_path / "run.csv", raw.t, raw.q, raw.tau)
@@ -181,8 +181,10 @@ def test_parquet_and_rosbag2_give_the_csv_result(log, tmp_path):
     sqlite = tmp_path / "bag_sqlite"
     write_rosbag2(sqlite, RawLog("sim", raw.t, raw.q[:, ::-1], raw.tau[:, ::-1]), ros_names[::-1],
                   storage="sqlite3")          # joints in another order: matched by name
+    ros1 = tmp_path / "run.bag"
+    write_rosbag1(ros1, raw, ros_names)
     reference = _values(identify_streamed(IdentificationRequest(PANDA, (str(csv),), split=0.7)))
-    for log_path in (parquet, mcap, sqlite):
+    for log_path in (parquet, mcap, sqlite, ros1):
         result = identify_streamed(IdentificationRequest(PANDA, (str(log_path),), split=0.7))
         assert _relative(_values(result), reference) < 1e-9, log_path
 

@@ -392,3 +392,23 @@ def write_rosbag2(path, raw: RawLog, joint_names: Sequence[str], storage: str = 
                              velocity=empty if raw.qd is None else np.asarray(raw.qd[i], float),
                              effort=np.asarray(raw.tau[i], float))
             writer.write(connection, ns, store.serialize_cdr(msg, JointState.__msgtype__))
+
+
+def write_rosbag1(path, raw: RawLog, joint_names: Sequence[str], topic: str = "/joint_states") -> None:
+    """``raw`` as a ROS 1 ``.bag`` file of ``sensor_msgs/JointState`` messages stamped with ``raw.t`` (s)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS1_NOETIC)
+    JointState = store.types["sensor_msgs/msg/JointState"]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    with Writer(Path(path)) as writer:
+        connection = writer.add_connection(topic, JointState.__msgtype__, typestore=store)
+        empty = np.zeros(0)
+        for i, t in enumerate(raw.t):
+            ns = int(round(float(t) * 1e9))
+            msg = JointState(header=Header(seq=i, stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
+                             name=list(joint_names), position=np.asarray(raw.q[i], float),
+                             velocity=empty if raw.qd is None else np.asarray(raw.qd[i], float),
+                             effort=np.asarray(raw.tau[i], float))
+            writer.write(connection, ns, store.serialize_ros1(msg, JointState.__msgtype__))
