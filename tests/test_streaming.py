@@ -201,3 +201,28 @@ def test_bag_joint_names_are_checked(tmp_path):
     write_rosbag2(extra, RawLog("sim", t, np.zeros((100, 8)), np.zeros((100, 8))), names + ["gripper"])
     with pytest.raises(LogError, match="names joint\\(s\\) gripper the description does not have"):
         read_any(extra, 7, names)
+
+
+def test_semidefinite_program_from_the_factor_equals_the_stacked_one(ten_files):
+    from kindyngen.measured.consistent import identify_consistent, identify_consistent_factor
+    from kindyngen.measured.effects import effect_columns
+    from kindyngen.measured.regressor_rows import torque_regressor
+    from kindyngen.inertial_parameters import parameter_vector
+    arm, one, _, _ = ten_files
+    model = load_robot(arm)
+    raw = read_any(one, 3)
+    R = torque_regressor(model)
+    Yb = R(raw.q, raw.qd, raw.qdd)
+    E = effect_columns(("viscous_friction",), raw.qd, raw.qdd)
+    names = tuple(f"fv{i + 1}" for i in range(3))
+    prior = parameter_vector(model) * 1.2
+    stacked = identify_consistent(Yb @ R.base_map, E, raw.tau, 3, names, prior=prior, base_map=R.base_map)
+    factor = LSFactor.empty(3, Yb.shape[2] + 3)
+    for a in range(0, len(raw.t), 700):
+        factor = factor.fold(np.concatenate([Yb, E], axis=2)[a:a + 700], raw.tau[a:a + 700])
+    folded = identify_consistent_factor(factor, R.base_map, names, prior=prior)
+    # the same program, given to the solver as a differently shaped (same Gram matrix) term
+    assert _relative(folded.base_values, stacked.base_values) < 1e-5
+    assert _relative(folded.effect_values, stacked.effect_values) < 1e-5
+    assert np.allclose(folded.rms, stacked.rms, rtol=1e-5)
+    assert folded.data_term == pytest.approx(stacked.data_term, rel=1e-5)
