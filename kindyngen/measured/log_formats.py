@@ -113,21 +113,34 @@ def read_any(path, n: int, joint_names: Sequence[str] | None = None) -> RawLog:
     return RawLog(str(path), whole["t"], whole["q"], whole["tau"], whole["qd"], whole["qdd"])
 
 
-def time_column(path) -> np.ndarray | None:
-    """The ``t`` column alone of a Parquet or CSV file (None if it has none: the full reader
-    then names what is wrong)."""
+def time_span_of_file(path) -> tuple[float, float] | None:
+    """(first, last) time stamp of a Parquet file (its first and last row groups' ``t``) or a
+    CSV file (its ``t`` column streamed alone), or None if the file has no readable ``t``
+    (the full reader then names what is wrong)."""
     import pyarrow as pa
     try:
         if log_kind(path) == "parquet":
             import pyarrow.parquet as pq
-            table = pq.read_table(path, columns=["t"])
-        else:
-            import pyarrow.csv as pacsv
-            table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(include_columns=["t"],
-                                                                              column_types={"t": pa.float64()}))
+            handle = pq.ParquetFile(path)
+            groups = handle.metadata.num_row_groups
+            if groups == 0:
+                return None
+            first = handle.read_row_group(0, columns=["t"]).column("t").to_numpy()
+            last = handle.read_row_group(groups - 1, columns=["t"]).column("t").to_numpy()
+            return (float(first[0]), float(last[-1])) if len(first) and len(last) else None
+        import pyarrow.csv as pacsv
+        reader = pacsv.open_csv(path, read_options=pacsv.ReadOptions(block_size=8 << 20),
+                                convert_options=pacsv.ConvertOptions(include_columns=["t"],
+                                                                     column_types={"t": pa.float64()}))
+        first = last = None
+        for batch in reader:
+            if batch.num_rows:
+                t = batch.column(0).to_numpy()
+                first = float(t[0]) if first is None else first
+                last = float(t[-1])
+        return None if first is None else (first, last)
     except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError):
         return None
-    return table.column("t").to_numpy()
 
 
 def _check_chunk(source: str, chunk: RawChunk, last_t, kind: str) -> None:
@@ -257,10 +270,17 @@ def _parquet_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterato
         if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
             raise LogError(source, name, f"expected real numbers, got the Parquet type {kind}")
     rows = 0
-    for batch in handle.iter_batches(batch_size=chunk_rows):
-        columns = {i: batch.column(i).to_numpy(zero_copy_only=False).astype(float) for i in range(batch.num_columns)}
-        yield _columns_chunk(columns, layout, rows)
-        rows += batch.num_rows
+    # one row group at a time: ParquetFile.iter_batches keeps every row group it has read (its
+    # resident memory grew by one row group per group, 5 GB into a 10-hour log); read_row_group
+    # does not.  Memory is then one row group (write them at most ~1M rows; pyarrow's default
+    # is 1M) plus one chunk.
+    for group in range(handle.metadata.num_row_groups):
+        table = handle.read_row_group(group)
+        columns = {i: table.column(i).to_numpy().astype(float) for i in range(table.num_columns)}
+        del table
+        for a in range(0, len(columns[0]) if columns else 0, chunk_rows):
+            yield _columns_chunk({i: v[a:a + chunk_rows] for i, v in columns.items()}, layout, rows + a)
+        rows += len(columns[0]) if columns else 0
 
 
 def write_parquet(path, raw: RawLog) -> None:

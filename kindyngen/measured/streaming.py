@@ -45,7 +45,7 @@ from .effects import coulomb_eps, effect_columns, effect_names
 from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, _consistency
 from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
-                          time_column)
+                          time_span_of_file)
 from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess
 from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
 from .model_writer import ModelWriteError, model_yaml
@@ -355,9 +355,9 @@ def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> t
     alone; other formats take one pass over their chunks."""
     kind = log_kind(path)
     if kind == "parquet" or (kind == "csv" and Path(path).stat().st_size > SMALL_CSV_BYTES):
-        t = time_column(path)
-        if t is not None and len(t):
-            return float(t[0]), float(t[-1])
+        span = time_span_of_file(path)
+        if span is not None:
+            return span
     first = last = None
     for chunk in iter_chunks(path, n, joint_names, chunk_rows):
         first = float(chunk.t[0]) if first is None else first
