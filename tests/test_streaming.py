@@ -191,7 +191,6 @@ def test_parquet_and_bags_give_the_csv_result(log, tmp_path):
 
 def test_bag_joint_names_are_checked(tmp_path):
     t = np.arange(100) * 0.01
-    raw = RawLog("sim", t, np.zeros((100, 7)), np.zeros((100, 7)))
     names = joint_names_of(load_robot(PANDA))
     missing = tmp_path / "missing"
     write_rosbag2(missing, RawLog("sim", t, np.zeros((100, 6)), np.zeros((100, 6))), names[:6])

@@ -211,8 +211,8 @@ def _csv_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterator[Ra
 
 def _npz_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterator[RawChunk]:
     """npz members streamed row block by row block (no member is loaded whole); archives that
-    cannot be streamed (compressed with Fortran order, object arrays) are read by read_log."""
-    source = str(path)
+    cannot be streamed (Fortran-ordered or object arrays, keys other than the five of a log,
+    which read_log refuses or notes) are read by read_log."""
     raw_keys = {"times": "t", "positions": "q", "velocities": "qd", "accelerations": "qdd", "torques": "tau"}
     try:
         archive = zipfile.ZipFile(path)
@@ -221,7 +221,10 @@ def _npz_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterator[Ra
         return
     with archive:
         members = {name[:-4]: name for name in archive.namelist() if name.endswith(".npy")}
-        streams, layout = {}, {}
+        if set(members) - set(raw_keys) or len(members) != len(archive.namelist()):
+            yield from _slices(read_log(path, n), chunk_rows)
+            return
+        streams = {}
         try:
             for key, member in members.items():
                 if key not in raw_keys:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -250,6 +250,9 @@ class FoldTask:
     settings: Preprocessing
     chunk_rows: int = CHUNK_ROWS
     cut_time: float | None = None
+    #: ``rows_factory(model, effects)`` -> the per-chunk callable (preprocessed piece -> regressor
+    #: rows, torques); a top-level function, so that Dask and process pools can send it
+    rows_factory: Callable | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -276,7 +279,7 @@ def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: Non
     started = time.perf_counter()
     model = load_robot(task.robot, task.snap_angles, task.base, task.tip)
     n = model.n
-    rows_of = regressor_rows(model, task.effects)
+    rows_of = (task.rows_factory or regressor_rows)(model, task.effects)
     regressor = torque_regressor(model)
     k_base = len(regressor.names)
     k = k_base + len(effect_names(task.effects, n))
@@ -401,15 +404,17 @@ def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], No
 
 def identify_streamed(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
                       workers: int = 1, client=None, chunk_rows: int = CHUNK_ROWS,
-                      limits: FitLimits = FitLimits()) -> Identification:
+                      limits: FitLimits = FitLimits(), rows_factory: Callable | None = None) -> Identification:
     """:func:`kindyngen.measured.identify.identify` in bounded memory (same request, same
     :class:`~kindyngen.measured.identify.Identification`; the validation arrays for the figure
-    are decimated to at most about 2 x FIGURE_SAMPLES samples)."""
+    are decimated to at most about 2 x FIGURE_SAMPLES samples).  ``rows_factory``: see
+    :class:`FoldTask` (default :func:`regressor_rows`)."""
     model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     n = model.n
     settings = request.preprocessing
     common = dict(robot=str(request.robot), base=request.base, tip=request.tip, snap_angles=request.snap_angles,
-                  effects=tuple(request.effects), settings=settings, chunk_rows=chunk_rows)
+                  effects=tuple(request.effects), settings=settings, chunk_rows=chunk_rows,
+                  rows_factory=rows_factory)
     tasks = []
     if request.split is not None:
         progress("finding the time span of the training logs for --split")
