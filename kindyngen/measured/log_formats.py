@@ -49,7 +49,8 @@ _CHANNELS = ("q", "qd", "qdd", "tau")
 @dataclass(frozen=True, eq=False)
 class RawChunk:
     """Consecutive samples of a log: ``t`` (m,), ``q``, ``tau`` (m, n), ``qd``/``qdd`` or None;
-    ``first_row``: the 0-based row of the first sample in the whole log."""
+    ``first_row``: the 0-based row of the first sample in the whole log; ``notes``: what the
+    reader left out (on the first chunk)."""
 
     t: np.ndarray
     q: np.ndarray
@@ -57,6 +58,7 @@ class RawChunk:
     qd: np.ndarray | None
     qdd: np.ndarray | None
     first_row: int
+    notes: tuple[str, ...] = ()
 
 
 def log_kind(path) -> str:
@@ -164,7 +166,7 @@ def _slices(raw: RawLog, chunk_rows: int) -> Iterator[RawChunk]:
     for a in range(0, len(raw.t), chunk_rows):
         s = slice(a, a + chunk_rows)
         yield RawChunk(raw.t[s], raw.q[s], raw.tau[s], None if raw.qd is None else raw.qd[s],
-                       None if raw.qdd is None else raw.qdd[s], a)
+                       None if raw.qdd is None else raw.qdd[s], a, raw.notes if a == 0 else ())
 
 
 def _columns_chunk(columns: dict, layout: dict, first_row: int) -> RawChunk:

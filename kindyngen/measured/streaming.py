@@ -140,6 +140,7 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
 
     def extend(chunk: RawChunk):
         nonlocal buf
+        notes.extend(chunk.notes)
         new = {"t": chunk.t, "q": chunk.q, "tau": chunk.tau, "qd": chunk.qd, "qdd": chunk.qdd}
         if buf is None:
             buf = new
@@ -169,7 +170,9 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
         b1 = b0 + rows_buffered()
         if exhausted and (L is None or b0 == 0 and b1 <= 2 * chunk_rows + 2 * L):
             # short enough to preprocess whole: exactly what the in-memory path does
-            yield from preprocess(_window_log(source, buf, 0, b1), settings)
+            whole = preprocess(_window_log(source, buf, 0, b1), settings)
+            notes.extend(note for seg in whole for note in seg.notes)
+            yield from whole
             return
         end_out = b1 - cut if exhausted else None
         if exhausted and s >= end_out:
