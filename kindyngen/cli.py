@@ -25,6 +25,15 @@ LANGS = ("c", "python", "casadi", "jax", "matlab")
 # generate also writes the CPython extension source (python_c), which eval does not run
 GENERATE_LANGS = ("c", "python", "casadi", "python_c", "jax", "matlab")
 EXIT_BAD_INPUT = 2
+#: what each command writes into --out (an earlier run's file of these names that a new run
+#: does not write is removed, so two runs never mix: kindyngen.output_dir)
+IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
+DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "residuals.png", "gap.png", "heldout_torques.png")
+EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
+MAX_HOLDOUT = 0.8
+MAX_FOLDS = 50
+#: excite refuses a design whose regressor condition number exceeds this (identify's default limit)
+MAX_EXCITATION_CONDITION = 1e6
 
 
 class UsageError(ValueError):
@@ -279,9 +288,19 @@ def _count(text: str) -> int:
     return value
 
 
+def _folds(text: str) -> int:
+    """An argparse type: a number of cross-validation blocks (at least 2)."""
+    value = _count(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"expected at least 2 blocks (one is fitted, one validates), got {text!r}")
+    return value
+
+
 def _cmd_identify(args) -> int:
-    from .measured.identify import IdentificationRequest, identify, write_outputs
+    from .measured.identify import IdentificationRequest, write_outputs
     from .measured.logs import Preprocessing
+    from .measured.streaming import FitLimits, identify_streamed
+    from .output_dir import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
                          "the data it was fitted to says little")
@@ -295,8 +314,22 @@ def _cmd_identify(args) -> int:
         if not args.quiet:
             print(f"identify: {text}", file=sys.stderr, flush=True)
 
-    result = identify(request, progress)
-    out = write_outputs(result, args.out)
+    limits = FitLimits(min_samples_per_column=args.min_samples_per_column, max_condition=args.max_condition,
+                       override=args.accept_poor_fit)
+    client = None
+    if args.scheduler:
+        try:
+            from dask.distributed import Client
+            client = Client(args.scheduler, timeout=30)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise UsageError(f"--scheduler {args.scheduler}: cannot connect to the Dask scheduler ({exc})") from None
+    try:
+        result = identify_streamed(request, progress, workers=args.workers, client=client, limits=limits)
+    finally:
+        if client is not None:
+            client.close()
+    replace_outputs(args.out, lambda folder: write_outputs(result, folder), IDENTIFY_OUTPUTS)
+    out = Path(args.out)
     summary = {"rms_train": [round(float(v), 4) for v in result.rms_train]}
     if result.rms_validation is not None:
         summary["rms_validation"] = [round(float(v), 4) for v in result.rms_validation]
@@ -320,8 +353,16 @@ def _cmd_discover(args) -> int:
         if not args.quiet:
             print(f"discover: {text}", file=sys.stderr, flush=True)
 
+    from .output_dir import replace_outputs
+    if args.holdout > MAX_HOLDOUT:
+        raise UsageError(f"--holdout {args.holdout:g} leaves {100 * (1 - args.holdout):.3g} % of the log to find "
+                         f"effects in; at most {MAX_HOLDOUT:g} may be held out")
+    if args.folds > MAX_FOLDS:
+        raise UsageError(f"--folds {args.folds}: at most {MAX_FOLDS} cross-validation blocks (each block must hold "
+                         f"seconds of motion, not a handful of samples)")
     result = run_discrepancy(request, progress)
-    out = write_outputs(result, args.out)
+    replace_outputs(args.out, lambda folder: write_outputs(result, folder), DISCOVER_OUTPUTS)
+    out = Path(args.out)
     d = result.discovery
     print(json.dumps({"effects": list(d.effects),
                       "indistinguishable": [list(group) for group, _ in d.indistinguishable],
@@ -368,13 +409,30 @@ def _cmd_excite(args) -> int:
         if not args.quiet:
             print(f"excite: {text}", file=sys.stderr, flush=True)
 
+    from .measured.logs import MIN_SAMPLES
+    from .output_dir import replace_outputs
+    rows = int(math.floor(args.periods / args.frequency * args.rate + 1e-9)) + 1
+    if rows < MIN_SAMPLES:
+        raise UsageError(f"--rate {args.rate:g} Hz over {args.periods} period(s) of {1 / args.frequency:g} s gives "
+                         f"{rows} row(s); a log needs at least {MIN_SAMPLES} (identification filters and "
+                         f"differentiates it): raise --rate")
     result = optimise_excitation(model, limits, harmonics=args.harmonics, base_frequency_hz=args.frequency,
                                  friction=not args.no_friction, seed=args.seed, max_iterations=args.iterations,
                                  progress=progress)
+    if not result.feasible:
+        raise UsageError(f"no trajectory within the limits was found (velocity {args.velocity:g} rad/s, acceleration "
+                         f"{args.acceleration:g} rad/s^2, margin {args.margin:g} rad): relax them or raise --iterations")
+    if not result.condition_number <= MAX_EXCITATION_CONDITION:
+        raise UsageError(f"the best trajectory within the limits has a regressor condition number of "
+                         f"{result.condition_number:.3g} (limit {MAX_EXCITATION_CONDITION:.0e}): velocity "
+                         f"{args.velocity:g} rad/s and acceleration {args.acceleration:g} rad/s^2 leave too little "
+                         f"motion to excite every parameter; raise them")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = write_trajectory_csv(out / "excitation.csv", result.trajectory, args.rate, periods=args.periods)
-    write_trajectory_json(out / "excitation.json", result)
+
+    def write(folder):
+        write_trajectory_csv(folder / "excitation.csv", result.trajectory, args.rate, periods=args.periods)
+        write_trajectory_json(folder / "excitation.json", result)
+    replace_outputs(out, write, EXCITE_OUTPUTS)
     print(json.dumps({"condition_number": round(result.condition_number, 3),
                       "initial_condition_number": round(result.initial_condition_number, 3),
                       "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
@@ -474,8 +532,11 @@ def parser() -> argparse.ArgumentParser:
                                     "DIR/model.yaml (the identified robot description) when the result is "
                                     "physical. Logs: CSV with header t, q1..qn, tau1..taun (optional qd1.., "
                                     "qdd1..; s, rad, N m) or npz with times, positions, velocities, "
-                                    "accelerations, torques. Each file is one experiment; files are never "
-                                    "differentiated across."))
+                                    "accelerations, torques; Parquet with the CSV's column names; ROS 2 bags "
+                                    "(a rosbag2 folder, MCAP or SQLite) and ROS 1 .bag files of "
+                                    "sensor_msgs/msg/JointState, joints matched by name. Logs are read and "
+                                    "folded in chunks, so memory does not grow with their length. Each file is "
+                                    "one experiment; files are never differentiated across."))
     i.add_argument("--robot", required=True, metavar="ROBOT", help="the robot description, YAML or URDF (geometry, prior)")
     _robot_options(i)
     i.add_argument("--data", required=True, action="append", metavar="LOG", help="training log (repeatable)")
@@ -488,6 +549,16 @@ def parser() -> argparse.ArgumentParser:
                    help="physically consistent identification (semidefinite program): positive definite "
                         "pseudo-inertias, non-negative friction and armature")
     i.add_argument("--weighted", action="store_true", help="weighted least squares (per-joint noise levels)")
+    i.add_argument("--workers", type=_count, default=1, metavar="N",
+                   help="fold the log files in N local processes (default 1; the result is the same bit for bit)")
+    i.add_argument("--scheduler", metavar="ADDRESS",
+                   help="fold the log files on a dask.distributed cluster (e.g. tcp://host:8786)")
+    i.add_argument("--min-samples-per-column", type=_positive, default=10.0, metavar="K",
+                   help="refuse fits with fewer training samples per regressor column (default 10)")
+    i.add_argument("--max-condition", type=_positive, default=1e6, metavar="C",
+                   help="refuse fits whose stacked regressor's condition number exceeds C (default 1e6)")
+    i.add_argument("--accept-poor-fit", action="store_true",
+                   help="fit despite those two limits; the report and identification.json flag it")
     _log_arguments(i)
     i.set_defaults(run=_cmd_identify)
 
@@ -554,7 +625,7 @@ def parser() -> argparse.ArgumentParser:
                    help="fraction of the time span held out (default 0.3)")
     d.add_argument("--candidates", type=_candidates, default=None, metavar="LIST",
                    help="comma-separated candidate effects (default: all)")
-    d.add_argument("--folds", type=_count, default=5, help="cross-validation blocks (default 5)")
+    d.add_argument("--folds", type=_folds, default=5, help="cross-validation blocks, 2 to 50 (default 5)")
     _log_arguments(d)
     d.set_defaults(run=_cmd_discover)
     return p

@@ -357,9 +357,14 @@ def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = No
 def _read_yaml(path: Path):
     source = str(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise RobotDescriptionError(source, "<file>", f"cannot read: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise RobotDescriptionError(source, "<file>", f"not a text file (byte {exc.start}: {exc.reason}): a robot "
+                                                      f"description is YAML or URDF text") from None
+    if "\0" in text:
+        raise RobotDescriptionError(source, "<file>", "contains NUL bytes: a binary file, not a YAML description")
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -17,7 +17,13 @@ adds what meeting real data needs, one module per job:
   and what a description predicts along motion;
 * :mod:`kindyngen.measured.model_writer`, :mod:`kindyngen.measured.report`: identified models
   written back as descriptions, figures and tables;
-* :mod:`kindyngen.measured.identify`: the ``identify`` command's run;
+* :mod:`kindyngen.measured.identify`: the ``identify`` command's run (in memory);
+* :mod:`kindyngen.measured.log_formats`: logs read in chunks (CSV, npz, Parquet, ROS 2 and
+  ROS 1 bags of JointState);
+* :mod:`kindyngen.measured.ls_factor`: least squares from the triangular factor, folded chunk
+  by chunk and combined across logs;
+* :mod:`kindyngen.measured.streaming`: the ``identify`` command's run in bounded memory, and
+  fleets of logs on a process pool or Dask;
 * :mod:`kindyngen.measured.discovery`, :mod:`kindyngen.measured.discrepancy`: naming the effect
   a model misses, and the ``discover`` command's run;
 * :mod:`kindyngen.measured.fri_source`, :mod:`kindyngen.measured.paper_reproduction`: the

@@ -188,6 +188,45 @@ class ConsistentFit:
         return links_from_barycentric(self.full_values, len(self.full_values) // 10)
 
 
+def _solve_program(R, c, z0, n: int, nonnegative, regularization, epsilon, min_mass, solver, verbose):
+    """The semidefinite program on the compressed least-squares term ``||R z - c||^2`` (R: m x m,
+    any matrix with the stacked regressor's Gram matrix; z = full parameters then effect
+    coefficients, ``z0`` the prior): (values, status, optimum without the constant, solve seconds)."""
+    import cvxpy as cp
+    m = len(z0)
+    norms = np.linalg.norm(R, axis=0)
+    big = norms.max() if norms.size else 1.0
+    D = np.where(norms > 1e-9 * big, 1.0 / np.where(norms > 0, norms, 1.0), 1.0 / big)
+
+    x = cp.Variable(m)
+    z = z0 + cp.multiply(D, x)
+    p = z[:10 * n]
+    residual = (R * D) @ x - (c - R @ z0)
+    objective = OBJECTIVE_SCALE * (cp.sum_squares(residual)
+                                   + regularization * cp.sum_squares(cp.multiply(D[:10 * n], x[:10 * n])))
+    T = _pseudo_inertia_map()
+    constraints = []
+    for i in range(n):
+        J = cp.reshape(T @ p[10 * i:10 * i + 10], (4, 4), order="C")
+        constraints.append(J >> epsilon * np.eye(4))
+        constraints.append(p[10 * i] >= min_mass)
+    if nonnegative.any():
+        constraints.append(z[10 * n:][np.flatnonzero(nonnegative)] >= 0)
+    problem = cp.Problem(cp.Minimize(objective), constraints)
+    try:
+        problem.solve(solver=solver, verbose=verbose, **SOLVER_OPTIONS.get(solver, {}))
+    except cp.error.SolverError as exc:
+        raise ConsistentIdentificationError(f"the semidefinite program failed in {solver}: {exc}") from exc
+    status = problem.status
+    if status not in ("optimal", "optimal_inaccurate") or x.value is None:
+        raise ConsistentIdentificationError(
+            f"the semidefinite program was not solved: solver {solver} reports {status!r} "
+            f"(check the data's scale and that the regressor and torques belong together)")
+    solve_time = float(problem.solver_stats.solve_time or 0.0) if problem.solver_stats else 0.0
+    values = z0 + D * np.asarray(x.value, float)
+    return values, status, float(problem.value) / OBJECTIVE_SCALE, solve_time
+
+
 def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
                         regularization: float = REGULARIZATION, min_mass: float = MIN_MASS,
                         epsilon: float = EPSILON, base_map=None, solver: str = "CLARABEL",
@@ -202,8 +241,6 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     regulariser pulls towards (10 n; default zeros); ``base_map``: P with ``base = P @ full``,
     for ``base_values``.  Raises IdentificationDataError for bad data and
     ConsistentIdentificationError when the solver fails."""
-    import cvxpy as cp
-
     started = time.perf_counter()
     n = int(n)
     Y_full = np.asarray(Y_full, float)
@@ -249,37 +286,9 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     F = np.vstack([F, np.zeros((max(0, m + 1 - F.shape[0]), m + 1))])
     R, c = F[:m, :m], F[:m, m]
     constant = float(F[m, m] ** 2)          # the part of ||b||^2 no parameter can explain
-    norms = np.linalg.norm(R, axis=0)
-    big = norms.max() if norms.size else 1.0
-    D = np.where(norms > 1e-9 * big, 1.0 / np.where(norms > 0, norms, 1.0), 1.0 / big)
-
-    x = cp.Variable(m)
-    z = z0 + cp.multiply(D, x)
-    p = z[:10 * n]
-    residual = (R * D) @ x - (c - R @ z0)
-    objective = OBJECTIVE_SCALE * (cp.sum_squares(residual)
-                                   + regularization * cp.sum_squares(cp.multiply(D[:10 * n], x[:10 * n])))
-    T = _pseudo_inertia_map()
-    constraints = []
-    for i in range(n):
-        J = cp.reshape(T @ p[10 * i:10 * i + 10], (4, 4), order="C")
-        constraints.append(J >> epsilon * np.eye(4))
-        constraints.append(p[10 * i] >= min_mass)
-    if nonnegative.any():
-        constraints.append(z[10 * n:][np.flatnonzero(nonnegative)] >= 0)
-    problem = cp.Problem(cp.Minimize(objective), constraints)
-    setup = time.perf_counter() - started
-    try:
-        problem.solve(solver=solver, verbose=verbose, **SOLVER_OPTIONS.get(solver, {}))
-    except cp.error.SolverError as exc:
-        raise ConsistentIdentificationError(f"the semidefinite program failed in {solver}: {exc}") from exc
-    status = problem.status
-    if status not in ("optimal", "optimal_inaccurate") or x.value is None:
-        raise ConsistentIdentificationError(
-            f"the semidefinite program was not solved: solver {solver} reports {status!r} "
-            f"(check the data's scale and that the regressor and torques belong together)")
-    solve_time = float(problem.solver_stats.solve_time or 0.0) if problem.solver_stats else 0.0
-    values = z0 + D * np.asarray(x.value, float)
+    values, status, optimum, solve_time = _solve_program(R, c, z0, n, nonnegative, regularization, epsilon,
+                                                         min_mass, solver, verbose)
+    setup = time.perf_counter() - started - solve_time
     full, effects = values[:10 * n], values[10 * n:]
     predicted = A3 @ values
     data_term = float(np.mean(((tau - predicted) * scale) ** 2))
@@ -292,7 +301,62 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     return ConsistentFit(full_names=tuple(f"{name}{i + 1}" for i in range(n) for name in NAMES),
                          full_values=full, effect_names=effect_names, effect_values=effects, base_values=base,
                          rms=np.sqrt(np.mean((tau - predicted) ** 2, axis=0)), status=status,
-                         objective=float(problem.value) / OBJECTIVE_SCALE + constant, data_term=data_term,
+                         objective=optimum + constant, data_term=data_term,
+                         min_pseudo_inertia_eigenvalue=eigen, joint_scale=scale,
+                         regularization=float(regularization), epsilon=float(epsilon), min_mass=float(min_mass),
+                         solve_time=solve_time, setup_time=setup)
+
+
+def identify_consistent_factor(factor, base_map, effect_names=(), prior=None,
+                               regularization: float = REGULARIZATION, min_mass: float = MIN_MASS,
+                               epsilon: float = EPSILON, solver: str = "CLARABEL", verbose: bool = False,
+                               joint_weights: str = "equal") -> ConsistentFit:
+    """:func:`identify_consistent` from a :class:`kindyngen.measured.ls_factor.LSFactor` over the
+    base columns then the effect columns (no stacked regressor): the same program, because
+    ``[Y_base E] @ blockdiag(P, 1)`` is the full-parameter regressor, so joint j's term is
+    ``||R_j blockdiag(P, 1) z - c_j||^2 + rss_j``."""
+    started = time.perf_counter()
+    P = np.asarray(base_map, float)
+    n, k_all = factor.n, factor.k
+    k_base = P.shape[0]
+    effect_names = tuple(effect_names)
+    k = len(effect_names)
+    if k_base + k != k_all or P.shape[1] != 10 * n:
+        raise IdentificationDataError(f"a factor of {k_all} columns for {k_base} base parameters and {k} effects")
+    N = factor.samples
+    if N == 0:
+        raise IdentificationDataError("no samples")
+    nonnegative = np.array([effect_of(name) in NONNEGATIVE for name in effect_names], bool)
+    prior = np.zeros(10 * n) if prior is None else _full_vector(prior, n)
+    if joint_weights == "equal":
+        overall = float(np.sqrt(np.sum(factor.sum_tau2) / (N * n)))
+        scale = np.full(n, 1.0 / overall if overall > 0 else 1.0)
+    elif joint_weights == "rms":
+        rms_tau = np.sqrt(factor.sum_tau2 / N)
+        scale = np.where(rms_tau > 0, 1.0 / np.where(rms_tau > 0, rms_tau, 1.0), 1.0)
+    else:
+        raise ValueError(f"joint_weights must be 'equal' or 'rms', got {joint_weights!r}")
+    M = np.zeros((k_all, 10 * n + k))
+    M[:k_base, :10 * n] = P
+    M[k_base:, 10 * n:] = np.eye(k)
+    root = np.sqrt(N * n)
+    R, c, rss = factor.stacked(scale)
+    z0 = np.concatenate([prior, np.zeros(k)])
+    values, status, optimum, solve_time = _solve_program(R @ M / root, c / root, z0, n, nonnegative,
+                                                         regularization, epsilon, min_mass, solver, verbose)
+    setup = time.perf_counter() - started - solve_time
+    full, effects = values[:10 * n], values[10 * n:]
+    columns = M @ values
+    eigen = min_pseudo_inertia_eigenvalues(full, n)
+    if eigen.min() <= 0:
+        raise ConsistentIdentificationError(
+            f"the solver ({status}) returned a non-physical point: smallest pseudo-inertia eigenvalue "
+            f"{eigen.min():.3g}; increase epsilon (now {epsilon:g})")
+    sums = factor.residual_sums(columns)
+    return ConsistentFit(full_names=tuple(f"{name}{i + 1}" for i in range(n) for name in NAMES),
+                         full_values=full, effect_names=effect_names, effect_values=effects, base_values=P @ full,
+                         rms=factor.rms(columns), status=status, objective=optimum + rss / (N * n),
+                         data_term=float(np.sum(scale ** 2 * sums) / (N * n)),
                          min_pseudo_inertia_eigenvalue=eigen, joint_scale=scale,
                          regularization=float(regularization), epsilon=float(epsilon), min_mass=float(min_mass),
                          solve_time=solve_time, setup_time=setup)

@@ -316,6 +316,8 @@ def _read_csv(path: Path, n: int, source: str) -> RawLog:
     if not header or not any(cell.strip() for cell in header):
         raise LogError(source, "<file>", f"empty file; expected a header row ({_expected_columns(n)})")
     names = [cell.strip() for cell in header]
+    if any("\0" in name for name in names):   # a binary file: echoing its bytes as a name helps nobody
+        raise LogError(source, "<file>", "contains NUL bytes: a binary file, not CSV text")
     if all(_is_number(name) for name in names):
         raise LogError(source, "<file>", f"the first row holds numbers, not column names; a "
                                          f"header row is required ({_expected_columns(n)})")
@@ -444,6 +446,10 @@ def _csv_numbers(rows: list[list[str]], lines: list[int], names: list[str], sour
 
 
 def _read_npz(path: Path, n: int, source: str) -> RawLog:
+    if path.is_file() and not zipfile.is_zipfile(path):
+        # np.load would try it as a pickle and call it "pickled data"
+        raise LogError(source, "<file>", "cannot read as an .npz archive: no zip signature (np.savez writes zip "
+                                         "archives of .npy arrays)")
     try:
         with np.load(path, allow_pickle=False) as archive:
             keys = list(archive.files)

@@ -1,0 +1,543 @@
+"""Identification of logs of any length in bounded memory, and of many logs at once.
+
+A log is read in chunks (:mod:`kindyngen.measured.log_formats`), each chunk preprocessed
+together with ``overlap`` samples of its neighbours on either side (:func:`overlap_rows`: long
+enough that the zero-phase filter's and the differences' edge effects have decayed below 1e-15
+of the signal where the chunk's own samples begin), turned into regressor rows and torques by a
+per-chunk callable, and folded into the triangular factor of the stacked regressor
+(:class:`kindyngen.measured.ls_factor.LSFactor`).  Memory is the factor (O(columns^2)) plus one
+chunk, whatever the log length; the fit (ordinary or weighted least squares, or the
+semidefinite program) is solved from the factor.  Validation is folded the same way: the
+validation RMS of any parameters is exact from the validation factor, so one pass over the data
+suffices; the validation figure shows a decimated subset of the samples.
+
+Each file is folded on its own (:func:`fold_file`), so files run in parallel: in this process
+(``workers=1``), a local process pool, or a ``dask.distributed`` client.  The per-file factors
+are combined in the order the files were given (left to right), and each file's chunks in time
+order, so the result is the same bit for bit for any number of workers (BLAS is held to one
+thread inside a file's fold for that reason).
+
+Streaming needs a log whose chunks preprocess like the whole: one gap-free piece, no repeated
+rows, on its own clock (no ``rate_hz`` resampling).  Any other log is preprocessed whole, in
+memory, with a note saying so.
+
+Example:
+
+>>> request = StreamedRequest("robots/panda.yaml", ("hour.parquet",), split=0.8)   # doctest: +SKIP
+>>> result = identify_streamed(request, workers=2)                                  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+import yaml
+
+from ..inertial_parameters import parameter_vector
+from ..joint_effects import effect_parameter_values
+from ..robot import load_robot, parse_robot
+from .consistent import identify_consistent_factor, links_from_barycentric
+from .effects import coulomb_eps, effect_columns, effect_names
+from .estimation import IdentificationDataError
+from .identify import Identification, IdentificationRequest, _consistency
+from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
+                          time_span_of_file)
+from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess
+from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
+from .model_writer import ModelWriteError, model_yaml
+from .regressor_rows import torque_regressor
+
+#: Validation samples the figure keeps per run (every k-th sample, k a power of two).
+FIGURE_SAMPLES = 4000
+#: A position further than this outside a revolute joint's limits (rad, or this fraction of
+#: the joint's range if larger) is not a measurement of this robot: refused, with a hint when
+#: the numbers look like degrees.
+LIMIT_MARGIN_RAD = 0.35
+LIMIT_MARGIN_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class FitLimits:
+    """When a fit is refused: fewer than ``min_samples_per_column`` training samples per
+    regressor column (each sample gives n equations, but neighbouring samples of a 1 kHz log
+    are nearly copies: 10 per column, 430 samples for the Panda's 43 base columns, is a floor,
+    not a target), or a condition number of the stacked regressor above ``max_condition``
+    (1e6: parameters then move by up to a million times the relative torque error).
+    ``override``: fit anyway, the report saying which limit was overridden."""
+
+    min_samples_per_column: float = 10.0
+    max_condition: float = 1e6
+    override: bool = False
+
+
+def check_joint_limits(source: str, model, seg: Segment) -> None:
+    """Refuse positions far outside the description's joint limits (LogError naming the column)."""
+    for j, joint in enumerate(model.joints):
+        lo, hi = float(joint.lower), float(joint.upper)
+        if joint.kind != "revolute" or not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+            continue
+        margin = max(LIMIT_MARGIN_RAD, LIMIT_MARGIN_FRACTION * (hi - lo))
+        q = seg.q[:, j]
+        bad = np.flatnonzero((q < lo - margin) | (q > hi + margin))
+        if bad.size:
+            i = int(bad[np.argmax(np.abs(q[bad]))])
+            hint = ""
+            if np.abs(q).max() > 2 * math.pi:
+                hint = (f"; values up to {np.abs(q).max():.4g} look like degrees: the log must give "
+                        f"angles in radians (multiply by pi/180 = 0.01745)")
+            raise LogError(source, f"q{j + 1}", f"{q[i]:.4g} rad at t = {seg.t[i]:.6g} s is far outside the joint "
+                                                f"limits [{lo:.4g}, {hi:.4g}] rad of the description (more than "
+                                                f"{margin:.3g} rad beyond){hint}")
+
+
+def overlap_rows(settings: Preprocessing, dt: float) -> int:
+    """Samples of overlap on each side of a chunk: the slowest pole of the Butterworth filter
+    decays as ``exp(-a t)``, ``a = 2 pi f_c sin(pi / (2 order))`` (12.0 /s at 5 Hz, 4th order);
+    40 / a seconds (3.3 s) bring an edge error to ``e^-40 = 4e-18`` of it, with one cutoff
+    period for the reflection padding and two samples for the differences on top.
+
+    >>> overlap_rows(Preprocessing(), 0.001)
+    3530
+    """
+    if settings.cutoff_hz is None:
+        return 2
+    decay = 2 * math.pi * settings.cutoff_hz * math.sin(math.pi / (2 * settings.order))
+    return int(math.ceil((40.0 / decay + 1.0 / settings.cutoff_hz) / dt)) + 2
+
+
+class _NotStreamable(Exception):
+    """A window that does not preprocess like the whole log (gap, repeated row, resampling)."""
+
+
+def _window_log(source: str, buf: dict, a: int, b: int) -> RawLog:
+    def part(ch):
+        return None if buf[ch] is None else buf[ch][a:b]
+    return RawLog(source, buf["t"][a:b], part("q"), part("tau"), part("qd"), part("qdd"))
+
+
+def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joint_names=None,
+                    chunk_rows: int = CHUNK_ROWS, notes: list | None = None) -> Iterator[Segment]:
+    """Preprocessed consecutive pieces of the log at ``path`` whose concatenation equals (to
+    ~1e-15 relative) the segments of ``preprocess(read_any(path))``; at most about ``2 chunk_rows``
+    samples each.  ``notes`` (a list) receives what was done."""
+    source = str(path)
+    notes = notes if notes is not None else []
+    if settings.rate_hz is not None:
+        notes.append("preprocessed whole in memory (resampling to --rate needs the whole log)")
+        yield from preprocess(read_any(path, n, joint_names), settings)
+        return
+    chunks = iter_chunks(path, n, joint_names, chunk_rows)
+    buf = None           # arrays of global rows [b0, b1)
+    b0 = 0
+    exhausted = False
+    window_settings = replace(settings, trim_s=0.0)
+    cut = L = None
+    s = None             # next output row
+
+    def extend(chunk: RawChunk):
+        nonlocal buf
+        notes.extend(chunk.notes)
+        new = {"t": chunk.t, "q": chunk.q, "tau": chunk.tau, "qd": chunk.qd, "qdd": chunk.qdd}
+        if buf is None:
+            buf = new
+        else:
+            buf = {ch: (None if buf[ch] is None or new[ch] is None else np.concatenate([buf[ch], new[ch]]))
+                   for ch in buf}
+
+    def rows_buffered():
+        return 0 if buf is None else len(buf["t"])
+
+    while True:
+        if not exhausted and (L is None or b0 + rows_buffered() < s + 2 * chunk_rows + L):
+            chunk = next(chunks, None)
+            if chunk is None:
+                exhausted = True
+            else:
+                extend(chunk)
+                if L is None and rows_buffered() >= MIN_SAMPLES:
+                    steps = np.diff(buf["t"])
+                    dt = float(np.median(steps[steps > 0]))
+                    L = overlap_rows(settings, dt)
+                    cut = int(round(settings.effective_trim_s / dt))
+                    s = cut
+                continue
+        if buf is None:
+            raise LogError(source, "t", "no samples")
+        b1 = b0 + rows_buffered()
+        if exhausted and (L is None or b0 == 0 and b1 <= 2 * chunk_rows + 2 * L):
+            # short enough to preprocess whole: exactly what the in-memory path does
+            whole = preprocess(_window_log(source, buf, 0, b1), settings)
+            notes.extend(note for seg in whole for note in seg.notes)
+            yield from whole
+            return
+        end_out = b1 - cut if exhausted else None
+        if exhausted and s >= end_out:
+            return
+        e = end_out if exhausted and end_out - s <= 2 * chunk_rows else s + chunk_rows
+        w0, w1 = max(0, s - L), min(b1, e + L)
+        try:
+            pieces = preprocess(_window_log(source, buf, w0 - b0, w1 - b0), window_settings)
+        except LogError:
+            pieces = ()
+        if len(pieces) != 1 or len(pieces[0].t) != w1 - w0:
+            raise _NotStreamable("gaps or repeated rows: chunks would not preprocess like the whole log")
+        seg = pieces[0]
+        a, b = s - w0, e - w0
+        if s == cut and not any("streamed" in note for note in notes):
+            kept = [note for note in seg.notes if "low-pass" in note or "central differences" in note
+                    or "uniform" in note]
+            notes.extend(kept)
+            notes.append(f"streamed in chunks of {chunk_rows} samples with {L} samples of overlap on each side; "
+                         f"trimmed {cut} samples at each end of the log")
+        yield Segment(source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b])
+        s = e
+        drop = max(0, s - L - b0)        # rows no later window needs
+        if drop:
+            buf = {ch: (None if v is None else v[drop:]) for ch, v in buf.items()}
+            b0 += drop
+
+
+# --------------------------------------------------------------------------- one file's fold
+
+def regressor_rows(model, effects: tuple[str, ...]) -> Callable[[Segment], tuple[np.ndarray, np.ndarray]]:
+    """The default per-chunk callable: a preprocessed piece -> (regressor rows (m, n, k): the
+    rigid-body base columns then the effect columns, torques (m, n))."""
+    R = torque_regressor(model)
+    eps = coulomb_eps(model)
+
+    def rows(seg: Segment):
+        Y = R(seg.q, seg.qd, seg.qdd)
+        if effects:
+            Y = np.concatenate([Y, effect_columns(effects, seg.qd, seg.qdd, eps)], axis=2)
+        return Y, seg.tau
+    return rows
+
+
+class _Reservoir:
+    """Every ``stride``-th sample (stride doubling whenever more than 2 x ``limit`` are kept)."""
+
+    def __init__(self, limit: int):
+        self.limit, self.stride, self.seen = limit, 1, 0
+        self.parts: list[tuple] = []
+
+    def add(self, x, Y, tau, nominal):
+        idx = np.flatnonzero((self.seen + np.arange(len(x))) % self.stride == 0)
+        self.seen += len(x)
+        self.parts.append((x[idx], Y[idx], tau[idx], nominal[idx]))
+        if sum(len(p[0]) for p in self.parts) > 2 * self.limit:
+            self.stride *= 2                # kept indices 0, s, 2s, ...: every other one is a multiple of 2s
+            self.parts = [tuple(a[::2] for a in self.arrays())]
+
+    def arrays(self):
+        if not self.parts:
+            return None
+        return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(4))
+
+
+@dataclass(frozen=True)
+class FoldTask:
+    """One file's part of a run: ``role`` 'train', 'validate', or 'split' (samples before
+    ``cut_time`` train, the rest validate)."""
+
+    path: str
+    role: str
+    robot: str
+    base: str | None
+    tip: str | None
+    snap_angles: bool
+    effects: tuple[str, ...]
+    settings: Preprocessing
+    chunk_rows: int = CHUNK_ROWS
+    cut_time: float | None = None
+    #: ``rows_factory(model, effects)`` -> the per-chunk callable (preprocessed piece -> regressor
+    #: rows, torques); a top-level function, so that Dask and process pools can send it
+    rows_factory: Callable | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class FileFold:
+    """What one file contributes: the factors of its training and validation samples, per
+    joint the sum of squared errors of the description's own prediction on its validation
+    samples, a decimated set of validation samples for the figure ((time, Y, tau, nominal) or
+    None), the preprocessing notes, chunk and sample counts and seconds spent."""
+
+    path: str
+    train: LSFactor
+    validation: LSFactor
+    nominal_sums: np.ndarray
+    figure: tuple | None
+    notes: tuple[str, ...]
+    chunks: int
+    samples: int
+    seconds: float
+
+
+def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: None) -> FileFold:
+    """Read, preprocess, regress and fold one file (runs in a worker for fleets)."""
+    from threadpoolctl import threadpool_limits
+    started = time.perf_counter()
+    model = load_robot(task.robot, task.snap_angles, task.base, task.tip)
+    n = model.n
+    rows_of = (task.rows_factory or regressor_rows)(model, task.effects)
+    regressor = torque_regressor(model)
+    k_base = len(regressor.names)
+    k = k_base + len(effect_names(task.effects, n))
+    nominal_p = regressor.base_map @ parameter_vector(model)
+    names = joint_names_of(model)
+    with threadpool_limits(1):      # the same arithmetic whatever the worker's thread count
+        notes: list[str] = []
+        try:
+            parts = _accumulate(task, stream_segments(task.path, n, task.settings, names, task.chunk_rows, notes),
+                                rows_of, n, k, k_base, nominal_p, model, started, progress)
+        except _NotStreamable as exc:
+            notes = [f"preprocessed whole in memory ({exc})"]
+            whole = preprocess(read_any(task.path, n, names), task.settings)
+            notes += [note for s in whole for note in s.notes]
+            parts = _accumulate(task, _pieces(whole, task.chunk_rows), rows_of, n, k, k_base, nominal_p, model, started, progress)
+    train, valid, nominal_sums, reservoir, chunks, samples = parts
+    if samples == 0:
+        raise LogError(task.path, "t", "no samples after preprocessing")
+    return FileFold(task.path, train, valid, nominal_sums, reservoir.arrays(), tuple(dict.fromkeys(notes)),
+                    chunks, samples, time.perf_counter() - started)
+
+
+def _pieces(segments, rows: int) -> Iterator[Segment]:
+    """Segments cut into pieces of at most ``rows`` samples (the regressor of one at a time)."""
+    for seg in segments:
+        for a in range(0, len(seg.t), rows):
+            b = a + rows
+            yield Segment(seg.source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b])
+
+
+def _accumulate(task, segments, rows_of, n, k, k_base, nominal_p, model, started, progress):
+    """Fold the pieces of one file: (train factor, validation factor, nominal sums, reservoir,
+    chunks, samples)."""
+    declared = model.effects
+    declared_values = np.array([float(v) for v in effect_parameter_values(model)]) if declared else None
+    eps = coulomb_eps(model)
+    train, valid = LSFactor.empty(n, k), LSFactor.empty(n, k)
+    nominal_sums = np.zeros(n)
+    reservoir = _Reservoir(FIGURE_SAMPLES)
+    chunks = samples = 0
+    valid_time = 0.0
+    last = time.perf_counter()
+    for seg in segments:
+        check_joint_limits(task.path, model, seg)
+        Y, tau = rows_of(seg)
+        if task.role == "train":
+            is_valid = np.zeros(len(tau), bool)
+        elif task.role == "validate":
+            is_valid = np.ones(len(tau), bool)
+        else:
+            is_valid = seg.t >= task.cut_time
+        if (~is_valid).any():
+            train = train.fold(Y[~is_valid], tau[~is_valid])
+        if is_valid.any():
+            Yv, tv = Y[is_valid], tau[is_valid]
+            valid = valid.fold(Yv, tv)
+            nominal = Yv[:, :, :k_base] @ nominal_p
+            if declared:
+                nominal = nominal + effect_columns(declared, seg.qd[is_valid], seg.qdd[is_valid], eps) @ declared_values
+            nominal_sums += np.sum((tv - nominal) ** 2, axis=0)
+            x = valid_time + seg.dt * np.arange(len(tv))
+            valid_time += seg.dt * len(tv)
+            reservoir.add(x, Yv, tv, nominal)
+        chunks += 1
+        samples += len(tau)
+        now = time.perf_counter()
+        if now - last > 5.0:
+            last = now
+            rate = samples / (now - started)
+            progress(f"{task.path}: {samples} samples read, {chunks} chunks folded ({rate:,.0f} samples/s)")
+    return train, valid, nominal_sums, reservoir, chunks, samples
+
+
+def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> tuple[float, float]:
+    """(first, last) time stamp of a log: Parquet and large CSV files read their ``t`` column
+    alone; other formats take one pass over their chunks."""
+    kind = log_kind(path)
+    if kind == "parquet" or (kind == "csv" and Path(path).stat().st_size > SMALL_CSV_BYTES):
+        span = time_span_of_file(path)
+        if span is not None:
+            return span
+    first = last = None
+    for chunk in iter_chunks(path, n, joint_names, chunk_rows):
+        first = float(chunk.t[0]) if first is None else first
+        last = float(chunk.t[-1])
+    return first, last
+
+
+def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], None] = lambda text: None):
+    """``fold_file`` of every task, in this process (``workers=1``), a process pool of ``workers``,
+    or on a ``dask.distributed`` ``client``; the results in task order."""
+    tasks = list(tasks)
+    if client is not None:
+        futures = client.map(fold_file, tasks, pure=False)
+        results = []
+        for task, future in zip(tasks, futures):
+            results.append(future.result())
+            progress(f"folded {task.path} on the Dask cluster ({results[-1].samples} samples, "
+                     f"{results[-1].chunks} chunks, {results[-1].seconds:.1f} s)")
+        return results
+    if workers > 1 and len(tasks) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            results = []
+            for task, result in zip(tasks, pool.map(fold_file, tasks)):
+                results.append(result)
+                progress(f"folded {task.path} ({result.samples} samples, {result.chunks} chunks, "
+                         f"{result.seconds:.1f} s)")
+            return results
+    results = []
+    for task in tasks:
+        progress(f"reading and folding {task.path}")
+        results.append(fold_file(task, progress))
+        r = results[-1]
+        progress(f"folded {task.path}: {r.samples} samples, {r.chunks} chunks in {r.seconds:.1f} s "
+                 f"({r.samples / max(r.seconds, 1e-9):,.0f} samples/s)")
+    return results
+
+
+# --------------------------------------------------------------------------- the whole run
+
+def identify_streamed(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
+                      workers: int = 1, client=None, chunk_rows: int = CHUNK_ROWS,
+                      limits: FitLimits = FitLimits(), rows_factory: Callable | None = None) -> Identification:
+    """:func:`kindyngen.measured.identify.identify` in bounded memory (same request, same
+    :class:`~kindyngen.measured.identify.Identification`; the validation arrays for the figure
+    are decimated to at most about 2 x FIGURE_SAMPLES samples).  ``rows_factory``: see
+    :class:`FoldTask` (default :func:`regressor_rows`)."""
+    model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
+    n = model.n
+    settings = request.preprocessing
+    common = dict(robot=str(request.robot), base=request.base, tip=request.tip, snap_angles=request.snap_angles,
+                  effects=tuple(request.effects), settings=settings, chunk_rows=chunk_rows,
+                  rows_factory=rows_factory)
+    tasks = []
+    if request.split is not None:
+        progress("finding the time span of the training logs for --split")
+        spans = [time_span(p, n, joint_names_of(model), chunk_rows) for p in request.data]
+        dt = None
+        first, last = min(s[0] for s in spans), max(s[1] for s in spans)
+        # the in-memory split cuts the span of the trimmed segments
+        trim = settings.effective_trim_s
+        steps = []
+        for p in request.data[:1]:
+            for chunk in iter_chunks(p, n, joint_names_of(model), chunk_rows):
+                d = np.diff(chunk.t)
+                steps = d[d > 0]
+                break
+        dt = float(np.median(steps)) if len(steps) else 0.0
+        cut_rows = int(round(trim / dt)) if dt > 0 else 0
+        start, end = first + cut_rows * dt, last - cut_rows * dt
+        cut_time = start + request.split * (end - start)
+        tasks += [FoldTask(str(p), "split", cut_time=cut_time, **common) for p in request.data]
+    else:
+        tasks += [FoldTask(str(p), "train", **common) for p in request.data]
+    tasks += [FoldTask(str(p), "validate", **common) for p in request.validate]
+
+    started = time.perf_counter()
+    folds = run_folds(tasks, workers, client, progress)
+    total = sum(f.samples for f in folds)
+    progress(f"{total} samples in {sum(f.chunks for f in folds)} chunks from {len(folds)} files folded in "
+             f"{time.perf_counter() - started:.1f} s ({total / max(time.perf_counter() - started, 1e-9):,.0f} "
+             f"samples/s)")
+    train = combine_in_order([f.train for f in folds])
+    valid = combine_in_order([f.validation for f in folds])
+    return solve_folds(request, model, train, valid, folds, progress, limits)
+
+
+def _check_fit(train: LSFactor, limits: FitLimits) -> tuple[str, ...]:
+    """Refuse (IdentificationDataError) a fit below ``limits``; with ``override`` the reasons
+    come back as notes for the report instead."""
+    reasons = []
+    per_column = train.samples / train.k
+    if per_column < limits.min_samples_per_column:
+        reasons.append(f"{train.samples} training samples for {train.k} regressor columns ({per_column:.3g} per "
+                       f"column) is below the minimum of {limits.min_samples_per_column:g} per column "
+                       f"(--min-samples-per-column): give more data or a larger --split")
+    else:
+        cond = condition_number(train)
+        if cond > limits.max_condition:
+            reasons.append(f"the condition number of the stacked training regressor is {cond:.3g}, above the "
+                           f"limit {limits.max_condition:.3g} (--max-condition): the data do not excite every "
+                           f"parameter (use an excitation trajectory, see 'kindyngen excite', or more data)")
+    if reasons and not limits.override:
+        raise IdentificationDataError(reasons[0] + "; --accept-poor-fit fits anyway, flagged in the report")
+    return tuple(f"OVERRIDDEN REFUSAL (--accept-poor-fit): {reason}" for reason in reasons)
+
+
+def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progress,
+                limits: FitLimits = FitLimits()) -> Identification:
+    """The fit and its report from the combined factors (the part of :func:`identify_streamed`
+    after the data are folded)."""
+    n = model.n
+    regressor = torque_regressor(model)
+    k_base = len(regressor.names)
+    enames = effect_names(request.effects, n)
+    P = regressor.base_map
+    prior = parameter_vector(model)
+    if train.samples == 0:
+        raise IdentificationDataError("no training samples")
+    overridden = _check_fit(train, limits)
+    if request.consistent:
+        progress(f"solving the semidefinite program ({train.samples} samples, {10 * n + len(enames)} unknowns)")
+        fit = identify_consistent_factor(train, P, enames, prior=prior)
+        full, evalues = fit.full_values, fit.effect_values
+        base = P @ full
+        base_std = effect_std = None
+        cond = condition_number(train)
+        method = "physically consistent (semidefinite program, CLARABEL)"
+    else:
+        progress(f"least squares from the factor ({train.samples} samples, {k_base + len(enames)} columns)")
+        fit = least_squares_factor(train, regressor.names + enames, weighted=request.weighted)
+        base, evalues = fit.values[:k_base], fit.values[k_base:]
+        base_std, effect_std = fit.std_percent[:k_base], fit.std_percent[k_base:]
+        cond = fit.condition_number
+        full = prior + np.linalg.pinv(P) @ (base - P @ prior)
+        method = "weighted least squares" if request.weighted else "ordinary least squares"
+    values = np.concatenate([base, evalues])
+    rms_train = train.rms(values)
+    consistent, consistency_notes = _consistency(full, n, enames, evalues)
+    consistency_notes = overridden + consistency_notes
+    text = None
+    if consistent:
+        try:
+            header = (f"Identified by KinDynGen from {', '.join(map(str, request.data))} ({method}).\n"
+                      f"Geometry from {request.robot}; link parameters and joint effects identified.")
+            text = model_yaml(request.robot, links_from_barycentric(full, n), dict(zip(enames, map(float, evalues))),
+                              model=model, header=header, name=f"{model.name}_identified")
+            parse_robot(yaml.safe_load(text), "model.yaml")
+        except (ModelWriteError, ValueError) as exc:
+            consistency_notes += (f"model.yaml not written: {exc}",)
+            text = None
+    else:
+        consistency_notes += ("model.yaml not written: the identified parameters are not physical "
+                              "(use --consistent)",)
+    rms_val = rms_nominal = vt = vtau = vpred = vnom = None
+    if valid.samples:
+        rms_val = valid.rms(values)
+        rms_nominal = np.sqrt(sum(f.nominal_sums for f in folds) / valid.samples)
+        parts, offset = [], 0.0
+        for f in folds:
+            if f.figure is not None:
+                x, Y, tau, nominal = f.figure
+                parts.append((x + offset, Y @ values, tau, nominal))
+                offset = float(x[-1] + offset) + (x[1] - x[0] if len(x) > 1 else 0.0)
+        if parts:
+            vt, vpred, vtau, vnom = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    notes = tuple(dict.fromkeys(note for f in folds for note in f.notes))
+    return Identification(
+        request=request, method=method, base_names=regressor.names, base_values=np.asarray(base),
+        base_std_percent=base_std, effect_names=enames, effect_values=np.asarray(evalues),
+        effect_std_percent=effect_std, condition_number=cond, rms_train=rms_train, rms_validation=rms_val,
+        rms_validation_nominal=rms_nominal, physically_consistent=consistent,
+        consistency_notes=consistency_notes, model_yaml=text,
+        samples_train=int(train.samples), samples_validation=int(valid.samples),
+        preprocessing_notes=notes, validation_t=vt, validation_tau=vtau, validation_predicted=vpred,
+        validation_nominal=vnom)
