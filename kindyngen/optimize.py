@@ -20,7 +20,8 @@ from dataclasses import dataclass, replace
 
 import symengine as se
 
-from .opcount import OpCount, program_count, tree_count
+from .c_trig import kernel_latency
+from .opcount import CriticalPath, OpCount, program_count, program_critical_path, tree_count
 from .symbolic import SymbolicFunction
 
 
@@ -50,6 +51,8 @@ class Program:
     after: OpCount
     # (route, operations after CSE) of every route that was optimised, chosen one included
     routes: tuple[tuple[str, OpCount], ...] = ()
+    # longest chain of dependent operations of the C as printed, sin/cos of q from the kernel
+    critical: CriticalPath = CriticalPath(0, 0)
 
 
 def optimize(function: SymbolicFunction) -> Program:
@@ -84,7 +87,20 @@ def optimize(function: SymbolicFunction) -> Program:
         outputs=tuple(outputs),
         before=tree_count(staged + flat),
         after=program_count(assignments, reduced),
+        critical=critical_path(function, assignments, reduced),
     )
+
+
+def critical_path(function: SymbolicFunction, assignments, outputs) -> CriticalPath:
+    """The program's critical path as generated with ``--trig kernel``: sin and cos of an entry
+    of the ``q`` port come from the sincos kernel (:func:`kindyngen.c_trig.kernel_latency`
+    cycles after the start), every other call from libm."""
+    names = [p.name for p in function.inputs]
+    served = set()
+    if "q" in names:
+        for sym in function.input_symbols[names.index("q")]:
+            served |= {se.sin(sym), se.cos(sym)}
+    return program_critical_path(assignments, outputs, served, {"kernel": kernel_latency()})
 
 
 def _cse(exprs):

@@ -14,7 +14,7 @@ import jinja2
 import symengine as se
 
 from . import __version__
-from .c_trig import BOUND as TRIG_BOUND, MAX_ULP as TRIG_MAX_ULP, kernel_c
+from .c_trig import BOUND as TRIG_BOUND, MAX_ULP as TRIG_MAX_ULP, kernel_c, kernel_latency
 from .ik_dls import dls_view
 from .optimize import Program
 from .printer import C, CASADI, NUMPY, Dialect
@@ -66,6 +66,7 @@ class FunctionView:
     before: dict
     after: dict
     has_select: bool
+    critical: dict = None         # longest chain of dependent operations (cycles, operations)
     angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
@@ -182,6 +183,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "?" in text),
+        critical=program.critical.to_json(),
         angles=angles,
         first_angle=first,
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
@@ -206,6 +208,7 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
         "trig": trig,
         "trig_bound": TRIG_BOUND,
         "trig_max_ulp": TRIG_MAX_ULP,
+        "kernel_latency": kernel_latency(),
         "batch_block": BATCH_BLOCK,
         "batch_stack": BATCH_STACK,
         "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None

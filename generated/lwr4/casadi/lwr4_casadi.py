@@ -98,10 +98,9 @@ def fk_hom():
 def fk_dq():
     """Forward kinematics: flange pose as a unit dual quaternion.
 
-    Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-    (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-    dx, dy, dz), x and -x are the same pose; the sign is that of the product of the joint
-    dual quaternions (continuous in q, not normalised to rw >= 0).
+    Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+    (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the
+    product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).
 
     in  q: 7, joint angles, DH order [rad]
     out x: 8, flange pose: rotation quaternion (w,x,y,z), then dual part 1/2 t (x) r (w,x,y,z); t = flange position in the base frame [1 (real), m (dual)]
@@ -224,10 +223,10 @@ def jacobian():
 def pose_jacobian_dq():
     """Pose Jacobian of the flange dual quaternion: vec8(xdot) = Jx(q) qd.
 
-    Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-    (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-    dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with fk_dq's sign (the
-    product of the joint dual quaternions, not normalised to rw >= 0); vec8(xdot) = Jx qd.
+    Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+    (rw, rx, ry, rz, dw, dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with
+    fk_dq's sign (the product of the joint dual quaternions, not normalised to rw >= 0);
+    vec8(xdot) = Jx qd.
 
     in  q: 7, joint angles, DH order [rad]
     out Jx: 8 x 7, dx/dq: column i = 1/2 L_i(q) x, L_i = joint i's current line (u_i + e m_i; e u_i for a prismatic joint) in the base frame; rows in fk_dq's layout (rw, rx, ry, rz, dw, dx, dy, dz) (row-major) [1 (rows 0-3), m (rows 4-7) per rad (per m for prismatic joints)]

@@ -102,10 +102,9 @@ def fk_hom(q):
 def fk_dq(q):
     """Forward kinematics: flange pose as a unit dual quaternion.
 
-    Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-    (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-    dx, dy, dz), x and -x are the same pose; the sign is that of the product of the joint
-    dual quaternions (continuous in q, not normalised to rw >= 0).
+    Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+    (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the
+    product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).
 
     q: (..., 7,) joint angles, DH order [rad]
     Returns x: (..., 8,) double, flange pose: rotation quaternion (w,x,y,z), then dual part 1/2 t (x) r (w,x,y,z); t = flange position in the base frame [1 (real), m (dual)]
@@ -292,10 +291,10 @@ def jacobian(q):
 def pose_jacobian_dq(q):
     """Pose Jacobian of the flange dual quaternion: vec8(xdot) = Jx(q) qd.
 
-    Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-    (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-    dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with fk_dq's sign (the
-    product of the joint dual quaternions, not normalised to rw >= 0); vec8(xdot) = Jx qd.
+    Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+    (rw, rx, ry, rz, dw, dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with
+    fk_dq's sign (the product of the joint dual quaternions, not normalised to rw >= 0);
+    vec8(xdot) = Jx qd.
 
     q: (..., 7,) joint angles, DH order [rad]
     Returns Jx: (..., 8, 7) double, dx/dq: column i = 1/2 L_i(q) x, L_i = joint i's current line (u_i + e m_i; e u_i for a prismatic joint) in the base frame; rows in fk_dq's layout (rw, rx, ry, rz, dw, dx, dy, dz) (row-major) [1 (rows 0-3), m (rows 4-7) per rad (per m for prismatic joints)]

@@ -13,32 +13,23 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
     long i;
     for (i = 0; i < n; ++i) {
         /* arguments out of range give garbage here (no undefined behaviour: all in double),
-           replaced in the second loop */
+           replaced in the second loop; c_trig.py's _steps explains each step */
         const double xi = x[i];
-        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^52 */
         const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        /* k mod 4 as m = k - 4 round(k/4) in -2..2, exact: doubles keep the quadrant select
-           free of int conversions, which some targets do not vectorise */
         const double m = k - 4.0*((0.25*k + 6755399441055744.0) - 6755399441055744.0);
-        /* r + rlo = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
-           two subtractions recovered exactly (Fast2Sum: |a| >= |k*p2| unless a - k*p2 is exact,
-           likewise for b) */
         const double a = xi - k*1.5707963267341256;
         const double b = a - k*6.077100506303966e-11;
         const double b_err = (a - b) - k*6.077100506303966e-11;
         const double d = b - k*2.0222662487111665e-21;
         const double d_err = (b - d) - k*2.0222662487111665e-21;
         const double tail = (b_err + d_err) - k*8.4784276603689e-32;
-        const double r = d + tail;
-        const double rlo = (d - r) + tail;
-        const double z = r*r;
-        /* sin(r + rlo) = r + r^3 S(z) + rlo (1 - z/2) */
-        const double sin_r = r + (r*z*(-0.16666666666666632 + z*(0.008333333333322424 + z*(-0.0001984126982981672 + z*(2.7557313695144572e-06 + z*(-2.5050758640135855e-08 + z*(1.5896827148989416e-10)))))) + rlo*(1.0 - 0.5*z));
-        /* cos(r + rlo) = (1 - z/2) + z^2 C(z) - r rlo, the rounding of 1 - z/2 added back */
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
         const double half_z = 0.5*z;
         const double w = 1.0 - half_z;
-        const double cos_r = w + (((1.0 - w) - half_z)
-                                  + (z*z*(0.0416666666666666 + z*(-0.0013888888888874138 + z*(2.4801587289491644e-05 + z*(-2.755731435518579e-07 + z*(2.0875723676428724e-09 + z*(-1.1359669434575456e-11)))))) - r*rlo));
+        const double sin_r = d + (d*z*((-0.16666666666666632 + 0.008333333333322424*z) + z2*(-0.0001984126982981672 + 2.7557313695144572e-06*z) + z4*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) + tail*w);
+        const double cos_r = w + (z2*((0.0416666666666666 + -0.0013888888888874138*z) + z2*(2.4801587289491644e-05 + -2.755731435518579e-07*z) + z4*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) - d*tail));
         /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s */
         const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;
