@@ -70,7 +70,7 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
     timers = {}
     for variant, flags in VARIANTS.items():
         log(f"{robot}: building {variant} ({' '.join(flags)})")
-        timers[variant] = compiled.generated_c(robot, "c_native", robot_dir, functions, samples,
+        timers[variant] = compiled.generated_c(robot, f"latency_{variant}", robot_dir, functions, samples,
                                                workdir / variant, flags)
     log(f"{robot}: timing in {rounds} interleaved rounds")
     pooled, _ = compiled.interleave(timers, 3 * rounds, rounds, 5e6,

@@ -267,21 +267,30 @@ def program_critical_path(assignments, outputs, served=(), latency=None) -> Crit
     >>> program_critical_path([], [x/(y*z)])       # x/(y*z): 3 + 13
     CriticalPath(cycles=16, operations=2)
     """
-    lat = dict(LATENCY, **(latency or {}))
-    served = frozenset(served)
-    memo: dict = {}
-    kernel = (lat["kernel"], 1 if lat["kernel"] else 0)
+    timer = ChainTimer(served, latency)
+    for sym, expr in assignments:
+        timer.assign(sym, expr)
+    t, n = max((timer.ready(e) for e in outputs), default=(0, 0))
+    return CriticalPath(t, n)
 
-    def chain(start, steps):
-        """``steps`` operations in sequence after ``start``, each joining one more operand
-        (ready times): ((a op b) op c) ..."""
-        t, n = start
-        for operand_latency, operand in steps:
-            t, n = max((t, n), operand)
-            t, n = t + operand_latency, n + 1
-        return t, n
 
-    def visit(e):
+class ChainTimer:
+    """When each expression of a program is ready, as (cycles, operations on the chain), by
+    the rules of :func:`program_critical_path`; temporaries are told with :meth:`assign`."""
+
+    def __init__(self, served=(), latency=None):
+        self.lat = lat = dict(LATENCY, **(latency or {}))
+        self.served = frozenset(served)
+        self.memo: dict = {}
+        self.kernel = (lat["kernel"], 1 if lat["kernel"] else 0)
+
+    def assign(self, sym, expr) -> None:
+        self.memo[sym] = self.ready(expr)
+
+    def ready(self, e):
+        lat, memo, served, kernel = self.lat, self.memo, self.served, self.kernel
+        visit = self.ready
+        chain = _chain
         hit = memo.get(e)
         if hit is not None:
             return hit
@@ -331,7 +340,12 @@ def program_critical_path(assignments, outputs, served=(), latency=None) -> Crit
         memo[e] = hit
         return hit
 
-    for sym, expr in assignments:
-        memo[sym] = visit(expr)
-    t, n = max((visit(e) for e in outputs), default=(0, 0))
-    return CriticalPath(t, n)
+
+def _chain(start, steps):
+    """``steps`` operations in sequence after ``start``, each joining one more operand (ready
+    times): ((a op b) op c) ..."""
+    t, n = start
+    for operand_latency, operand in steps:
+        t, n = max((t, n), operand)
+        t, n = t + operand_latency, n + 1
+    return t, n

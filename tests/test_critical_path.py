@@ -135,3 +135,59 @@ def test_kernel_latency_is_its_printed_chain():
             ready[m.group(1)] = c_ready(m.group(2), ready, 0)
     chain = max(ready["sin_r"], ready["cos_r"], ready["m"] + LATENCY["add"])
     assert c_trig.kernel_latency() == chain + c_trig.SELECTS * LATENCY["select"]
+
+
+# -- shallower code: reassociation chosen by the count ----------------------------------------
+
+def best_tree(ready, latency):
+    """The earliest a sum of operands ready at ``ready`` can be ready, by trying every way of
+    joining two of them (exhaustive, small n)."""
+    ready = tuple(sorted(ready))
+    if len(ready) == 1:
+        return ready[0]
+    best = None
+    for i, j in itertools.combinations(range(len(ready)), 2):
+        rest = [r for k, r in enumerate(ready) if k not in (i, j)]
+        t = best_tree(rest + [max(ready[i], ready[j]) + latency], latency)
+        best = t if best is None else min(best, t)
+    return best
+
+
+def _evaluate(assignments, expr, values):
+    """A straight-line program's value at ``values`` (symbol -> float), in plain floats."""
+    env = dict(values)
+    for sym, e in list(assignments) + [(None, expr)]:
+        v = float(e.xreplace({s: se.Float(env[s]) for s in e.free_symbols}))
+        if sym is None:
+            return v
+        env[sym] = v
+
+
+def test_reassociated_sums_are_optimal_and_equal():
+    """Sums of operands ready at different times (chains of 0-4 products): the optimised
+    program's critical path is the exhaustive optimum, its operation count that of the sum as
+    written, its value the same."""
+    from kindyngen.optimize import optimize
+    from kindyngen.symbolic import Port, SymbolicFunction
+    rng = random.Random(3)
+    add, mul = LATENCY["add"], LATENCY["mul"]
+    for trial in range(12):
+        n = rng.randint(3, 6)
+        x = se.symbols(f"x0:{2 * n}")
+        depth = [rng.randint(0, 4) for _ in range(n)]
+        operands, stages = [], []
+        for k in range(n):
+            term = x[k]
+            for j in range(depth[k]):         # one product per named intermediate
+                s = se.Symbol(f"s{k}_{j}")
+                stages.append((s, term * x[n + k]))
+                term = s
+            operands.append(term)
+        f = SymbolicFunction("f", "", (Port("x", (2 * n,), ""),), (Port("y", (1,), ""),), (x,),
+                             ((se.Add(*operands),),), stages=tuple(stages))
+        p = optimize(f)
+        assert p.critical.cycles == best_tree([d * mul for d in depth], add), (depth, p.critical)
+        assert (p.after.add, p.after.mul) == (n - 1, sum(depth))
+        values = {s: rng.uniform(-2, 2) for s in x}
+        want = _evaluate(stages, se.Add(*operands), values)
+        assert abs(_evaluate(p.assignments, p.outputs[0][0], values) - want) <= 1e-12 * (1 + abs(want))

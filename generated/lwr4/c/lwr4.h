@@ -73,7 +73,7 @@ void lwr4_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 36 add, 69 mul, 14 call
  * (as derived, before CSE: 184 add, 560 mul, 304 call);
- * critical path 73 cycles, 12 dependent operations.
+ * critical path 70 cycles, 11 dependent operations.
  */
 void lwr4_fk_dq(const double *q, double *x);
 void lwr4_fk_dq_batch(long count, const double *q, double *x);
@@ -107,7 +107,7 @@ void lwr4_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 228 add, 359 mul, 14 call
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call);
- * critical path 94 cycles, 19 dependent operations.
+ * critical path 82 cycles, 15 dependent operations.
  */
 void lwr4_pose_jacobian_dq(const double *q, double *Jx);
 void lwr4_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -125,7 +125,7 @@ void lwr4_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 142 add, 257 mul, 14 call
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call);
- * critical path 124 cycles, 29 dependent operations.
+ * critical path 103 cycles, 22 dependent operations.
  */
 void lwr4_jacobian_dq(const double *q, double *J);
 void lwr4_jacobian_dq_batch(long count, const double *q, double *J);
@@ -143,7 +143,7 @@ void lwr4_jacobian_dq_batch(long count, const double *q, double *J);
  *
  * Cost: 157 add, 172 mul, 12 call
  * (as derived, before CSE: 5919 add, 8715 mul, 6724 call);
- * critical path 156 cycles, 36 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_M(const double *q, double *M);
@@ -162,7 +162,7 @@ void lwr4_M_batch(long count, const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
- * critical path 102 cycles, 18 dependent operations.
+ * critical path 90 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_g(const double *q, double *g);
@@ -182,7 +182,7 @@ void lwr4_g_batch(long count, const double *q, double *g);
  *
  * Cost: 241 add, 311 mul, 12 call
  * (as derived, before CSE: 42081 add, 81748 mul, 70825 call);
- * critical path 201 cycles, 51 dependent operations.
+ * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_c(const double *q, const double *qd, double *c);
@@ -202,7 +202,7 @@ void lwr4_c_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 766 add, 862 mul, 12 call
  * (as derived, before CSE: 55151 add, 91314 mul, 68639 call);
- * critical path 162 cycles, 38 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_S(const double *q, const double *qd, double *S);
@@ -223,7 +223,7 @@ void lwr4_S_batch(long count, const double *q, const double *qd, double *S);
  *
  * Cost: 263 add, 330 mul, 12 call
  * (as derived, before CSE: 49900 add, 87783 mul, 76848 call);
- * critical path 222 cycles, 58 dependent operations.
+ * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -244,7 +244,7 @@ void lwr4_tau_batch(long count, const double *q, const double *qd, const double 
  *
  * Cost: 512 add, 647 mul, 12 call
  * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call);
- * critical path 394 cycles, 92 dependent operations.
+ * critical path 346 cycles, 76 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -267,7 +267,7 @@ void lwr4_fd_batch(long count, const double *q, const double *qd, const double *
  *
  * Cost: 1809 add, 2314 mul, 12 call
  * (as derived, before CSE: 434960 add, 832852 mul, 833128 call);
- * critical path 252 cycles, 68 dependent operations.
+ * critical path 162 cycles, 38 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
@@ -291,7 +291,7 @@ void lwr4_tau_derivatives_batch(long count, const double *q, const double *qd, c
  *
  * Cost: 3030 add, 3580 mul, 12 call
  * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call);
- * critical path 583 cycles, 155 dependent operations.
+ * critical path 460 cycles, 114 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -310,7 +310,7 @@ void lwr4_fd_derivatives_batch(long count, const double *q, const double *qd, co
  *
  * Cost: 750 add, 1042 mul, 12 call
  * (as derived, before CSE: 5133 add, 14904 mul, 16343 call);
- * critical path 246 cycles, 66 dependent operations.
+ * critical path 99 cycles, 17 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_M_lagrange(const double *q, double *M);
@@ -329,7 +329,7 @@ void lwr4_M_lagrange_batch(long count, const double *q, double *M);
  *
  * Cost: 81 add, 131 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call);
- * critical path 132 cycles, 28 dependent operations.
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_g_lagrange(const double *q, double *g);
@@ -349,7 +349,7 @@ void lwr4_g_lagrange_batch(long count, const double *q, double *g);
  *
  * Cost: 807 add, 916 mul, 12 call
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call);
- * critical path 186 cycles, 46 dependent operations.
+ * critical path 144 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_c_christoffel(const double *q, const double *qd, double *c);
@@ -368,7 +368,7 @@ void lwr4_c_christoffel_batch(long count, const double *q, const double *qd, dou
  *
  * Cost: 165 add, 241 mul, 12 call
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call);
- * critical path 151 cycles, 38 dependent operations.
+ * critical path 127 cycles, 30 dependent operations.
  */
 void lwr4_M_dq(const double *q, double *M);
 void lwr4_M_dq_batch(long count, const double *q, double *M);
@@ -386,7 +386,7 @@ void lwr4_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 127 cycles, 30 dependent operations.
+ * critical path 118 cycles, 27 dependent operations.
  */
 void lwr4_g_dq(const double *q, double *g);
 void lwr4_g_dq_batch(long count, const double *q, double *g);
@@ -405,7 +405,7 @@ void lwr4_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 290 add, 420 mul, 12 call
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call);
- * critical path 235 cycles, 66 dependent operations.
+ * critical path 148 cycles, 37 dependent operations.
  */
 void lwr4_c_dq(const double *q, const double *qd, double *c);
 void lwr4_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -425,7 +425,7 @@ void lwr4_c_dq_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 313 add, 440 mul, 12 call
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call);
- * critical path 238 cycles, 67 dependent operations.
+ * critical path 151 cycles, 38 dependent operations.
  */
 void lwr4_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void lwr4_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -447,7 +447,7 @@ void lwr4_tau_dq_batch(long count, const double *q, const double *qd, const doub
  *
  * Cost: 611 add, 853 mul, 12 call
  * (as derived, before CSE: 115759 add, 499001 mul, 168182 call);
- * critical path 160 cycles, 41 dependent operations.
+ * critical path 136 cycles, 33 dependent operations.
  */
 void lwr4_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void lwr4_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
@@ -504,7 +504,7 @@ void lwr4_ik_hom_batch(long count, const double *T, const double *theta3, double
  *
  * Cost: 246 add, 211 mul, 90 call
  * (as derived, before CSE: 5130962184 add, 5224650480 mul, 565628768 call);
- * critical path 342 cycles, 74 dependent operations.
+ * critical path 336 cycles, 72 dependent operations.
  */
 void lwr4_ik_dq(const double *x, const double *theta3, double *q, int *status);
 void lwr4_ik_dq_batch(long count, const double *x, const double *theta3, double *q, int *status);
@@ -546,7 +546,7 @@ void lwr4_Y_g_batch(long count, const double *q, double *Y);
  *
  * Cost: 328 add, 764 mul, 12 call
  * (as derived, before CSE: 2057 add, 6856 mul, 8366 call);
- * critical path 96 cycles, 16 dependent operations.
+ * critical path 90 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_Y_m(const double *q, double *Y);
@@ -569,7 +569,7 @@ void lwr4_Y_m_batch(long count, const double *q, double *Y);
  *
  * Cost: 512 add, 719 mul, 12 call
  * (as derived, before CSE: 53080 add, 94170 mul, 83708 call);
- * critical path 150 cycles, 34 dependent operations.
+ * critical path 135 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_Y(const double *q, const double *qd, const double *qdd, double *Y);

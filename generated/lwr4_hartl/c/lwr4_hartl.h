@@ -73,7 +73,7 @@ void lwr4_hartl_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 36 add, 70 mul, 14 call
  * (as derived, before CSE: 184 add, 560 mul, 304 call);
- * critical path 76 cycles, 13 dependent operations.
+ * critical path 73 cycles, 12 dependent operations.
  */
 void lwr4_hartl_fk_dq(const double *q, double *x);
 void lwr4_hartl_fk_dq_batch(long count, const double *q, double *x);
@@ -107,7 +107,7 @@ void lwr4_hartl_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 228 add, 357 mul, 14 call
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call);
- * critical path 91 cycles, 18 dependent operations.
+ * critical path 85 cycles, 16 dependent operations.
  */
 void lwr4_hartl_pose_jacobian_dq(const double *q, double *Jx);
 void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -125,7 +125,7 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 142 add, 259 mul, 14 call
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call);
- * critical path 121 cycles, 28 dependent operations.
+ * critical path 103 cycles, 22 dependent operations.
  */
 void lwr4_hartl_jacobian_dq(const double *q, double *J);
 void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
@@ -143,7 +143,7 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
  *
  * Cost: 157 add, 172 mul, 12 call
  * (as derived, before CSE: 5919 add, 8715 mul, 6724 call);
- * critical path 156 cycles, 36 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_M(const double *q, double *M);
@@ -162,7 +162,7 @@ void lwr4_hartl_M_batch(long count, const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
- * critical path 102 cycles, 18 dependent operations.
+ * critical path 90 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_g(const double *q, double *g);
@@ -182,7 +182,7 @@ void lwr4_hartl_g_batch(long count, const double *q, double *g);
  *
  * Cost: 241 add, 311 mul, 12 call
  * (as derived, before CSE: 42081 add, 81748 mul, 70825 call);
- * critical path 198 cycles, 50 dependent operations.
+ * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_c(const double *q, const double *qd, double *c);
@@ -202,7 +202,7 @@ void lwr4_hartl_c_batch(long count, const double *q, const double *qd, double *c
  *
  * Cost: 786 add, 868 mul, 12 call
  * (as derived, before CSE: 55151 add, 91314 mul, 68639 call);
- * critical path 177 cycles, 43 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_S(const double *q, const double *qd, double *S);
@@ -223,7 +223,7 @@ void lwr4_hartl_S_batch(long count, const double *q, const double *qd, double *S
  *
  * Cost: 263 add, 331 mul, 12 call
  * (as derived, before CSE: 49900 add, 87783 mul, 76848 call);
- * critical path 210 cycles, 54 dependent operations.
+ * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -244,7 +244,7 @@ void lwr4_hartl_tau_batch(long count, const double *q, const double *qd, const d
  *
  * Cost: 512 add, 648 mul, 12 call
  * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call);
- * critical path 399 cycles, 97 dependent operations.
+ * critical path 343 cycles, 75 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -267,7 +267,7 @@ void lwr4_hartl_fd_batch(long count, const double *q, const double *qd, const do
  *
  * Cost: 1806 add, 2309 mul, 12 call
  * (as derived, before CSE: 434960 add, 832852 mul, 833128 call);
- * critical path 258 cycles, 70 dependent operations.
+ * critical path 162 cycles, 38 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
@@ -291,7 +291,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  *
  * Cost: 3050 add, 3584 mul, 12 call
  * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call);
- * critical path 555 cycles, 169 dependent operations.
+ * critical path 442 cycles, 108 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -310,7 +310,7 @@ void lwr4_hartl_fd_derivatives_batch(long count, const double *q, const double *
  *
  * Cost: 753 add, 1044 mul, 12 call
  * (as derived, before CSE: 5133 add, 14904 mul, 16343 call);
- * critical path 231 cycles, 61 dependent operations.
+ * critical path 99 cycles, 17 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_M_lagrange(const double *q, double *M);
@@ -329,7 +329,7 @@ void lwr4_hartl_M_lagrange_batch(long count, const double *q, double *M);
  *
  * Cost: 81 add, 131 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call);
- * critical path 126 cycles, 26 dependent operations.
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_g_lagrange(const double *q, double *g);
@@ -349,7 +349,7 @@ void lwr4_hartl_g_lagrange_batch(long count, const double *q, double *g);
  *
  * Cost: 827 add, 918 mul, 12 call
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call);
- * critical path 186 cycles, 46 dependent operations.
+ * critical path 144 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_c_christoffel(const double *q, const double *qd, double *c);
@@ -368,7 +368,7 @@ void lwr4_hartl_c_christoffel_batch(long count, const double *q, const double *q
  *
  * Cost: 167 add, 244 mul, 12 call
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call);
- * critical path 148 cycles, 37 dependent operations.
+ * critical path 127 cycles, 30 dependent operations.
  */
 void lwr4_hartl_M_dq(const double *q, double *M);
 void lwr4_hartl_M_dq_batch(long count, const double *q, double *M);
@@ -386,7 +386,7 @@ void lwr4_hartl_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 127 cycles, 30 dependent operations.
+ * critical path 118 cycles, 27 dependent operations.
  */
 void lwr4_hartl_g_dq(const double *q, double *g);
 void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
@@ -405,7 +405,7 @@ void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 290 add, 420 mul, 12 call
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call);
- * critical path 235 cycles, 66 dependent operations.
+ * critical path 148 cycles, 37 dependent operations.
  */
 void lwr4_hartl_c_dq(const double *q, const double *qd, double *c);
 void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -425,7 +425,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double
  *
  * Cost: 313 add, 440 mul, 12 call
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call);
- * critical path 247 cycles, 70 dependent operations.
+ * critical path 151 cycles, 38 dependent operations.
  */
 void lwr4_hartl_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -447,7 +447,7 @@ void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, cons
  *
  * Cost: 691 add, 858 mul, 12 call
  * (as derived, before CSE: 116775 add, 503492 mul, 169711 call);
- * critical path 163 cycles, 42 dependent operations.
+ * critical path 133 cycles, 32 dependent operations.
  */
 void lwr4_hartl_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void lwr4_hartl_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
@@ -513,7 +513,7 @@ void lwr4_hartl_ik_hom_batch(long count, const double *T, const double *theta3, 
  *
  * Cost: 264 add, 211 mul, 90 call
  * (as derived, before CSE: 5130962216 add, 5224650480 mul, 565628768 call);
- * critical path 342 cycles, 74 dependent operations.
+ * critical path 336 cycles, 72 dependent operations.
  */
 void lwr4_hartl_ik_dq(const double *x, const double *theta3, double *q, int *status);
 void lwr4_hartl_ik_dq_batch(long count, const double *x, const double *theta3, double *q, int *status);
@@ -555,7 +555,7 @@ void lwr4_hartl_Y_g_batch(long count, const double *q, double *Y);
  *
  * Cost: 331 add, 778 mul, 12 call
  * (as derived, before CSE: 2089 add, 6947 mul, 8479 call);
- * critical path 96 cycles, 16 dependent operations.
+ * critical path 87 cycles, 13 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_Y_m(const double *q, double *Y);
@@ -578,7 +578,7 @@ void lwr4_hartl_Y_m_batch(long count, const double *q, double *Y);
  *
  * Cost: 585 add, 718 mul, 12 call
  * (as derived, before CSE: 53044 add, 94126 mul, 83664 call);
- * critical path 150 cycles, 34 dependent operations.
+ * critical path 135 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_Y(const double *q, const double *qd, const double *qdd, double *Y);

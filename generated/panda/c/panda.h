@@ -56,7 +56,7 @@ extern "C" {
  *
  * Cost: 41 add, 76 mul, 14 call
  * (as derived, before CSE: 123 add, 318 mul, 437 call);
- * critical path 90 cycles, 14 dependent operations.
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fk_hom(const double *q, double *T);
@@ -73,7 +73,7 @@ void panda_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 52 add, 93 mul, 14 call
  * (as derived, before CSE: 664 add, 2332 mul, 1284 call);
- * critical path 91 cycles, 18 dependent operations.
+ * critical path 85 cycles, 16 dependent operations.
  */
 void panda_fk_dq(const double *q, double *x);
 void panda_fk_dq_batch(long count, const double *q, double *x);
@@ -107,7 +107,7 @@ void panda_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 286 add, 427 mul, 14 call
  * (as derived, before CSE: 3672 add, 26272 mul, 13432 call);
- * critical path 97 cycles, 20 dependent operations.
+ * critical path 91 cycles, 18 dependent operations.
  */
 void panda_pose_jacobian_dq(const double *q, double *Jx);
 void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -125,7 +125,7 @@ void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 188 add, 313 mul, 14 call
  * (as derived, before CSE: 27455 add, 193768 mul, 107648 call);
- * critical path 139 cycles, 34 dependent operations.
+ * critical path 112 cycles, 25 dependent operations.
  */
 void panda_jacobian_dq(const double *q, double *J);
 void panda_jacobian_dq_batch(long count, const double *q, double *J);
@@ -143,7 +143,7 @@ void panda_jacobian_dq_batch(long count, const double *q, double *J);
  *
  * Cost: 198 add, 214 mul, 12 call
  * (as derived, before CSE: 7832 add, 11019 mul, 8564 call);
- * critical path 168 cycles, 40 dependent operations.
+ * critical path 135 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_M(const double *q, double *M);
@@ -162,7 +162,7 @@ void panda_M_batch(long count, const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
- * critical path 102 cycles, 18 dependent operations.
+ * critical path 90 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_g(const double *q, double *g);
@@ -182,7 +182,7 @@ void panda_g_batch(long count, const double *q, double *g);
  *
  * Cost: 269 add, 350 mul, 12 call
  * (as derived, before CSE: 65491 add, 128314 mul, 109167 call);
- * critical path 207 cycles, 53 dependent operations.
+ * critical path 153 cycles, 35 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_c(const double *q, const double *qd, double *c);
@@ -202,7 +202,7 @@ void panda_c_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 1018 add, 1004 mul, 12 call
  * (as derived, before CSE: 77815 add, 122234 mul, 93654 call);
- * critical path 174 cycles, 42 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_S(const double *q, const double *qd, double *S);
@@ -223,7 +223,7 @@ void panda_S_batch(long count, const double *q, const double *qd, double *S);
  *
  * Cost: 288 add, 364 mul, 12 call
  * (as derived, before CSE: 78018 add, 137165 mul, 117612 call);
- * critical path 219 cycles, 57 dependent operations.
+ * critical path 156 cycles, 36 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -244,7 +244,7 @@ void panda_tau_batch(long count, const double *q, const double *qd, const double
  *
  * Cost: 577 add, 719 mul, 12 call
  * (as derived, before CSE: 409012967 add, 629618682 mul, 497749580 call);
- * critical path 409 cycles, 97 dependent operations.
+ * critical path 358 cycles, 80 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -267,7 +267,7 @@ void panda_fd_batch(long count, const double *q, const double *qd, const double 
  *
  * Cost: 2094 add, 2627 mul, 12 call
  * (as derived, before CSE: 570628 add, 1088662 mul, 1081938 call);
- * critical path 276 cycles, 76 dependent operations.
+ * critical path 162 cycles, 38 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
@@ -291,7 +291,7 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  *
  * Cost: 3398 add, 3875 mul, 12 call
  * (as derived, before CSE: 12664599226860 add, 19495258176161 mul, 15412087385897 call);
- * critical path 586 cycles, 156 dependent operations.
+ * critical path 454 cycles, 112 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -310,7 +310,7 @@ void panda_fd_derivatives_batch(long count, const double *q, const double *qd, c
  *
  * Cost: 838 add, 1126 mul, 12 call
  * (as derived, before CSE: 6812 add, 18193 mul, 19610 call);
- * critical path 246 cycles, 66 dependent operations.
+ * critical path 99 cycles, 17 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_M_lagrange(const double *q, double *M);
@@ -329,7 +329,7 @@ void panda_M_lagrange_batch(long count, const double *q, double *M);
  *
  * Cost: 81 add, 133 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call);
- * critical path 120 cycles, 24 dependent operations.
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_g_lagrange(const double *q, double *g);
@@ -349,7 +349,7 @@ void panda_g_lagrange_batch(long count, const double *q, double *g);
  *
  * Cost: 1058 add, 1047 mul, 12 call
  * (as derived, before CSE: 77857 add, 122283 mul, 93654 call);
- * critical path 192 cycles, 48 dependent operations.
+ * critical path 144 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_c_christoffel(const double *q, const double *qd, double *c);
@@ -368,7 +368,7 @@ void panda_c_christoffel_batch(long count, const double *q, const double *qd, do
  *
  * Cost: 219 add, 303 mul, 12 call
  * (as derived, before CSE: 14791 add, 48807 mul, 16807 call);
- * critical path 151 cycles, 38 dependent operations.
+ * critical path 133 cycles, 32 dependent operations.
  */
 void panda_M_dq(const double *q, double *M);
 void panda_M_dq_batch(long count, const double *q, double *M);
@@ -386,7 +386,7 @@ void panda_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 127 cycles, 30 dependent operations.
+ * critical path 118 cycles, 27 dependent operations.
  */
 void panda_g_dq(const double *q, double *g);
 void panda_g_dq_batch(long count, const double *q, double *g);
@@ -405,7 +405,7 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 332 add, 468 mul, 12 call
  * (as derived, before CSE: 148676 add, 646792 mul, 215417 call);
- * critical path 229 cycles, 64 dependent operations.
+ * critical path 151 cycles, 38 dependent operations.
  */
 void panda_c_dq(const double *q, const double *qd, double *c);
 void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -425,7 +425,7 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 353 add, 484 mul, 12 call
  * (as derived, before CSE: 164689 add, 688748 mul, 229617 call);
- * critical path 235 cycles, 66 dependent operations.
+ * critical path 154 cycles, 39 dependent operations.
  */
 void panda_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void panda_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -447,7 +447,7 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  *
  * Cost: 842 add, 963 mul, 12 call
  * (as derived, before CSE: 179060 add, 753806 mul, 252381 call);
- * critical path 163 cycles, 42 dependent operations.
+ * critical path 139 cycles, 34 dependent operations.
  */
 void panda_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void panda_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
@@ -489,7 +489,7 @@ void panda_Y_g_batch(long count, const double *q, double *Y);
  *
  * Cost: 330 add, 756 mul, 12 call
  * (as derived, before CSE: 2904 add, 8254 mul, 9675 call);
- * critical path 105 cycles, 19 dependent operations.
+ * critical path 93 cycles, 15 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y_m(const double *q, double *Y);
@@ -512,7 +512,7 @@ void panda_Y_m_batch(long count, const double *q, double *Y);
  *
  * Cost: 685 add, 783 mul, 12 call
  * (as derived, before CSE: 79704 add, 141096 mul, 122494 call);
- * critical path 159 cycles, 37 dependent operations.
+ * critical path 138 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
