@@ -234,10 +234,9 @@ def longest_chain(nodes) -> CriticalPath:
     return CriticalPath(t, n)
 
 
-def _printed_terms(e: se.Add) -> list:
-    """The terms of a sum in the order :mod:`kindyngen.printer` writes them (a positive term
-    first)."""
-    _, terms = add_parts(e)
+def _printed_terms(terms: list) -> list:
+    """The non-constant terms of a sum (:func:`add_parts`) in the order
+    :mod:`kindyngen.printer` writes them (a positive term first)."""
     negative = [isinstance(t, se.Mul) and mul_parts(t)[0] < 0 for t in terms]
     if negative[0] and not all(negative):
         terms.insert(0, terms.pop(negative.index(False)))
@@ -283,28 +282,36 @@ class ChainTimer:
         self.served = frozenset(served)
         self.memo: dict = {}
         self.kernel = (lat["kernel"], 1 if lat["kernel"] else 0)
+        self.literals: dict = {}
+
+    def literal(self, e) -> bool:
+        """:func:`is_literal`, memoised (asked of every node by its parents' rules)."""
+        known = self.literals.get(e)
+        if known is None:
+            known = self.literals[e] = is_literal(e)
+        return known
 
     def assign(self, sym, expr) -> None:
         self.memo[sym] = self.ready(expr)
 
     def ready(self, e):
         lat, memo, served, kernel = self.lat, self.memo, self.served, self.kernel
-        visit = self.ready
+        visit, literal = self.ready, self.literal
         chain = _chain
         hit = memo.get(e)
         if hit is not None:
             return hit
         if e in served:
             hit = kernel
-        elif is_literal(e) or e.is_Symbol:
+        elif e.is_Symbol or literal(e):
             hit = (0, 0)
         elif isinstance(e, se.Add):
-            const, terms = add_parts(e)
-            terms = _printed_terms(e)
+            const, terms = add_parts(e, literal)
+            terms = _printed_terms(terms)
             ready = [visit(t) for t in terms]
             hit = chain(ready[0], [(lat["add"], r) for r in ready[1:]] + ([(lat["add"], (0, 0))] if const else []))
         elif isinstance(e, se.Mul):
-            coeff, numer, denom = mul_parts(e)
+            coeff, numer, denom = mul_parts(e, literal)
             numer, denom = _printed_factors(numer), _printed_factors(denom)
             ready = [visit(f) for f in numer]
             if abs(coeff) != 1.0:
@@ -327,7 +334,7 @@ class ChainTimer:
             else:
                 hit = chain(b, [(lat["call"], (0, 0))])
         elif isinstance(e, se.Piecewise):
-            parts = [visit(a) for a in children(e)]
+            parts = [visit(a) for a in children(e, literal)]
             hit = chain(max(parts), [(lat["select"], (0, 0))] * (len(e.args) // 2 - 1))
         elif isinstance(e, COMPARISONS):
             hit = chain(max(visit(a) for a in e.args), [(lat["add"], (0, 0))])

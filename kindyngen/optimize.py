@@ -23,7 +23,7 @@ import symengine as se
 from .c_trig import kernel_latency
 import heapq
 
-from .opcount import ChainTimer, CriticalPath, OpCount, is_literal, program_count, program_critical_path, tree_count
+from .opcount import ChainTimer, CriticalPath, OpCount, program_count, program_critical_path, tree_count
 from .symbolic import SymbolicFunction
 
 
@@ -141,15 +141,15 @@ def _shallower(function: SymbolicFunction, assignments, outputs):
         return join(heap[0][2], heap[1][2])
 
     def rebuild(e):
-        if e.is_Symbol or e.is_Number or not e.args or is_literal(e) or e in timer.served:
+        if e.is_Symbol or e.is_Number or not e.args or timer.literal(e) or e in timer.served:
             return e
         if isinstance(e, se.Add):
-            operands = [a if is_literal(a) else rebuild(a) for a in e.args]
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
             return _earlier(se.Add(*operands), operands, se.Add)
         if isinstance(e, se.Mul):
             if any(isinstance(a, se.Pow) for a in e.args):    # divisors, powers printed in line
                 return se.Mul(*[rebuild(a) for a in e.args])
-            operands = [a if is_literal(a) else rebuild(a) for a in e.args]
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
             sign = 1
             if se.Integer(-1) in operands:                     # a sign, not a factor
                 operands.remove(se.Integer(-1))
