@@ -61,11 +61,11 @@ def fit(columns, y) -> dict:
     return {"coefficients": [float(v) for v in coef], "r": pearson(a @ coef, y)}
 
 
-def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Path) -> dict:
+def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Path, only=None) -> dict:
     robot_dir = generated / robot
     spec = manifest(robot_dir)
     model = load_robot(ROBOTS / f"{robot}.yaml")
-    functions = spec["functions"]
+    functions = [f for f in spec["functions"] if only is None or f["name"] in only]
     samples = {f["name"]: inputs.sample(f, model, K) for f in functions}
     timers = {}
     for variant, flags in VARIANTS.items():
@@ -79,6 +79,8 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
     rows = {}
     for f in functions:
         name = f["name"]
+        if name not in counts:          # iterative functions (ik_dls): a cost per iteration instead
+            continue
         c = counts[name]
         rows[name] = {"critical_path_cycles": c["critical_path"]["cycles"],
                       "critical_path_operations": c["critical_path"]["operations"],
@@ -182,17 +184,20 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the function timing")
     parser.add_argument("--kernel-repeats", type=int, default=300, help="repetitions of the kernel timing")
     parser.add_argument("--no-functions", action="store_true", help="the kernel only")
+    parser.add_argument("--functions", nargs="+", help="time only these functions (default: all)")
+    parser.add_argument("--no-kernel", action="store_true", help="the functions only")
     parser.add_argument("--generated", type=Path, default=GENERATED)
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     result = {"machine": machine(), "variants": VARIANTS}
     workdir = BUILD / "latency"
-    log("kernel")
-    result["kernel"] = time_kernel(workdir / "kernel", args.kernel_repeats)
+    if not args.no_kernel:
+        log("kernel")
+        result["kernel"] = time_kernel(workdir / "kernel", args.kernel_repeats)
     if not args.no_functions:
         result["robots"] = {}
         for robot in args.robots:
-            rows = time_functions(robot, args.generated, args.rounds, 200, workdir / robot)
+            rows = time_functions(robot, args.generated, args.rounds, 200, workdir / robot, args.functions)
             result["robots"][robot] = {"functions": rows, "correlation": correlation(rows)}
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "latency.json"
