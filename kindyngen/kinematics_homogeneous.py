@@ -17,8 +17,6 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 import symengine as se
 
 from .geometry import compose, constant_transform, joint_transform
@@ -84,30 +82,10 @@ def homogeneous(rotation: se.Matrix, position: se.Matrix) -> se.Matrix:
     return se.Matrix([rows[0] + [position[0]], rows[1] + [position[1]], rows[2] + [position[2]], [0, 0, 0, 1]])
 
 
-def balanced_pose(model: RobotModel, q) -> tuple[se.Matrix, se.Matrix]:
-    """The flange pose as a balanced tree of products, ((T1 T2)(T3 T4))((T5 T6)(T7 tool)),
-    instead of the chain (((T1 T2) T3) ...): ceil(log2 n) products deep instead of n - 1."""
-    parts = [joint_transform(joint, qi) for joint, qi in zip(model.joints, q)]
-    tool = constant_transform(model.tool)
-    parts += [tool] if tool is not None else []
-    while len(parts) > 1:
-        parts = [compose(parts[k], parts[k + 1]) if k + 1 < len(parts) else parts[k]
-                 for k in range(0, len(parts), 2)]
-    return parts[0]
-
-
 def fk_hom(model: RobotModel) -> SymbolicFunction:
-    """Flange pose as a 4x4 homogeneous transform, ``fk_hom(q) -> T``: two routes, the chain of
-    link transforms and their balanced product tree, the one with the shorter critical path
-    kept (:data:`kindyngen.optimize.LATENCY_ROUTE_BOUND`)."""
+    """Flange pose as a 4x4 homogeneous transform, ``fk_hom(q) -> T``."""
     q = port_symbols("q", (model.n,))
-    chain = _fk_hom(model, q, flange(model, frame_chain(model, q)), "chain")
-    return replace(chain, metadata={**chain.metadata, "choose": "critical_path"},
-                   alternatives=(_fk_hom(model, q, balanced_pose(model, q), "balanced tree"),))
-
-
-def _fk_hom(model: RobotModel, q, pose, route: str) -> SymbolicFunction:
-    rotation, position = pose
+    rotation, position = flange(model, frame_chain(model, q))
     return SymbolicFunction(
         name="fk_hom",
         summary="Forward kinematics: flange pose as a 4x4 homogeneous transform.",
@@ -116,34 +94,13 @@ def _fk_hom(model: RobotModel, q, pose, route: str) -> SymbolicFunction:
         input_symbols=(q,),
         output_exprs=(flatten(homogeneous(rotation, position)),),
         conventions=frame_convention(model),
-        metadata={"route": route},
     )
 
 
-def prefix_chain(model: RobotModel, q) -> list[tuple[se.Matrix, se.Matrix]]:
-    """The absolute frames of :func:`frame_chain` as a parallel prefix (Sklansky): in round
-    r = 0, 1, ... every frame in the upper half of a block of 2^(r+1) links is composed with the
-    last frame of the lower half, ceil(log2 n) products deep instead of n - 1."""
-    frames = [joint_transform(joint, qi) for joint, qi in zip(model.joints, q)]
-    span = 1
-    while span < len(frames):
-        frames = [compose(frames[(i // span) * span - 1], f) if (i // span) % 2 else f
-                  for i, f in enumerate(frames)]
-        span *= 2
-    return [(se.eye(3), se.zeros(3, 1))] + frames
-
-
 def jacobian(model: RobotModel) -> SymbolicFunction:
-    """Geometric Jacobian of the flange, ``jacobian(q) -> J`` (6 x n, linear rows first): two
-    routes, the frames as a chain and as a parallel prefix, the one with the shorter critical
-    path kept (:data:`kindyngen.optimize.LATENCY_ROUTE_BOUND`)."""
+    """Geometric Jacobian of the flange, ``jacobian(q) -> J`` (6 x n, linear rows first)."""
     q = port_symbols("q", (model.n,))
-    chain = _jacobian(model, q, frame_chain(model, q), "chain")
-    return replace(chain, metadata={**chain.metadata, "choose": "critical_path"},
-                   alternatives=(_jacobian(model, q, prefix_chain(model, q), "parallel prefix"),))
-
-
-def _jacobian(model: RobotModel, q, chain, route: str) -> SymbolicFunction:
+    chain = frame_chain(model, q)
     point = flange(model, chain)[1]
     columns = []
     for joint, (axis, origin) in zip(model.joints, joint_axes(model, chain)):
@@ -163,5 +120,4 @@ def _jacobian(model: RobotModel, q, chain, route: str) -> SymbolicFunction:
         output_exprs=(flatten(J),),
         conventions=frame_convention(model)
         + " J is expressed in base-frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED).",
-        metadata={"route": route},
     )

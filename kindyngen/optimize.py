@@ -222,36 +222,12 @@ def _renamed_calls(expr, calls):
     return expr.xreplace({c: calls[c] for c in found}) if found else expr
 
 
-LATENCY_ROUTE_BOUND = 0.25
-"""A function whose routes are chosen by latency (``metadata["choose"] == "critical_path"``)
-keeps the route with the shortest critical path among those whose additions + multiplications
-after CSE are at most this fraction above the fewest (the fewest operations on a tie). For the
-balanced pose of fk_hom: lwr4 98 -> 111 add + mul (+13 %), panda 117 -> 140 (+20 %), both
-critical paths 84 -> 72 cycles."""
-
-
 def _cheapest(routes) -> Program:
     programs = [optimize(route) for route in routes]
-    if routes[0].metadata.get("choose") == "critical_path":
-        return _shortest(programs)
     best = min(range(len(programs)), key=lambda k: (programs[k].after.add + programs[k].after.mul, k))
     counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)
     text = ("Route chosen by the fewest additions + multiplications after CSE: "
             + "; ".join(f"{name} {count.add} + {count.mul}" for name, count in counted) + ".")
-    chosen = programs[best]
-    return replace(chosen, function=replace(chosen.function, summary=f"{chosen.function.summary} {text}"),
-                   routes=counted)
-
-
-def _shortest(programs) -> Program:
-    ops = [p.after.add + p.after.mul for p in programs]
-    allowed = [k for k in range(len(programs)) if ops[k] <= (1 + LATENCY_ROUTE_BOUND) * min(ops)]
-    best = min(allowed, key=lambda k: (programs[k].critical.cycles, ops[k], k))
-    counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)
-    text = (f"Route chosen by the shortest critical path among those at most {LATENCY_ROUTE_BOUND:.0%} above "
-            "the fewest additions + multiplications: "
-            + "; ".join(f"{p.function.metadata.get('route')} {p.after.add} + {p.after.mul}, {p.critical.cycles} cycles"
-                        for p in programs) + ".")
     chosen = programs[best]
     return replace(chosen, function=replace(chosen.function, summary=f"{chosen.function.summary} {text}"),
                    routes=counted)

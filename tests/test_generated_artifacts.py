@@ -72,8 +72,8 @@ def test_headers_state_conventions_units_and_costs(robot):
 def test_opcounts_json_schema_and_paper_bars():
     counts = json.loads((GENERATED / "lwr4" / "opcounts.json").read_text())
     for name, entry in counts.items():
-        assert set(entry) - {"route", "routes"} == {"before", "after", "critical_path"}
-        for stage in (entry["before"], entry["after"], *entry.get("routes", {}).values()):
+        assert set(entry) == {"before", "after", "critical_path"}
+        for stage in (entry["before"], entry["after"]):
             assert set(stage) == {"add", "mul", "call"}
         assert set(entry["critical_path"]) == {"cycles", "operations"}
     # Kinematics paper, Table II, Maple-optimised: FK homogeneous 40/87/14, dual quaternion 38/88/14

@@ -19,14 +19,14 @@ def _input(value, shape, name):
 
 
 def fk_hom(q):
-    """Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 31 + 67, 84 cycles; balanced tree 37 + 74, 72 cycles.
+    """Forward kinematics: flange pose as a 4x4 homogeneous transform.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
 
     q: (..., 7,) joint angles, DH order [rad]
     Returns T: (..., 4, 4) double, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
-    Cost per configuration: 37 add, 74 mul, 14 call.
+    Cost per configuration: 31 add, 67 mul, 14 call.
     """
     q, batch_q = _input(q, (7,), "q")
     batch = np.broadcast_shapes(batch_q, )
@@ -37,71 +37,61 @@ def fk_hom(q):
     q_4 = q[..., 4]
     q_5 = q[..., 5]
     q_6 = q[..., 6]
-    t0 = np.cos(q_6)
-    t1 = np.cos(q_0)
-    t2 = np.cos(q_3)
-    t3 = np.sin(q_1)
+    t0 = np.sin(q_6)
+    t1 = np.cos(q_4)
+    t2 = np.sin(q_0)
+    t3 = np.cos(q_2)
     t4 = t3*t2
-    t5 = np.sin(q_2)
-    t6 = np.sin(q_3)
-    t7 = np.sin(q_0)
+    t5 = np.cos(q_1)
+    t6 = np.sin(q_2)
+    t7 = np.cos(q_0)
     t8 = t7*t6
-    t9 = np.cos(q_1)
-    t10 = t9*t6
-    t11 = np.cos(q_2)
-    t12 = t1*t11
-    t13 = t12*t10 - t4*t1 - t8*t5
-    t14 = np.sin(q_5)
-    t15 = t13*t14
-    t16 = np.sin(q_6)
-    t17 = np.cos(q_4)
-    t18 = t16*t17
-    t19 = np.cos(q_5)
-    t20 = np.sin(q_4)
-    t21 = t0*t20
-    t22 = t18 + t21*t19
-    t23 = t7*t11
-    t24 = t5*t1
-    t25 = -t23 - t9*t24
-    t26 = t20*t16
-    t27 = t0*t17
-    t28 = t27*t19 - t26
-    t29 = t5*t7
-    t30 = t9*t2
-    t31 = t6*t1*t3 - t2*t29 + t30*t12
-    t32 = t27 - t26*t19
-    t33 = -t21 - t19*t18
-    t34 = t20*t14
-    t35 = t14*t17
-    t36 = 0.4*t3
-    t37 = t6*t24 - t4*t7 + t23*t10
-    t38 = t37*t14
-    t39 = t12 - t9*t29
-    t40 = t8*t3 + t2*t24 + t23*t30
-    t41 = t3*t11
-    t42 = t30 + t6*t41
-    t43 = t42*t14
-    t44 = t5*t3
-    t45 = t2*t41 - t10
-    t51 = t28*t31 + t22*t25
-    t52 = t33*t31 + t25*t32
-    t54 = t40*t28 + t22*t39
-    t55 = t40*t33 + t39*t32
-    t57 = t45*t28 - t44*t22
-    t58 = t45*t33 - t44*t32
+    t9 = -t8*t5 - t4
+    t10 = np.sin(q_4)
+    t11 = np.sin(q_3)
+    t12 = np.sin(q_1)
+    t13 = t11*t12
+    t14 = np.cos(q_3)
+    t15 = t6*t2
+    t16 = t7*t3
+    t17 = t5*t16 - t15
+    t18 = t14*t17 + t7*t13
+    t19 = t18*t10 - t9*t1
+    t20 = np.cos(q_6)
+    t21 = np.sin(q_5)
+    t22 = t12*t14
+    t23 = t11*t17 - t7*t22
+    t24 = np.cos(q_5)
+    t25 = t1*t18 + t9*t10
+    t26 = t24*t25 + t23*t21
+    t27 = 0.4*t12
+    t28 = t16 - t5*t15
+    t29 = t5*t4 + t8
+    t30 = t29*t14 + t2*t13
+    t31 = t30*t10 - t1*t28
+    t32 = t29*t11 - t2*t22
+    t33 = t1*t30 + t28*t10
+    t34 = t24*t33 + t21*t32
+    t35 = t6*t12
+    t36 = t3*t12
+    t37 = t36*t14 - t5*t11
+    t38 = t37*t10 + t1*t35
+    t39 = t36*t11 + t5*t14
+    t40 = t1*t37 - t35*t10
+    t41 = t40*t24 + t21*t39
     T = np.empty(batch + (4, 4), dtype=float)
-    T[..., 0, 0] = t51 + t0*t15
-    T[..., 0, 1] = t52 - t15*t16
-    T[..., 0, 2] = t19*t13 - t25*t34 - t31*t35
-    T[..., 0, 3] = 0.39*t13 - t1*t36
-    T[..., 1, 0] = t54 + t0*t38
-    T[..., 1, 1] = t55 - t38*t16
-    T[..., 1, 2] = t37*t19 - t39*t34 - t40*t35
-    T[..., 1, 3] = 0.39*t37 - t7*t36
-    T[..., 2, 0] = t57 + t0*t43
-    T[..., 2, 1] = t58 - t43*t16
-    T[..., 2, 2] = t42*t19 + t44*t34 - t45*t35
-    T[..., 2, 3] = 0.39*t42 + 0.4*t9
+    T[..., 0, 0] = t26*t20 - t0*t19
+    T[..., 0, 1] = -t0*t26 - t20*t19
+    T[..., 0, 2] = t24*t23 - t21*t25
+    T[..., 0, 3] = 0.39*t23 - t7*t27
+    T[..., 1, 0] = t20*t34 - t0*t31
+    T[..., 1, 1] = -t0*t34 - t20*t31
+    T[..., 1, 2] = t24*t32 - t21*t33
+    T[..., 1, 3] = 0.39*t32 - t2*t27
+    T[..., 2, 0] = t41*t20 - t0*t38
+    T[..., 2, 1] = -t0*t41 - t20*t38
+    T[..., 2, 2] = t24*t39 - t40*t21
+    T[..., 2, 3] = 0.4*t5 + 0.39*t39
     T[..., 3, 0] = 0.0
     T[..., 3, 1] = 0.0
     T[..., 3, 2] = 0.0
@@ -199,7 +189,7 @@ def fk_dq(q):
 
 
 def jacobian(q):
-    """Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 36 + 76, 84 cycles; parallel prefix 38 + 78, 78 cycles.
+    """Geometric Jacobian of the flange: [v; w] = J(q) qd.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
@@ -207,7 +197,7 @@ def jacobian(q):
 
     q: (..., 7,) joint angles, DH order [rad]
     Returns J: (..., 6, 7) double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
-    Cost per configuration: 38 add, 78 mul, 12 call.
+    Cost per configuration: 36 add, 76 mul, 12 call.
     """
     q, batch_q = _input(q, (7,), "q")
     batch = np.broadcast_shapes(batch_q, )
@@ -222,94 +212,91 @@ def jacobian(q):
     t1 = np.sin(q_1)
     t2 = np.sin(q_0)
     t3 = t1*t2
-    t4 = np.cos(q_0)
-    t5 = np.sin(q_3)
-    t6 = np.sin(q_2)
+    t4 = np.sin(q_3)
+    t5 = np.sin(q_2)
+    t6 = np.cos(q_0)
     t7 = t5*t6
     t8 = np.cos(q_1)
-    t9 = t8*t5
-    t10 = np.cos(q_2)
-    t11 = t2*t10
-    t12 = t9*t11 + t4*t7 - t0*t3
+    t9 = np.cos(q_2)
+    t10 = t9*t2
+    t11 = t8*t10 + t7
+    t12 = t4*t11 - t0*t3
     t13 = 0.39*t12
     t14 = t13 - 0.4*t3
     t15 = -t14
-    t16 = t8*t0
-    t17 = t1*t10
-    t18 = t5*t17 + t16
-    t19 = 0.39*t18
-    t20 = 0.4*t8 + t19
-    t21 = t6*t1
-    t22 = t4*t10
-    t23 = t8*t6
-    t24 = t22 - t2*t23
+    t16 = t9*t1
+    t17 = t4*t16 + t8*t0
+    t18 = 0.39*t17
+    t19 = 0.4*t8 + t18
+    t20 = t5*t1
+    t21 = t9*t6
+    t22 = t5*t2
+    t23 = t21 - t8*t22
+    t24 = t14 + t15
     t25 = np.cos(q_4)
     t26 = np.sin(q_4)
-    t27 = t0*t17 - t9
-    t28 = t27*t26 + t21*t25
-    t29 = t14 + t15
-    t30 = 0.0
-    t31 = t6*t0
-    t32 = t11*t16 + t4*t31 + t5*t3
-    t33 = t26*t32 - t24*t25
-    t34 = np.cos(q_5)
-    t35 = np.sin(q_5)
-    t36 = t26*t35
-    t37 = t25*t35
-    t38 = t21*t36 - t27*t37 + t34*t18
-    t39 = t34*t12 - t32*t37 - t24*t36
-    t40 = t4*t1
-    t41 = t9*t22 - t7*t2 - t0*t40
-    t42 = 0.39*t41
-    t43 = t42 - 0.4*t40
-    t44 = -t4*t23 - t11
-    t45 = t22*t16 - t2*t31 + t5*t40
-    t46 = t45*t26 - t44*t25
-    t47 = 0.0
-    t48 = t41*t34 - t44*t36 - t45*t37
+    t27 = t0*t16 - t8*t4
+    t28 = t27*t26 + t25*t20
+    t29 = t0*t11 + t4*t3
+    t30 = t29*t26 - t23*t25
+    t31 = 0.0
+    t32 = np.cos(q_5)
+    t33 = np.sin(q_5)
+    t34 = t32*t17 - (t27*t25 - t26*t20)*t33
+    t35 = t32*t12 - (t29*t25 + t23*t26)*t33
+    t36 = t6*t1
+    t37 = t8*t21 - t22
+    t38 = t4*t37 - t0*t36
+    t39 = 0.39*t38
+    t40 = t39 - 0.4*t36
+    t41 = -t8*t7 - t10
+    t42 = t0*t37 + t4*t36
+    t43 = t42*t26 - t41*t25
+    t44 = 0.0
+    t45 = t32*t38 - (t42*t25 + t41*t26)*t33
     J = np.empty(batch + (6, 7), dtype=float)
     J[..., 0, 0] = t15
-    J[..., 0, 1] = -t4*t20
-    J[..., 0, 2] = -t3*t20 - t8*t14
-    J[..., 0, 3] = t24*t19 + t21*t13
+    J[..., 0, 1] = -t6*t19
+    J[..., 0, 2] = -t3*t19 - t8*t14
+    J[..., 0, 3] = t23*t18 + t20*t13
     J[..., 0, 4] = 0.0
-    J[..., 0, 5] = t33*t30 - t29*t28
-    J[..., 0, 6] = t39*t30 - t29*t38
-    J[..., 1, 0] = t43
-    J[..., 1, 1] = -t2*t20
-    J[..., 1, 2] = t8*t43 + t40*t20
-    J[..., 1, 3] = -t42*t21 - t44*t19
+    J[..., 0, 5] = t31*t30 - t24*t28
+    J[..., 0, 6] = t31*t35 - t24*t34
+    J[..., 1, 0] = t40
+    J[..., 1, 1] = -t2*t19
+    J[..., 1, 2] = t8*t40 + t36*t19
+    J[..., 1, 3] = -t20*t39 - t41*t18
     J[..., 1, 4] = 0.0
-    J[..., 1, 5] = t47*t28 - t46*t30
-    J[..., 1, 6] = t47*t38 - t48*t30
+    J[..., 1, 5] = t44*t28 - t43*t31
+    J[..., 1, 6] = t44*t34 - t45*t31
     J[..., 2, 0] = 0.0
-    J[..., 2, 1] = t2*t14 + t4*t43
-    J[..., 2, 2] = t3*t43 - t40*t14
-    J[..., 2, 3] = t44*t13 - t42*t24
+    J[..., 2, 1] = t2*t14 + t6*t40
+    J[..., 2, 2] = t3*t40 - t36*t14
+    J[..., 2, 3] = t41*t13 - t23*t39
     J[..., 2, 4] = 0.0
-    J[..., 2, 5] = t46*t29 - t47*t33
-    J[..., 2, 6] = t48*t29 - t47*t39
+    J[..., 2, 5] = t43*t24 - t44*t30
+    J[..., 2, 6] = t45*t24 - t44*t35
     J[..., 3, 0] = 0.0
     J[..., 3, 1] = t2
-    J[..., 3, 2] = -t40
-    J[..., 3, 3] = t44
-    J[..., 3, 4] = t41
-    J[..., 3, 5] = t46
-    J[..., 3, 6] = t48
+    J[..., 3, 2] = -t36
+    J[..., 3, 3] = t41
+    J[..., 3, 4] = t38
+    J[..., 3, 5] = t43
+    J[..., 3, 6] = t45
     J[..., 4, 0] = 0.0
-    J[..., 4, 1] = -t4
+    J[..., 4, 1] = -t6
     J[..., 4, 2] = -t3
-    J[..., 4, 3] = t24
+    J[..., 4, 3] = t23
     J[..., 4, 4] = t12
-    J[..., 4, 5] = t33
-    J[..., 4, 6] = t39
+    J[..., 4, 5] = t30
+    J[..., 4, 6] = t35
     J[..., 5, 0] = 1.0
     J[..., 5, 1] = 0.0
     J[..., 5, 2] = t8
-    J[..., 5, 3] = -t21
-    J[..., 5, 4] = t18
+    J[..., 5, 3] = -t20
+    J[..., 5, 4] = t17
     J[..., 5, 5] = t28
-    J[..., 5, 6] = t38
+    J[..., 5, 6] = t34
     return J
 
 

@@ -49,16 +49,16 @@ extern "C" {
 #define LWR4_HARTL_NDOF 7
 
 /*
- * fk_hom: Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 31 + 67, 84 cycles; balanced tree 37 + 74, 72 cycles.
+ * fk_hom: Forward kinematics: flange pose as a 4x4 homogeneous transform.
  * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
  * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out T[16]: 4 x 4 double, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
  *
- * Cost: 37 add, 74 mul, 14 call
- * (as derived, before CSE: 74 add, 223 mul, 303 call);
- * critical path 72 cycles, 8 dependent operations.
+ * Cost: 31 add, 67 mul, 14 call
+ * (as derived, before CSE: 88 add, 238 mul, 332 call);
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fk_hom(const double *q, double *T);
@@ -81,7 +81,7 @@ void lwr4_hartl_fk_dq(const double *q, double *x);
 void lwr4_hartl_fk_dq_batch(long count, const double *q, double *x);
 
 /*
- * jacobian: Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 36 + 76, 84 cycles; parallel prefix 38 + 78, 78 cycles.
+ * jacobian: Geometric Jacobian of the flange: [v; w] = J(q) qd.
  * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
  * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
  * frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED).
@@ -89,9 +89,9 @@ void lwr4_hartl_fk_dq_batch(long count, const double *q, double *x);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
  *
- * Cost: 38 add, 78 mul, 12 call
- * (as derived, before CSE: 226 add, 670 mul, 852 call);
- * critical path 78 cycles, 10 dependent operations.
+ * Cost: 36 add, 76 mul, 12 call
+ * (as derived, before CSE: 226 add, 613 mul, 795 call);
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_jacobian(const double *q, double *J);
@@ -628,9 +628,9 @@ void lwr4_hartl_Y_batch(long count, const double *q, const double *qd, const dou
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (37 add, 74 mul, 14 call) + jacobian (38 add, 78 mul, 12 call, only after
+ * fk_hom (31 add, 67 mul, 14 call) + jacobian (36 add, 76 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 348 add, 484 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 340 add, 475 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void lwr4_hartl_ik_dls(const double *T, const double *q0, double *q, int *status);

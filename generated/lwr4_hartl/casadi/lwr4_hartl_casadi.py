@@ -38,69 +38,59 @@ def _matrix(entries, rows, cols):
 
 
 def fk_hom():
-    """Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 31 + 67, 84 cycles; balanced tree 37 + 74, 72 cycles.
+    """Forward kinematics: flange pose as a 4x4 homogeneous transform.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
 
     in  q: 7, joint angles, DH order [rad]
     out T: 4 x 4, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
-    Cost: 37 add, 74 mul, 14 call.
+    Cost: 31 add, 67 mul, 14 call.
     """
     q = ca.SX.sym("q", 7)
-    t0 = ca.cos(q[6])
-    t1 = ca.cos(q[0])
-    t2 = ca.cos(q[3])
-    t3 = ca.sin(q[1])
+    t0 = ca.sin(q[6])
+    t1 = ca.cos(q[4])
+    t2 = ca.sin(q[0])
+    t3 = ca.cos(q[2])
     t4 = t3*t2
-    t5 = ca.sin(q[2])
-    t6 = ca.sin(q[3])
-    t7 = ca.sin(q[0])
+    t5 = ca.cos(q[1])
+    t6 = ca.sin(q[2])
+    t7 = ca.cos(q[0])
     t8 = t7*t6
-    t9 = ca.cos(q[1])
-    t10 = t9*t6
-    t11 = ca.cos(q[2])
-    t12 = t1*t11
-    t13 = t8*t5 - t4*t1 + t12*t10
-    t14 = ca.sin(q[5])
-    t15 = t13*t14
-    t16 = ca.sin(q[6])
-    t17 = ca.cos(q[4])
-    t18 = t16*t17
-    t19 = ca.cos(q[5])
-    t20 = ca.sin(q[4])
-    t21 = t0*t20
-    t22 = t21*t19 - t18
-    t23 = t7*t11
-    t24 = t5*t1
-    t25 = t9*t24 - t23
-    t26 = t20*t16
-    t27 = t0*t17
-    t28 = t26 + t27*t19
-    t29 = t5*t7
-    t30 = t9*t2
-    t31 = t6*t1*t3 + t2*t29 + t30*t12
-    t32 = -t27 - t26*t19
-    t33 = t21 - t19*t18
-    t34 = t20*t14
-    t35 = t14*t17
-    t36 = 0.4*t3
-    t37 = t23*t10 - t4*t7 - t6*t24
-    t38 = t37*t14
-    t39 = t12 + t9*t29
-    t40 = t8*t3 - t2*t24 + t23*t30
-    t41 = t3*t11
-    t42 = t30 + t6*t41
-    t43 = t42*t14
-    t44 = t5*t3
-    t45 = t2*t41 - t10
-    t51 = t28*t31 + t22*t25
-    t52 = t33*t31 + t25*t32
-    t54 = t40*t28 + t22*t39
-    t55 = t40*t33 + t39*t32
-    t57 = t44*t22 + t45*t28
-    t58 = t45*t33 + t44*t32
-    out_T = _matrix([t51 + t0*t15, t52 - t15*t16, t25*t34 - t19*t13 + t31*t35, 0.39*t13 + t1*t36, t54 + t0*t38, t55 - t38*t16, t39*t34 - t37*t19 + t40*t35, 0.39*t37 + t7*t36, t57 + t0*t43, t58 - t43*t16, t44*t34 - t42*t19 + t45*t35, 0.39*t42 - 0.4*t9, 0.0, 0.0, 0.0, 1.0], 4, 4)
+    t9 = t8*t5 - t4
+    t10 = ca.sin(q[4])
+    t11 = ca.sin(q[3])
+    t12 = ca.sin(q[1])
+    t13 = t11*t12
+    t14 = ca.cos(q[3])
+    t15 = t6*t2
+    t16 = t7*t3
+    t17 = t5*t16 + t15
+    t18 = t14*t17 + t7*t13
+    t19 = t18*t10 - t9*t1
+    t20 = ca.cos(q[6])
+    t21 = ca.sin(q[5])
+    t22 = t12*t14
+    t23 = t11*t17 - t7*t22
+    t24 = ca.cos(q[5])
+    t25 = t1*t18 + t9*t10
+    t26 = t24*t25 + t23*t21
+    t27 = 0.4*t12
+    t28 = t5*t15 + t16
+    t29 = t5*t4 - t8
+    t30 = t29*t14 + t2*t13
+    t31 = t30*t10 - t1*t28
+    t32 = t29*t11 - t2*t22
+    t33 = t1*t30 + t28*t10
+    t34 = t24*t33 + t21*t32
+    t35 = t6*t12
+    t36 = t3*t12
+    t37 = t36*t14 - t5*t11
+    t38 = t37*t10 - t1*t35
+    t39 = t36*t11 + t5*t14
+    t40 = t1*t37 + t35*t10
+    t41 = t40*t24 + t21*t39
+    out_T = _matrix([t26*t20 + t0*t19, t20*t19 - t0*t26, t21*t25 - t24*t23, t7*t27 + 0.39*t23, t20*t34 + t0*t31, t20*t31 - t0*t34, t21*t33 - t24*t32, t2*t27 + 0.39*t32, t41*t20 + t0*t38, t20*t38 - t0*t41, t40*t21 - t24*t39, 0.39*t39 - 0.4*t5, 0.0, 0.0, 0.0, 1.0], 4, 4)
     return ca.Function("fk_hom", [q], [out_T],
                        ["q"], ["T"])
 
@@ -181,7 +171,7 @@ def fk_dq():
 
 
 def jacobian():
-    """Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 36 + 76, 84 cycles; parallel prefix 38 + 78, 78 cycles.
+    """Geometric Jacobian of the flange: [v; w] = J(q) qd.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
@@ -189,59 +179,56 @@ def jacobian():
 
     in  q: 7, joint angles, DH order [rad]
     out J: 6 x 7, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
-    Cost: 38 add, 78 mul, 12 call.
+    Cost: 36 add, 76 mul, 12 call.
     """
     q = ca.SX.sym("q", 7)
     t0 = ca.cos(q[3])
     t1 = ca.sin(q[1])
     t2 = ca.sin(q[0])
     t3 = t1*t2
-    t4 = ca.cos(q[0])
-    t5 = ca.sin(q[3])
-    t6 = ca.sin(q[2])
+    t4 = ca.sin(q[3])
+    t5 = ca.sin(q[2])
+    t6 = ca.cos(q[0])
     t7 = t5*t6
     t8 = ca.cos(q[1])
-    t9 = t8*t5
-    t10 = ca.cos(q[2])
-    t11 = t2*t10
-    t12 = t9*t11 - t4*t7 - t0*t3
+    t9 = ca.cos(q[2])
+    t10 = t9*t2
+    t11 = t8*t10 - t7
+    t12 = t4*t11 - t0*t3
     t13 = 0.39*t12
     t14 = 0.4*t3 + t13
     t15 = -t14
-    t16 = t8*t0
-    t17 = t1*t10
-    t18 = t5*t17 + t16
-    t19 = 0.39*t18
-    t20 = t19 - 0.4*t8
-    t21 = t6*t1
-    t22 = t4*t10
-    t23 = t8*t6
-    t24 = t2*t23 + t22
+    t16 = t9*t1
+    t17 = t4*t16 + t8*t0
+    t18 = 0.39*t17
+    t19 = t18 - 0.4*t8
+    t20 = t5*t1
+    t21 = t9*t6
+    t22 = t5*t2
+    t23 = t8*t22 + t21
+    t24 = t14 + t15
     t25 = ca.cos(q[4])
     t26 = ca.sin(q[4])
-    t27 = t0*t17 - t9
-    t28 = t27*t26 - t21*t25
-    t29 = t14 + t15
-    t30 = 0.0
-    t31 = t6*t0
-    t32 = t11*t16 - t4*t31 + t5*t3
-    t33 = t26*t32 - t24*t25
-    t34 = ca.cos(q[5])
-    t35 = ca.sin(q[5])
-    t36 = t26*t35
-    t37 = t25*t35
-    t38 = t27*t37 + t21*t36 - t34*t18
-    t39 = t32*t37 + t24*t36 - t34*t12
-    t40 = t4*t1
-    t41 = t9*t22 + t7*t2 - t0*t40
-    t42 = 0.39*t41
-    t43 = 0.4*t40 + t42
-    t44 = t4*t23 - t11
-    t45 = t22*t16 + t2*t31 + t5*t40
-    t46 = t45*t26 - t44*t25
-    t47 = 0.0
-    t48 = t44*t36 + t45*t37 - t41*t34
-    out_J = _matrix([t15, -t4*t20, t3*t20 + t8*t14, t24*t19 - t21*t13, 0.0, t33*t30 - t29*t28, t39*t30 - t29*t38, t43, -t2*t20, -t8*t43 - t40*t20, t42*t21 - t44*t19, 0.0, t47*t28 - t46*t30, t47*t38 - t48*t30, 0.0, t2*t14 + t4*t43, t40*t14 - t3*t43, t44*t13 - t42*t24, 0.0, t46*t29 - t47*t33, t48*t29 - t47*t39, 0.0, t2, t40, t44, t41, t46, t48, 0.0, -t4, t3, t24, t12, t33, t39, 1.0, 0.0, -t8, t21, t18, t28, t38], 6, 7)
+    t27 = t0*t16 - t8*t4
+    t28 = t27*t26 - t25*t20
+    t29 = t0*t11 + t4*t3
+    t30 = t29*t26 - t23*t25
+    t31 = 0.0
+    t32 = ca.cos(q[5])
+    t33 = ca.sin(q[5])
+    t34 = (t27*t25 + t26*t20)*t33 - t32*t17
+    t35 = (t29*t25 + t23*t26)*t33 - t32*t12
+    t36 = t6*t1
+    t37 = t8*t21 + t22
+    t38 = t4*t37 - t0*t36
+    t39 = 0.39*t38
+    t40 = 0.4*t36 + t39
+    t41 = t8*t7 - t10
+    t42 = t0*t37 + t4*t36
+    t43 = t42*t26 - t41*t25
+    t44 = 0.0
+    t45 = (t42*t25 + t41*t26)*t33 - t32*t38
+    out_J = _matrix([t15, -t6*t19, t3*t19 + t8*t14, t23*t18 - t20*t13, 0.0, t31*t30 - t24*t28, t31*t35 - t24*t34, t40, -t2*t19, -t8*t40 - t36*t19, t20*t39 - t41*t18, 0.0, t44*t28 - t43*t31, t44*t34 - t45*t31, 0.0, t2*t14 + t6*t40, t36*t14 - t3*t40, t41*t13 - t23*t39, 0.0, t43*t24 - t44*t30, t45*t24 - t44*t35, 0.0, t2, t36, t41, t38, t43, t45, 0.0, -t6, t3, t23, t12, t30, t35, 1.0, 0.0, -t8, t20, t17, t28, t34], 6, 7)
     return ca.Function("jacobian", [q], [out_J],
                        ["q"], ["J"])
 

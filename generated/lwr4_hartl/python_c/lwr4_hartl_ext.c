@@ -144,9 +144,7 @@ PyDoc_STRVAR(kdg_d_fk_hom,
     "fk_hom($module, q)\n"
     "--\n"
     "\n"
-    "Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the\n"
-    "shortest critical path among those at most 25% above the fewest additions +\n"
-    "multiplications: chain 31 + 67, 84 cycles; balanced tree 37 + 74, 72 cycles.\n"
+    "Forward kinematics: flange pose as a 4x4 homogeneous transform.\n"
     "\n"
     "Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates\n"
     "(row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.\n"
@@ -154,7 +152,7 @@ PyDoc_STRVAR(kdg_d_fk_hom,
     "q: (7,) float64, joint angles, DH order [rad]\n"
     "Returns T: (4, 4) float64, flange pose in the base frame (row-major) [m (translation), 1\n"
     "    (rotation)]\n"
-    "Cost of the generated C: 37 add, 74 mul, 14 call.\n"
+    "Cost of the generated C: 31 add, 67 mul, 14 call.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/lwr4_hartl.py. Same as fk_hom(q) there.");
 
@@ -229,9 +227,7 @@ PyDoc_STRVAR(kdg_d_jacobian,
     "jacobian($module, q)\n"
     "--\n"
     "\n"
-    "Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest\n"
-    "critical path among those at most 25% above the fewest additions + multiplications:\n"
-    "chain 36 + 76, 84 cycles; parallel prefix 38 + 78, 78 cycles.\n"
+    "Geometric Jacobian of the flange: [v; w] = J(q) qd.\n"
     "\n"
     "Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates\n"
     "(row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in\n"
@@ -241,7 +237,7 @@ PyDoc_STRVAR(kdg_d_jacobian,
     "Returns J: (6, 7) float64, rows 0-2: linear velocity of the flange origin, rows 3-5:\n"
     "    angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows\n"
     "    3-5)]\n"
-    "Cost of the generated C: 38 add, 78 mul, 12 call.\n"
+    "Cost of the generated C: 36 add, 76 mul, 12 call.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/lwr4_hartl.py. Same as jacobian(q) there.");
 
@@ -1533,7 +1529,7 @@ PyDoc_STRVAR(kdg_d_ik_dls,
     "    (smallest |e|^2)\n"
     "status 3: invalid input (non-finite T or q0, or T's rotation not orthonormal to\n"
     "    ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0\n"
-    "Cost of the generated C per iteration: 348 add, 484 mul, 34 call; at most 200\n"
+    "Cost of the generated C per iteration: 340 add, 475 mul, 34 call; at most 200\n"
     "iterations.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/lwr4_hartl.py. Same as ik_dls(T, q0) there.");

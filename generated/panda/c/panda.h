@@ -49,16 +49,16 @@ extern "C" {
 #define PANDA_NDOF 7
 
 /*
- * fk_hom: Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 41 + 76, 84 cycles; balanced tree 51 + 89, 72 cycles.
+ * fk_hom: Forward kinematics: flange pose as a 4x4 homogeneous transform.
  * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
  * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out T[16]: 4 x 4 double, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
  *
- * Cost: 51 add, 89 mul, 14 call
- * (as derived, before CSE: 99 add, 280 mul, 367 call);
- * critical path 72 cycles, 8 dependent operations.
+ * Cost: 41 add, 76 mul, 14 call
+ * (as derived, before CSE: 123 add, 318 mul, 437 call);
+ * critical path 84 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fk_hom(const double *q, double *T);
@@ -81,7 +81,7 @@ void panda_fk_dq(const double *q, double *x);
 void panda_fk_dq_batch(long count, const double *q, double *x);
 
 /*
- * jacobian: Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 66 + 97, 96 cycles; parallel prefix 89 + 121, 87 cycles.
+ * jacobian: Geometric Jacobian of the flange: [v; w] = J(q) qd.
  * Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
  * (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
  * frame axes at the flange origin (Pinocchio LOCAL_WORLD_ALIGNED).
@@ -562,9 +562,9 @@ void panda_Y_batch(long count, const double *q, const double *qd, const double *
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (51 add, 89 mul, 14 call) + jacobian (66 add, 97 mul, 12 call, only after
+ * fk_hom (41 add, 76 mul, 14 call) + jacobian (66 add, 97 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 390 add, 518 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 380 add, 505 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void panda_ik_dls(const double *T, const double *q0, double *q, int *status);

@@ -38,78 +38,69 @@ def _matrix(entries, rows, cols):
 
 
 def fk_hom():
-    """Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 41 + 76, 84 cycles; balanced tree 51 + 89, 72 cycles.
+    """Forward kinematics: flange pose as a 4x4 homogeneous transform.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
 
     in  q: 7, joint angles, DH order [rad]
     out T: 4 x 4, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
-    Cost: 51 add, 89 mul, 14 call.
+    Cost: 41 add, 76 mul, 14 call.
     """
     q = ca.SX.sym("q", 7)
     t0 = ca.sin(q[6])
     t1 = ca.cos(q[4])
-    t2 = t1*t0
-    t3 = ca.cos(q[5])
-    t4 = ca.sin(q[4])
-    t5 = ca.cos(q[6])
-    t6 = t5*t4
-    t7 = t2 - t6*t3
-    t8 = ca.sin(q[0])
-    t9 = ca.cos(q[2])
-    t10 = t9*t8
-    t11 = ca.cos(q[1])
-    t12 = ca.cos(q[0])
-    t13 = ca.sin(q[2])
-    t14 = t12*t13
-    t15 = t10 + t11*t14
-    t16 = ca.sin(q[3])
-    t17 = t8*t13
-    t18 = ca.cos(q[3])
-    t19 = ca.sin(q[1])
-    t20 = t19*t12
-    t21 = t11*t16
-    t22 = t9*t12
-    t23 = t16*t17 + t20*t18 - t22*t21
-    t24 = ca.sin(q[5])
-    t25 = t5*t24
-    t26 = t4*t0
-    t27 = t5*t1
-    t28 = t26 + t3*t27
-    t29 = t11*t18
-    t30 = t20*t16 - t17*t18 + t29*t22
-    t31 = t27 + t3*t26
-    t32 = t0*t24
-    t33 = t6 - t3*t2
-    t34 = t4*t24
-    t35 = t1*t24
-    t36 = 0.088*t3
-    t37 = t1*t36 - 0.0825
-    t38 = t4*t36
-    t39 = 0.088*t24 + 0.384
-    t40 = 0.0825*t11
-    t41 = t11*t17 - t22
-    t42 = t19*t18
-    t43 = t8*t42 - t14*t16 - t21*t10
-    t44 = t19*t16
-    t45 = t14*t18 + t8*t44 + t29*t10
-    t46 = t19*t13
-    t47 = t29 + t9*t44
-    t48 = t21 - t9*t42
-    t56 = 0.316*t20 - 0.0825*t17
-    t57 = t56 + t40*t22
-    t58 = t57 - t38*t15
-    t59 = t37*t30 + t23*t39
-    t64 = 0.316*t8*t19 + t40*t10
-    t65 = t64 + 0.0825*t14
-    t66 = t65 - t41*t38
-    t67 = t45*t37 + t43*t39
-    t72 = 0.316*t11 + 0.333
-    t73 = t72 - 0.0825*t9*t19
-    t74 = t73 + t46*t38
-    t75 = t48*t37 + t47*t39
-    out_T = _matrix([t7*t15 + t23*t25 + t28*t30, t31*t15 - t23*t32 + t33*t30, t35*t30 - t34*t15 - t3*t23, t59 + t58, t7*t41 + t43*t25 + t45*t28, t41*t31 - t43*t32 + t45*t33, t45*t35 - t41*t34 - t3*t43, t67 + t66, t47*t25 - t7*t46 + t48*t28, t48*t33 - t46*t31 - t47*t32, t46*t34 - t3*t47 + t48*t35, t75 + t74, 0.0, 0.0, 0.0, 1.0], 4, 4)
+    t2 = ca.sin(q[0])
+    t3 = ca.cos(q[2])
+    t4 = t3*t2
+    t5 = ca.cos(q[1])
+    t6 = ca.sin(q[2])
+    t7 = ca.cos(q[0])
+    t8 = t7*t6
+    t9 = -t4 - t8*t5
+    t10 = ca.sin(q[4])
+    t11 = ca.sin(q[3])
+    t12 = ca.sin(q[1])
+    t13 = t11*t12
+    t14 = ca.cos(q[3])
+    t15 = t6*t2
+    t16 = t7*t3
+    t17 = t5*t16 - t15
+    t18 = t7*t13 + t14*t17
+    t19 = t9*t1 - t18*t10
+    t20 = ca.cos(q[6])
+    t21 = ca.sin(q[5])
+    t22 = t12*t14
+    t23 = t7*t22 - t11*t17
+    t24 = ca.cos(q[5])
+    t25 = t9*t10 + t1*t18
+    t26 = t23*t21 + t24*t25
+    t27 = 0.316*t12
+    t28 = t16 - t5*t15
+    t29 = t8 + t5*t4
+    t30 = t2*t13 + t29*t14
+    t31 = t1*t28 - t30*t10
+    t32 = t2*t22 - t29*t11
+    t33 = t28*t10 + t1*t30
+    t34 = t21*t32 + t24*t33
+    t35 = t6*t12
+    t36 = t3*t12
+    t37 = t5*t11 - t36*t14
+    t38 = t1*t35 - t37*t10
+    t39 = t5*t14 + t36*t11
+    t40 = t35*t10 + t1*t37
+    t41 = t21*t39 + t40*t24
+    t42 = 0.0825*t17 + t7*t27
+    t43 = 0.384*t23 + t42
+    t44 = t43 - 0.0825*t18
+    t45 = 0.0825*t29 + t2*t27
+    t46 = 0.384*t32 + t45
+    t47 = t46 - 0.0825*t30
+    t48 = 0.316*t5 + 0.333
+    t49 = t48 - 0.0825*t36
+    t50 = 0.384*t39 + t49
+    t51 = t50 - 0.0825*t37
+    out_T = _matrix([t26*t20 - t0*t19, -t20*t19 - t0*t26, -(t24*t23 - t21*t25), 0.088*t26 + t44, t20*t34 - t0*t31, -t20*t31 - t0*t34, -(t24*t32 - t21*t33), 0.088*t34 + t47, t41*t20 - t0*t38, -t20*t38 - t0*t41, -(t24*t39 - t40*t21), 0.088*t41 + t51, 0.0, 0.0, 0.0, 1.0], 4, 4)
     return ca.Function("fk_hom", [q], [out_T],
                        ["q"], ["T"])
 
@@ -205,7 +196,7 @@ def fk_dq():
 
 
 def jacobian():
-    """Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 66 + 97, 96 cycles; parallel prefix 89 + 121, 87 cycles.
+    """Geometric Jacobian of the flange: [v; w] = J(q) qd.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-

@@ -19,14 +19,14 @@ def _input(value, shape, name):
 
 
 def fk_hom(q):
-    """Forward kinematics: flange pose as a 4x4 homogeneous transform. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 41 + 76, 84 cycles; balanced tree 51 + 89, 72 cycles.
+    """Forward kinematics: flange pose as a 4x4 homogeneous transform.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad.
 
     q: (..., 7,) joint angles, DH order [rad]
     Returns T: (..., 4, 4) double, flange pose in the base frame (row-major) [m (translation), 1 (rotation)]
-    Cost per configuration: 51 add, 89 mul, 14 call.
+    Cost per configuration: 41 add, 76 mul, 14 call.
     """
     q, batch_q = _input(q, (7,), "q")
     batch = np.broadcast_shapes(batch_q, )
@@ -39,78 +39,69 @@ def fk_hom(q):
     q_6 = q[..., 6]
     t0 = np.sin(q_6)
     t1 = np.cos(q_4)
-    t2 = t1*t0
-    t3 = np.cos(q_5)
-    t4 = np.sin(q_4)
-    t5 = np.cos(q_6)
-    t6 = t5*t4
-    t7 = t2 - t6*t3
-    t8 = np.sin(q_0)
-    t9 = np.cos(q_2)
-    t10 = t9*t8
-    t11 = np.cos(q_1)
-    t12 = np.cos(q_0)
-    t13 = np.sin(q_2)
-    t14 = t12*t13
-    t15 = t10 + t11*t14
-    t16 = np.sin(q_3)
-    t17 = t8*t13
-    t18 = np.cos(q_3)
-    t19 = np.sin(q_1)
-    t20 = t19*t12
-    t21 = t11*t16
-    t22 = t9*t12
-    t23 = t16*t17 + t20*t18 - t22*t21
-    t24 = np.sin(q_5)
-    t25 = t5*t24
-    t26 = t4*t0
-    t27 = t5*t1
-    t28 = t26 + t3*t27
-    t29 = t11*t18
-    t30 = t20*t16 - t17*t18 + t29*t22
-    t31 = t27 + t3*t26
-    t32 = t0*t24
-    t33 = t6 - t3*t2
-    t34 = t4*t24
-    t35 = t1*t24
-    t36 = 0.088*t3
-    t37 = t1*t36 - 0.0825
-    t38 = t4*t36
-    t39 = 0.088*t24 + 0.384
-    t40 = 0.0825*t11
-    t41 = t11*t17 - t22
-    t42 = t19*t18
-    t43 = t8*t42 - t14*t16 - t21*t10
-    t44 = t19*t16
-    t45 = t14*t18 + t8*t44 + t29*t10
-    t46 = t19*t13
-    t47 = t29 + t9*t44
-    t48 = t21 - t9*t42
-    t56 = 0.316*t20 - 0.0825*t17
-    t57 = t56 + t40*t22
-    t58 = t57 - t38*t15
-    t59 = t37*t30 + t23*t39
-    t64 = 0.316*t8*t19 + t40*t10
-    t65 = t64 + 0.0825*t14
-    t66 = t65 - t41*t38
-    t67 = t45*t37 + t43*t39
-    t72 = 0.316*t11 + 0.333
-    t73 = t72 - 0.0825*t9*t19
-    t74 = t73 + t46*t38
-    t75 = t48*t37 + t47*t39
+    t2 = np.sin(q_0)
+    t3 = np.cos(q_2)
+    t4 = t3*t2
+    t5 = np.cos(q_1)
+    t6 = np.sin(q_2)
+    t7 = np.cos(q_0)
+    t8 = t7*t6
+    t9 = -t4 - t8*t5
+    t10 = np.sin(q_4)
+    t11 = np.sin(q_3)
+    t12 = np.sin(q_1)
+    t13 = t11*t12
+    t14 = np.cos(q_3)
+    t15 = t6*t2
+    t16 = t7*t3
+    t17 = t5*t16 - t15
+    t18 = t7*t13 + t14*t17
+    t19 = t9*t1 - t18*t10
+    t20 = np.cos(q_6)
+    t21 = np.sin(q_5)
+    t22 = t12*t14
+    t23 = t7*t22 - t11*t17
+    t24 = np.cos(q_5)
+    t25 = t9*t10 + t1*t18
+    t26 = t23*t21 + t24*t25
+    t27 = 0.316*t12
+    t28 = t16 - t5*t15
+    t29 = t8 + t5*t4
+    t30 = t2*t13 + t29*t14
+    t31 = t1*t28 - t30*t10
+    t32 = t2*t22 - t29*t11
+    t33 = t28*t10 + t1*t30
+    t34 = t21*t32 + t24*t33
+    t35 = t6*t12
+    t36 = t3*t12
+    t37 = t5*t11 - t36*t14
+    t38 = t1*t35 - t37*t10
+    t39 = t5*t14 + t36*t11
+    t40 = t35*t10 + t1*t37
+    t41 = t21*t39 + t40*t24
+    t42 = 0.0825*t17 + t7*t27
+    t43 = 0.384*t23 + t42
+    t44 = t43 - 0.0825*t18
+    t45 = 0.0825*t29 + t2*t27
+    t46 = 0.384*t32 + t45
+    t47 = t46 - 0.0825*t30
+    t48 = 0.316*t5 + 0.333
+    t49 = t48 - 0.0825*t36
+    t50 = 0.384*t39 + t49
+    t51 = t50 - 0.0825*t37
     T = np.empty(batch + (4, 4), dtype=float)
-    T[..., 0, 0] = t7*t15 + t23*t25 + t28*t30
-    T[..., 0, 1] = t31*t15 - t23*t32 + t33*t30
-    T[..., 0, 2] = t35*t30 - t34*t15 - t3*t23
-    T[..., 0, 3] = t59 + t58
-    T[..., 1, 0] = t7*t41 + t43*t25 + t45*t28
-    T[..., 1, 1] = t41*t31 - t43*t32 + t45*t33
-    T[..., 1, 2] = t45*t35 - t41*t34 - t3*t43
-    T[..., 1, 3] = t67 + t66
-    T[..., 2, 0] = t47*t25 - t7*t46 + t48*t28
-    T[..., 2, 1] = t48*t33 - t46*t31 - t47*t32
-    T[..., 2, 2] = t46*t34 - t3*t47 + t48*t35
-    T[..., 2, 3] = t75 + t74
+    T[..., 0, 0] = t26*t20 - t0*t19
+    T[..., 0, 1] = -t20*t19 - t0*t26
+    T[..., 0, 2] = -(t24*t23 - t21*t25)
+    T[..., 0, 3] = 0.088*t26 + t44
+    T[..., 1, 0] = t20*t34 - t0*t31
+    T[..., 1, 1] = -t20*t31 - t0*t34
+    T[..., 1, 2] = -(t24*t32 - t21*t33)
+    T[..., 1, 3] = 0.088*t34 + t47
+    T[..., 2, 0] = t41*t20 - t0*t38
+    T[..., 2, 1] = -t20*t38 - t0*t41
+    T[..., 2, 2] = -(t24*t39 - t40*t21)
+    T[..., 2, 3] = 0.088*t41 + t51
     T[..., 3, 0] = 0.0
     T[..., 3, 1] = 0.0
     T[..., 3, 2] = 0.0
@@ -224,7 +215,7 @@ def fk_dq(q):
 
 
 def jacobian(q):
-    """Geometric Jacobian of the flange: [v; w] = J(q) qd. Route chosen by the shortest critical path among those at most 25% above the fewest additions + multiplications: chain 66 + 97, 96 cycles; parallel prefix 89 + 121, 87 cycles.
+    """Geometric Jacobian of the flange: [v; w] = J(q) qd.
 
     Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
     (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. J is expressed in base-
