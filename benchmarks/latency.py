@@ -89,7 +89,18 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
     return rows
 
 
+SMALL = 700
+"""Functions of at most this many operations after CSE form the "small" set of the correlation,
+where a single call is short enough for latency to matter."""
+
+
 def correlation(rows: dict) -> dict:
+    """Correlations over every function and over the small ones (:data:`SMALL`)."""
+    small = {n: r for n, r in rows.items() if r["operations"] <= SMALL}
+    return {**_correlation(rows), "small": {"max_operations": SMALL, **_correlation(small)}}
+
+
+def _correlation(rows: dict) -> dict:
     names = [n for n, r in rows.items() if "strict" in r]
     t = [rows[n]["strict"]["median_ns"] for n in names]
     cycles = [rows[n]["critical_path_cycles"] for n in names]

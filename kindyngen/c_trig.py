@@ -18,8 +18,9 @@ by one loop of plain C99 that compilers vectorise:
   polynomials start from d while the tail is summed, which enters to first order
   (sin(d + tail) = sin d + tail cos d), and are evaluated by Estrin's scheme (three dependent
   steps after z^4 instead of Horner's ten). The chain went from 84 to 51 cycles of
-  :data:`kindyngen.opcount.LATENCY`; measured alone (``python -m benchmarks.sincos_kernel``,
-  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 67 cycles;
+  :data:`kindyngen.opcount.LATENCY`; measured alone (``python -m benchmarks.latency``,
+  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 65 cycles (FMA build; 73
+  strict, 1.43x the bound);
 * the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
 * |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
 
