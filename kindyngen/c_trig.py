@@ -5,14 +5,22 @@ Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by a
 cosines of the joint angles are therefore computed together, at the start of a function,
 by one loop of plain C99 that compilers vectorise:
 
-* range reduction x = k pi/2 + r, k the integer nearest x 2/pi, by Cody-Waite: pi/2 split
-  into four parts, the first three with 33 significant bits so that k times each is exact
-  for |k| < 2^20; the two roundings left are recovered (Fast2Sum), so r + rlo carries
+* range reduction x = k pi/2 + d + tail, k the integer nearest x 2/pi, by Cody-Waite: pi/2
+  split into four parts, the first three with 33 significant bits so that k times each is
+  exact for |k| < 2^20; the two roundings left are recovered (Fast2Sum), so d + tail carries
   x - k pi/2 to about 2^-140 absolute, enough even for the doubles closest to multiples of
   pi/2 (their |r| is above 2^-62 in the kernel's range);
-* polynomials on |r| <= pi/4: sin r = r + r^3 S(r^2), cos r = 1 - r^2/2 + r^4 C(r^2), S and C
+* polynomials on |d| <= pi/4: sin d = d + d^3 S(d^2), cos d = 1 - d^2/2 + d^4 C(d^2), S and C
   of degree 5, minimax (Remez, :func:`fit_coefficients`) for the relative error of sin and
-  the absolute error of cos; their own error is 2^-58 and 2^-64;
+  the absolute error of cos; their own error is 2^-58 and 2^-64. Degree 4 would miss the
+  1-ulp aim (its fit error is about 2^-50); what is cut is the latency, the kernel's chain of
+  dependent operations being what a single call waits for (:func:`kernel_latency`): the
+  polynomials start from d while the tail is summed, which enters to first order
+  (sin(d + tail) = sin d + tail cos d), and are evaluated by Estrin's scheme (three dependent
+  steps after z^4 instead of Horner's ten). The chain went from 84 to 51 cycles of
+  :data:`kindyngen.opcount.LATENCY`; measured alone (``python -m benchmarks.latency``,
+  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 65 cycles (FMA build; 73
+  strict, 1.43x the bound);
 * the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
 * |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
 
@@ -126,18 +134,86 @@ def fit_coefficients():
                 float(sin_error), float(cos_error))
 
 
-def _horner(coeffs, z: str) -> str:
-    text = repr(coeffs[-1])
-    for c in reversed(coeffs[:-1]):
-        text = f"{c!r} + {z}*({text})"
-    return text
+def _estrin(coeffs, z: str, z2: str, z4: str) -> str:
+    """c0 + c1 z + ... + c5 z^5 as (c0 + c1 z) + z2 (c2 + c3 z) + z4 (c4 + c5 z): three
+    dependent steps after z4 where Horner's scheme has ten."""
+    pairs = [f"({coeffs[j]!r} + {coeffs[j + 1]!r}*{z})" for j in range(0, len(coeffs), 2)]
+    return f"{pairs[0]} + {z2}*{pairs[1]} + {z4}*{pairs[2]}"
+
+
+def _steps() -> tuple[tuple[str, str], ...]:
+    """The kernel's arithmetic for one argument ``xi`` as (name, C expression) in evaluation
+    order; every expression is also valid Python (names, literals, + - *, parentheses), which
+    :func:`kernel_latency` reads. The quadrant selects follow in :func:`kernel_c`."""
+    p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
+    shifter = repr(SHIFTER)
+    return (
+        # k = xi*2/pi rounded to an integer by the shifter 1.5*2^52
+        ("k", f"(xi*{TWO_OVER_PI!r} + {shifter}) - {shifter}"),
+        # k mod 4 as m = k - 4 round(k/4) in -2..2, exact
+        ("m", f"k - 4.0*((0.25*k + {shifter}) - {shifter})"),
+        # d + tail = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
+        # two subtractions recovered exactly (Fast2Sum)
+        ("a", f"xi - k*{p1}"),
+        ("b", f"a - k*{p2}"),
+        ("b_err", f"(a - b) - k*{p2}"),
+        ("d", f"b - k*{p3}"),
+        ("d_err", f"(b - d) - k*{p3}"),
+        ("tail", f"(b_err + d_err) - k*{p4}"),
+        # the polynomials start from d while the tail is still being summed: it enters to
+        # first order, sin(d + tail) = sin d + tail cos d, cos(d + tail) = cos d - tail sin d
+        ("z", "d*d"),
+        ("z2", "z*z"),
+        ("z4", "z2*z2"),
+        ("half_z", "0.5*z"),
+        ("w", "1.0 - half_z"),
+        # sin(d + tail) = d + d^3 S(z) + tail (1 - z/2)
+        ("sin_r", f"d + (d*z*({_estrin(SIN_COEFFS, 'z', 'z2', 'z4')}) + tail*w)"),
+        # cos(d + tail) = (1 - z/2) + z^2 C(z) - d tail, the rounding of 1 - z/2 added back
+        ("cos_r", f"w + (z2*({_estrin(COS_COEFFS, 'z', 'z2', 'z4')}) + (((1.0 - w) - half_z) - d*tail))"),
+    )
+
+
+SELECTS = 3
+"""Dependent selects after the polynomials: the quadrant's (sin, cos) swap, its sign, the tiny
+argument."""
+
+
+def kernel_latency(latency=None) -> int:
+    """Cycles from the argument to sin and cos along the kernel's longest chain, with
+    :data:`kindyngen.opcount.LATENCY` (no contraction): the instruction-level latency bound
+    of one call. Read from the very expressions :func:`kernel_c` prints.
+
+    >>> kernel_latency()
+    51
+    """
+    import ast
+    from .opcount import LATENCY
+    lat = dict(LATENCY, **(latency or {}))
+    ops = {ast.Add: lat["add"], ast.Sub: lat["add"], ast.Mult: lat["mul"]}
+    ready = {"xi": 0}
+
+    def visit(node):
+        if isinstance(node, ast.BinOp):
+            return max(visit(node.left), visit(node.right)) + ops[type(node.op)]
+        if isinstance(node, ast.Name):
+            return ready[node.id]
+        if isinstance(node, ast.Constant) or (isinstance(node, ast.UnaryOp)
+                                              and isinstance(node.operand, ast.Constant)):
+            return 0            # a literal, negative ones included
+        raise TypeError(f"kernel step not in + - * of names and literals: {ast.dump(node)}")
+
+    for name, expr in _steps():
+        ready[name] = visit(ast.parse(expr, mode="eval").body)
+    quadrant = ready["m"] + lat["add"]          # fabs(m) == 1.0: a compare
+    return max(ready["sin_r"], ready["cos_r"], quadrant) + SELECTS * lat["select"]
 
 
 def kernel_c(name: str = "kdg_sincos") -> str:
     """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
     for i < n. The arrays must not overlap."""
-    p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
     bound = repr(BOUND)
+    body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
     return f"""\
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/c_trig.py
  * explains the method and where its constants come from). The first loop has no branch and no
@@ -148,32 +224,9 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
     long i;
     for (i = 0; i < n; ++i) {{
         /* arguments out of range give garbage here (no undefined behaviour: all in double),
-           replaced in the second loop */
+           replaced in the second loop; c_trig.py's _steps explains each step */
         const double xi = x[i];
-        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^52 */
-        const double k = (xi*{TWO_OVER_PI!r} + {SHIFTER!r}) - {SHIFTER!r};
-        /* k mod 4 as m = k - 4 round(k/4) in -2..2, exact: doubles keep the quadrant select
-           free of int conversions, which some targets do not vectorise */
-        const double m = k - 4.0*((0.25*k + {SHIFTER!r}) - {SHIFTER!r});
-        /* r + rlo = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
-           two subtractions recovered exactly (Fast2Sum: |a| >= |k*p2| unless a - k*p2 is exact,
-           likewise for b) */
-        const double a = xi - k*{p1};
-        const double b = a - k*{p2};
-        const double b_err = (a - b) - k*{p2};
-        const double d = b - k*{p3};
-        const double d_err = (b - d) - k*{p3};
-        const double tail = (b_err + d_err) - k*{p4};
-        const double r = d + tail;
-        const double rlo = (d - r) + tail;
-        const double z = r*r;
-        /* sin(r + rlo) = r + r^3 S(z) + rlo (1 - z/2) */
-        const double sin_r = r + (r*z*({_horner(SIN_COEFFS, "z")}) + rlo*(1.0 - 0.5*z));
-        /* cos(r + rlo) = (1 - z/2) + z^2 C(z) - r rlo, the rounding of 1 - z/2 added back */
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double cos_r = w + (((1.0 - w) - half_z)
-                                  + (z*z*({_horner(COS_COEFFS, "z")}) - r*rlo));
+{body}
         /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s */
         const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;

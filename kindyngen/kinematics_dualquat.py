@@ -28,6 +28,11 @@ from .symbolic import Port, SymbolicFunction, port_symbols
 Quat = tuple  # (w, x, y, z)
 
 
+def pose_convention(model: RobotModel) -> str:
+    """The frames text of a function whose pose is the dual quaternion x, not the matrix T."""
+    return f"{model.frames_text} Lengths in m, angles in rad."
+
+
 def quat_mul(a: Quat, b: Quat) -> Quat:
     """Hamilton product, scalar first."""
     aw, ax, ay, az = (se.sympify(v) for v in a)
@@ -224,7 +229,7 @@ def fk_dq(model: RobotModel) -> SymbolicFunction:
                       "1/2 t (x) r (w,x,y,z); t = flange position in the base frame", "1 (real), m (dual)"),),
         input_symbols=(q,),
         output_exprs=(tuple(se.sympify(v) for v in real) + tuple(se.sympify(v) for v in dual),),
-        conventions=frame_convention(model)
+        conventions=pose_convention(model)
         + " x = (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the "
           "product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).",
     )
@@ -286,7 +291,7 @@ def pose_jacobian_dq(model: RobotModel) -> SymbolicFunction:
                       "1 (rows 0-3), m (rows 4-7) per rad (per m for prismatic joints)"),),
         input_symbols=(q,),
         output_exprs=(tuple(column[k] for k in range(8) for column in columns),),
-        conventions=frame_convention(model)
+        conventions=pose_convention(model)
         + " x = (rw, rx, ry, rz, dw, dx, dy, dz) as fk_dq (real part r, dual part d = 1/2 t r), with "
           "fk_dq's sign (the product of the joint dual quaternions, not normalised to rw >= 0); "
           "vec8(xdot) = Jx qd.",

@@ -191,3 +191,168 @@ def program_count(assignments, outputs) -> OpCount:
     """Operations of a straight-line program: every assignment and output paid once, the
     temporaries it reads being free."""
     return tree_count([expr for _, expr in assignments] + list(outputs))
+
+
+# -- critical path ---------------------------------------------------------------------------
+
+LATENCY = {"add": 3, "mul": 3, "div": 13, "sqrt": 20, "select": 1, "call": 40, "kernel": 0}
+"""Cycles from operands to result per operation kind, for the critical-path count: AMD Zen 4
+(family 19h, AMD's Software Optimization Guide): vaddsd/vsubsd 3, vmulsd 3, vdivsd 13,
+vsqrtsd 20 (15-21), a blend or sign flip 1. ``call``: a libm call (sin, cos, atan2, ... of an
+argument the sincos kernel does not serve), a stated round figure (glibc's sin is 40-60
+cycles). ``kernel``: a sin or cos of a joint angle read from the sincos kernel's output, which
+runs at the start of the function: its latency is the kernel's own critical path
+(:data:`kindyngen.c_trig.KERNEL_LATENCY` passed by the caller), 0 here. Strict C99: a*b + c is
+a product then a sum (no contraction), and every sum and product is evaluated left to right in
+the order the printer writes it."""
+
+
+@dataclass(frozen=True)
+class CriticalPath:
+    """The longest chain of dependent operations of a program, in cycles of :data:`LATENCY`,
+    and how many operations lie on it."""
+    cycles: int
+    operations: int
+
+    def to_json(self) -> dict:
+        return {"cycles": self.cycles, "operations": self.operations}
+
+
+def longest_chain(nodes) -> CriticalPath:
+    """Longest weighted path of a DAG given as ``(name, latency, dependencies)`` in an order
+    where every dependency comes first; a node's result is ready ``latency`` cycles after its
+    last dependency's.
+
+    >>> longest_chain([("a", 3, ()), ("b", 13, ("a",)), ("c", 3, ("a",)), ("d", 3, ("b", "c"))])
+    CriticalPath(cycles=19, operations=3)
+    """
+    ready: dict = {}
+    for name, latency, deps in nodes:
+        t, n = max((ready[d] for d in deps), default=(0, 0))
+        ready[name] = (t + latency, n + (latency > 0))
+    t, n = max(ready.values(), default=(0, 0))
+    return CriticalPath(t, n)
+
+
+def _printed_terms(terms: list) -> list:
+    """The non-constant terms of a sum (:func:`add_parts`) in the order
+    :mod:`kindyngen.printer` writes them (a positive term first)."""
+    negative = [isinstance(t, se.Mul) and mul_parts(t)[0] < 0 for t in terms]
+    if negative[0] and not all(negative):
+        terms.insert(0, terms.pop(negative.index(False)))
+    return terms
+
+
+def _printed_factors(factors) -> list:
+    """Factors as the printer chains them: a power ``b**k`` (k >= 2 integer) inside a product
+    is ``b*b*...`` in line, k factors of the chain, not a product of its own."""
+    out = []
+    for f in factors:
+        if isinstance(f, se.Pow) and f.args[1].is_Integer and int(f.args[1]) >= 2:
+            out += [f.args[0]] * int(f.args[1])
+        else:
+            out.append(f)
+    return out
+
+
+def program_critical_path(assignments, outputs, served=(), latency=None) -> CriticalPath:
+    """Critical path of a straight-line program as printed in C: temporaries ready when their
+    expression is, inputs at 0, ``served`` (sin/cos expressions read from the kernel's arrays)
+    at ``latency["kernel"]``.
+
+    >>> x, y, z = se.symbols("x y z")
+    >>> program_critical_path([], [x*y + z + 1])   # (x*y + z) + 1.0: 3 + 3 + 3
+    CriticalPath(cycles=9, operations=3)
+    >>> program_critical_path([], [x/(y*z)])       # x/(y*z): 3 + 13
+    CriticalPath(cycles=16, operations=2)
+    """
+    timer = ChainTimer(served, latency)
+    for sym, expr in assignments:
+        timer.assign(sym, expr)
+    t, n = max((timer.ready(e) for e in outputs), default=(0, 0))
+    return CriticalPath(t, n)
+
+
+class ChainTimer:
+    """When each expression of a program is ready, as (cycles, operations on the chain), by
+    the rules of :func:`program_critical_path`; temporaries are told with :meth:`assign`."""
+
+    def __init__(self, served=(), latency=None):
+        self.lat = lat = dict(LATENCY, **(latency or {}))
+        self.served = frozenset(served)
+        self.memo: dict = {}
+        self.kernel = (lat["kernel"], 1 if lat["kernel"] else 0)
+        self.literals: dict = {}
+
+    def literal(self, e) -> bool:
+        """:func:`is_literal`, memoised (asked of every node by its parents' rules)."""
+        known = self.literals.get(e)
+        if known is None:
+            known = self.literals[e] = is_literal(e)
+        return known
+
+    def assign(self, sym, expr) -> None:
+        self.memo[sym] = self.ready(expr)
+
+    def ready(self, e):
+        lat, memo, served, kernel = self.lat, self.memo, self.served, self.kernel
+        visit, literal = self.ready, self.literal
+        chain = _chain
+        hit = memo.get(e)
+        if hit is not None:
+            return hit
+        if e in served:
+            hit = kernel
+        elif e.is_Symbol or literal(e):
+            hit = (0, 0)
+        elif isinstance(e, se.Add):
+            const, terms = add_parts(e, literal)
+            terms = _printed_terms(terms)
+            ready = [visit(t) for t in terms]
+            hit = chain(ready[0], [(lat["add"], r) for r in ready[1:]] + ([(lat["add"], (0, 0))] if const else []))
+        elif isinstance(e, se.Mul):
+            coeff, numer, denom = mul_parts(e, literal)
+            numer, denom = _printed_factors(numer), _printed_factors(denom)
+            ready = [visit(f) for f in numer]
+            if abs(coeff) != 1.0:
+                ready.insert(0, (0, 0))
+            hit = chain(ready[0], [(lat["mul"], r) for r in ready[1:]]) if ready else (0, 0)
+            if denom:
+                d = [visit(f) for f in denom]
+                hit = chain(hit, [(lat["div"], chain(d[0], [(lat["mul"], r) for r in d[1:]]))])
+        elif isinstance(e, se.Pow):
+            base, exp = e.args
+            b = visit(base)
+            if exp.is_Integer and int(exp) >= 2:
+                hit = chain(b, [(lat["mul"], (0, 0))] * (int(exp) - 1))
+            elif exp.is_Integer:
+                hit = chain(chain(b, [(lat["mul"], (0, 0))] * (-int(exp) - 1)), [(lat["div"], (0, 0))])
+            elif exp == se.Rational(1, 2):
+                hit = chain(b, [(lat["sqrt"], (0, 0))])
+            elif exp == se.Rational(-1, 2):
+                hit = chain(b, [(lat["sqrt"], (0, 0)), (lat["div"], (0, 0))])
+            else:
+                hit = chain(b, [(lat["call"], (0, 0))])
+        elif isinstance(e, se.Piecewise):
+            parts = [visit(a) for a in children(e, literal)]
+            hit = chain(max(parts), [(lat["select"], (0, 0))] * (len(e.args) // 2 - 1))
+        elif isinstance(e, COMPARISONS):
+            hit = chain(max(visit(a) for a in e.args), [(lat["add"], (0, 0))])
+        elif isinstance(e, LOGIC):
+            hit = max((visit(a) for a in e.args), default=(0, 0))
+        elif e.is_Function:
+            hit = chain(max(visit(a) for a in e.args), [(lat["call"], (0, 0))])
+        else:
+            raise TypeError(f"no latency rule for {type(e).__name__}: {e}")
+        memo[e] = hit
+        return hit
+
+
+def _chain(start, steps):
+    """``steps`` operations in sequence after ``start``, each joining one more operand (ready
+    times): ((a op b) op c) ..."""
+    t, n = start
+    for operand_latency, operand in steps:
+        t, n = max((t, n), operand)
+        t, n = t + operand_latency, n + 1
+    return t, n

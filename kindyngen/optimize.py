@@ -20,7 +20,10 @@ from dataclasses import dataclass, replace
 
 import symengine as se
 
-from .opcount import OpCount, program_count, tree_count
+from .c_trig import kernel_latency
+import heapq
+
+from .opcount import ChainTimer, CriticalPath, OpCount, program_count, program_critical_path, tree_count
 from .symbolic import SymbolicFunction
 
 
@@ -50,6 +53,8 @@ class Program:
     after: OpCount
     # (route, operations after CSE) of every route that was optimised, chosen one included
     routes: tuple[tuple[str, OpCount], ...] = ()
+    # longest chain of dependent operations of the C as printed, sin/cos of q from the kernel
+    critical: CriticalPath = CriticalPath(0, 0)
 
 
 def optimize(function: SymbolicFunction) -> Program:
@@ -74,6 +79,7 @@ def optimize(function: SymbolicFunction) -> Program:
     reduced = [_renamed(e, rename) for e in reduced]
     assignments, reduced = _hoist_power_bases(assignments, reduced)
     assignments = _live(assignments, reduced)
+    assignments, reduced = _shallower(function, assignments, reduced)
     outputs, start = [], 0
     for port in function.outputs:
         outputs.append(tuple(reduced[start:start + port.size]))
@@ -84,7 +90,102 @@ def optimize(function: SymbolicFunction) -> Program:
         outputs=tuple(outputs),
         before=tree_count(staged + flat),
         after=program_count(assignments, reduced),
+        critical=critical_path(function, assignments, reduced),
     )
+
+
+def _served(function: SymbolicFunction) -> set:
+    """The sin/cos the C sincos kernel serves: of entries of the ``q`` port."""
+    names = [p.name for p in function.inputs]
+    served = set()
+    if "q" in names:
+        for sym in function.input_symbols[names.index("q")]:
+            served |= {se.sin(sym), se.cos(sym)}
+    return served
+
+
+def _shallower(function: SymbolicFunction, assignments, outputs):
+    """The program with its sums and products reassociated where that shortens the critical
+    path, or the program unchanged. Every sum or product of three or more operands whose
+    operands are ready at different times is evaluated by joining the two earliest-ready
+    operands first (Huffman's rule, which minimises the time the result is ready for operands
+    of given ready times and one latency per join), the joins named as new temporaries; a node
+    is rewritten only where that makes it ready earlier than in the printed left-to-right order.
+    The number of operations is unchanged (n - 1 joins either way), so the count decides on the
+    critical path alone, and the whole rewrite is kept only when the function's critical path
+    is shorter and its add/mul/call count equal. Ready times are integers of the latency table:
+    the choice is exact, the same on every CPU."""
+    timer = ChainTimer(_served(function), {"kernel": kernel_latency()})
+    used = [int(str(sym)[1:]) for sym, _ in assignments if str(sym)[1:].isdigit()]
+    counter = [max(used, default=-1) + 1]
+    program: list = []
+
+    def temporary(expr):
+        sym = se.Symbol(f"t{counter[0]}")
+        counter[0] += 1
+        program.append((sym, expr))
+        timer.assign(sym, expr)
+        return sym
+
+    def joined(operands, join):
+        """``operands`` (exprs) joined by ``join`` (se.Add or se.Mul) earliest first; the last
+        join is returned unnamed."""
+        heap = [(timer.ready(x)[0], k, x) for k, x in enumerate(operands)]
+        heapq.heapify(heap)
+        k = len(heap)
+        while len(heap) > 2:
+            (_, _, a), (_, _, b) = heapq.heappop(heap), heapq.heappop(heap)
+            t = temporary(join(a, b))
+            heapq.heappush(heap, (timer.ready(t)[0], k, t))
+            k += 1
+        return join(heap[0][2], heap[1][2])
+
+    def rebuild(e):
+        if e.is_Symbol or e.is_Number or not e.args or timer.literal(e) or e in timer.served:
+            return e
+        if isinstance(e, se.Add):
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
+            return _earlier(se.Add(*operands), operands, se.Add)
+        if isinstance(e, se.Mul):
+            if any(isinstance(a, se.Pow) for a in e.args):    # divisors, powers printed in line
+                return se.Mul(*[rebuild(a) for a in e.args])
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
+            sign = 1
+            if se.Integer(-1) in operands:                     # a sign, not a factor
+                operands.remove(se.Integer(-1))
+                sign = -1
+            return _earlier(se.Mul(*operands) * sign, operands, se.Mul, sign)
+        return e
+
+    def _earlier(plain, operands, join, sign=1):
+        if len(operands) < 3:
+            return plain
+        mark = len(program)
+        before = timer.ready(plain)[0]
+        new = joined(operands, join)
+        new = -new if sign < 0 else new
+        if timer.ready(new)[0] < before:
+            return new
+        del program[mark:]                          # not earlier: the node as printed
+        return plain
+
+    for sym, expr in assignments:
+        new = rebuild(expr)
+        program.append((sym, new))
+        timer.assign(sym, new)
+    new_outputs = [rebuild(e) for e in outputs]
+    old_path = program_critical_path(assignments, outputs, timer.served, {"kernel": kernel_latency()})
+    new_path = program_critical_path(program, new_outputs, timer.served, {"kernel": kernel_latency()})
+    if new_path.cycles < old_path.cycles and program_count(program, new_outputs) == program_count(assignments, outputs):
+        return tuple(program), new_outputs
+    return assignments, outputs
+
+
+def critical_path(function: SymbolicFunction, assignments, outputs) -> CriticalPath:
+    """The program's critical path as generated with ``--trig kernel``: sin and cos of an entry
+    of the ``q`` port come from the sincos kernel (:func:`kindyngen.c_trig.kernel_latency`
+    cycles after the start), every other call from libm."""
+    return program_critical_path(assignments, outputs, _served(function), {"kernel": kernel_latency()})
 
 
 def _cse(exprs):

@@ -15,7 +15,7 @@ import symengine as se
 
 from . import __version__
 from .c_trig import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, kernel_c,
-                     kernel_c_float)
+                     kernel_c_float, kernel_latency)
 from .ik_dls import dls_view
 from .optimize import Program
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
@@ -70,6 +70,7 @@ class FunctionView:
     before: dict
     after: dict
     has_select: bool
+    critical: dict = None         # longest chain of dependent operations (cycles, operations)
     angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
@@ -201,6 +202,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
+        critical=program.critical.to_json(),
         angles=angles,
         first_angle=first,
         lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
@@ -225,6 +227,7 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
         "trig": trig,
         "trig_bound": TRIG_BOUND,
         "trig_max_ulp": TRIG_MAX_ULP,
+        "kernel_latency": kernel_latency(),
         "batch_block": BATCH_BLOCK,
         "batch_stack": BATCH_STACK,
         "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None

@@ -19,10 +19,12 @@ PAPER_TABLE_II = {
 def opcounts_json(programs: list[Program], float_error: dict | None = None) -> dict:
     """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order; a function
     chosen among routes also has ``"route"`` (the chosen one) and ``"routes"`` (each one's
-    count after CSE); with ``--scalar float`` each measured function has ``"float_error"``
-    (kindyngen/float_accuracy.py)."""
+    count after CSE); ``"critical_path"``: cycles and operations of the longest chain of
+    dependent operations (:func:`kindyngen.opcount.program_critical_path`); with ``--scalar float``
+    each measured function has ``"float_error"`` (kindyngen/float_accuracy.py)."""
     float_error = float_error or {}
-    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(), **_routes_json(p),
+    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(),
+                              "critical_path": p.critical.to_json(), **_routes_json(p),
                               **({"float_error": float_error[p.function.name].to_json()}
                                  if p.function.name in float_error else {})}
             for p in programs}
@@ -36,6 +38,22 @@ def _routes_json(p: Program) -> dict:
 
 def _row(values) -> str:
     return " | ".join(str(v) for v in values)
+
+
+def _critical_markdown(programs) -> list[str]:
+    from .c_trig import kernel_latency
+    from .opcount import LATENCY
+    table = ", ".join(f"{k} {v}" for k, v in LATENCY.items() if k not in ("kernel", "call"))
+    lines = ["", "## Critical path", "",
+             "The longest chain of dependent operations of the generated C as printed (strict C99: no "
+             "contraction, sums and products left to right), in cycles of a stated latency table (AMD Zen 4: "
+             f"{table}; a libm call as 40; sin/cos of q from the sincos kernel {kernel_latency()}, its own "
+             "chain). A single call waits at least this long however many units the core has; "
+             "docs/latency.md compares it with measured times.", "",
+             "| function | cycles | operations on it | add + mul + call after CSE |", "|---|---|---|---|"]
+    for p in programs:
+        lines.append(f"| {p.function.name} | {p.critical.cycles} | {p.critical.operations} | {p.after.total} |")
+    return lines
 
 
 def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool,
@@ -52,6 +70,7 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
     for p in programs:
         b, a = p.before, p.after
         lines.append(f"| {p.function.name} | {_row([b.add, b.mul, b.call, a.add, a.mul, a.call])} |")
+    lines += _critical_markdown(programs)
     chosen = [p for p in programs if p.routes]
     if chosen:
         lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "

@@ -62,15 +62,20 @@ def test_headers_state_conventions_units_and_costs(robot):
             continue
         after = f["opcount"]["after"]
         assert f"Cost: {after['add']} add, {after['mul']} mul, {after['call']} call" in header
+    counts = json.loads((GENERATED / robot / "opcounts.json").read_text())
+    for name, entry in counts.items():
+        if "per_iteration" not in entry:
+            assert f"critical path {entry['critical_path']['cycles']} cycles" in header, name
     assert "row-major" in header and "rad" in header and "Gravity in the base frame" in header
 
 
 def test_opcounts_json_schema_and_paper_bars():
     counts = json.loads((GENERATED / "lwr4" / "opcounts.json").read_text())
     for name, entry in counts.items():
-        assert set(entry) == {"before", "after"}
-        for stage in entry.values():
+        assert set(entry) == {"before", "after", "critical_path"}
+        for stage in (entry["before"], entry["after"]):
             assert set(stage) == {"add", "mul", "call"}
+        assert set(entry["critical_path"]) == {"cycles", "operations"}
     # Kinematics paper, Table II, Maple-optimised: FK homogeneous 40/87/14, dual quaternion 38/88/14
     hom, dq = counts["fk_hom"]["after"], counts["fk_dq"]["after"]
     assert (hom["add"], hom["mul"], hom["call"]) <= (40, 87, 14) and hom["add"] <= 40 and hom["mul"] <= 87
