@@ -3,10 +3,9 @@ function [x] = lwr4_fk_dq(q)
 %   [x] = lwr4_fk_dq(q) for the robot "lwr4"
 %   (7 revolute joints, standard DH, from lwr4.yaml).
 %
-%   Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-%   (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-%   dx, dy, dz), x and -x are the same pose; the sign is that of the product of the joint
-%   dual quaternions (continuous in q, not normalised to rw >= 0).
+%   Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+%   (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the
+%   product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).
 %
 %   Batches: every input may carry a trailing batch dimension of N configurations (a vector
 %   input of size m is m x N, a matrix input r x c is r x c x N); inputs with one configuration are
@@ -38,7 +37,7 @@ q_3 = q(4, :);
 q_4 = q(5, :);
 q_5 = q(6, :);
 q_6 = q(7, :);
-t0 = 0.5.*(q_0 + q_2);
+t0 = 0.5.*(q_2 + q_0);
 t1 = sin(t0);
 t2 = 0.5.*q_1;
 t3 = cos(t2);
@@ -51,8 +50,8 @@ t9 = sin(t2);
 t10 = sin(t4);
 t11 = t9.*t10;
 t12 = t8.*t11;
-t13 = t12 + t6.*t1;
-t14 = 0.5.*(q_4 + q_6);
+t13 = t6.*t1 + t12;
+t14 = 0.5.*(q_6 + q_4);
 t15 = 0.5.*q_5;
 t16 = cos(t15);
 t17 = t16.*sin(t14);
@@ -71,25 +70,37 @@ t29 = t1.*t21;
 t30 = t8.*t19 - t29;
 t31 = t24.*t30;
 t32 = t11.*t18;
-t33 = t6.*t20 + t32;
+t33 = t32 + t6.*t20;
 t34 = t16.*cos(t14);
 t35 = t24.*t13;
 t36 = t24.*t28;
 t37 = 0.395.*t33 - 0.4.*t32;
 t38 = 0.395.*t23 - 0.4.*t22;
 t39 = t24.*t38;
-t40 = -0.395.*t30 - 0.4.*t29;
+t40 = -0.4.*t29 - 0.395.*t30;
 t41 = t40.*t24;
 t42 = 0.4.*t12 - 0.395.*t13;
 t43 = t24.*t37;
 t44 = t42.*t24;
+t47 = t34.*t30 + t33.*t36;
+t48 = t26.*t35 + t23.*t17;
+t49 = t23.*t34 - t30.*t17;
+t50 = t28.*t35 - t27.*t33;
+t51 = t33.*t17 - t23.*t36;
+t52 = t34.*t13 - t26.*t31;
+t53 = t42.*t34 - t37.*t17;
+t54 = t41.*t26 - t28.*t39;
+t57 = t40.*t34 - t38.*t17;
+t58 = t43.*t28 - t44.*t26;
+t59 = t34.*t37 + t42.*t17;
+t60 = -t26.*t39 - t41.*t28;
 x = zeros(8, N);
-x(1, :) = t33.*t34 - t28.*t31 + t23.*t27 - t13.*t17;
-x(2, :) = t33.*t36 + t34.*t30 + t23.*t17 + t26.*t35;
-x(3, :) = t23.*t34 - t30.*t17 - t27.*t33 + t28.*t35;
-x(4, :) = t33.*t17 - t23.*t36 - t26.*t31 + t34.*t13;
-x(5, :) = t42.*t34 + t41.*t26 - t28.*t39 - t37.*t17;
-x(6, :) = t44.*t28 + t43.*t26 + t34.*t38 + t40.*t17;
-x(7, :) = t40.*t34 - t44.*t26 - t38.*t17 + t43.*t28;
-x(8, :) = t42.*t17 - t41.*t28 - t26.*t39 + t34.*t37;
+x(1, :) = t23.*t27 - t13.*t17 - t28.*t31 + t33.*t34;
+x(2, :) = t48 + t47;
+x(3, :) = t50 + t49;
+x(4, :) = t52 + t51;
+x(5, :) = t54 + t53;
+x(6, :) = t40.*t17 + t34.*t38 + t43.*t26 + t44.*t28;
+x(7, :) = t58 + t57;
+x(8, :) = t60 + t59;
 end

@@ -3,10 +3,9 @@ function [x] = lwr4_hartl_fk_dq(q)
 %   [x] = lwr4_hartl_fk_dq(q) for the robot "lwr4_hartl"
 %   (7 revolute joints, standard DH, from lwr4_hartl.yaml).
 %
-%   Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-%   (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-%   dx, dy, dz), x and -x are the same pose; the sign is that of the product of the joint
-%   dual quaternions (continuous in q, not normalised to rw >= 0).
+%   Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+%   (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the
+%   product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).
 %
 %   Batches: every input may carry a trailing batch dimension of N configurations (a vector
 %   input of size m is m x N, a matrix input r x c is r x c x N); inputs with one configuration are
@@ -38,7 +37,7 @@ q_3 = q(4, :);
 q_4 = q(5, :);
 q_5 = q(6, :);
 q_6 = q(7, :);
-t0 = 0.5.*(q_4 + q_6);
+t0 = 0.5.*(q_6 + q_4);
 t1 = cos(t0);
 t2 = 0.5.*(q_0 - q_2);
 t3 = sin(t2);
@@ -48,11 +47,11 @@ t6 = 0.5.*q_3;
 t7 = cos(t6);
 t8 = t5.*t7;
 t9 = sin(t6);
-t10 = 0.5.*(q_0 + q_2);
+t10 = 0.5.*(q_2 + q_0);
 t11 = sin(t4);
 t12 = t11.*sin(t10);
 t13 = t9.*t12;
-t14 = t13 + t8.*t3;
+t14 = t8.*t3 + t13;
 t15 = 0.5.*q_5;
 t16 = sin(t15);
 t17 = t14.*t16;
@@ -70,12 +69,12 @@ t28 = t7.*t12 - t27;
 t29 = cos(t24);
 t30 = t29.*t23;
 t31 = t9.*t18;
-t32 = t8.*t19 + t31;
+t32 = t31 + t8.*t19;
 t33 = sin(t0);
 t34 = t33.*t16;
 t35 = t1.*t16;
 t36 = t28.*t16;
-t37 = 0.005.*t28 + 0.4.*t27;
+t37 = 0.4.*t27 + 0.005.*t28;
 t38 = 0.4.*t21 - 0.005.*t22;
 t39 = t23.*t38;
 t40 = 0.4.*t31 - 0.005.*t32;
@@ -84,13 +83,25 @@ t42 = 0.005.*t14 - 0.4.*t13;
 t43 = t42.*t16;
 t44 = t37.*t16;
 t45 = t38.*t16;
+t46 = t34.*t32 + t28.*t30;
+t47 = t1.*t17 + t22.*t26;
+t52 = -t28.*t26 - t32.*t35;
+t53 = t33.*t17 + t22.*t30;
+t54 = t43.*t33 + t26.*t37;
+t55 = t29.*t39 + t1.*t41;
+t56 = t42.*t30 - t40.*t26;
+t57 = t1.*t44 - t45.*t33;
+t58 = t40.*t30 + t42.*t26;
+t59 = -t44.*t33 - t1.*t45;
+t60 = t37.*t30 - t1.*t43;
+t61 = t41.*t33 - t25.*t39;
 x = zeros(8, N);
-x(1, :) = t28.*t30 + t34.*t32 + t22.*t26 + t1.*t17;
-x(2, :) = -(t32.*t30 - t33.*t36 + t22.*t35 - t26.*t14);
-x(3, :) = -(t26.*t32 - t1.*t36 - t22.*t34 + t30.*t14);
-x(4, :) = t22.*t30 - t32.*t35 - t28.*t26 + t33.*t17;
-x(5, :) = t43.*t33 + t1.*t41 + t29.*t39 + t26.*t37;
-x(6, :) = -(t42.*t30 - t45.*t33 + t1.*t44 - t40.*t26);
-x(7, :) = -(t42.*t26 - t1.*t45 - t44.*t33 + t40.*t30);
-x(8, :) = t41.*t33 - t1.*t43 - t25.*t39 + t37.*t30;
+x(1, :) = t47 + t46;
+x(2, :) = -(t22.*t35 - t26.*t14 - t33.*t36 + t32.*t30);
+x(3, :) = -(t30.*t14 - t22.*t34 - t1.*t36 + t26.*t32);
+x(4, :) = t53 + t52;
+x(5, :) = t55 + t54;
+x(6, :) = -(t57 + t56);
+x(7, :) = -(t59 + t58);
+x(8, :) = t61 + t60;
 end

@@ -3,10 +3,9 @@ function [x] = panda_fk_dq(q)
 %   [x] = panda_fk_dq(q) for the robot "panda"
 %   (7 revolute joints, modified DH, from panda.yaml).
 %
-%   Frames: base = DH frame 0, flange = last DH frame (7). T maps flange to base coordinates
-%   (row-major 4x4, last row 0 0 0 1). Lengths in m, angles in rad. x = (rw, rx, ry, rz, dw,
-%   dx, dy, dz), x and -x are the same pose; the sign is that of the product of the joint
-%   dual quaternions (continuous in q, not normalised to rw >= 0).
+%   Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =
+%   (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the
+%   product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).
 %
 %   Batches: every input may carry a trailing batch dimension of N configurations (a vector
 %   input of size m is m x N, a matrix input r x c is r x c x N); inputs with one configuration are
@@ -52,7 +51,7 @@ t10 = sin(t9);
 t11 = cos(t8).*t10;
 t12 = t7.*t11;
 t13 = sin(t6);
-t14 = 0.5.*(q_0 + q_2);
+t14 = 0.5.*(q_2 + q_0);
 t15 = cos(t9);
 t16 = t15.*cos(t14);
 t17 = t13.*t16;
@@ -66,48 +65,58 @@ t24 = sin(t4);
 t25 = t5.*t18 - t24.*t23;
 t26 = sin(t2);
 t27 = t21.*t13;
-t28 = t27 + t7.*t19;
+t28 = t7.*t19 + t27;
 t29 = t11.*t13;
-t30 = t7.*t16 + t29;
+t30 = t29 + t7.*t16;
 t31 = t5.*t30 - t24.*t28;
 t32 = t26.*t31;
 t33 = t3.*t25 - t32;
 t34 = t1.*t33;
 t35 = cos(t0);
-t36 = t24.*t30 + t5.*t28;
+t36 = t5.*t28 + t24.*t30;
 t37 = t26.*t36;
-t38 = t5.*t23 + t24.*t18;
-t39 = t3.*t38 + t37;
+t38 = t24.*t18 + t5.*t23;
+t39 = t37 + t3.*t38;
 t40 = t39.*t35 - t34;
 t41 = t26.*t38;
 t42 = t3.*t36 - t41;
 t43 = t1.*t42;
 t44 = t26.*t25;
-t45 = t3.*t31 + t44;
-t46 = t45.*t35 + t43;
+t45 = t44 + t3.*t31;
+t46 = t43 + t45.*t35;
 t47 = t1.*t45;
 t48 = t42.*t35 - t47;
 t49 = t1.*t39;
-t50 = t49 + t33.*t35;
-t51 = 0.649.*t20 - 0.0825.*t27 - 0.333.*t22;
-t52 = 0.649.*t17 - 0.0825.*t29 - 0.333.*t12;
+t50 = t33.*t35 + t49;
+t51 = 0.649.*t20 - 0.333.*t22 - 0.0825.*t27;
+t52 = 0.649.*t17 - 0.333.*t12 - 0.0825.*t29;
 t53 = t5.*t51 - t52.*t24;
-t54 = -0.0825.*t17 - 0.316.*t29;
-t55 = 0.316.*t27 + 0.0825.*t20;
+t54 = -0.316.*t29 - 0.0825.*t17;
+t55 = 0.0825.*t20 + 0.316.*t27;
 t56 = t5.*t55 - t54.*t24;
-t57 = t3.*t53 - t56.*t26 + 1.033.*t37;
-t58 = t55.*t24 + t5.*t54;
-t59 = t5.*t52 + t51.*t24;
-t60 = t3.*t59 + t58.*t26 + 1.033.*t32;
-t61 = t3.*t56 + t53.*t26 - 1.033.*t41;
-t62 = t3.*t58 - t59.*t26 - 1.033.*t44;
+t65 = 1.033.*t37 - t56.*t26;
+t57 = t65 + t3.*t53;
+t58 = t5.*t54 + t55.*t24;
+t59 = t51.*t24 + t5.*t52;
+t60 = 1.033.*t32 + t58.*t26 + t3.*t59;
+t67 = t3.*t56 - 1.033.*t41;
+t61 = t67 + t53.*t26;
+t62 = t3.*t58 - 1.033.*t44 - t59.*t26;
+t70 = -0.5165.*t50 - 0.044.*t46;
+t71 = t1.*t62 - 0.088.*t34;
+t72 = -0.5165.*t48 - 0.044.*t40;
+t73 = t71 + t35.*t61;
+t74 = 0.5165.*t46 + 0.088.*t49;
+t75 = t35.*t62 - 0.044.*t50;
+t76 = t74 - t1.*t61;
+t78 = 0.5165.*t40 - 0.044.*t48;
 x = zeros(8, N);
 x(1, :) = -t40;
 x(2, :) = t46;
 x(3, :) = t48;
 x(4, :) = -t50;
-x(5, :) = -0.044.*t46 - 0.5165.*t50 - (t35.*t60 - t1.*t57 - 0.088.*t43);
-x(6, :) = t1.*t62 - 0.044.*t40 - 0.5165.*t48 - 0.088.*t34 + t35.*t61;
-x(7, :) = 0.5165.*t46 - 0.044.*t50 + t35.*t62 + 0.088.*t49 - t1.*t61;
-x(8, :) = 0.5165.*t40 - 0.044.*t48 - (t1.*t60 + t57.*t35 + 0.088.*t47);
+x(5, :) = t70 - (t35.*t60 - 0.088.*t43 - t1.*t57);
+x(6, :) = t73 + t72;
+x(7, :) = t76 + t75;
+x(8, :) = t78 - (0.088.*t47 + t57.*t35 + t1.*t60);
 end
