@@ -107,6 +107,21 @@ def warm_resolve(funcs, repeats=5):
             "median_ms": 1e3 * float(np.median(times))}
 
 
+def crocoddyl_row(venv: Path):
+    """benchmarks/crocoddyl_reach.py in its own virtual environment (see its docstring)."""
+    from dh_to_urdf import write_urdf
+    funcs = ocp_reach.load()
+    urdf = write_urdf(funcs["robot"], ROOT / "examples" / "results" / "urdf" / "lwr4.urdf")
+    py = venv / "bin" / "python"
+    if not py.exists():
+        return {"error": f"no Crocoddyl environment at {venv}"}
+    r = subprocess.run([str(py), str(ROOT / "benchmarks" / "crocoddyl_reach.py"), "--urdf", str(urdf)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        return {"error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"exit {r.returncode}"}
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
 def plot(doc, path):
     import matplotlib
     matplotlib.use("Agg")
@@ -127,8 +142,18 @@ def plot(doc, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp.json"))
-    ap.add_argument("--no-peers", action="store_true", help="skip adam and urdf2casadi")
+    ap.add_argument("--no-peers", action="store_true", help="skip adam, urdf2casadi and Crocoddyl")
+    ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"),
+                    help="virtual environment with crocoddyl==3.0.1 pin==3.4.0 (default .venv-crocoddyl)")
+    ap.add_argument("--only-crocoddyl", action="store_true",
+                    help="run only the Crocoddyl row and add it to an existing --out file")
     args = ap.parse_args(argv)
+    if args.only_crocoddyl:
+        doc = json.loads(Path(args.out).read_text())
+        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
+        Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+        print(doc["crocoddyl"])
+        return
     funcs = ocp_reach.load()
     doc = {"machine": _machine(), "cores": len(__import__("os").sched_getaffinity(0)), "casadi": ca.__version__,
            "python": platform.python_version(),
@@ -162,6 +187,8 @@ def main(argv=None):
                 row["fd_max_abs_diff"] = err
                 doc["rows"].append(row)
                 out.write_text(json.dumps(doc, indent=1) + "\n")
+        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
+        print(f"crocoddyl: {doc['crocoddyl']}", flush=True)
     doc["warm_resolve"] = warm_resolve(funcs)
     print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
     out.write_text(json.dumps(doc, indent=1) + "\n")
