@@ -22,6 +22,9 @@ Problems:
             poses with the shortest joint-space distance).
   panda     Franka Panda (robots/panda.yaml, generated/panda/casadi/*.casadi), two given
             configurations.
+  lwr4_reach  the LWR reach of examples/ocp_reach.py (fixed T = 1 s, flange position goal,
+            min integral |tau|^2), with --formulation (baseline, fd_rk4, id_rk4) and
+            --solver (ipopt, fatrop, sqp); its RK4 steps per interval are --substeps (default 1).
 
 Output in --out: ocp.json (status, iterations, solve_s, T, t, q, qd, tau, max_defect,
 resim_error, limit checks), joints.png, torques.png.
@@ -46,7 +49,7 @@ for _p in (str(ROOT), str(EXAMPLES)):
 
 from kindyngen.robot import load_robot  # noqa: E402
 
-PROBLEMS = ("two_link", "lwr4", "panda")
+PROBLEMS = ("two_link", "lwr4", "panda", "lwr4_reach")
 MODES = ("sx", "mx", "mx_expand", "mx_map")
 # Fastest way of using the generated Functions in this NLP (examples/ocp_speed.py,
 # examples/results/ocp_speed.json): one SX RK4-step Function with fd inlined, mapped over the
@@ -475,8 +478,49 @@ def to_json(setup: dict, res: dict, sim: dict) -> dict:
     return doc
 
 
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):   # one error line, exit 2 (no usage block)
+        print(f"error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def run_reach(args, out: Path) -> int:
+    import ocp_reach
+    funcs = ocp_reach.load()
+    M = args.substeps or 1
+    if args.formulation == "baseline":
+        if args.solver != "ipopt":
+            print("error: --formulation baseline is Opti + IPOPT; --solver must be ipopt", file=sys.stderr)
+            return 2
+        res = ocp_reach.solve_baseline(args.N or 20, funcs, args.verbose, M)
+        setup = ocp_reach.setup_dict(funcs, args.N or 20)
+    else:
+        nlp = ocp_reach.reach_problem(args.formulation, args.solver, args.N or 20, funcs, verbose=args.verbose,
+                                      substeps=M)
+        res, setup = nlp.solve(), nlp.setup
+    sim = ocp_reach.check(setup, res, funcs, args.resim_substeps)
+    doc = {k: res[k] for k in ("status", "success", "iterations", "solve_s", "build_s", "formulation", "solver",
+                               "substeps", "N", "T", "objective")}
+    doc.update({k: sim[k] for k in ("plan_step_error", "resim_error", "resim_final_error", "resim_substeps",
+                                    "resim_goal_error_m", "resim_final_speed", "limit_excess")})
+    doc.update({"problem": "lwr4_reach", "q_start": setup["q0"].tolist(), "goal": setup["goal"].tolist(),
+                "limits": {"q_lower": setup["q_lo"].tolist(), "q_upper": setup["q_hi"].tolist(),
+                           "tau_max": setup["tau_max"].tolist()},
+                "t": res["t"].tolist(), "q": res["q"].tolist(), "qd": res["qd"].tolist(), "tau": res["tau"].tolist()})
+    setup_plot = dict(setup, problem="lwr4_reach")
+    doc["plots"] = plot(setup_plot, res, sim, out)
+    (out / "ocp.json").write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"lwr4_reach ({args.formulation}, {args.solver}, {M} RK4 step(s)/interval): {res['status']}, "
+          f"{res['iterations']} iterations, solve {res['solve_s']:.3f} s, build {res['build_s']:.2f} s, "
+          f"objective {res['objective']:.4f}")
+    print(f"  Pinocchio: plan step error {sim['plan_step_error']:.1e}, re-simulation ({args.resim_substeps} steps/"
+          f"interval) error {sim['resim_error']:.2e}, flange {1e3 * sim['resim_goal_error_m']:.2f} mm from the goal")
+    print(f"  wrote {out / 'ocp.json'}")
+    return 0 if res["success"] else 1
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    ap = _Parser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="\n\n".join(__doc__.split("\n\n")[2:]))
     ap.add_argument("--problem", choices=PROBLEMS, required=True)
@@ -489,7 +533,19 @@ def main(argv=None) -> int:
                          "(default 1 for two_link, 4 otherwise)")
     ap.add_argument("--resim-substeps", type=int, default=20, help="RK4 steps per interval of the re-simulation")
     ap.add_argument("--verbose", action="store_true", help="IPOPT's iteration log")
+    ap.add_argument("--formulation", choices=("baseline", "fd_rk4", "id_rk4"), default="id_rk4",
+                    help="lwr4_reach only: how the dynamics enter (default id_rk4)")
+    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp"), default="ipopt",
+                    help="lwr4_reach only (default ipopt)")
     args = ap.parse_args(argv)
+    if args.N is not None and args.N < 1:
+        ap.error(f"--N {args.N}: must be at least 1")
+    if args.substeps is not None and args.substeps < 1:
+        ap.error(f"--substeps {args.substeps}: must be at least 1")
+    if args.problem == "lwr4_reach":
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        return run_reach(args, out)
     N = args.N or (100 if args.problem == "two_link" else 20)
     args.substeps = args.substeps or (1 if args.problem == "two_link" else 4)
     out = Path(args.out)

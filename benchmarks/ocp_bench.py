@@ -1,0 +1,200 @@
+"""The LWR reach of examples/ocp_reach.py, every formulation and solver side by side in one
+run, each solution checked by Pinocchio; the same formulation built from adam's and
+urdf2casadi's forward dynamics when they are installed.
+
+    nice -n 10 .venv/bin/python -m benchmarks.ocp_bench [--out benchmarks/results/ocp.json] [--quick]
+
+Rows: solve wall and CPU time (the ratio to the baseline is on CPU time, which other jobs on a
+shared machine disturb far less than the wall time) (cold, from rest with gravity-compensating torques), iterations,
+objective, ratio to the baseline (Opti + IPOPT, fd on MX, the issue's reference), and the
+Pinocchio checks: plan_step_error (the plan's own RK4 steps of pin.aba from each node vs the
+next node), resim_error (20 RK4 steps per interval, state error at the nodes) and the flange's
+distance from the goal after re-simulation. Also the warm re-solve of id_rk4 + IPOPT from the
+solution shifted by one interval (what examples/mpc.py does at each step).
+Writes the JSON and a bar chart (ocp.png) beside it. Wall times on a shared machine: compare
+rows of one run only.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "examples"))
+import ocp_reach  # noqa: E402
+
+VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
+            ("id_rk4", "ipopt", 2)]
+
+
+def _version(dist):
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def _machine():
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
+        return next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
+    except (OSError, StopIteration):
+        return platform.processor() or platform.machine()
+
+
+def _row(name, source, res, setup, funcs, base_s=None):
+    sim = ocp_reach.check(setup, res, funcs)
+    row = {"variant": name, "dynamics": source, "formulation": res["formulation"], "solver": res["solver"],
+           "substeps": res.get("substeps", 1), "status": res["status"], "success": res["success"],
+           "iterations": res["iterations"], "build_s": res["build_s"], "solve_s": res["solve_s"],
+           "solve_cpu_s": res["solve_cpu_s"],
+           "ms_per_iteration": 1e3 * res["solve_s"] / max(res["iterations"], 1), "objective": res["objective"],
+           "plan_step_error": sim["plan_step_error"], "resim_error": sim["resim_error"],
+           "resim_goal_error_m": sim["resim_goal_error_m"], "limit_excess": sim["limit_excess"]}
+    if base_s:   # on CPU time: the wall time of a shared machine swings by 5x between rows
+        row["speedup_vs_baseline"] = base_s / res["solve_cpu_s"]
+    print(f"{name:28s} {row['status']:24s} it={row['iterations']:4d} build={row['build_s']:6.2f}s "
+          f"solve={row['solve_s']:7.3f}s cpu={row['solve_cpu_s']:7.3f}s f={row['objective']:.4f} step_err={row['plan_step_error']:.1e} "
+          f"resim={row['resim_error']:.1e} goal={1e3 * row['resim_goal_error_m']:.2f}mm"
+          + (f" x{row['speedup_vs_baseline']:.1f}" if base_s else ""), flush=True)
+    return row
+
+
+def peer_fds(funcs):
+    """adam's and urdf2casadi's fd on the URDF of examples/dh_to_urdf.py (ocp_peers.py's way)."""
+    import ocp_peers
+    from dh_to_urdf import write_urdf
+    robot = funcs["robot"]
+    urdf = write_urdf(robot, ROOT / "examples" / "results" / "urdf" / f"{robot.name}.urdf")
+    out, failures = {}, []
+    for name, build in (("adam", lambda: ocp_peers.adam_fd(urdf, robot)),
+                        ("urdf2casadi", lambda: ocp_peers.urdf2casadi_fd(urdf, robot))):
+        try:
+            fd = build()
+            err = ocp_peers.max_difference(fd, funcs["fd"], robot)
+            if err > 1e-9:
+                failures.append({"source": name, "error": f"max |fd - generated fd| = {err:.3e}"})
+                continue
+            out[name] = (fd, err)
+        except Exception as exc:  # noqa: BLE001 - a peer that does not load is reported, not fatal
+            failures.append({"source": name, "error": repr(exc)})
+    return out, failures
+
+
+def warm_resolve(funcs, repeats=5):
+    """id_rk4 + IPOPT re-solved from its own solution shifted by one interval, the initial
+    state moved to the solution's node 1: the receding-horizon step of examples/mpc.py."""
+    nlp = ocp_reach.reach_problem("id_rk4", "ipopt", funcs=funcs,
+                                  options={"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                                           "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    cold = nlp.solve()
+    times, its = [], []
+    for _ in range(repeats):
+        x1 = np.concatenate([cold["q"][1], cold["qd"][1]])
+        r = nlp.solve(x_init=x1, z0=nlp.shifted(cold["z"]), lam_g0=cold["lam_g"])
+        times.append(r["solve_cpu_s"])
+        its.append(r["iterations"])
+    return {"what": "id_rk4 + IPOPT warm start (shifted solution, mu_init 1e-4), CPU time", "solve_cpu_s": times, "iterations": its,
+            "median_ms": 1e3 * float(np.median(times))}
+
+
+def crocoddyl_row(venv: Path):
+    """benchmarks/crocoddyl_reach.py in its own virtual environment (see its docstring)."""
+    from dh_to_urdf import write_urdf
+    funcs = ocp_reach.load()
+    urdf = write_urdf(funcs["robot"], ROOT / "examples" / "results" / "urdf" / "lwr4.urdf")
+    py = venv / "bin" / "python"
+    if not py.exists():
+        return {"error": f"no Crocoddyl environment at {venv}"}
+    r = subprocess.run([str(py), str(ROOT / "benchmarks" / "crocoddyl_reach.py"), "--urdf", str(urdf)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        return {"error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"exit {r.returncode}"}
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def plot(doc, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = doc["rows"]
+    fig, ax = plt.subplots(figsize=(9, 4))
+    names = [r["variant"] for r in rows]
+    ax.barh(names, [r["solve_cpu_s"] for r in rows], color=["C3" if r["formulation"] == "baseline" else "C0" for r in rows])
+    ax.set_xscale("log")
+    ax.set_xlabel("solve CPU time [s] (cold start, log scale)")
+    ax.set_title(f"LWR reach, N = 20, one run on {doc['machine']}")
+    ax.invert_yaxis()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp.json"))
+    ap.add_argument("--no-peers", action="store_true", help="skip adam, urdf2casadi and Crocoddyl")
+    ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"),
+                    help="virtual environment with crocoddyl==3.0.1 pin==3.4.0 (default .venv-crocoddyl)")
+    ap.add_argument("--only-crocoddyl", action="store_true",
+                    help="run only the Crocoddyl row and add it to an existing --out file")
+    args = ap.parse_args(argv)
+    if args.only_crocoddyl:
+        doc = json.loads(Path(args.out).read_text())
+        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
+        Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+        print(doc["crocoddyl"])
+        return
+    funcs = ocp_reach.load()
+    doc = {"machine": _machine(), "cores": len(__import__("os").sched_getaffinity(0)), "casadi": ca.__version__,
+           "python": platform.python_version(),
+           "versions": {d: _version(d) for d in ("casadi", "pin", "adam-robotics", "urdf2casadi")},
+           "problem": "lwr4_reach N = 20, T = 1 s, data-sheet qd limits (examples/ocp_reach.py)",
+           "note": "wall times on a shared 2-core machine; compare rows of this run only",
+           "rows": [], "peer_failures": []}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    base_s = None
+    setup = ocp_reach.setup_dict(funcs)
+    for form, solver, M in VARIANTS:
+        name = f"{form} {solver} M={M}"
+        if form == "baseline":
+            res = ocp_reach.solve_baseline(funcs=funcs, substeps=M)
+        else:
+            res = ocp_reach.reach_problem(form, solver, funcs=funcs, substeps=M).solve()
+        doc["rows"].append(_row(name, "generated", res, setup, funcs, base_s))
+        if form == "baseline":
+            base_s = res["solve_cpu_s"]
+        out.write_text(json.dumps(doc, indent=1) + "\n")
+    if not args.no_peers:
+        peers, failures = peer_fds(funcs)
+        doc["peer_failures"] = failures
+        for source, (fd, err) in peers.items():
+            pf = dict(funcs, fd=fd)
+            for form, solver in (("baseline", "ipopt"), ("fd_rk4", "ipopt")):
+                res = (ocp_reach.solve_baseline(funcs=pf) if form == "baseline"
+                       else ocp_reach.reach_problem(form, solver, funcs=pf).solve())
+                row = _row(f"{source} {form} {solver} M=1", source, res, setup, funcs, base_s)
+                row["fd_max_abs_diff"] = err
+                doc["rows"].append(row)
+                out.write_text(json.dumps(doc, indent=1) + "\n")
+        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
+        print(f"crocoddyl: {doc['crocoddyl']}", flush=True)
+    doc["warm_resolve"] = warm_resolve(funcs)
+    print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
+    out.write_text(json.dumps(doc, indent=1) + "\n")
+    plot(doc, out.with_suffix(".png"))
+    print(f"wrote {out} and {out.with_suffix('.png')}")
+
+
+if __name__ == "__main__":
+    main()
