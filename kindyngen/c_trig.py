@@ -112,11 +112,11 @@ def _remez(f, weight, degree, a, b, grid=1500, iterations=20):
     return coeffs, worst
 
 
-def fit_coefficients():
-    """(S, C, error of S, error of C) as doubles: S(z) ~ (sin sqrt z - sqrt z) / z^1.5 weighted
-    by z (the relative error of sin), C(z) ~ (cos sqrt z - 1 + z/2) / z^2 weighted by z^2 (the
-    absolute error of cos), z in [z_max/1000, z_max] (below it the weight makes any error
-    negligible)."""
+def _minimax(degree: int):
+    """(S, C, error of S, error of C) as mpmath numbers, polynomials of ``degree`` in z:
+    S(z) ~ (sin sqrt z - sqrt z) / z^1.5 weighted by z (the relative error of sin), C(z) ~
+    (cos sqrt z - 1 + z/2) / z^2 weighted by z^2 (the absolute error of cos), z in
+    [z_max/1000, z_max] (below it the weight makes any error negligible)."""
     import mpmath as mp
     with mp.workdps(50):
         z_max = mp.mpf(R_MAX) ** 2
@@ -128,10 +128,16 @@ def fit_coefficients():
         def c(z):
             return (mp.cos(mp.sqrt(z)) - 1 + z / 2) / (z * z)
 
-        sin_coeffs, sin_error = _remez(s, lambda z: z, 5, z_max / 1000, z_max)
-        cos_coeffs, cos_error = _remez(c, lambda z: z * z, 5, z_max / 1000, z_max)
-        return (tuple(float(v) for v in sin_coeffs), tuple(float(v) for v in cos_coeffs),
-                float(sin_error), float(cos_error))
+        sin_coeffs, sin_error = _remez(s, lambda z: z, degree, z_max / 1000, z_max)
+        cos_coeffs, cos_error = _remez(c, lambda z: z * z, degree, z_max / 1000, z_max)
+        return sin_coeffs, cos_coeffs, sin_error, cos_error
+
+
+def fit_coefficients():
+    """The double kernel's (S, C, error of S, error of C) as doubles: :func:`_minimax` of degree 5."""
+    sin_coeffs, cos_coeffs, sin_error, cos_error = _minimax(5)
+    return (tuple(float(v) for v in sin_coeffs), tuple(float(v) for v in cos_coeffs),
+            float(sin_error), float(cos_error))
 
 
 def _estrin(coeffs, z: str, z2: str, z4: str) -> str:
@@ -295,22 +301,12 @@ def _fraction(value):
 
 
 def fit_coefficients_float():
-    """(S, C) for float: minimax of degree 3 on the same intervals as :func:`fit_coefficients`,
-    each coefficient rounded once to float, as C literals."""
+    """(S, C) for float: :func:`_minimax` of degree 3, each coefficient rounded once to float
+    from its exact value, as C literals."""
     import mpmath as mp
     from .float32 import c_float
+    sin_coeffs, cos_coeffs, _, _ = _minimax(3)
     with mp.workdps(50):
-        z_max = mp.mpf(R_MAX) ** 2
-
-        def s(z):
-            root = mp.sqrt(z)
-            return (mp.sin(root) - root) / (z * root)
-
-        def c(z):
-            return (mp.cos(mp.sqrt(z)) - 1 + z / 2) / (z * z)
-
-        sin_coeffs, _ = _remez(s, lambda z: z, 3, z_max / 1000, z_max)
-        cos_coeffs, _ = _remez(c, lambda z: z * z, 3, z_max / 1000, z_max)
         return (tuple(c_float(_fraction(mp.mpf(v))) for v in sin_coeffs),
                 tuple(c_float(_fraction(mp.mpf(v))) for v in cos_coeffs))
 
