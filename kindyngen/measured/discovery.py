@@ -480,6 +480,51 @@ class _Problem:
         return float(n_eff_total * math.log(max(fit["rss"], 1e-300) / rows) + fit["rank"] * math.log(n_eff_total))
 
 
+#: smallest eigenvalue (kg m^2) the payload's pseudo-inertia is held to in the constrained fit
+PAYLOAD_EPSILON = 1e-6
+
+
+def _physical_payload(problem: _Problem, fit: dict):
+    """When the fitted payload's pseudo-inertia is not positive definite: the fit again with
+    it held >= PAYLOAD_EPSILON (a semidefinite program, CLARABEL through cvxpy), the other
+    non-negative coefficients >= 0.  Returns (fit, note) or None when the free fit is
+    physical already."""
+    from .consistent import pseudo_inertia
+    idx = fit["idx"]
+    own = problem.slices["payload"]
+    where = np.searchsorted(idx, own) if np.all(np.isin(own, idx)) else None
+    if where is None:
+        return None
+    values = fit["theta"] * problem.scale[idx]
+    if np.linalg.eigvalsh(pseudo_inertia(values[where]))[0] >= PAYLOAD_EPSILON:
+        return None
+    import cvxpy as cp
+    G, b = problem.G[np.ix_(idx, idx)], problem.b[idx]
+    w, V = np.linalg.eigh(G)
+    keep = w > RCOND * max(w.max(), 1e-300)
+    root = np.sqrt(w[keep])[:, None] * V[:, keep].T
+    target = (V[:, keep].T @ b) / np.sqrt(w[keep])
+    T = np.stack([pseudo_inertia(np.eye(10)[k]).reshape(16) for k in range(10)], axis=1)
+    x = cp.Variable(len(idx))                    # scaled unknowns, as the fit's theta
+    body = cp.multiply(problem.scale[idx][where], x[where])
+    J = cp.reshape(T @ body, (4, 4), order="C")
+    constraints = [0.5 * (J + J.T) >> PAYLOAD_EPSILON * np.eye(4)]
+    nonneg = problem.nonneg[idx]
+    if nonneg.any():
+        constraints.append(x[np.flatnonzero(nonneg)] >= 0)
+    cp.Problem(cp.Minimize(cp.sum_squares(root @ x - target)), constraints).solve(solver="CLARABEL")
+    if x.value is None:
+        return None
+    theta = np.asarray(x.value, float)
+    residual = problem.r - problem.A[:, :, idx] @ theta
+    before = float(np.linalg.eigvalsh(pseudo_inertia(values[where]))[0])
+    out = dict(fit, theta=theta, residual=residual, rss=float(np.sum(residual ** 2)))
+    return out, (f"payload: the free fit's pseudo-inertia has smallest eigenvalue {before:.3g} kg m^2; fitted "
+                 f"again inside the physical domain (pseudo-inertia >= {PAYLOAD_EPSILON:g} kg m^2, a semidefinite "
+                 f"program): full-data RMS {math.sqrt(fit['rss'] / residual.size):.4g} -> "
+                 f"{math.sqrt(out['rss'] / residual.size):.4g} N m")
+
+
 def _principal_cosine(A, B) -> float:
     """Cosine of the smallest principal angle between the column spaces of A and B (rows x k)."""
     def basis(M):
@@ -792,6 +837,11 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         details[stribeck_key] = f"vs = {vs_final:.3g} rad/s (refined between the grid points {lo:g} and {hi:g})"
     final_problem = _Problem(final_blocks, r, data.fold_of, folds) if chosen else problem
     final = final_problem.fit(list(final_blocks) if chosen else [])
+    if "payload" in final_blocks:
+        physical = _physical_payload(final_problem, final)
+        if physical is not None:
+            final, text = physical
+            notes.append(text)
 
     # final values of every fitted candidate
     idx = final["idx"]
