@@ -93,6 +93,25 @@ NONNEGATIVE_CANDIDATES = ("viscous_friction", "coulomb_friction", "armature", "s
                           "load_dependent_friction", "motor_side_elasticity")
 
 
+#: a torque sensor's relative gain error is fitted within +-TORQUE_GAIN_ERROR_MAX: one that
+#: reads less than half (or 1.5 times) the torque is broken, not mis-scaled
+TORQUE_GAIN_ERROR_MAX = 0.5
+#: an encoder offset is fitted within +-ENCODER_OFFSET_MAX rad: the column is the first-order
+#: term of tau(q - dq), whose neglected second-order part grows as dq^2 (0.25 % at 0.05 rad)
+ENCODER_OFFSET_MAX = 0.05
+
+
+def _bounds(candidate: str) -> tuple[float, float]:
+    """The physical range of a candidate's coefficients (+-inf: no bound)."""
+    if candidate in NONNEGATIVE_CANDIDATES:
+        return 0.0, np.inf
+    if candidate == "torque_sensor_gain":
+        return -TORQUE_GAIN_ERROR_MAX, TORQUE_GAIN_ERROR_MAX
+    if candidate == "encoder_offset":
+        return -ENCODER_OFFSET_MAX, ENCODER_OFFSET_MAX
+    return -np.inf, np.inf
+
+
 def _public(key: str) -> str:
     """The candidate a block key stands for (``stribeck_friction@0.05`` -> ``stribeck_friction``)."""
     return key.split("@")[0]
@@ -399,16 +418,15 @@ def effective_samples(residual: np.ndarray) -> np.ndarray:
     return out
 
 
-def _bounded_solve(G, b, nonneg):
-    """Minimise ``th' G th - 2 b' th`` with ``th[nonneg] >= 0``: bounded least squares on
-    the square root of ``G`` (eigen-decomposition, so a singular ``G`` is fine)."""
+def _bounded_solve(G, b, lower, upper):
+    """Minimise ``th' G th - 2 b' th`` with ``lower <= th <= upper``: bounded least squares
+    on the square root of ``G`` (eigen-decomposition, so a singular ``G`` is fine)."""
     from scipy.optimize import lsq_linear
     w, V = np.linalg.eigh(G)
     keep = w > RCOND * max(w.max(), 1e-300)
     root = np.sqrt(w[keep])[:, None] * V[:, keep].T
     target = (V[:, keep].T @ b) / np.sqrt(w[keep])
-    lower = np.where(nonneg, 0.0, -np.inf)
-    return lsq_linear(root, target, bounds=(lower, np.full(len(b), np.inf)), method="bvls").x
+    return lsq_linear(root, target, bounds=(lower, upper), method="bvls").x
 
 
 class _Problem:
@@ -425,14 +443,18 @@ class _Problem:
         self.blocks = blocks
         A = np.concatenate([b[0] for b in blocks.values()], axis=2) if blocks else np.zeros((self.N, self.n, 0))
         self.slices, start = {}, 0
-        nonneg = []
+        lower = []                               # (low, high) per column
         for name, (cols, _, _) in blocks.items():
             self.slices[name] = np.arange(start, start + cols.shape[2])
             start += cols.shape[2]
-            nonneg += [_public(name) in NONNEGATIVE_CANDIDATES] * cols.shape[2]
-        self.nonneg = np.array(nonneg, bool)
+            lower += [_bounds(_public(name))] * cols.shape[2]
         scale = np.sqrt(np.sum(A ** 2, axis=(0, 1)))
         self.scale = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1), 0.0)
+        bounds = np.array(lower, float).reshape(-1, 2)
+        # bounds on the scaled unknowns theta = value / scale (a zero column is free)
+        live = np.where(self.scale > 0, self.scale, 1.0)
+        self.lower = np.where(self.scale > 0, bounds[:, 0] / live, -np.inf)
+        self.upper = np.where(self.scale > 0, bounds[:, 1] / live, np.inf)
         self.A = A * self.scale                  # unit columns (zero columns stay zero)
         self.fold_rows = [np.flatnonzero(fold_of == k) for k in range(folds)]
         A2 = self.A.reshape(self.N * self.n, -1)
@@ -456,9 +478,9 @@ class _Problem:
         keep = w > RCOND * max(w.max(), 1e-300)
         inv = (V[:, keep] / w[keep]) @ V[:, keep].T
         theta = inv @ b
-        nonneg = self.nonneg[idx]
-        if np.any(theta[nonneg] < 0):
-            theta = _bounded_solve(G, b, nonneg)
+        lower, upper = self.lower[idx], self.upper[idx]
+        if np.any(theta < lower) or np.any(theta > upper):
+            theta = _bounded_solve(G, b, lower, upper)
         return theta, inv, int(keep.sum())
 
     def fit(self, names):
@@ -509,9 +531,11 @@ def _physical_payload(problem: _Problem, fit: dict):
     body = cp.multiply(problem.scale[idx][where], x[where])
     J = cp.reshape(T @ body, (4, 4), order="C")
     constraints = [0.5 * (J + J.T) >> PAYLOAD_EPSILON * np.eye(4)]
-    nonneg = problem.nonneg[idx]
-    if nonneg.any():
-        constraints.append(x[np.flatnonzero(nonneg)] >= 0)
+    lower, upper = problem.lower[idx], problem.upper[idx]
+    for bound, sign in ((lower, 1), (upper, -1)):
+        k = np.flatnonzero(np.isfinite(bound))
+        if k.size:
+            constraints.append(sign * (x[k] - bound[k]) >= 0)
     cp.Problem(cp.Minimize(cp.sum_squares(root @ x - target)), constraints).solve(solver="CLARABEL")
     if x.value is None:
         return None

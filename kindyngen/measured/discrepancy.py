@@ -81,7 +81,7 @@ class DiscrepancyResult:
     heldout_motion: tuple             # q, qd, qdd on the held-out part
     preprocessing_notes: tuple[str, ...]
     samples: dict
-    phases_after: dict = field(default_factory=dict)   # the same, for model.yaml
+    phases_fitted: dict = field(default_factory=dict)   # the same, with every fitted effect
 
 
 def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
@@ -207,7 +207,7 @@ def run_discrepancy(request: DiscrepancyRequest,
         heldout_motion=(h["q"], h["qd"], h["qdd"]),
         preprocessing_notes=tuple(dict.fromkeys(notes)),
         samples={"selection": int(d.samples), "held_out": int(len(h["tau"]))},
-        phases_after=motion_phases(h["tau"] - h["after"], h["qd"], h["qdd"]))
+        phases_fitted=motion_phases(h["tau"] - h["fitted"], h["qd"], h["qdd"]))
 
 
 def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
@@ -218,7 +218,7 @@ def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
     out = list(d.unexplained)
     floor = d.noise_floor
     for j in np.flatnonzero(result.rms_after_fit > EXPLAINED_FACTOR * floor):
-        phases = {k: v[j] for k, v in result.phases_after.items() if math.isfinite(v[j])} if result.phases_after else {}
+        phases = {k: v[j] for k, v in result.phases_fitted.items() if math.isfinite(v[j])}
         phase = max(phases, key=phases.get) if phases else None
         out.append(f"joint {j + 1} on the held-out data: RMS {result.rms_after_fit[j]:.3g} N m with every fitted "
                    f"effect = {result.rms_after_fit[j] / max(floor[j], 1e-300):.3g} x its noise floor"
