@@ -178,3 +178,16 @@ def test_an_effect_outside_the_library_is_not_explained(tmp_path):
     result, doc = run(tmp_path, "lwr4", [write_log(tmp_path / "log.npz", "lwr4", (), extra=hum)])
     assert doc["explained"] is False
     assert any(w.startswith("joint 2") for w in doc["unexplained"]), doc["unexplained"]
+
+
+def test_identify_takes_two_recordings_each_from_zero(tmp_path):
+    from kindyngen.measured.identify import IdentificationRequest, identify
+    a = write_log(tmp_path / "a.npz", "lwr4", ("viscous_friction",), seed=1)
+    b = write_log(tmp_path / "b.npz", "lwr4", ("viscous_friction",), seed=2)
+    result = identify(IdentificationRequest("robots/lwr4.yaml", (a, b), effects=("viscous_friction",), split=0.7))
+    # each file's last 30 % validates: 2 x 30 s at 200 Hz, trimmed 0.4 s at each end, each part
+    # decimated by 5 on its own (one sample more per part at most)
+    assert abs(result.samples_validation + result.samples_train - 2 * (6000 - 2 * 80) / 5) <= 4
+    assert abs(result.samples_validation / (result.samples_train + result.samples_validation) - 0.3) < 0.01
+    np.testing.assert_allclose(result.effect_values, FV, rtol=0.05)
+    assert np.all(result.rms_validation < 1.5 * filtered_noise(NOISE))
