@@ -877,6 +877,14 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
            if len(idx) else np.zeros(0))
     names = [name for c in chosen for name in final_blocks[c][1]]
     value_of = dict(zip(names, map(float, values)))
+    for k in chosen:
+        low, high = _bounds(_public(k))
+        pinned = [nm for nm in final_blocks[k][1] if math.isfinite(low) and math.isfinite(high)
+                  and min(abs(value_of[nm] - low), abs(value_of[nm] - high)) <= 1e-6 * (high - low)]
+        if pinned:
+            notes.append(f"{_public(k)}: {', '.join(pinned)} at the edge of the physical range [{low:g}, {high:g}]: "
+                         f"the data pulls beyond it, so read these as standing in for something else (an error "
+                         f"of the nominal model, an effect outside the library)")
     std_of = dict(zip(names, map(float, std)))
     payload = payload_mass = gravity = tilt = None
     fitted = tuple(_public(k) for k in chosen)

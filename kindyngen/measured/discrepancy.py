@@ -82,6 +82,7 @@ class DiscrepancyResult:
     preprocessing_notes: tuple[str, ...]
     samples: dict
     phases_fitted: dict = field(default_factory=dict)   # the same, with every fitted effect
+    written_values: dict = field(default_factory=dict)  # joint coefficients written to model.yaml
 
 
 def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
@@ -102,7 +103,7 @@ def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
     return out
 
 
-def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ...]]:
+def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ...], dict]:
     """model.yaml with the named effects the schema holds, and what could not be written:
     named effects outside the schema, and a payload whose fitted inertia is not physical
     (dropped, the rest written)."""
@@ -112,10 +113,18 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
     values = {name: d.values[name] for name in effect_names(joint_effects, model.n)} if joint_effects else {}
     for e in writable:
         if e in SENSING_EFFECTS:
+            skipped = []
             for i in range(model.n):
-                v = d.values[f"{_SENSING_PREFIX[e]}{i + 1}"]
-                if e != "motor_side_elasticity" or v > 0:   # a zero compliance is a rigid joint
-                    values[f"{_SENSING_PREFIX[e]}{i + 1}"] = v
+                name = f"{_SENSING_PREFIX[e]}{i + 1}"
+                v, std = d.values[name], d.std.get(name, 0.0)
+                # a joint whose coefficient is within one std of zero (or exactly zero: a rigid
+                # joint, a column that vanishes) keeps the ideal sensor
+                if v != 0 and abs(v) > std:
+                    values[name] = v
+                else:
+                    skipped.append(f"{name} = {v:.3g} +- {std:.2g}")
+            if skipped:
+                not_written += (f"{e} on joints where it is not distinguishable from zero ({', '.join(skipped)})",)
     payload = None
     if "payload" in writable:
         try:
@@ -130,13 +139,13 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
                           payload=payload if with_payload else None, gravity=gravity)
         try:
             parse_robot(yaml.safe_load(text), "model.yaml")   # the loader must take what we write
-            return text, not_written
+            return text, not_written, values
         except ValueError as exc:
             if with_payload:
                 not_written += (f"payload: the fitted flange body is not physical ({exc.reason if hasattr(exc, 'reason') else exc})",)
                 continue
-            return None, not_written + (f"model.yaml refused by the loader: {exc}",)
-    return None, not_written
+            return None, not_written + (f"model.yaml refused by the loader: {exc}",), {}
+    return None, not_written, {}
 
 
 def measured_prediction(model, segment) -> np.ndarray:
@@ -192,7 +201,7 @@ def run_discrepancy(request: DiscrepancyRequest,
         heldout += b
     eps = coulomb_eps(model)
     d = discover(model, train, request.candidates, request.folds, progress, eps)
-    text, not_written = _model_text(request, model, d)
+    text, not_written, written_values = _model_text(request, model, d)
     written = parse_robot(yaml.safe_load(text), "model.yaml") if text is not None else None
     h = _heldout(model, written, d, heldout)
 
@@ -207,7 +216,7 @@ def run_discrepancy(request: DiscrepancyRequest,
         heldout_motion=(h["q"], h["qd"], h["qdd"]),
         preprocessing_notes=tuple(dict.fromkeys(notes)),
         samples={"selection": int(d.samples), "held_out": int(len(h["tau"]))},
-        phases_fitted=motion_phases(h["tau"] - h["fitted"], h["qd"], h["qdd"]))
+        phases_fitted=motion_phases(h["tau"] - h["fitted"], h["qd"], h["qdd"]), written_values=written_values)
 
 
 def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
@@ -232,19 +241,9 @@ def explained(result: DiscrepancyResult) -> bool:
 
 
 def model_values(result: DiscrepancyResult) -> dict:
-    """The joint values written to model.yaml, as fitted jointly at the end (by name)."""
-    if result.model_yaml is None:
-        return {}
-    d = result.discovery
-    return {k: v for k, v in d.values.items()
-            if any(k.startswith(p) and k[len(p):].isdigit() for p in ("fv", "fc", "f0", "Ia", "ce", "dq", "gt"))
-            and _effect_of_name(k) in d.effects}
-
-
-def _effect_of_name(name: str) -> str:
-    prefix = {"fv": "viscous_friction", "fc": "coulomb_friction", "f0": "torque_offset", "Ia": "armature",
-              "ce": "motor_side_elasticity", "dq": "encoder_offset", "gt": "torque_sensor_gain"}
-    return prefix.get(name[:2], "")
+    """The joint coefficients written to model.yaml (fitted jointly at the end), by name;
+    ``ce`` compliances and ``gt`` gain errors as fitted (model.yaml holds 1 / ce and 1 + gt)."""
+    return dict(result.written_values) if result.model_yaml is not None else {}
 
 
 def _floats(values):
