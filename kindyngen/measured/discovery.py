@@ -12,34 +12,61 @@ joints at once* (per-joint parameters, one candidate = one block of columns):
 =============================  ==========================  =====================================
 candidate                      parameters                  torque on joint i
 =============================  ==========================  =====================================
-``viscous_friction``           ``fv1..fvn``                ``fv_i qd_i``
-``coulomb_friction``           ``fc1..fcn``                ``fc_i sign(qd_i)`` (``tanh(qd/eps)``)
+``viscous_friction``           ``fv1..fvn`` (>= 0)         ``fv_i qd_i``
+``coulomb_friction``           ``fc1..fcn`` (>= 0)         ``fc_i sign(qd_i)`` (``tanh(qd/eps)``)
 ``torque_offset``              ``f01..f0n``                ``f0_i``
-``armature``                   ``Ia1..Ian``                ``Ia_i qdd_i``
+``armature``                   ``Ia1..Ian`` (>= 0)         ``Ia_i qdd_i``
 ``payload``                    ``payload_m .. payload_Izz``  the last 10 columns of ``Y @ P``
                                                            (a body on the flange; its 10
                                                            barycentric values add to the last
-                                                           link's)
+                                                           link's; pseudo-inertia kept positive
+                                                           definite)
 ``base_tilt``                  ``dgx, dgy, dgz``           gravity torques of the nominal
                                                            parameters under ``g_nom + dg``
                                                            (exactly linear in ``g``)
-``stribeck_friction``          ``fs1..fsn`` (+ ``vs``)     ``fs_i exp(-(qd_i/vs)^2) sign(qd_i)``,
-                                                           ``vs`` from :data:`STRIBECK_VS`
+``stribeck_friction``          ``fs1..fsn`` (>= 0, + vs)   ``fs_i exp(-(qd_i/vs)^2) sign(qd_i)``,
+                                                           ``vs`` from :data:`STRIBECK_VS`, then
+                                                           refined between the grid points
 ``position_ripple``            ``rs1.., rc1..``            ``rs_i sin(k q_i) + rc_i cos(k q_i)``
-``load_dependent_friction``    ``fl1..fln``                ``fl_i |tau_nom_i| sign(qd_i)``
+``load_dependent_friction``    ``fl1..fln`` (>= 0)         ``fl_i |tau_nom_i| sign(qd_i)``
+``motor_side_elasticity``      ``ce1..cen`` (>= 0, peak    ``q_logged = q + ce_i tau_i``
+                              deflection <= 0.05 rad)     (``ce = 1 / stiffness``): to first
+                                                           order ``-D tau_nom . ce_i (tau_i,
+                                                           taud_i, taudd_i) e_i``
+``encoder_offset``             ``dq1..dqn`` (+-0.05 rad)   ``q_logged = q + dq_i``: ``-dtau_nom/
+                                                           dq_i dq_i``
+``torque_sensor_gain``         ``gt1..gtn`` (+-0.5)        ``tau_logged = (1 + gt_i) tau_i``:
+                                                           ``gt_i tau_nom_i``
 =============================  ==========================  =====================================
+
+The last three act on the measurement, not the joint: their columns are directional
+derivatives of the nominal torques by central differences (exact in qd and qdd), with the
+joint torque ``tau_i`` taken from the low-passed measured torque (:func:`spring_torque`).
+
+**Parallel filtering.**  Every column (and ``tau_nom``) is computed from each recording's
+motion estimate (the low-passed q and its derivatives), then filtered with the recording's
+*unfiltered* torque by the same linear filter and decimated
+(:func:`kindyngen.measured.logs.filtered_rows`).  ``sign(qd)`` of a filtered velocity
+against a filtered torque would smear a Coulomb step into a spurious negative Stribeck dip;
+a linear filter applied to both sides keeps every linear-in-parameters law exact.
 
 Judgement (constants below; each rule says why):
 
-* **Held-out error**: K contiguous time blocks (``folds``), fit on K-1, predict the held-out
-  block; out-of-fold predictions give a held-out RMS per joint.  Contiguous blocks because
-  filtered, autocorrelated samples next to a training sample are not independent test data.
+* **Held-out error**: every recording cut into K contiguous time blocks (``folds``), fold k
+  the k-th block of every recording (so the folds do not depend on the order of the
+  recordings); fit on K-1, predict the held-out fold; out-of-fold predictions give a
+  held-out RMS per joint.  Contiguous blocks because filtered, autocorrelated samples next to
+  a training sample are not independent test data.
+* **Physical domain**: every fit (selection, folds, final) holds the coefficients inside
+  their range (table above) by bounded least squares; a payload whose free fit breaks
+  positive definiteness is fitted again as a semidefinite program, not dropped.
 * **Criterion**: ``BIC_eff = N_eff log(RSS / rows) + rank log(N_eff)`` with the effective
   sample size per joint ``N_eff = N / (1 + 2 sum_k rho_k)`` (autocorrelation of the
   residual of the larger model, summed up to the first non-positive lag), summed over joints.
   Both models of a comparison use the same ``N_eff``.
 * **Noise floor** per joint: ``1.4826 median|d2 r| / sqrt(6)``, the robust (MAD) scale of
-  the second difference of the residual within each segment (white noise of std s gives
+  the second difference of the *unfiltered* residual within each segment, times the noise
+  gain of the parallel filter (:func:`kindyngen.measured.logs.noise_gain`) (white noise of std s gives
   ``d2`` of std ``sqrt(6) s``; smooth effects contribute ``(omega dt)^2`` of their amplitude,
   sparse jumps such as Coulomb reversals are ignored by the median).  Torques low-passed
   before logging have correlated noise whose second difference is small: the floor is then
@@ -49,16 +76,24 @@ Judgement (constants below; each rule says why):
   by at least :data:`MIN_RELATIVE_IMPROVEMENT`; (b) ``BIC_eff`` falls by at least
   :data:`BIC_MARGIN` (strong evidence on the Kass-Raftery scale); (c) its block of
   parameters is non-zero: the Wald statistic ``dRSS / s^2 * N_eff / rows`` exceeds the
-  chi-square quantile :data:`WALD_P` of its rank.  Stop when no candidate passes, or when every
+  chi-square quantile :data:`WALD_P` of its rank; (d) it matters: some joint's held-out RMS
+  falls by :data:`MATTER` noise floors.  At the end every chosen effect must still pass (a)
+  and (d) against the fit without it (backward check).  Stop when no candidate passes, or when every
   joint's held-out RMS is within :data:`NOISE_STOP` times its noise floor, or the residual is
   at rounding level (:data:`ROUNDING`).
 * **Indistinguishable**: another candidate is indistinguishable from the best when the
   fold-wise difference of their held-out MSE is within :data:`AMBIGUITY_SE` standard errors
-  of zero, or within ``(AMBIGUITY_NOISE * floor)^2``.  Then nothing is *named*: the best
+  of zero, or within ``(AMBIGUITY_NOISE * floor)^2``, *and* the smallest principal angle
+  between their columns (the chosen ones projected out) is at most
+  :data:`AMBIGUITY_ANGLE_DEG`; every flag is re-examined at the end beside all the effects
+  chosen after it.  Then nothing is *named*: the best
   member's columns stay in the fit (so the remaining residual keeps shrinking and
   ``rms_after`` is honest), the group goes to ``indistinguishable`` with a motion that would
   separate it (:func:`separating_motion`), and ``effects`` does not list it.  The principal
   angle between the two column spaces is reported with it.
+* **Verdict**: ``explained`` when every joint's final held-out RMS is within
+  :data:`EXPLAINED_FACTOR` x its noise floor; else ``unexplained`` says, per joint, how far
+  above and what the rest correlates with.
 
 Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.logs.Segment`):
 
@@ -109,6 +144,8 @@ def _bounds(candidate: str) -> tuple[float, float]:
         return -TORQUE_GAIN_ERROR_MAX, TORQUE_GAIN_ERROR_MAX
     if candidate == "encoder_offset":
         return -ENCODER_OFFSET_MAX, ENCODER_OFFSET_MAX
+    if candidate == "motor_side_elasticity":
+        return 0.0, ENCODER_OFFSET_MAX          # fitted as the peak deflection (rad), see _Rows
     return -np.inf, np.inf
 
 
@@ -249,6 +286,7 @@ class Discovery:
     explained: bool = True              # every joint's held-out RMS within EXPLAINED_FACTOR x its floor
     unexplained: tuple[str, ...] = ()   # where the rest lives, one sentence per joint
     filtering: tuple[str, ...] = ()     # the parallel filters of the recordings (LowPass.describe)
+    negligible: tuple[str, ...] = ()    # fitted coefficients whose own torque stays below MATTER floors
 
 
 def predict_effects(discovery: Discovery, model: RobotModel, q, qd, qdd, effects=None, spring=None) -> np.ndarray:
@@ -306,7 +344,8 @@ def _directional(model, q, qd, qdd, dq, dqd, dqdd) -> np.ndarray:
 
 def spring_torque(tau, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The joint torque seen by a motor-side encoder's spring and its first two time
-    derivatives, from a (low-passed) measured torque ``tau`` (N, n) sampled every ``dt`` s."""
+    derivatives, from a smooth torque estimate ``tau`` (N, n) sampled every ``dt`` s (the
+    nominal torque along the logged motion: free of the torque sensor's noise)."""
     tau = np.asarray(tau, float)
     if len(tau) < 3:
         return tau, np.zeros_like(tau), np.zeros_like(tau)
@@ -580,6 +619,10 @@ class _Rows:
             q, qd, qdd = seg.q, seg.qd, seg.qdd
             tau_nom = nominal_torques(model, q, qd, qdd)
             raw = seg.tau_unfiltered if seg.low_pass is not None else seg.tau
+            # the joint torque of the spring: the low-passed measured torque (the joint torque
+            # itself, whatever the model misses); its noise correlates with the residual's, a
+            # bias that matters only where the torque is near the noise, and there the deflection
+            # bound and the negligible-coefficient rule keep the joint rigid in model.yaml
             smooth = seg.tau if seg.low_pass is not None or len(seg.t) < 60 else \
                 zero_phase_low_pass(seg.tau, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
             self.spring.append(spring_torque(smooth, seg.dt) if need_spring else None)
@@ -593,6 +636,10 @@ class _Rows:
             fold_of.append(np.minimum((np.arange(m) * folds) // m, folds - 1))
             floors.append(noise_floor(raw - tau_nom, [len(raw)]) * noise_gain(seg.low_pass))
             weights.append(m)
+        # motor_side_elasticity is fitted as the peak deflection ce_i max|tau_i| (rad), so that
+        # its bound is the first-order model's range of validity, as for an encoder offset
+        self.spring_peak = (np.max([np.max(np.abs(sp[0]), axis=0) for sp in self.spring], axis=0)
+                            if need_spring else None)
         self.nominal = np.concatenate(nominal)
         self.tau = np.concatenate(measured)
         self.signals = np.concatenate(signals)
@@ -609,8 +656,18 @@ class _Rows:
         parts, names, detail = [], (), ""
         for seg, (q, qd, qdd, tau_nom), spring in zip(self.segments, self.motion, self.spring):
             cols, names, detail = _columns(name, self.model, q, qd, qdd, tau_nom, self.eps, self.ripple_k, vs, spring)
+            if name == "motor_side_elasticity":
+                cols = cols / self.peak()
             parts.append(filtered_rows(seg, cols)[1])
         return np.concatenate(parts), names, detail
+
+    def peak(self) -> np.ndarray:
+        """Per joint, the largest |joint torque| (N m; 1 where it is zero)."""
+        return np.where(self.spring_peak > 0, self.spring_peak, 1.0)
+
+    def natural(self, key, values) -> np.ndarray:
+        """A block's fitted values in the candidate's own units (a peak deflection -> ce)."""
+        return values / self.peak() if _public(key) == "motor_side_elasticity" else values
 
 
 def _where(fit, floor, signals, factor, rounding) -> tuple[str, ...]:
@@ -777,7 +834,8 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
             flagged[best_key] = (tuple(alternatives), "; ".join(reasons))
             note = (note + "; " if note else "") + f"indistinguishable from {', '.join(alternatives)}: not named"
         steps.append(Step(effect=best, alternatives=tuple(alternatives),
-                          parameter_names=blocks[best_key][1], values=values[own], std=std[own],
+                          parameter_names=blocks[best_key][1], values=data.natural(best_key, values[own]),
+                          std=data.natural(best_key, std[own]),
                           rms_before=current["heldout"], rms_after=fit["heldout"],
                           criterion_before=crit_before, criterion_after=crit_after, improvement=improvement,
                           wald=(float(wald), wald_threshold), note=note))
@@ -876,16 +934,32 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     std = (np.sqrt(np.maximum(np.diag(final["inv"]), 0) * s2 * rows / n_eff.sum()) * final_problem.scale[idx]
            if len(idx) else np.zeros(0))
     names = [name for c in chosen for name in final_blocks[c][1]]
-    value_of = dict(zip(names, map(float, values)))
+    fitted_values = dict(zip(names, map(float, values)))      # as fitted (bounds apply to these)
+    natural = np.concatenate([data.natural(c, values[final_problem.slices[c]]) for c in chosen]) \
+        if chosen else np.zeros(0)
+    value_of = dict(zip(names, map(float, natural)))
     for k in chosen:
         low, high = _bounds(_public(k))
-        pinned = [nm for nm in final_blocks[k][1] if math.isfinite(low) and math.isfinite(high)
-                  and min(abs(value_of[nm] - low), abs(value_of[nm] - high)) <= 1e-6 * (high - low)]
+        if not (math.isfinite(low) and math.isfinite(high)):
+            continue
+        edges = (low, high) if low < 0 else (high,)      # a coefficient at 0 of [0, x] is just absent
+        pinned = [nm for nm in final_blocks[k][1]
+                  if any(abs(fitted_values[nm] - e) <= 1e-6 * (high - low) for e in edges)]
         if pinned:
             notes.append(f"{_public(k)}: {', '.join(pinned)} at the edge of the physical range [{low:g}, {high:g}]: "
                          f"the data pulls beyond it, so read these as standing in for something else (an error "
                          f"of the nominal model, an effect outside the library)")
-    std_of = dict(zip(names, map(float, std)))
+    # per coefficient, whether its own torque matters (MATTER noise floors on some joint):
+    # a joint's spring or gain that changes nothing above the noise stays ideal in model.yaml
+    negligible = []
+    for c in chosen:
+        for k, nm in zip(final_problem.slices[c], final_blocks[c][1]):
+            contribution = np.sqrt(np.mean((final_problem.A[:, :, k] * final["theta"][k]) ** 2, axis=0))
+            if np.all(contribution < MATTER * np.maximum(floor, 1e-300)):
+                negligible.append(nm)
+    std_natural = np.concatenate([data.natural(c, std[final_problem.slices[c]]) for c in chosen]) \
+        if chosen else np.zeros(0)
+    std_of = dict(zip(names, map(float, std_natural)))
     payload = payload_mass = gravity = tilt = None
     fitted = tuple(_public(k) for k in chosen)
     for k in chosen:
@@ -918,4 +992,4 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
                      payload=payload, payload_mass=payload_mass, gravity=gravity, tilt_deg=tilt, n_eff=n_eff,
                      samples=N, folds=folds, ripple_k=ripple_k, eps=eps,
                      stribeck_vs=vs_final, explained=not unexplained, unexplained=unexplained,
-                     filtering=data.low_pass)
+                     filtering=data.low_pass, negligible=tuple(negligible))

@@ -39,7 +39,7 @@ import yaml
 
 from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
-from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover, predict_effects, spring_torque
+from .discovery import CANDIDATES, EXPLAINED_FACTOR, MATTER, Discovery, discover, predict_effects, spring_torque
 from .effects import EFFECTS, coulomb_eps, effect_names
 from .logs import Preprocessing, filtered_rows, load_segments, split_time
 from .model_writer import model_yaml
@@ -119,7 +119,7 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
                 v, std = d.values[name], d.std.get(name, 0.0)
                 # a joint whose coefficient is within one std of zero (or exactly zero: a rigid
                 # joint, a column that vanishes) keeps the ideal sensor
-                if v != 0 and abs(v) > std:
+                if v != 0 and abs(v) > std and name not in d.negligible:
                     values[name] = v
                 else:
                     skipped.append(f"{name} = {v:.3g} +- {std:.2g}")
@@ -151,18 +151,20 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
 def measured_prediction(model, segment) -> np.ndarray:
     """What ``model`` predicts the torque sensors read along ``segment`` (N, n), unfiltered:
     its joints' sensing (``stiffness``, ``encoder_offset``, ``torque_gain``) undone on the
-    logged motion exactly (``q = q_logged - encoder_offset - tau / stiffness``, with the
-    low-passed measured torque for ``tau`` and its derivatives for those of ``q``), then the
-    description's torques there, times the gain."""
+    logged motion (``q = q_logged - encoder_offset - tau / stiffness``, with the low-passed
+    measured torque, undone of the gain, for ``tau`` and its derivatives for those of ``q``),
+    then the description's torques there, times the gain."""
     q, qd, qdd = segment.q, segment.qd, segment.qdd
     joints = model.joints
     offset = np.array([float(j.encoder_offset or 0) for j in joints])
     gain = np.array([float(j.torque_gain or 1) for j in joints])
     compliance = np.array([0.0 if j.stiffness is None else 1.0 / float(j.stiffness) for j in joints])
     if np.any(compliance):
+        # the spring torque: the low-passed measured torque (as discover uses), undone of the gain
         s, sd, sdd = spring_torque(segment.tau / gain, segment.dt)
         q, qd, qdd = q - compliance * s, qd - compliance * sd, qdd - compliance * sdd
-    return gain * description_torques(model, q - offset, qd, qdd)
+    q = q - offset
+    return gain * description_torques(model, q, qd, qdd)
 
 
 def _heldout(model, written, d, segments):
@@ -226,11 +228,14 @@ def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
     d = result.discovery
     out = list(d.unexplained)
     floor = d.noise_floor
-    for j in np.flatnonzero(result.rms_after_fit > EXPLAINED_FACTOR * floor):
+    # the better of the two held-out predictions: every fitted effect (first order for the
+    # sensing effects) and model.yaml (its sensing undone exactly)
+    best = np.minimum(result.rms_after_fit, result.rms_after)
+    for j in np.flatnonzero(best > EXPLAINED_FACTOR * floor):
         phases = {k: v[j] for k, v in result.phases_fitted.items() if math.isfinite(v[j])}
         phase = max(phases, key=phases.get) if phases else None
-        out.append(f"joint {j + 1} on the held-out data: RMS {result.rms_after_fit[j]:.3g} N m with every fitted "
-                   f"effect = {result.rms_after_fit[j] / max(floor[j], 1e-300):.3g} x its noise floor"
+        out.append(f"joint {j + 1} on the held-out data: RMS {best[j]:.3g} N m with every fitted effect "
+                   f"= {best[j] / max(floor[j], 1e-300):.3g} x its noise floor"
                    + (f"; largest in the phase '{phase}' ({phases[phase]:.3g} N m)" if phase else ""))
     return tuple(out)
 
@@ -270,8 +275,9 @@ def result_document(result: DiscrepancyResult) -> dict:
         "effects": list(d.effects),
         "explained": explained(result),
         "unexplained": list(where_unexplained(result)),
-        "explained_rule": f"every joint's held-out RMS of all fitted effects (cross-validated on the selection "
-                          f"data and on the held-out data) within {EXPLAINED_FACTOR:g} x its noise floor",
+        "explained_rule": f"every joint's RMS with the fitted effects within {EXPLAINED_FACTOR:g} x its noise floor, "
+                          f"both cross-validated on the selection data and on the held-out data (there the better "
+                          f"of all fitted effects and model.yaml)",
         "rms_before": _floats(result.rms_before), "rms_after": _floats(result.rms_after),
         "rms_after_all_fitted": _floats(result.rms_after_fit),
         "steps": steps,
