@@ -20,7 +20,6 @@ from scipy.signal import butter, sosfiltfilt
 
 from harness import robot
 from kindyngen.measured.discrepancy import DiscrepancyRequest, result_document, run_discrepancy
-from kindyngen.robot import load_robot
 from reference import pinocchio_model
 
 RATE = 200.0

@@ -124,7 +124,8 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
                 else:
                     skipped.append(f"{name} = {v:.3g} +- {std:.2g}")
             if skipped:
-                not_written += (f"{e} on joints where it is not distinguishable from zero ({', '.join(skipped)})",)
+                not_written += (f"{e} on joints where it is not distinguishable from zero or changes no torque by "
+                                f"{MATTER:g} noise floors ({', '.join(skipped)})",)
     payload = None
     if "payload" in writable:
         try:
