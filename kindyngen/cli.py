@@ -620,9 +620,10 @@ def parser() -> argparse.ArgumentParser:
                                     "--holdout fraction of the log is held out for the before/after figures."))
     d.add_argument("--robot", required=True, metavar="ROBOT", help="the nominal robot description, YAML or URDF")
     _robot_options(d)
-    d.add_argument("--data", required=True, action="append", metavar="LOG", help="measured log (repeatable)")
+    d.add_argument("--data", required=True, action="append", metavar="LOG",
+                   help="measured log (repeatable; each file its own experiment, with its own clock)")
     d.add_argument("--holdout", type=_fraction, default=0.3, metavar="FRACTION",
-                   help="fraction of the time span held out (default 0.3)")
+                   help="fraction of each file's time span held out (default 0.3)")
     d.add_argument("--candidates", type=_candidates, default=None, metavar="LIST",
                    help="comma-separated candidate effects (default: all)")
     d.add_argument("--folds", type=_folds, default=5, help="cross-validation blocks, 2 to 50 (default 5)")

@@ -83,13 +83,16 @@ def _offset(joint) -> Placement:
     return rotation(Z, joint.offset)
 
 
-def _effects(friction: Friction | None, armature) -> dict:
+def _effects(friction: Friction | None, armature, joint=None) -> dict:
     out = {}
     if friction is not None:
         out["friction"] = {"viscous": _number(friction.viscous), "coulomb": _number(friction.coulomb),
                            "offset": _number(friction.offset)}
     if armature is not None:
         out["armature"] = _number(armature)
+    for key in ("stiffness", "encoder_offset", "torque_gain"):
+        if joint is not None and getattr(joint, key) is not None:
+            out[key] = _number(getattr(joint, key))
     return out
 
 
@@ -102,7 +105,7 @@ def describe(model: RobotModel) -> dict:
     """The YAML data (``dh: none``) of ``model``: joints by origin and axis, links, payload,
     tool, effects. Frames and joint order are the model's."""
     data = {"name": model.name, "dh": "none", "gravity": [_number(v) for v in model.gravity],
-            "joints": [_joint(j, _effects(j.friction, j.armature)) for j in model.joints],
+            "joints": [_joint(j, _effects(j.friction, j.armature, j)) for j in model.joints],
             "links": [_link(link) for link in model.links]}
     if model.payload is not None:
         data["payload"] = _link(model.payload)

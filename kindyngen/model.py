@@ -64,6 +64,11 @@ class Joint:
     friction: "Friction | None" = None       # None: the description declares no friction
     armature: sympy.Rational | None = None   # kg m^2 (kg, prismatic): reflected rotor inertia
     dh: DHRow | None = None                  # the DH row, when the description is a DH table
+    # how the joint is *measured* (not part of the dynamics, nor of the generated code):
+    # q_logged = q + tau / stiffness + encoder_offset, tau_logged = torque_gain * tau
+    stiffness: sympy.Rational | None = None       # N m/rad (N/m): elasticity seen by a motor-side encoder
+    encoder_offset: sympy.Rational | None = None  # rad (m): constant offset of the position reading
+    torque_gain: sympy.Rational | None = None     # gain of the torque sensor (1: exact)
 
     @property
     def prismatic(self) -> bool:

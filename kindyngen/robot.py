@@ -122,9 +122,10 @@ def _vector(value, length: int, source: str, field: str) -> tuple[sympy.Rational
 TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool")
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
-JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature")
+SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
 # a joint given by origin and axis (dh: none)
-FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature")
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
 ORIGIN_KEYS = ("xyz", "rpy")
 FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
@@ -260,8 +261,17 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     name = row.get("name", "")
     if not isinstance(name, str):
         raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
+    sensing = {}
+    for key in ("stiffness", "torque_gain"):
+        if key in row:
+            value = _rational(row[key], source, f"{field}.{key}")
+            if not value > 0:
+                raise RobotDescriptionError(source, f"{field}.{key}", f"must be positive, got {float(value):g}")
+            sensing[key] = value
+    if "encoder_offset" in row:
+        sensing["encoder_offset"] = _rational(row["encoder_offset"], source, f"{field}.encoder_offset")
     return Joint(before=before, after=after, offset=offset, lower=lower, upper=upper, kind=kind, name=name,
-                 friction=friction, armature=armature, dh=dh)
+                 friction=friction, armature=armature, dh=dh, **sensing)
 
 
 def _nonnegative(value, source: str, field: str) -> sympy.Rational:

@@ -26,6 +26,8 @@ from kindyngen.measured.logs import Segment
 
 RATE = 200.0
 NOMINAL = robot("lwr4")
+# effects on what is measured rather than joint torques: simulated in tests/test_discover_issue24.py
+MEASUREMENT_EFFECTS = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -157,7 +159,7 @@ def test_nothing_missing_names_nothing(noise, kind):
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.02, 0.1])
-@pytest.mark.parametrize("effect", CANDIDATES)
+@pytest.mark.parametrize("effect", [c for c in CANDIDATES if c not in MEASUREMENT_EFFECTS])
 def test_each_effect_alone_is_named(effect, noise):
     d = check_named((effect,), noise)
     step = d.steps[0]

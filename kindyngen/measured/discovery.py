@@ -12,34 +12,61 @@ joints at once* (per-joint parameters, one candidate = one block of columns):
 =============================  ==========================  =====================================
 candidate                      parameters                  torque on joint i
 =============================  ==========================  =====================================
-``viscous_friction``           ``fv1..fvn``                ``fv_i qd_i``
-``coulomb_friction``           ``fc1..fcn``                ``fc_i sign(qd_i)`` (``tanh(qd/eps)``)
+``viscous_friction``           ``fv1..fvn`` (>= 0)         ``fv_i qd_i``
+``coulomb_friction``           ``fc1..fcn`` (>= 0)         ``fc_i sign(qd_i)`` (``tanh(qd/eps)``)
 ``torque_offset``              ``f01..f0n``                ``f0_i``
-``armature``                   ``Ia1..Ian``                ``Ia_i qdd_i``
+``armature``                   ``Ia1..Ian`` (>= 0)         ``Ia_i qdd_i``
 ``payload``                    ``payload_m .. payload_Izz``  the last 10 columns of ``Y @ P``
                                                            (a body on the flange; its 10
                                                            barycentric values add to the last
-                                                           link's)
+                                                           link's; pseudo-inertia kept positive
+                                                           definite)
 ``base_tilt``                  ``dgx, dgy, dgz``           gravity torques of the nominal
                                                            parameters under ``g_nom + dg``
                                                            (exactly linear in ``g``)
-``stribeck_friction``          ``fs1..fsn`` (+ ``vs``)     ``fs_i exp(-(qd_i/vs)^2) sign(qd_i)``,
-                                                           ``vs`` from :data:`STRIBECK_VS`
+``stribeck_friction``          ``fs1..fsn`` (>= 0, + vs)   ``fs_i exp(-(qd_i/vs)^2) sign(qd_i)``,
+                                                           ``vs`` from :data:`STRIBECK_VS`, then
+                                                           refined between the grid points
 ``position_ripple``            ``rs1.., rc1..``            ``rs_i sin(k q_i) + rc_i cos(k q_i)``
-``load_dependent_friction``    ``fl1..fln``                ``fl_i |tau_nom_i| sign(qd_i)``
+``load_dependent_friction``    ``fl1..fln`` (>= 0)         ``fl_i |tau_nom_i| sign(qd_i)``
+``motor_side_elasticity``      ``ce1..cen`` (>= 0, peak    ``q_logged = q + ce_i tau_i``
+                              deflection <= 0.05 rad)     (``ce = 1 / stiffness``): to first
+                                                           order ``-D tau_nom . ce_i (tau_i,
+                                                           taud_i, taudd_i) e_i``
+``encoder_offset``             ``dq1..dqn`` (+-0.05 rad)   ``q_logged = q + dq_i``: ``-dtau_nom/
+                                                           dq_i dq_i``
+``torque_sensor_gain``         ``gt1..gtn`` (+-0.5)        ``tau_logged = (1 + gt_i) tau_i``:
+                                                           ``gt_i tau_nom_i``
 =============================  ==========================  =====================================
+
+The last three act on the measurement, not the joint: their columns are directional
+derivatives of the nominal torques by central differences (exact in qd and qdd), with the
+joint torque ``tau_i`` taken from the low-passed measured torque (:func:`spring_torque`).
+
+**Parallel filtering.**  Every column (and ``tau_nom``) is computed from each recording's
+motion estimate (the low-passed q and its derivatives), then filtered with the recording's
+*unfiltered* torque by the same linear filter and decimated
+(:func:`kindyngen.measured.logs.filtered_rows`).  ``sign(qd)`` of a filtered velocity
+against a filtered torque would smear a Coulomb step into a spurious negative Stribeck dip;
+a linear filter applied to both sides keeps every linear-in-parameters law exact.
 
 Judgement (constants below; each rule says why):
 
-* **Held-out error**: K contiguous time blocks (``folds``), fit on K-1, predict the held-out
-  block; out-of-fold predictions give a held-out RMS per joint.  Contiguous blocks because
-  filtered, autocorrelated samples next to a training sample are not independent test data.
+* **Held-out error**: every recording cut into K contiguous time blocks (``folds``), fold k
+  the k-th block of every recording (so the folds do not depend on the order of the
+  recordings); fit on K-1, predict the held-out fold; out-of-fold predictions give a
+  held-out RMS per joint.  Contiguous blocks because filtered, autocorrelated samples next to
+  a training sample are not independent test data.
+* **Physical domain**: every fit (selection, folds, final) holds the coefficients inside
+  their range (table above) by bounded least squares; a payload whose free fit breaks
+  positive definiteness is fitted again as a semidefinite program, not dropped.
 * **Criterion**: ``BIC_eff = N_eff log(RSS / rows) + rank log(N_eff)`` with the effective
   sample size per joint ``N_eff = N / (1 + 2 sum_k rho_k)`` (autocorrelation of the
   residual of the larger model, summed up to the first non-positive lag), summed over joints.
   Both models of a comparison use the same ``N_eff``.
 * **Noise floor** per joint: ``1.4826 median|d2 r| / sqrt(6)``, the robust (MAD) scale of
-  the second difference of the residual within each segment (white noise of std s gives
+  the second difference of the *unfiltered* residual within each segment, times the noise
+  gain of the parallel filter (:func:`kindyngen.measured.logs.noise_gain`) (white noise of std s gives
   ``d2`` of std ``sqrt(6) s``; smooth effects contribute ``(omega dt)^2`` of their amplitude,
   sparse jumps such as Coulomb reversals are ignored by the median).  Torques low-passed
   before logging have correlated noise whose second difference is small: the floor is then
@@ -49,16 +76,24 @@ Judgement (constants below; each rule says why):
   by at least :data:`MIN_RELATIVE_IMPROVEMENT`; (b) ``BIC_eff`` falls by at least
   :data:`BIC_MARGIN` (strong evidence on the Kass-Raftery scale); (c) its block of
   parameters is non-zero: the Wald statistic ``dRSS / s^2 * N_eff / rows`` exceeds the
-  chi-square quantile :data:`WALD_P` of its rank.  Stop when no candidate passes, or when every
+  chi-square quantile :data:`WALD_P` of its rank; (d) it matters: some joint's held-out RMS
+  falls by :data:`MATTER` noise floors.  At the end every chosen effect must still pass (a)
+  and (d) against the fit without it (backward check).  Stop when no candidate passes, or when every
   joint's held-out RMS is within :data:`NOISE_STOP` times its noise floor, or the residual is
   at rounding level (:data:`ROUNDING`).
 * **Indistinguishable**: another candidate is indistinguishable from the best when the
   fold-wise difference of their held-out MSE is within :data:`AMBIGUITY_SE` standard errors
-  of zero, or within ``(AMBIGUITY_NOISE * floor)^2``.  Then nothing is *named*: the best
+  of zero, or within ``(AMBIGUITY_NOISE * floor)^2``, *and* the smallest principal angle
+  between their columns (the chosen ones projected out) is at most
+  :data:`AMBIGUITY_ANGLE_DEG`; every flag is re-examined at the end beside all the effects
+  chosen after it.  Then nothing is *named*: the best
   member's columns stay in the fit (so the remaining residual keeps shrinking and
   ``rms_after`` is honest), the group goes to ``indistinguishable`` with a motion that would
   separate it (:func:`separating_motion`), and ``effects`` does not list it.  The principal
   angle between the two column spaces is reported with it.
+* **Verdict**: ``explained`` when every joint's final held-out RMS is within
+  :data:`EXPLAINED_FACTOR` x its noise floor; else ``unexplained`` says, per joint, how far
+  above and what the rest correlates with.
 
 Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.logs.Segment`):
 
@@ -81,11 +116,42 @@ from ..inertial_parameters import NAMES as BARYCENTRIC_NAMES
 from ..inertial_parameters import parameter_vector
 from ..robot import RobotModel
 from .effects import effect_columns, effect_names
-from .logs import Segment, concatenate_rows
+from .logs import Segment, filtered_rows, noise_gain, zero_phase_low_pass
 from .regressor_rows import description_torques, torque_regressor
 
 CANDIDATES = ("viscous_friction", "coulomb_friction", "torque_offset", "armature", "payload",
-              "base_tilt", "stribeck_friction", "position_ripple", "load_dependent_friction")
+              "base_tilt", "stribeck_friction", "position_ripple", "load_dependent_friction",
+              "motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
+#: candidates whose coefficients are physically non-negative: fitted with them held >= 0
+#: (friction coefficients, the Stribeck excess over Coulomb, reflected inertia, compliance)
+NONNEGATIVE_CANDIDATES = ("viscous_friction", "coulomb_friction", "armature", "stribeck_friction",
+                          "load_dependent_friction", "motor_side_elasticity")
+
+
+#: a torque sensor's relative gain error is fitted within +-TORQUE_GAIN_ERROR_MAX: one that
+#: reads less than half (or 1.5 times) the torque is broken, not mis-scaled
+TORQUE_GAIN_ERROR_MAX = 0.5
+#: an encoder offset is fitted within +-ENCODER_OFFSET_MAX rad: the column is the first-order
+#: term of tau(q - dq), whose neglected second-order part grows as dq^2 (0.25 % at 0.05 rad)
+ENCODER_OFFSET_MAX = 0.05
+
+
+def _bounds(candidate: str) -> tuple[float, float]:
+    """The physical range of a candidate's coefficients (+-inf: no bound)."""
+    if candidate in NONNEGATIVE_CANDIDATES:
+        return 0.0, np.inf
+    if candidate == "torque_sensor_gain":
+        return -TORQUE_GAIN_ERROR_MAX, TORQUE_GAIN_ERROR_MAX
+    if candidate == "encoder_offset":
+        return -ENCODER_OFFSET_MAX, ENCODER_OFFSET_MAX
+    if candidate == "motor_side_elasticity":
+        return 0.0, ENCODER_OFFSET_MAX          # fitted as the peak deflection (rad), see _Rows
+    return -np.inf, np.inf
+
+
+def _public(key: str) -> str:
+    """The candidate a block key stands for (``stribeck_friction@0.05`` -> ``stribeck_friction``)."""
+    return key.split("@")[0]
 
 #: Stribeck velocities tried (rad/s): at every step each is fitted with the chosen effects
 #: and the one of lowest held-out error stands for the candidate (the choice counts as one
@@ -110,12 +176,22 @@ ROUNDING = 1e-9
 AMBIGUITY_SE = 2.0
 #: ... or a gap below (this fraction of the noise floor)^2 per joint, summed.
 AMBIGUITY_NOISE = 0.1
+#: ... and only when the two blocks' columns (the chosen ones projected out) are this close:
+#: their smallest principal angle at most this many degrees (else the data can tell them
+#: apart, and the fits' closeness is chance).
+AMBIGUITY_ANGLE_DEG = 20.0
+#: (d) a named effect must matter: some joint's held-out RMS falls by at least this many
+#: noise floors (0.25: an effect of RMS 0.75 floors beside noise of one floor).
+MATTER = 0.25
+#: verdict: the data is explained when every joint's held-out RMS is within this factor of
+#: its noise floor.
+EXPLAINED_FACTOR = 1.5
 #: eigenvalues of the column-scaled normal matrix below this times the largest are dropped
 #: (minimum-norm solution: the payload's columns are rank-deficient among themselves).
 RCOND = 1e-11
 
-NOISE_METHOD = ("robust scale of the second difference of the residual within each segment: "
-                "1.4826 median|d2 r| / sqrt(6)")
+NOISE_METHOD = ("robust scale of the second difference of the unfiltered residual within each segment, "
+                "1.4826 median|d2 r| / sqrt(6), times the noise gain of the parallel filter")
 
 _SEPARATE = {
     frozenset({"payload", "base_tilt"}): "rotate the wrist (joints 5-7) through large angles at a few "
@@ -204,23 +280,31 @@ class Discovery:
     n_eff: np.ndarray
     samples: int
     folds: int
-    stribeck_vs: float | None = None    # the grid velocity chosen for stribeck_friction, if fitted
+    stribeck_vs: float | None = None    # the Stribeck velocity fitted for stribeck_friction, if fitted
     ripple_k: float = RIPPLE_K
     eps: float | None = None
+    explained: bool = True              # every joint's held-out RMS within EXPLAINED_FACTOR x its floor
+    unexplained: tuple[str, ...] = ()   # where the rest lives, one sentence per joint
+    filtering: tuple[str, ...] = ()     # the parallel filters of the recordings (LowPass.describe)
+    negligible: tuple[str, ...] = ()    # fitted coefficients whose own torque stays below MATTER floors
 
 
-def predict_effects(discovery: Discovery, model: RobotModel, q, qd, qdd, effects=None) -> np.ndarray:
+def predict_effects(discovery: Discovery, model: RobotModel, q, qd, qdd, effects=None, spring=None) -> np.ndarray:
     """Torques (N, n) of the fitted ``effects`` (default: every fitted one) with the values
-    of ``discovery``, along new motion: what the discovered model adds to the nominal one."""
+    of ``discovery``, along new motion: what the discovered model adds to the nominal one
+    (to first order for the effects on the measurement).  ``spring``: the joint torque and its
+    derivatives (:func:`spring_torque`), needed for ``motor_side_elasticity``."""
     effects = discovery.fitted if effects is None else tuple(effects)
     q, qd, qdd = (np.asarray(a, float) for a in (q, qd, qdd))
+    if "motor_side_elasticity" in effects and spring is None:
+        raise ValueError("motor_side_elasticity needs the joint torque: pass spring=spring_torque(tau, dt)")
     tau_nom = nominal_torques(model, q, qd, qdd)
     out = np.zeros_like(q)
     for name in effects:
         if name not in discovery.fitted:
             raise ValueError(f"{name} was not fitted (fitted: {', '.join(discovery.fitted) or 'none'})")
         columns, names, _ = _columns(name, model, q, qd, qdd, tau_nom, discovery.eps, discovery.ripple_k,
-                                     discovery.stribeck_vs)
+                                     discovery.stribeck_vs, spring)
         out += columns @ np.array([discovery.values[k] for k in names])
     return out
 
@@ -245,8 +329,33 @@ def _gravity_columns(model: RobotModel, q) -> np.ndarray:
     return np.stack(out, axis=2)
 
 
-def _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, stribeck_vs):
-    """(columns (N, n, k), parameter names, detail text) of one candidate."""
+def _directional(model, q, qd, qdd, dq, dqd, dqdd) -> np.ndarray:
+    """Derivative of the nominal torques along the motion change ``(dq, dqd, dqdd)`` (N, n
+    each), by central differences (exact in qdd and qd, where the torque is affine and
+    quadratic; the step is 1e-5 rad of the largest position change, error ~1e-10 relative)."""
+    size = float(np.max(np.abs(dq))) if np.any(dq) else float(np.max(np.abs(np.concatenate([dqd, dqdd]))))
+    if size == 0:
+        return np.zeros_like(q)
+    h = 1e-5 / size
+    plus = nominal_torques(model, q + h * dq, qd + h * dqd, qdd + h * dqdd)
+    minus = nominal_torques(model, q - h * dq, qd - h * dqd, qdd - h * dqdd)
+    return (plus - minus) / (2 * h)
+
+
+def spring_torque(tau, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The joint torque seen by a motor-side encoder's spring and its first two time
+    derivatives, from a smooth torque estimate ``tau`` (N, n) sampled every ``dt`` s (the
+    nominal torque along the logged motion: free of the torque sensor's noise)."""
+    tau = np.asarray(tau, float)
+    if len(tau) < 3:
+        return tau, np.zeros_like(tau), np.zeros_like(tau)
+    d = np.gradient(tau, dt, axis=0, edge_order=2)
+    return tau, d, np.gradient(d, dt, axis=0, edge_order=2)
+
+
+def _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, stribeck_vs, spring=None):
+    """(columns (N, n, k), parameter names, detail text) of one candidate.  ``spring``: the
+    joint torque and its derivatives (:func:`spring_torque`), for ``motor_side_elasticity``."""
     n = model.n
     if name in ("viscous_friction", "coulomb_friction", "torque_offset", "armature"):
         return effect_columns(name, qd, qdd, eps), effect_names(name, n), ""
@@ -258,14 +367,36 @@ def _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, stribeck_vs):
         return Yb @ P, tuple(f"payload_{k}" for k in BARYCENTRIC_NAMES), ""
     if name == "base_tilt":
         return _gravity_columns(model, q), ("dgx", "dgy", "dgz"), ""
-    if name in ("stribeck_friction", "position_ripple", "load_dependent_friction"):
+    if name in ("encoder_offset", "motor_side_elasticity"):
+        out = np.zeros((len(q), n, n))
+        zero = np.zeros_like(q)
+        for i in range(n):
+            dq = zero.copy()
+            if name == "encoder_offset":
+                # q_logged = q + dq_i: the true torque is tau(q_logged - dq_i e_i) ~ tau - dtau/dq_i dq_i
+                dq[:, i] = 1.0
+                out[:, :, i] = -_directional(model, q, qd, qdd, dq, zero, zero)
+            else:
+                # q_logged = q + tau_i / K_i: the true motion is the logged one minus
+                # (tau_i, taud_i, taudd_i) / K_i, linear in 1 / K_i to first order
+                s, sd, sdd = spring
+                dqd, dqdd = zero.copy(), zero.copy()
+                dq[:, i], dqd[:, i], dqdd[:, i] = s[:, i], sd[:, i], sdd[:, i]
+                out[:, :, i] = -_directional(model, q, qd, qdd, dq, dqd, dqdd)
+        prefix = "dq" if name == "encoder_offset" else "ce"
+        detail = "" if name == "encoder_offset" else "ce_i = 1 / K_i (rad per N m), K_i the joint stiffness"
+        return out, tuple(f"{prefix}{i + 1}" for i in range(n)), detail
+    if name in ("stribeck_friction", "position_ripple", "load_dependent_friction", "torque_sensor_gain"):
         if name == "stribeck_friction":
             values = [np.exp(-(qd / stribeck_vs) ** 2) * np.sign(qd)]
-            names, detail = [f"fs{i + 1}" for i in range(n)], f"vs = {stribeck_vs:g} rad/s"
+            names, detail = [f"fs{i + 1}" for i in range(n)], f"vs = {stribeck_vs:.3g} rad/s"
         elif name == "position_ripple":
             values = [np.sin(ripple_k * q), np.cos(ripple_k * q)]
             names = [f"rs{i + 1}" for i in range(n)] + [f"rc{i + 1}" for i in range(n)]
             detail = f"k = {ripple_k:g} periods per rad"
+        elif name == "torque_sensor_gain":
+            # tau_logged = (1 + gt_i) tau_i: the relative gain error times the joint torque
+            values, names, detail = [tau_nom], [f"gt{i + 1}" for i in range(n)], "gt_i: relative gain error"
         else:
             values, names, detail = [np.abs(tau_nom) * np.sign(qd)], [f"fl{i + 1}" for i in range(n)], ""
         out = np.zeros((len(q), n, n * len(values)))
@@ -326,56 +457,81 @@ def effective_samples(residual: np.ndarray) -> np.ndarray:
     return out
 
 
-class _Problem:
-    """All candidate columns stacked once; fits of any subset via Gram matrices."""
+def _bounded_solve(G, b, lower, upper):
+    """Minimise ``th' G th - 2 b' th`` with ``lower <= th <= upper``: bounded least squares
+    on the square root of ``G`` (eigen-decomposition, so a singular ``G`` is fine)."""
+    from scipy.optimize import lsq_linear
+    w, V = np.linalg.eigh(G)
+    keep = w > RCOND * max(w.max(), 1e-300)
+    root = np.sqrt(w[keep])[:, None] * V[:, keep].T
+    target = (V[:, keep].T @ b) / np.sqrt(w[keep])
+    return lsq_linear(root, target, bounds=(lower, upper), method="bvls").x
 
-    def __init__(self, blocks, r, folds):
+
+class _Problem:
+    """All candidate columns stacked once; fits of any subset via Gram matrices, inside the
+    physical domain (coefficients flagged non-negative are held >= 0).
+
+    ``fold_of``: the fold of every row (each recording cut into ``folds`` contiguous time
+    blocks, fold k the k-th block of every recording: the same folds whatever the order of
+    the recordings)."""
+
+    def __init__(self, blocks, r, fold_of, folds):
         self.N, self.n = r.shape
         self.r = r
-        self.blocks = blocks                     # name -> slice into the stacked columns
+        self.blocks = blocks
         A = np.concatenate([b[0] for b in blocks.values()], axis=2) if blocks else np.zeros((self.N, self.n, 0))
         self.slices, start = {}, 0
+        lower = []                               # (low, high) per column
         for name, (cols, _, _) in blocks.items():
             self.slices[name] = np.arange(start, start + cols.shape[2])
             start += cols.shape[2]
+            lower += [_bounds(_public(name))] * cols.shape[2]
         scale = np.sqrt(np.sum(A ** 2, axis=(0, 1)))
         self.scale = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1), 0.0)
+        bounds = np.array(lower, float).reshape(-1, 2)
+        # bounds on the scaled unknowns theta = value / scale (a zero column is free)
+        live = np.where(self.scale > 0, self.scale, 1.0)
+        self.lower = np.where(self.scale > 0, bounds[:, 0] / live, -np.inf)
+        self.upper = np.where(self.scale > 0, bounds[:, 1] / live, np.inf)
         self.A = A * self.scale                  # unit columns (zero columns stay zero)
-        edges = np.linspace(0, self.N, folds + 1).astype(int)
-        self.folds = [(edges[k], edges[k + 1]) for k in range(folds)]
+        self.fold_rows = [np.flatnonzero(fold_of == k) for k in range(folds)]
         A2 = self.A.reshape(self.N * self.n, -1)
         r2 = r.reshape(-1)
         self.G = A2.T @ A2
         self.b = A2.T @ r2
         self.Gf, self.bf = [], []
-        for lo, hi in self.folds:
-            Af = A2[lo * self.n:hi * self.n]
+        for rows in self.fold_rows:
+            Af = self.A[rows].reshape(len(rows) * self.n, -1)
             self.Gf.append(Af.T @ Af)
-            self.bf.append(Af.T @ r2[lo * self.n:hi * self.n])
+            self.bf.append(Af.T @ r[rows].reshape(-1))
 
     def columns(self, names):
         return np.concatenate([self.slices[c] for c in names]) if names else np.zeros(0, int)
 
-    @staticmethod
-    def _solve(G, b):
-        """Minimum-norm solution and pseudo-inverse of the normal equations; rank."""
+    def _solve(self, G, b, idx):
+        """Solution in the physical domain and pseudo-inverse of the normal equations; rank."""
         if len(b) == 0:
             return np.zeros(0), np.zeros((0, 0)), 0
         w, V = np.linalg.eigh(G)
         keep = w > RCOND * max(w.max(), 1e-300)
         inv = (V[:, keep] / w[keep]) @ V[:, keep].T
-        return inv @ b, inv, int(keep.sum())
+        theta = inv @ b
+        lower, upper = self.lower[idx], self.upper[idx]
+        if np.any(theta < lower) or np.any(theta > upper):
+            theta = _bounded_solve(G, b, lower, upper)
+        return theta, inv, int(keep.sum())
 
     def fit(self, names):
         """Full-data fit and out-of-fold residuals of the candidates ``names``."""
         idx = self.columns(names)
-        theta, inv, rank = self._solve(self.G[np.ix_(idx, idx)], self.b[idx])
+        theta, inv, rank = self._solve(self.G[np.ix_(idx, idx)], self.b[idx], idx)
         residual = self.r - self.A[:, :, idx] @ theta
         oof = np.empty_like(self.r)
-        for (lo, hi), Gf, bf in zip(self.folds, self.Gf, self.bf):
-            th, _, _ = self._solve((self.G - Gf)[np.ix_(idx, idx)], (self.b - bf)[idx])
-            oof[lo:hi] = self.r[lo:hi] - self.A[lo:hi][:, :, idx] @ th
-        fold_mse = np.array([np.sum(np.mean(oof[lo:hi] ** 2, axis=0)) for lo, hi in self.folds])
+        for rows, Gf, bf in zip(self.fold_rows, self.Gf, self.bf):
+            th, _, _ = self._solve((self.G - Gf)[np.ix_(idx, idx)], (self.b - bf)[idx], idx)
+            oof[rows] = self.r[rows] - self.A[rows][:, :, idx] @ th
+        fold_mse = np.array([np.sum(np.mean(oof[rows] ** 2, axis=0)) for rows in self.fold_rows])
         return dict(names=tuple(names), idx=idx, theta=theta, inv=inv, rank=rank, residual=residual,
                     rss=float(np.sum(residual ** 2)), oof=oof, fold_mse=fold_mse,
                     heldout=np.sqrt(np.mean(oof ** 2, axis=0)), mse=float(np.sum(np.mean(oof ** 2, axis=0))))
@@ -383,6 +539,53 @@ class _Problem:
     def criterion(self, fit, n_eff_total):
         rows = self.N * self.n
         return float(n_eff_total * math.log(max(fit["rss"], 1e-300) / rows) + fit["rank"] * math.log(n_eff_total))
+
+
+#: smallest eigenvalue (kg m^2) the payload's pseudo-inertia is held to in the constrained fit
+PAYLOAD_EPSILON = 1e-6
+
+
+def _physical_payload(problem: _Problem, fit: dict):
+    """When the fitted payload's pseudo-inertia is not positive definite: the fit again with
+    it held >= PAYLOAD_EPSILON (a semidefinite program, CLARABEL through cvxpy), the other
+    non-negative coefficients >= 0.  Returns (fit, note) or None when the free fit is
+    physical already."""
+    from .consistent import pseudo_inertia
+    idx = fit["idx"]
+    own = problem.slices["payload"]
+    where = np.searchsorted(idx, own) if np.all(np.isin(own, idx)) else None
+    if where is None:
+        return None
+    values = fit["theta"] * problem.scale[idx]
+    if np.linalg.eigvalsh(pseudo_inertia(values[where]))[0] >= PAYLOAD_EPSILON:
+        return None
+    import cvxpy as cp
+    G, b = problem.G[np.ix_(idx, idx)], problem.b[idx]
+    w, V = np.linalg.eigh(G)
+    keep = w > RCOND * max(w.max(), 1e-300)
+    root = np.sqrt(w[keep])[:, None] * V[:, keep].T
+    target = (V[:, keep].T @ b) / np.sqrt(w[keep])
+    T = np.stack([pseudo_inertia(np.eye(10)[k]).reshape(16) for k in range(10)], axis=1)
+    x = cp.Variable(len(idx))                    # scaled unknowns, as the fit's theta
+    body = cp.multiply(problem.scale[idx][where], x[where])
+    J = cp.reshape(T @ body, (4, 4), order="C")
+    constraints = [0.5 * (J + J.T) >> PAYLOAD_EPSILON * np.eye(4)]
+    lower, upper = problem.lower[idx], problem.upper[idx]
+    for bound, sign in ((lower, 1), (upper, -1)):
+        k = np.flatnonzero(np.isfinite(bound))
+        if k.size:
+            constraints.append(sign * (x[k] - bound[k]) >= 0)
+    cp.Problem(cp.Minimize(cp.sum_squares(root @ x - target)), constraints).solve(solver="CLARABEL")
+    if x.value is None:
+        return None
+    theta = np.asarray(x.value, float)
+    residual = problem.r - problem.A[:, :, idx] @ theta
+    before = float(np.linalg.eigvalsh(pseudo_inertia(values[where]))[0])
+    out = dict(fit, theta=theta, residual=residual, rss=float(np.sum(residual ** 2)))
+    return out, (f"payload: the free fit's pseudo-inertia has smallest eigenvalue {before:.3g} kg m^2; fitted "
+                 f"again inside the physical domain (pseudo-inertia >= {PAYLOAD_EPSILON:g} kg m^2, a semidefinite "
+                 f"program): full-data RMS {math.sqrt(fit['rss'] / residual.size):.4g} -> "
+                 f"{math.sqrt(out['rss'] / residual.size):.4g} N m")
 
 
 def _principal_cosine(A, B) -> float:
@@ -401,66 +604,160 @@ def _principal_cosine(A, B) -> float:
 # ---------------------------------------------------------------------------------------------
 # the search
 
-def residual_diagnostics(model: RobotModel, segments: Sequence[Segment]) -> dict:
-    """Arrays for residual plots: ``t`` (one time axis through the segments), ``q``, ``qd``,
-    ``qdd``, ``tau`` (N, n), ``nominal`` (the description's rigid-body torques) and
-    ``residual = tau - nominal``; ``noise_floor`` per joint."""
-    q, qd, qdd, tau = concatenate_rows(segments)
-    nominal = nominal_torques(model, q, qd, qdd)
-    t, start = [], 0.0
-    for s in segments:
-        t.append(s.t - s.t[0] + start)
-        start = t[-1][-1] + s.dt
-    residual = tau - nominal
-    return dict(t=np.concatenate(t), q=q, qd=qd, qdd=qdd, tau=tau, nominal=nominal, residual=residual,
-                noise_floor=noise_floor(residual, [len(s.t) for s in segments]))
+class _Rows:
+    """Every recording's candidate columns, computed from its motion estimate and filtered
+    together with its unfiltered torque (:func:`kindyngen.measured.logs.filtered_rows`)."""
+
+    #: signals filtered alongside, for the "what the residual left correlates with" verdict
+    SIGNALS = ("q", "qd", "qdd", "sign(qd)", "nominal torque")
+
+    def __init__(self, model, segments, folds, eps, ripple_k, need_spring):
+        self.model, self.segments, self.eps, self.ripple_k = model, tuple(segments), eps, ripple_k
+        self.motion, self.spring = [], []
+        nominal, measured, signals, fold_of, floors, weights = [], [], [], [], [], []
+        for seg in self.segments:
+            q, qd, qdd = seg.q, seg.qd, seg.qdd
+            tau_nom = nominal_torques(model, q, qd, qdd)
+            raw = seg.tau_unfiltered if seg.low_pass is not None else seg.tau
+            # the joint torque of the spring: the low-passed measured torque (the joint torque
+            # itself, whatever the model misses); its noise correlates with the residual's, a
+            # bias that matters only where the torque is near the noise, and there the deflection
+            # bound and the negligible-coefficient rule keep the joint rigid in model.yaml
+            smooth = seg.tau if seg.low_pass is not None or len(seg.t) < 60 else \
+                zero_phase_low_pass(seg.tau, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
+            self.spring.append(spring_torque(smooth, seg.dt) if need_spring else None)
+            self.motion.append((q, qd, qdd, tau_nom))
+            stack = np.stack([tau_nom, q, qd, qdd, np.sign(qd), tau_nom], axis=2)
+            _, F, tau_f = filtered_rows(seg, stack)
+            nominal.append(F[:, :, 0])
+            signals.append(F[:, :, 1:])
+            measured.append(tau_f)
+            m = len(tau_f)
+            fold_of.append(np.minimum((np.arange(m) * folds) // m, folds - 1))
+            floors.append(noise_floor(raw - tau_nom, [len(raw)]) * noise_gain(seg.low_pass))
+            weights.append(m)
+        # motor_side_elasticity is fitted as the peak deflection ce_i max|tau_i| (rad), so that
+        # its bound is the first-order model's range of validity, as for an encoder offset
+        self.spring_peak = (np.max([np.max(np.abs(sp[0]), axis=0) for sp in self.spring], axis=0)
+                            if need_spring else None)
+        self.nominal = np.concatenate(nominal)
+        self.tau = np.concatenate(measured)
+        self.signals = np.concatenate(signals)
+        self.fold_of = np.concatenate(fold_of)
+        w = np.array(weights, float)[:, None]
+        self.floor = np.sqrt(np.sum(w * np.array(floors) ** 2, axis=0) / w.sum())
+        self.low_pass = tuple(dict.fromkeys(s.low_pass.describe() for s in self.segments if s.low_pass))
+
+    def block(self, key, vs=None):
+        """(filtered columns (rows, n, k), names, detail) of one candidate key."""
+        name = _public(key)
+        if vs is None and "@" in key:
+            vs = float(key.split("@")[1])
+        parts, names, detail = [], (), ""
+        for seg, (q, qd, qdd, tau_nom), spring in zip(self.segments, self.motion, self.spring):
+            cols, names, detail = _columns(name, self.model, q, qd, qdd, tau_nom, self.eps, self.ripple_k, vs, spring)
+            if name == "motor_side_elasticity":
+                cols = cols / self.peak()
+            parts.append(filtered_rows(seg, cols)[1])
+        return np.concatenate(parts), names, detail
+
+    def peak(self) -> np.ndarray:
+        """Per joint, the largest |joint torque| (N m; 1 where it is zero)."""
+        return np.where(self.spring_peak > 0, self.spring_peak, 1.0)
+
+    def natural(self, key, values) -> np.ndarray:
+        """A block's fitted values in the candidate's own units (a peak deflection -> ce)."""
+        return values / self.peak() if _public(key) == "motor_side_elasticity" else values
+
+
+def _where(fit, floor, signals, factor, rounding) -> tuple[str, ...]:
+    """Sentences on the joints whose residual stays above ``factor`` x floor (and above the
+    rounding level ``rounding``, N m), and what it correlates with most (filtered signals of
+    that joint)."""
+    out = []
+    residual = fit["residual"]
+    for j in np.flatnonzero((fit["heldout"] > factor * floor) & (fit["heldout"] > rounding)):
+        r = residual[:, j] - residual[:, j].mean()
+        corr = []
+        for k, label in enumerate(_Rows.SIGNALS):
+            x = signals[:, j, k] - signals[:, j, k].mean()
+            den = float(np.linalg.norm(r) * np.linalg.norm(x))
+            corr.append((abs(float(r @ x)) / den if den > 0 else 0.0, label))
+        c, label = max(corr)
+        out.append(f"joint {j + 1}: held-out RMS {fit['heldout'][j]:.3g} N m = {fit['heldout'][j] / max(floor[j], 1e-300):.3g} x "
+                   f"its noise floor {floor[j]:.3g}; correlates most with its {label} (|r| = {c:.2f})")
+    return tuple(out)
 
 
 def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequence[str] = CANDIDATES,
              folds: int = 5, progress: Callable[[str], None] | None = None, eps: float | None = None,
              *, ripple_k: float = RIPPLE_K, stribeck_vs: Sequence[float] = STRIBECK_VS) -> Discovery:
     """Which of ``candidates`` does the nominal ``model`` miss on ``segments``?  See the module
-    text for the rules.  ``eps``: Coulomb smoothing (rad/s) of the Coulomb candidate (None:
-    ``sign``); the description's own declared effects are assumed absent (a note says so
-    when it declares some)."""
+    text for the rules.  ``segments``: one or more recordings' segments, each filtered on
+    its own (a segment with a ``low_pass`` is parallel-filtered here); ``eps``: Coulomb
+    smoothing (rad/s) of the Coulomb candidate (None: ``sign``); the description's own
+    declared effects are assumed absent (a note says so when it declares some)."""
     progress = progress or (lambda text: None)
     candidates = tuple(dict.fromkeys(candidates))
     for c in candidates:
         if c not in CANDIDATES:
             raise ValueError(f"unknown candidate {c!r} (known: {', '.join(CANDIDATES)})")
     segments = tuple(segments)
+    if not segments:
+        raise ValueError("discover needs at least one segment")
     if folds < 2:
         raise ValueError("folds must be at least 2")
     notes = []
     if model.effects:
         notes.append(f"the description declares {', '.join(model.effects)}: ignored here (rigid bodies only "
                      f"are the nominal prediction)")
-    q, qd, qdd, tau = concatenate_rows(segments)
-    N, n = q.shape
+    progress("nominal prediction and candidate columns (parallel filtering)")
+    data = _Rows(model, segments, folds, eps, ripple_k, "motor_side_elasticity" in candidates)
+    N, n = data.tau.shape
     if N < 10 * folds:
         raise ValueError(f"{N} samples are too few for {folds} folds")
-    progress("nominal prediction")
-    tau_nom = nominal_torques(model, q, qd, qdd)
-    r = tau - tau_nom
-    floor = noise_floor(r, [len(s.t) for s in segments])
-    scale = float(np.sqrt(np.mean(tau ** 2))) or 1.0
-    progress("candidate columns")
+    r = data.tau - data.nominal
+    floor = data.floor
+    scale = float(np.sqrt(np.mean(data.tau ** 2))) or 1.0
     # one block of columns per candidate; the Stribeck candidate has one per velocity of the
     # grid, and at every step the velocity with the lowest held-out error stands for it
-    blocks, variants, public = {}, {}, {}
+    blocks, variants = {}, {}
     for c in candidates:
         for vs in (tuple(stribeck_vs) if c == "stribeck_friction" else (None,)):
             key = c if vs is None else f"{c}@{vs:g}"
-            blocks[key] = _columns(c, model, q, qd, qdd, tau_nom, eps, ripple_k, vs)
+            blocks[key] = data.block(key)
             variants.setdefault(c, []).append(key)
-            public[key] = c
     details = {key: b[2] for key, b in blocks.items()}
-    problem = _Problem(blocks, r, folds)
+    problem = _Problem(blocks, r, data.fold_of, folds)
     extra_k = {"stribeck_friction": 1 if len(stribeck_vs) > 1 else 0}
+    A2 = problem.A.reshape(N * n, -1)
+
+    def angle(key_a, key_b, base_keys) -> float:
+        """Smallest principal angle (deg) between two blocks once ``base_keys``' columns are
+        projected out."""
+        B = A2[:, problem.columns(base_keys)]
+
+        def proj_out(M):
+            if B.shape[1] == 0:
+                return M
+            coef, *_ = np.linalg.lstsq(B, M, rcond=None)
+            return M - B @ coef
+        cos = _principal_cosine(proj_out(A2[:, problem.columns([key_a])]), proj_out(A2[:, problem.columns([key_b])]))
+        return math.degrees(math.acos(min(1.0, cos)))
+
+    def close_fits(fa, fb) -> tuple[bool, float, float]:
+        d = fa["fold_mse"] - fb["fold_mse"]
+        gap, se = float(d.mean()), float(d.std(ddof=1) / math.sqrt(len(d)))
+        small = float(np.sum((AMBIGUITY_NOISE * floor) ** 2))
+        return (gap <= AMBIGUITY_SE * se or gap <= small), gap, se
+
+    def matters(before, after) -> float:
+        """Largest fall of a joint's held-out RMS, in noise floors."""
+        return float(np.max((before["heldout"] - after["heldout"]) / np.maximum(floor, 1e-300)))
 
     current = problem.fit(())
     rms_before = current["heldout"].copy()
-    chosen, named, steps, groups = [], [], [], []          # chosen: block keys; named: candidates
+    chosen, steps, flagged = [], [], {}         # chosen: block keys; flagged: key -> alternatives
     remaining = [c for c in candidates if any(np.any(problem.A[:, :, problem.slices[k]]) for k in variants[c])]
     for c in candidates:
         if c not in remaining:
@@ -498,6 +795,7 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         wald = (current["rss"] - fit["rss"]) / max(s2, 1e-300) * n_eff_total / rows
         r_block = max(fit["rank"] - current["rank"], 1)
         wald_threshold = float(chi2.isf(WALD_P, r_block))
+        gain = matters(current, fit)
         failed = []
         if improvement < MIN_RELATIVE_IMPROVEMENT:
             failed.append(f"held-out MSE falls by {100 * improvement:.3g} % < {100 * MIN_RELATIVE_IMPROVEMENT:g} %")
@@ -505,34 +803,27 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
             failed.append(f"BIC_eff changes by {crit_after - crit_before:.4g} (needs < -{BIC_MARGIN:g})")
         if wald < wald_threshold:
             failed.append(f"Wald {wald:.4g} < {wald_threshold:.4g}")
+        if gain < MATTER:
+            failed.append(f"no joint's held-out RMS falls by {MATTER:g} noise floors (largest fall {gain:.3g})")
         if failed:
             notes.append(f"stopped: best remaining candidate {best} rejected ({'; '.join(failed)})")
             break
-        # indistinguishable candidates: held-out error about as low as the best's
+        # indistinguishable: a held-out error about as low as the best's AND columns that
+        # (after the chosen ones are projected out) nearly span the same space
         alternatives, reasons = [], []
-        rows_idx = problem.columns([best_key])
-        base_idx = problem.columns(chosen)
-        A2 = problem.A.reshape(rows, -1)
         for c in remaining:
             if c == best:
                 continue
-            d = trials[c]["fold_mse"] - fit["fold_mse"]
-            gap, se = float(d.mean()), float(d.std(ddof=1) / math.sqrt(len(d)))
-            small = float(np.sum((AMBIGUITY_NOISE * floor) ** 2))
-            if gap <= AMBIGUITY_SE * se or gap <= small:
-                # principal angle between the two blocks after removing the chosen columns
-                B = A2[:, base_idx]
-                def proj_out(M):
-                    if B.shape[1] == 0:
-                        return M
-                    coef, *_ = np.linalg.lstsq(B, M, rcond=None)
-                    return M - B @ coef
-                cos = _principal_cosine(proj_out(A2[:, rows_idx]), proj_out(A2[:, problem.columns([key_of[c]])]))
-                alternatives.append(c)
-                reasons.append(f"{c}: held-out MSE {trials[c]['mse']:.4g} vs {fit['mse']:.4g} "
-                               f"(gap {gap:.3g} +- {se:.3g}, fold standard error), smallest principal angle "
-                               f"{math.degrees(math.acos(min(1.0, cos))):.3g} deg; to separate: "
-                               f"{separating_motion(best, c)}")
+            close, gap, se = close_fits(trials[c], fit)
+            if not close:
+                continue
+            deg = angle(best_key, key_of[c], chosen)
+            if deg > AMBIGUITY_ANGLE_DEG:
+                continue
+            alternatives.append(c)
+            reasons.append(f"{c}: held-out MSE {trials[c]['mse']:.4g} vs {fit['mse']:.4g} "
+                           f"(gap {gap:.3g} +- {se:.3g}, fold standard error), smallest principal angle "
+                           f"{deg:.3g} deg; to separate: {separating_motion(best, c)}")
         idx = fit["idx"]
         cov_scale = s2 * rows / n_eff_total
         values = fit["theta"] * problem.scale[idx]
@@ -540,13 +831,11 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         own = np.isin(idx, problem.slices[best_key])
         note = details.get(best_key, "")
         if alternatives:
-            group = (best,) + tuple(alternatives)
-            groups.append((group, "explain the residual about equally well: " + "; ".join(reasons)))
+            flagged[best_key] = (tuple(alternatives), "; ".join(reasons))
             note = (note + "; " if note else "") + f"indistinguishable from {', '.join(alternatives)}: not named"
-        else:
-            named.append(best)
         steps.append(Step(effect=best, alternatives=tuple(alternatives),
-                          parameter_names=blocks[best_key][1], values=values[own], std=std[own],
+                          parameter_names=blocks[best_key][1], values=data.natural(best_key, values[own]),
+                          std=data.natural(best_key, std[own]),
                           rms_before=current["heldout"], rms_after=fit["heldout"],
                           criterion_before=crit_before, criterion_after=crit_after, improvement=improvement,
                           wald=(float(wald), wald_threshold), note=note))
@@ -554,29 +843,135 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         remaining.remove(best)
         current = fit
 
+    # backward check: every chosen effect must still matter beside all the others
+    changed = True
+    while changed and len(chosen) > 1:
+        changed = False
+        worst, worst_gain = None, None
+        for k in chosen:
+            without = problem.fit([c for c in chosen if c != k])
+            rise = 1.0 - current["mse"] / without["mse"] if without["mse"] > 0 else 0.0
+            g = matters(without, current)
+            if rise < MIN_RELATIVE_IMPROVEMENT or g < MATTER:
+                if worst is None or g < worst_gain:
+                    worst, worst_gain = k, g
+        if worst is not None:
+            chosen.remove(worst)
+            flagged.pop(worst, None)
+            current = problem.fit(chosen)
+            notes.append(f"{_public(worst)}: dropped in the final check (without it no joint's held-out RMS rises "
+                         f"by {MATTER:g} noise floors beside the other effects; largest rise {worst_gain:.3g})")
+            changed = True
+
+    # re-examine every flagged ambiguity in the final context: swap the stand-in for each
+    # alternative while keeping every other chosen effect
+    groups = []
+    for key, (alternatives, _) in list(flagged.items()):
+        others = [c for c in chosen if c != key]
+        still, reasons = [], []
+        for c in alternatives:
+            if any(_public(k) == c for k in chosen):
+                continue                          # chosen as well later: both are in the fit
+            swapped, alt_key = min(((problem.fit(others + [k]), k) for k in variants[c]),
+                                   key=lambda f: f[0]["mse"])
+            close, gap, se = close_fits(swapped, current)
+            deg = angle(key, alt_key, others)
+            if close and deg <= AMBIGUITY_ANGLE_DEG:
+                still.append(c)
+                reasons.append(f"{c}: held-out MSE {swapped['mse']:.4g} vs {current['mse']:.4g} with the other "
+                               f"effects (gap {gap:.3g} +- {se:.3g}), smallest principal angle {deg:.3g} deg; to "
+                               f"separate: {separating_motion(_public(key), c)}")
+        if still:
+            groups.append(((_public(key),) + tuple(still),
+                           "explain the residual about equally well: " + "; ".join(reasons)))
+        else:
+            flagged.pop(key)
+            notes.append(f"{_public(key)}: named after all (re-examined beside the effects chosen after it, its "
+                         f"alternatives no longer explain the data as well or their columns differ)")
+    named = [_public(k) for k in chosen if k not in flagged]
+
+    # the Stribeck velocity between the grid points: 1-D search of the final fit's RSS
+    stribeck_key = next((k for k in chosen if k.startswith("stribeck")), None)
+    vs_final = None
+    final_blocks = {k: blocks[k] for k in chosen}
+    if stribeck_key is not None:
+        from scipy.optimize import minimize_scalar
+        grid = sorted(float(v) for v in stribeck_vs)
+        vs0 = float(stribeck_key.split("@")[1])
+        i = grid.index(vs0)
+        lo = grid[i - 1] if i > 0 else vs0 / 2
+        hi = grid[i + 1] if i + 1 < len(grid) else vs0 * 2
+        others = {k: blocks[k] for k in chosen if k != stribeck_key}
+
+        def rss_at(log_vs):
+            trial = dict(others)
+            trial["stribeck_friction"] = data.block("stribeck_friction", math.exp(log_vs))
+            return problem_for(trial).fit(list(trial))["rss"]
+
+        def problem_for(bl):
+            return _Problem(bl, r, data.fold_of, folds)
+        best_log = minimize_scalar(rss_at, bounds=(math.log(lo), math.log(hi)), method="bounded",
+                                   options={"xatol": 1e-3}).x
+        vs_final = float(math.exp(best_log))
+        final_blocks = {}
+        for k in chosen:
+            final_blocks[k] = (data.block("stribeck_friction", vs_final) if k == stribeck_key else blocks[k])
+        details[stribeck_key] = f"vs = {vs_final:.3g} rad/s (refined between the grid points {lo:g} and {hi:g})"
+    final_problem = _Problem(final_blocks, r, data.fold_of, folds) if chosen else problem
+    final = final_problem.fit(list(final_blocks) if chosen else [])
+    if "payload" in final_blocks:
+        physical = _physical_payload(final_problem, final)
+        if physical is not None:
+            final, text = physical
+            notes.append(text)
+
     # final values of every fitted candidate
-    idx = current["idx"]
+    idx = final["idx"]
     rows = N * n
-    n_eff = effective_samples(current["residual"])
-    s2 = current["rss"] / max(rows - current["rank"], 1)
-    values = current["theta"] * problem.scale[idx] if len(idx) else np.zeros(0)
-    std = (np.sqrt(np.maximum(np.diag(current["inv"]), 0) * s2 * rows / n_eff.sum()) * problem.scale[idx]
+    n_eff = effective_samples(final["residual"])
+    s2 = final["rss"] / max(rows - final["rank"], 1)
+    values = final["theta"] * final_problem.scale[idx] if len(idx) else np.zeros(0)
+    std = (np.sqrt(np.maximum(np.diag(final["inv"]), 0) * s2 * rows / n_eff.sum()) * final_problem.scale[idx]
            if len(idx) else np.zeros(0))
-    names = [name for c in chosen for name in blocks[c][1]]
-    value_of = dict(zip(names, map(float, values)))
-    std_of = dict(zip(names, map(float, std)))
+    names = [name for c in chosen for name in final_blocks[c][1]]
+    fitted_values = dict(zip(names, map(float, values)))      # as fitted (bounds apply to these)
+    natural = np.concatenate([data.natural(c, values[final_problem.slices[c]]) for c in chosen]) \
+        if chosen else np.zeros(0)
+    value_of = dict(zip(names, map(float, natural)))
+    for k in chosen:
+        low, high = _bounds(_public(k))
+        if not (math.isfinite(low) and math.isfinite(high)):
+            continue
+        edges = (low, high) if low < 0 else (high,)      # a coefficient at 0 of [0, x] is just absent
+        pinned = [nm for nm in final_blocks[k][1]
+                  if any(abs(fitted_values[nm] - e) <= 1e-6 * (high - low) for e in edges)]
+        if pinned:
+            notes.append(f"{_public(k)}: {', '.join(pinned)} at the edge of the physical range [{low:g}, {high:g}]: "
+                         f"the data pulls beyond it, so read these as standing in for something else (an error "
+                         f"of the nominal model, an effect outside the library)")
+    # per coefficient, whether its own torque matters (MATTER noise floors on some joint):
+    # a joint's spring or gain that changes nothing above the noise stays ideal in model.yaml
+    negligible = []
+    for c in chosen:
+        for k, nm in zip(final_problem.slices[c], final_blocks[c][1]):
+            contribution = np.sqrt(np.mean((final_problem.A[:, :, k] * final["theta"][k]) ** 2, axis=0))
+            if np.all(contribution < MATTER * np.maximum(floor, 1e-300)):
+                negligible.append(nm)
+    std_natural = np.concatenate([data.natural(c, std[final_problem.slices[c]]) for c in chosen]) \
+        if chosen else np.zeros(0)
+    std_of = dict(zip(names, map(float, std_natural)))
     payload = payload_mass = gravity = tilt = None
-    fitted = tuple(public[k] for k in chosen)
+    fitted = tuple(_public(k) for k in chosen)
     for k in chosen:
         if details[k]:
-            notes.append(f"{public[k]}: {details[k]}")
+            notes.append(f"{_public(k)}: {details[k]}")
     if "payload" in fitted:
         payload = np.array([value_of[f"payload_{k}"] for k in BARYCENTRIC_NAMES])
         # the mass is identifiable when its direction has no part in the fit's null space
-        G = problem.G[np.ix_(idx, idx)]
+        G = final_problem.G[np.ix_(idx, idx)]
         w, V = np.linalg.eigh(G)
         null = V[:, w <= RCOND * w.max()]
-        e = (idx == problem.slices["payload"][0]).astype(float)
+        e = (idx == final_problem.slices["payload"][0]).astype(float)
         if null.shape[1] == 0 or np.linalg.norm(null.T @ e) < 1e-6:
             payload_mass = float(payload[0])
         else:
@@ -590,9 +985,11 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         roll = math.degrees(math.atan2(-gravity[1], -gravity[2]))
         pitch = math.degrees(math.atan2(gravity[0], -gravity[2]))
         tilt = (roll, pitch, total)
+    unexplained = _where(final, floor, data.signals, EXPLAINED_FACTOR, 1e3 * ROUNDING * scale)
     return Discovery(effects=tuple(named), fitted=fitted, steps=tuple(steps), rms_before=rms_before,
-                     rms_after=current["heldout"], noise_floor=floor, noise_method=NOISE_METHOD,
+                     rms_after=final["heldout"], noise_floor=floor, noise_method=NOISE_METHOD,
                      indistinguishable=tuple(groups), notes=tuple(notes), values=value_of, std=std_of,
                      payload=payload, payload_mass=payload_mass, gravity=gravity, tilt_deg=tilt, n_eff=n_eff,
                      samples=N, folds=folds, ripple_k=ripple_k, eps=eps,
-                     stribeck_vs=next((float(k.split("@")[1]) for k in chosen if k.startswith("stribeck")), None))
+                     stribeck_vs=vs_final, explained=not unexplained, unexplained=unexplained,
+                     filtering=data.low_pass, negligible=tuple(negligible))

@@ -5,16 +5,20 @@ effect is missing, the model with it, and the gap before and after on data held 
 ``write_outputs(result, out)`` writes ``discovery.json``, ``report.md`` with its figures, and
 ``model.yaml``.  The steps:
 
-1. logs -> segments (:mod:`kindyngen.measured.logs`); the last ``holdout`` fraction of the
-   time span is held out and never seen by the selection;
+1. logs -> segments (:mod:`kindyngen.measured.logs`); every file is its own experiment
+   (its own clock, filtering and trimming), and the last ``holdout`` fraction of *each*
+   file's time span is held out and never seen by the selection; the files are taken in the
+   order of their names, so the outcome does not depend on the order they are given in;
 2. on the first part, :func:`kindyngen.measured.discovery.discover` names effects (greedy,
    time-blocked cross-validation, an effective-sample-size criterion, confusable candidates
    reported rather than guessed);
 3. the named effects that the robot-description schema holds (friction, offset, armature,
    payload, base tilt as gravity) are written into ``model.yaml``; ``rms_after`` is that
    model's torque error on the held-out part (so generating code from ``model.yaml`` and
-   running its ``tau`` there reproduces it); named effects the schema cannot hold yet
-   (Stribeck, ripple, load-dependent friction) are reported, and their fitted gap too.
+   running its ``tau`` there, with the description's joint sensing applied, reproduces it);
+   named effects the schema cannot hold yet (Stribeck, ripple, load-dependent friction) are
+   reported, and their fitted gap too.  Every comparison is made after parallel filtering:
+   predictions from the motion estimate and the unfiltered torque through the same filter.
 
 Example:
 
@@ -26,7 +30,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -35,14 +39,16 @@ import yaml
 
 from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
-from .discovery import CANDIDATES, Discovery, discover, nominal_torques, predict_effects
+from .discovery import CANDIDATES, EXPLAINED_FACTOR, MATTER, Discovery, discover, predict_effects, spring_torque
 from .effects import EFFECTS, coulomb_eps, effect_names
-from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
+from .logs import Preprocessing, filtered_rows, load_segments, split_time
 from .model_writer import model_yaml
 from .regressor_rows import description_torques
 from .report import rms_table, torque_figure
 
-SCHEMA_EFFECTS = EFFECTS + ("payload", "base_tilt")   # what a robot description can hold
+SENSING_EFFECTS = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
+SCHEMA_EFFECTS = EFFECTS + ("payload", "base_tilt") + SENSING_EFFECTS   # what a robot description can hold
+_SENSING_PREFIX = {"motor_side_elasticity": "ce", "encoder_offset": "dq", "torque_sensor_gain": "gt"}
 
 
 @dataclass(frozen=True)
@@ -75,6 +81,8 @@ class DiscrepancyResult:
     heldout_motion: tuple             # q, qd, qdd on the held-out part
     preprocessing_notes: tuple[str, ...]
     samples: dict
+    phases_fitted: dict = field(default_factory=dict)   # the same, with every fitted effect
+    written_values: dict = field(default_factory=dict)  # joint coefficients written to model.yaml
 
 
 def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
@@ -95,7 +103,7 @@ def motion_phases(residual, qd, qdd, slow: float = 0.05) -> dict:
     return out
 
 
-def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ...]]:
+def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ...], dict]:
     """model.yaml with the named effects the schema holds, and what could not be written:
     named effects outside the schema, and a payload whose fitted inertia is not physical
     (dropped, the rest written)."""
@@ -103,6 +111,21 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
     not_written = tuple(e for e in d.effects if e not in SCHEMA_EFFECTS)
     joint_effects = [e for e in writable if e in EFFECTS]
     values = {name: d.values[name] for name in effect_names(joint_effects, model.n)} if joint_effects else {}
+    for e in writable:
+        if e in SENSING_EFFECTS:
+            skipped = []
+            for i in range(model.n):
+                name = f"{_SENSING_PREFIX[e]}{i + 1}"
+                v, std = d.values[name], d.std.get(name, 0.0)
+                # a joint whose coefficient is within one std of zero (or exactly zero: a rigid
+                # joint, a column that vanishes) keeps the ideal sensor
+                if v != 0 and abs(v) > std and name not in d.negligible:
+                    values[name] = v
+                else:
+                    skipped.append(f"{name} = {v:.3g} +- {std:.2g}")
+            if skipped:
+                not_written += (f"{e} on joints where it is not distinguishable from zero or changes no torque by "
+                                f"{MATTER:g} noise floors ({', '.join(skipped)})",)
     payload = None
     if "payload" in writable:
         try:
@@ -117,43 +140,116 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
                           payload=payload if with_payload else None, gravity=gravity)
         try:
             parse_robot(yaml.safe_load(text), "model.yaml")   # the loader must take what we write
-            return text, not_written
+            return text, not_written, values
         except ValueError as exc:
             if with_payload:
                 not_written += (f"payload: the fitted flange body is not physical ({exc.reason if hasattr(exc, 'reason') else exc})",)
                 continue
-            return None, not_written + (f"model.yaml refused by the loader: {exc}",)
-    return None, not_written
+            return None, not_written + (f"model.yaml refused by the loader: {exc}",), {}
+    return None, not_written, {}
+
+
+def measured_prediction(model, segment) -> np.ndarray:
+    """What ``model`` predicts the torque sensors read along ``segment`` (N, n), unfiltered:
+    its joints' sensing (``stiffness``, ``encoder_offset``, ``torque_gain``) undone on the
+    logged motion (``q = q_logged - encoder_offset - tau / stiffness``, with the low-passed
+    measured torque, undone of the gain, for ``tau`` and its derivatives for those of ``q``),
+    then the description's torques there, times the gain."""
+    q, qd, qdd = segment.q, segment.qd, segment.qdd
+    joints = model.joints
+    offset = np.array([float(j.encoder_offset or 0) for j in joints])
+    gain = np.array([float(j.torque_gain or 1) for j in joints])
+    compliance = np.array([0.0 if j.stiffness is None else 1.0 / float(j.stiffness) for j in joints])
+    if np.any(compliance):
+        # the spring torque: the low-passed measured torque (as discover uses), undone of the gain
+        s, sd, sdd = spring_torque(segment.tau / gain, segment.dt)
+        q, qd, qdd = q - compliance * s, qd - compliance * sd, qdd - compliance * sdd
+    q = q - offset
+    return gain * description_torques(model, q, qd, qdd)
+
+
+def _heldout(model, written, d, segments):
+    """Per held-out segment, the measured torque and the nominal, fitted and model.yaml
+    predictions through the segment's parallel filter; stacked, with one time axis."""
+    out = {k: [] for k in ("t", "tau", "nominal", "fitted", "after", "q", "qd", "qdd")}
+    start = 0.0
+    rigid = replace(model, joints=tuple(replace(j, friction=None, armature=None) for j in model.joints))
+    for seg in segments:
+        nominal = measured_prediction(rigid, seg)       # rigid bodies only, as discover assumes
+        spring = spring_torque(seg.tau, seg.dt)
+        fitted = description_torques(model, seg.q, seg.qd, seg.qdd, effects=False) + \
+            predict_effects(d, model, seg.q, seg.qd, seg.qdd, spring=spring)
+        after = measured_prediction(written, seg) if written is not None else nominal
+        motion = np.stack([nominal, fitted, after, seg.q, seg.qd, seg.qdd], axis=2)
+        t, F, tau = filtered_rows(seg, motion)
+        out["t"].append(t - t[0] + start)
+        start = out["t"][-1][-1] + (t[1] - t[0] if len(t) > 1 else seg.dt)
+        out["tau"].append(tau)
+        for k, key in enumerate(("nominal", "fitted", "after", "q", "qd", "qdd")):
+            out[key].append(F[:, :, k])
+    return {k: np.concatenate(v) for k, v in out.items()}
 
 
 def run_discrepancy(request: DiscrepancyRequest,
                     progress: Callable[[str], None] = lambda text: None) -> DiscrepancyResult:
     model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
-    segments = []
-    for path in request.data:
+    train, heldout, notes = [], [], []
+    # each file its own experiment, held-out part taken from each; in the order of the names
+    for path in sorted(request.data, key=str):
         progress(f"reading {path}")
-        segments.extend(load_segments(path, model.n, request.preprocessing))
-    train, heldout = split_time(segments, 1.0 - request.holdout)
+        segments = load_segments(path, model.n, request.preprocessing)
+        notes += [note for s in segments for note in s.notes]
+        a, b = split_time(segments, 1.0 - request.holdout)
+        train += a
+        heldout += b
     eps = coulomb_eps(model)
     d = discover(model, train, request.candidates, request.folds, progress, eps)
-    q, qd, qdd, tau = concatenate_rows(heldout)
-    nominal = nominal_torques(model, q, qd, qdd)
-    fitted = nominal + predict_effects(d, model, q, qd, qdd)
-    text, not_written = _model_text(request, model, d)
-    # the written description's own prediction: what code generated from model.yaml computes
-    after = (description_torques(parse_robot(yaml.safe_load(text), "model.yaml"), q, qd, qdd)
-             if text is not None else nominal)
+    text, not_written, written_values = _model_text(request, model, d)
+    written = parse_robot(yaml.safe_load(text), "model.yaml") if text is not None else None
+    h = _heldout(model, written, d, heldout)
 
     def rms(pred):
-        return np.sqrt(np.mean((tau - pred) ** 2, axis=0))
+        return np.sqrt(np.mean((h["tau"] - pred) ** 2, axis=0))
 
     return DiscrepancyResult(
-        request=request, discovery=d, rms_before=rms(nominal), rms_after=rms(after), rms_after_fit=rms(fitted),
-        model_yaml=text, not_written=not_written, phases=motion_phases(tau - nominal, qd, qdd),
-        heldout_t=timeline(heldout), heldout_tau=tau, heldout_nominal=nominal, heldout_after=after,
-        heldout_motion=(q, qd, qdd),
-        preprocessing_notes=tuple(dict.fromkeys(n for s in segments for n in s.notes)),
-        samples={"selection": int(d.samples), "held_out": int(len(q))})
+        request=request, discovery=d, rms_before=rms(h["nominal"]), rms_after=rms(h["after"]),
+        rms_after_fit=rms(h["fitted"]), model_yaml=text, not_written=not_written,
+        phases=motion_phases(h["tau"] - h["nominal"], h["qd"], h["qdd"]),
+        heldout_t=h["t"], heldout_tau=h["tau"], heldout_nominal=h["nominal"], heldout_after=h["after"],
+        heldout_motion=(h["q"], h["qd"], h["qdd"]),
+        preprocessing_notes=tuple(dict.fromkeys(notes)),
+        samples={"selection": int(d.samples), "held_out": int(len(h["tau"]))},
+        phases_fitted=motion_phases(h["tau"] - h["fitted"], h["qd"], h["qdd"]), written_values=written_values)
+
+
+def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
+    """Sentences on where a residual above the stated factor x noise floor lives: from the
+    selection's cross-validation (with what it correlates with) and from the held-out data
+    (with the motion phase where it is largest)."""
+    d = result.discovery
+    out = list(d.unexplained)
+    floor = d.noise_floor
+    # the better of the two held-out predictions: every fitted effect (first order for the
+    # sensing effects) and model.yaml (its sensing undone exactly)
+    best = np.minimum(result.rms_after_fit, result.rms_after)
+    for j in np.flatnonzero(best > EXPLAINED_FACTOR * floor):
+        phases = {k: v[j] for k, v in result.phases_fitted.items() if math.isfinite(v[j])}
+        phase = max(phases, key=phases.get) if phases else None
+        out.append(f"joint {j + 1} on the held-out data: RMS {best[j]:.3g} N m with every fitted effect "
+                   f"= {best[j] / max(floor[j], 1e-300):.3g} x its noise floor"
+                   + (f"; largest in the phase '{phase}' ({phases[phase]:.3g} N m)" if phase else ""))
+    return tuple(out)
+
+
+def explained(result: DiscrepancyResult) -> bool:
+    """The verdict: no joint's residual above the stated factor x its noise floor."""
+    return not where_unexplained(result)
+
+
+def model_values(result: DiscrepancyResult) -> dict:
+    """The joint coefficients written to model.yaml (fitted jointly at the end), by name;
+    ``ce`` compliances and ``gt`` gain errors as fitted (model.yaml holds 1 / ce and 1 + gt)."""
+    return dict(result.written_values) if result.model_yaml is not None else {}
 
 
 def _floats(values):
@@ -178,6 +274,11 @@ def result_document(result: DiscrepancyResult) -> dict:
         "robot": str(result.request.robot), "data": [str(p) for p in result.request.data],
         "holdout_fraction": result.request.holdout, "samples": result.samples,
         "effects": list(d.effects),
+        "explained": explained(result),
+        "unexplained": list(where_unexplained(result)),
+        "explained_rule": f"every joint's RMS with the fitted effects within {EXPLAINED_FACTOR:g} x its noise floor, "
+                          f"both cross-validated on the selection data and on the held-out data (there the better "
+                          f"of all fitted effects and model.yaml)",
         "rms_before": _floats(result.rms_before), "rms_after": _floats(result.rms_after),
         "rms_after_all_fitted": _floats(result.rms_after_fit),
         "steps": steps,
@@ -189,7 +290,20 @@ def result_document(result: DiscrepancyResult) -> dict:
         "residual_by_phase": {k: [None if not math.isfinite(v) else v for v in vals]
                               for k, vals in result.phases.items()},
         "notes": list(d.notes), "preprocessing": list(result.preprocessing_notes),
+        "parallel_filtering": list(d.filtering),
+        "model_yaml_values": model_values(result),
     }
+
+
+def _group_of(name: str, d: Discovery) -> str:
+    """The fitted candidate a parameter name belongs to."""
+    from .discovery import CANDIDATES as _ALL
+    prefixes = {"fv": "viscous_friction", "fc": "coulomb_friction", "f0": "torque_offset", "Ia": "armature",
+                "fs": "stribeck_friction", "rs": "position_ripple", "rc": "position_ripple",
+                "fl": "load_dependent_friction", "ce": "motor_side_elasticity", "dq": "encoder_offset",
+                "gt": "torque_sensor_gain", "dg": "base_tilt", "pa": "payload"}
+    effect = prefixes.get(name[:2], "")
+    return effect if effect in _ALL else ""
 
 
 def _diagnostic_figure(path: Path, result: DiscrepancyResult) -> Path:
@@ -263,6 +377,9 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
              f"time span is held out ({result.samples['held_out']} samples); the selection saw "
              f"{result.samples['selection']} samples ({d.folds}-fold time-blocked cross-validation).", "",
              "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "Parallel filtering: every model column (rigid-body torques, effect columns) is computed from the "
+             "filtered motion, then the columns and the *unfiltered* torque pass through the same linear filter "
+             "and decimation: " + ("; ".join(d.filtering) if d.filtering else "none (the data as given)") + ".", "",
              "## Where model and measurement disagree", "",
              rms_table({"nominal, held out": list(result.rms_before), "noise floor": list(d.noise_floor)}, n), "",
              f"Noise floor: {d.noise_method}." + (
@@ -275,10 +392,19 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
                        n), "",
              f"![residuals]({diag.name})", "",
              "## Which effect is missing", ""]
+    verdict = explained(result)
     if d.effects:
         lines.append(f"Named, in order: **{', '.join(d.effects)}**.")
     else:
-        lines.append("Named: none (the data is explained within the stated rules).")
+        lines.append("Named: none.")
+    if verdict:
+        lines.append(f"Verdict: **explained**: every joint's held-out RMS with the fitted effects is within "
+                     f"{EXPLAINED_FACTOR:g} x its noise floor.")
+    else:
+        lines += [f"Verdict: **not explained**: the residual left stays above {EXPLAINED_FACTOR:g} x the noise "
+                  f"floor (an effect outside the candidate library, or a wrong nominal model):", ""]
+        lines += [f"- {w}" for w in where_unexplained(result)]
+        lines.append("")
     for group, reason in d.indistinguishable:
         lines.append(f"- Cannot tell apart on this data: {', '.join(group)} ({reason}).")
     lines += ["", "| step | effect | CV held-out MSE fall | BIC_eff change | Wald (threshold) | note |",
@@ -286,12 +412,20 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     for k, s in enumerate(d.steps, start=1):
         lines.append(f"| {k} | {s.effect}{' (not named)' if s.alternatives else ''} | {100 * s.improvement:.3g} % | "
                      f"{s.criterion_after - s.criterion_before:.4g} | {s.wald[0]:.4g} ({s.wald[1]:.3g}) | {s.note} |")
-    lines += ["", "Parameters of the named effects (value +- std):", ""]
-    for s in d.steps:
-        if s.alternatives:
-            continue
+    lines += ["", "### The final joint fit (the values in model.yaml)", "",
+              "Every fitted effect together, fitted once more at the end (value +- std):", ""]
+    final_names = {}
+    for name in d.values:
+        final_names.setdefault(_group_of(name, d), []).append(name)
+    for effect in d.fitted:
+        shown = ", ".join(f"{nm} = {d.values[nm]:.4g} +- {d.std[nm]:.2g}" for nm in final_names.get(effect, []))
+        where = "in model.yaml" if effect in d.effects and effect in SCHEMA_EFFECTS else \
+            ("not named" if effect not in d.effects else "not in model.yaml (the schema cannot hold it)")
+        lines.append(f"- {effect} ({where}): {shown}")
+    lines += ["", "### Each step's own fit (as fitted at that step, beside the effects chosen before it only)", ""]
+    for k, s in enumerate(d.steps, start=1):
         shown = ", ".join(f"{nm} = {v:.4g} +- {e:.2g}" for nm, v, e in zip(s.parameter_names, s.values, s.std))
-        lines.append(f"- {s.effect}: {shown}")
+        lines.append(f"- step {k}, {s.effect}{' (not named)' if s.alternatives else ''}: {shown}")
     if d.payload_mass is not None and "payload" in d.effects:
         lines.append(f"- payload mass {d.payload_mass:.4g} kg")
     if d.tilt_deg is not None and "base_tilt" in d.effects:

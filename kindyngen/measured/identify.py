@@ -6,9 +6,12 @@ parameters, prediction errors, an identified robot description and a report out.
 and the figures.  The steps, each from its own module:
 
 1. logs -> uniformly sampled, filtered segments (:mod:`kindyngen.measured.logs`); several
-   files are several experiments, stacked but never differentiated across their seams;
+   files are several experiments (each its own clock, filtering, trimming and, with
+   ``split``, its own validation part), stacked but never differentiated across their seams;
 2. the rigid-body base regressor along the motion (:mod:`kindyngen.measured.regressor_rows`)
-   plus the chosen effects' columns (:mod:`kindyngen.measured.effects`);
+   plus the chosen effects' columns (:mod:`kindyngen.measured.effects`), computed from the
+   filtered motion and then filtered with the unfiltered torque by the same filter
+   (:func:`kindyngen.measured.logs.filtered_rows`: parallel filtering and decimation);
 3. least squares, ordinary or weighted, with standard deviations
    (:mod:`kindyngen.measured.estimation`), or the physically consistent semidefinite program
    (:mod:`kindyngen.measured.consistent`) with the description's parameters as the prior;
@@ -36,7 +39,7 @@ from ..robot import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
 from .effects import NONNEGATIVE, coulomb_eps, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
-from .logs import Preprocessing, concatenate_rows, load_segments, split_time, timeline
+from .logs import Preprocessing, filtered_rows, load_segments, split_time
 from .model_writer import ModelWriteError, model_yaml
 from .regressor_rows import description_torques, torque_regressor
 from .report import rms_table, torque_figure
@@ -91,12 +94,20 @@ class Identification:
     validation_nominal: np.ndarray | None
 
 
-def _segments(paths, n, settings, progress, what):
-    out = []
+def _segments(paths, n, settings, progress, what, split=None):
+    """The segments of every file; with ``split``, (training, validation) cut file by file:
+    each file is its own experiment, with its own time span."""
+    train, held = [], []
     for path in paths:
         progress(f"reading {what} log {path}")
-        out.extend(load_segments(path, n, settings))
-    return tuple(out)
+        segments = load_segments(path, n, settings)
+        if split is None:
+            train.extend(segments)
+        else:
+            a, b = split_time(segments, split)
+            train.extend(a)
+            held.extend(b)
+    return (tuple(train), tuple(held)) if split is not None else tuple(train)
 
 
 def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[str, ...]]:
@@ -118,22 +129,41 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     n = model.n
     settings = request.preprocessing
-    train = _segments(request.data, n, settings, progress, "training")
-    validation = _segments(request.validate, n, settings, progress, "validation")
     if request.split is not None:
-        train, held_out = split_time(train, request.split)
-        validation = tuple(held_out) + validation
+        train, held_out = _segments(request.data, n, settings, progress, "training", request.split)
+    else:
+        train, held_out = _segments(request.data, n, settings, progress, "training"), ()
+    validation = tuple(held_out) + _segments(request.validate, n, settings, progress, "validation")
     notes = tuple(dict.fromkeys(note for s in train + validation for note in s.notes))
+    filters = tuple(dict.fromkeys(s.low_pass.describe() for s in train + validation if s.low_pass is not None))
+    if filters:
+        notes += ("parallel filtering: regressor and effect columns computed from the filtered motion, then "
+                  "filtered together with the unfiltered torque (" + "; ".join(filters) + ")",)
 
     progress("building the regressor")
     regressor = torque_regressor(model)
     eps = coulomb_eps(model)
     enames = effect_names(request.effects, n)
 
-    def rows(segments):
-        q, qd, qdd, tau = concatenate_rows(segments)
-        E = effect_columns(request.effects, qd, qdd, eps) if enames else np.zeros((len(q), n, 0))
-        return regressor(q, qd, qdd), E, tau
+    def rows(segments, extra=None):
+        """Regressor and effect columns and torque, parallel-filtered segment by segment;
+        ``extra(segment)`` (N, n): a prediction filtered along (returned fourth)."""
+        Ys, Es, taus, ts, extras, start = [], [], [], [], [], 0.0
+        for seg in segments:
+            Y = regressor(seg.q, seg.qd, seg.qdd)
+            E = effect_columns(request.effects, seg.qd, seg.qdd, eps) if enames else np.zeros((len(seg.t), n, 0))
+            parts = [Y, E] + ([extra(seg)[:, :, None]] if extra is not None else [])
+            t, F, tau = filtered_rows(seg, np.concatenate(parts, axis=2))
+            Ys.append(F[:, :, :Y.shape[2]])
+            Es.append(F[:, :, Y.shape[2]:Y.shape[2] + E.shape[2]])
+            extras.append(F[:, :, -1] if extra is not None else None)
+            taus.append(tau)
+            ts.append(t - t[0] + start)
+            start = ts[-1][-1] + (t[1] - t[0] if len(t) > 1 else seg.dt)
+        out = (np.concatenate(Ys), np.concatenate(Es), np.concatenate(taus))
+        if extra is not None:
+            out += (np.concatenate(extras), np.concatenate(ts))
+        return out
 
     Yb, E, tau = rows(train)
     k_base = Yb.shape[2]
@@ -185,13 +215,11 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     rms_val = rms_nominal = None
     vt = vtau = vpred = vnom = None
     if validation:
-        Yv, Ev, vtau = rows(validation)
+        # the starting description's own prediction (rigid bodies and its declared effects)
+        Yv, Ev, vtau, vnom, vt = rows(validation, lambda seg: description_torques(model, seg.q, seg.qd, seg.qdd))
         vpred = predicted(Yv, Ev)
         rms_val = rms_per_joint(vtau, vpred)
-        # the starting description's own prediction (rigid bodies and its declared effects)
-        vnom = description_torques(model, *concatenate_rows(validation)[:3])
         rms_nominal = rms_per_joint(vtau, vnom)
-        vt = timeline(validation)
     return Identification(
         request=request, method=method, base_names=regressor.names, base_values=np.asarray(base),
         base_std_percent=base_std, effect_names=enames, effect_values=np.asarray(evalues),

@@ -17,6 +17,10 @@ The steps, each a stated and overridable choice (:class:`Preprocessing`):
    differentiates what the log does not give, and trims the filter's edge transients.
 3. :func:`split_time` and :func:`concatenate_rows` prepare training/validation sets and the
    stacked rows for least squares.
+4. :func:`parallel_filter` (via :func:`filtered_rows`): the columns of a model, computed from
+   the filtered motion, and the *unfiltered* torque pass through the same linear filter and
+   decimation, so that a law that is nonlinear in the motion (``sign(qd)``, ``exp``) is kept
+   exact: filtering does not commute with it, but it commutes with the linear parameters.
 
 Example (a short synthetic log; real ones are read with :func:`load_segments`):
 
@@ -34,6 +38,8 @@ whole log, t = 0 .. 2.999 s
 q, tau low-pass 5 Hz (4th-order Butterworth, zero phase)
 qd by central differences of the filtered q; qdd by central differences of that qd
 trimmed 0.4 s (400 samples) at each end
+>>> segment.low_pass
+LowPass(rate_hz=1000.0, cutoff_hz=5.0, order=4, decimate=25)
 """
 from __future__ import annotations
 
@@ -54,7 +60,8 @@ from . import MeasuredDataError
 
 __all__ = [
     "MIN_SAMPLES", "LogError", "RawLog", "read_log", "repeated_rows", "Preprocessing",
-    "Segment", "preprocess", "load_segments", "split_time", "concatenate_rows",
+    "Segment", "LowPass", "preprocess", "load_segments", "split_time", "concatenate_rows",
+    "parallel_filter", "filtered_rows", "noise_gain",
 ]
 
 #: Fewest samples a log (and a segment after trimming) may have.  Below this a
@@ -561,6 +568,11 @@ class Preprocessing:
         taken as a uniform clock read with jitter (e.g. stamps taken on reception by a
         non-real-time PC): the samples stay on that clock, not interpolated.  0: always
         interpolate at the stamps as given.
+    ``decimate`` = None
+        After parallel filtering (:func:`parallel_filter`) keep every ``decimate``-th
+        sample.  None: ``floor(rate / (8 cutoff))`` (at least 1): 8 samples per period of the
+        cutoff keep everything the filter passed (25 at 1000 Hz and 5 Hz, 5 at 200 Hz), and
+        fewer, less correlated rows make the fit cheaper.
 
     >>> Preprocessing().cutoff_hz, Preprocessing().effective_trim_s
     (5.0, 0.4)
@@ -575,6 +587,7 @@ class Preprocessing:
     trim_s: float | None = None
     filter_given: bool = True
     jitter_tolerance: float = 0.5
+    decimate: int | None = None
 
     def __post_init__(self):
         def positive(name, value, allow_none):
@@ -598,6 +611,9 @@ class Preprocessing:
         if not isinstance(self.jitter_tolerance, (int, float)) or not 0 <= self.jitter_tolerance < 1:
             raise ValueError(f"Preprocessing.jitter_tolerance must be in [0, 1), "
                              f"got {self.jitter_tolerance!r}")
+        if self.decimate is not None and (isinstance(self.decimate, bool) or not isinstance(self.decimate, int)
+                                          or self.decimate < 1):
+            raise ValueError(f"Preprocessing.decimate must be a positive integer or None, got {self.decimate!r}")
 
     @property
     def effective_trim_s(self) -> float:
@@ -607,11 +623,38 @@ class Preprocessing:
         return 0.0 if self.cutoff_hz is None else 2.0 / self.cutoff_hz
 
 
+@dataclass(frozen=True)
+class LowPass:
+    """The linear filter of :func:`parallel_filter`: zero-phase Butterworth of ``order`` at
+    ``cutoff_hz`` on samples at ``rate_hz``, then every ``decimate``-th sample kept.
+
+    >>> LowPass(200.0, 5.0, 4, 5).rate_after_hz
+    40.0
+    """
+
+    rate_hz: float
+    cutoff_hz: float
+    order: int
+    decimate: int
+
+    @property
+    def rate_after_hz(self) -> float:
+        """Sample rate after decimation."""
+        return self.rate_hz / self.decimate
+
+    def describe(self) -> str:
+        return (f"{_g(self.cutoff_hz)} Hz {_ordinal(self.order)}-order Butterworth, zero phase, at "
+                f"{_g(self.rate_hz)} Hz, then every {self.decimate}th sample ({_g(self.rate_after_hz)} Hz)")
+
+
 @dataclass(frozen=True, eq=False)   # eq=False: arrays have no single truth value
 class Segment:
     """A uniformly sampled piece of a log, ready for identification: time ``t`` (N,) with
     step ``dt``; ``q``, ``qd``, ``qdd``, ``tau`` (N, n), all present and all through the
-    same filter; ``notes`` say what was done, in order.
+    same filter; ``notes`` say what was done, in order.  ``tau_unfiltered`` (N, n): the
+    torque on the same grid and rows before any low-pass, and ``low_pass`` the filter that
+    ``tau`` went through (both None for a log not filtered here): :func:`filtered_rows`
+    filters model columns computed from the motion together with it (parallel filtering).
 
     >>> import numpy as np
     >>> z = np.zeros((3, 1))
@@ -628,10 +671,19 @@ class Segment:
     qdd: np.ndarray
     tau: np.ndarray
     notes: tuple[str, ...] = field(default=())
+    tau_unfiltered: np.ndarray | None = None
+    low_pass: LowPass | None = None
 
     def __post_init__(self):
         for name in ("t", "q", "qd", "qdd", "tau"):
             object.__setattr__(self, name, _as_float(self.source, name, getattr(self, name)))
+        if self.tau_unfiltered is not None:
+            object.__setattr__(self, "tau_unfiltered", _as_float(self.source, "tau", self.tau_unfiltered))
+            if self.tau_unfiltered.shape != self.tau.shape:
+                raise LogError(self.source, "tau", f"unfiltered torque of shape {self.tau_unfiltered.shape} "
+                                                   f"beside {self.tau.shape}")
+        if (self.tau_unfiltered is None) != (self.low_pass is None):
+            raise LogError(self.source, "tau", "tau_unfiltered and low_pass go together")
         object.__setattr__(self, "dt", float(self.dt))
         object.__setattr__(self, "notes", tuple(self.notes))
         if self.t.ndim != 1 or len(self.t) < 1:
@@ -658,7 +710,8 @@ class Segment:
 
     def _part(self, rows: slice, note: str) -> "Segment":
         return Segment(self.source, self.t[rows], self.dt, self.q[rows], self.qd[rows],
-                       self.qdd[rows], self.tau[rows], self.notes + (note,))
+                       self.qdd[rows], self.tau[rows], self.notes + (note,),
+                       None if self.tau_unfiltered is None else self.tau_unfiltered[rows], self.low_pass)
 
 
 def _round_rate(rate: float) -> float:
@@ -798,8 +851,16 @@ def preprocess(raw: RawLog, settings: Preprocessing = Preprocessing()) -> tuple[
     for k, (t, dt, channels, notes, where) in enumerate(results):
         label = (f"segment {k + 1} of {len(results)}: {where} of the log"
                  if len(results) > 1 or dropped or gaps.size else f"whole log, {where}")
+        low_pass = None
+        if "tau_unfiltered" in channels:
+            rate = 1.0 / dt
+            if abs(_round_rate(rate) - rate) <= 1e-9 * rate:   # a clock step's last-bit rounding
+                rate = _round_rate(rate)
+            decimate = settings.decimate or max(1, int(math.floor(rate / (8.0 * settings.cutoff_hz) + 1e-9)))
+            low_pass = LowPass(rate, float(settings.cutoff_hz), settings.order, decimate)
         segments.append(Segment(source, t, dt, channels["q"], channels["qd"], channels["qdd"],
-                                channels["tau"], tuple(log_notes + dropped + [label] + notes)))
+                                channels["tau"], tuple(log_notes + dropped + [label] + notes),
+                                channels.get("tau_unfiltered"), low_pass))
     return tuple(segments)
 
 
@@ -855,6 +916,7 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
                                                 f"Nyquist frequency {_g(rate / 2)} Hz of the "
                                                 f"{_g(rate)} Hz grid")
         filtered = ["q"] + [ch for ch in ("qd", "qdd") if ch in values and settings.filter_given] + ["tau"]
+        values["tau_unfiltered"] = values["tau"]
         for ch in filtered:
             values[ch] = zero_phase_low_pass(values[ch], rate, settings.cutoff_hz, settings.order)
         notes.append(f"{_describe(filtered)} low-pass {_g(settings.cutoff_hz)} Hz "
@@ -982,6 +1044,81 @@ def concatenate_rows(segments: Sequence[Segment]) -> tuple[np.ndarray, np.ndarra
             raise LogError(s.source, "q", f"has {s.n} joints, the first segment has {n}")
     return tuple(np.concatenate([getattr(s, ch) for s in segments], axis=0)
                  for ch in ("q", "qd", "qdd", "tau"))
+
+
+# --------------------------------------------------------------------------- parallel filtering
+
+def parallel_filter(columns: np.ndarray, tau: np.ndarray, low_pass: LowPass) -> tuple[np.ndarray, np.ndarray]:
+    """The columns of a linear-in-parameters model and the measured torque, through one
+    linear filter: zero-phase low-pass (:func:`zero_phase_low_pass`, the same padding for
+    both) along axis 0, then every ``low_pass.decimate``-th sample from the first.
+
+    Contract.  ``columns`` (N, ...) and ``tau`` (N, n) are samples of one recording (or one
+    chunk of it) on its uniform grid, the columns computed from the best estimate of the
+    motion (the low-passed q and its derivatives) and ``tau`` *unfiltered*.  The operator
+    ``F`` applied is linear and the same for both, so whenever ``tau = columns @ p + noise``
+    holds sample by sample, ``F(tau) = F(columns) @ p + F(noise)`` holds exactly, whatever
+    nonlinear function of the motion the columns are (``sign(qd)``, ``exp(-(qd/vs)^2)``,
+    ``|tau_nom|``): filtering the *signals* first and taking ``sign`` of a filtered velocity
+    would not satisfy it.  The noise comes out with std ``noise_gain(low_pass)`` times its
+    own.  Returns ``(F(columns), F(tau))`` with ``ceil(N / decimate)`` rows.
+
+    Chunks: a chunk filtered alone differs from the whole recording filtered at once only
+    within about ``rate_hz / cutoff_hz`` samples of the chunk's ends (the filter's reach);
+    pass each chunk with that many extra samples of overlap on both sides, drop the overlap
+    rows from the result, and start every chunk on a multiple of ``decimate`` so the kept
+    samples are those of the whole recording.
+
+    >>> rate = 200.0; t = np.arange(0, 20, 1 / rate)
+    >>> qd = np.cos(2 * np.pi * 0.3 * t)[:, None]
+    >>> columns = np.sign(qd)[:, :, None]; tau = 1.5 * np.sign(qd)
+    >>> Fc, Ft = parallel_filter(columns, tau, LowPass(rate, 5.0, 4, 5))
+    >>> Fc.shape, bool(np.allclose(Ft, 1.5 * Fc[:, :, 0]))
+    ((800, 1, 1), True)
+    """
+    columns = np.asarray(columns, float)
+    tau = np.asarray(tau, float)
+    if len(columns) != len(tau):
+        raise ValueError(f"{len(columns)} rows of columns beside {len(tau)} of torque")
+    flat = np.concatenate([columns.reshape(len(columns), -1), tau.reshape(len(tau), -1)], axis=1)
+    out = zero_phase_low_pass(flat, low_pass.rate_hz, low_pass.cutoff_hz, low_pass.order)[::low_pass.decimate]
+    k = int(np.prod(columns.shape[1:]))
+    return out[:, :k].reshape((len(out),) + columns.shape[1:]), out[:, k:].reshape((len(out),) + tau.shape[1:])
+
+
+def noise_gain(low_pass: LowPass | None) -> float:
+    """Std of white noise after :func:`parallel_filter` over its std before (1 for None): the
+    root of the sum of the squared impulse response of the zero-phase filter.
+
+    >>> round(noise_gain(LowPass(200.0, 5.0, 4, 5)), 3)
+    0.212
+    """
+    if low_pass is None:
+        return 1.0
+    length = 2 * int(round(20 * low_pass.rate_hz / low_pass.cutoff_hz)) + 1
+    impulse = np.zeros(length)
+    impulse[length // 2] = 1.0
+    h = zero_phase_low_pass(impulse, low_pass.rate_hz, low_pass.cutoff_hz, low_pass.order)
+    return float(np.sqrt(np.sum(h ** 2)))
+
+
+def filtered_rows(segment: Segment, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, columns, tau)`` of one segment ready for least squares: ``columns`` (N, ...)
+    computed from the segment's motion (``q``, ``qd``, ``qdd``) and the segment's unfiltered
+    torque through :func:`parallel_filter` with the segment's ``low_pass``; a segment not
+    filtered here (``low_pass`` None) passes as it is.
+
+    >>> z = np.zeros((3, 1)); s = Segment("demo", np.arange(3.0), 1.0, z, z, z, z + 2)
+    >>> filtered_rows(s, z[:, :, None])[2][:, 0]
+    array([2., 2., 2.])
+    """
+    columns = np.asarray(columns, float)
+    if len(columns) != len(segment.t):
+        raise ValueError(f"{len(columns)} rows of columns for a segment of {len(segment.t)} samples")
+    if segment.low_pass is None:
+        return segment.t, columns, segment.tau
+    Fc, Ft = parallel_filter(columns, segment.tau_unfiltered, segment.low_pass)
+    return segment.t[::segment.low_pass.decimate], Fc, Ft
 
 
 def timeline(segments: Sequence[Segment]) -> np.ndarray:

@@ -25,7 +25,11 @@ from ..description_writer import describe
 from . import MeasuredDataError
 
 EFFECT_FIELDS = {"fv": ("friction", "viscous"), "fc": ("friction", "coulomb"), "f0": ("friction", "offset"),
-                 "Ia": ("armature", None)}
+                 "Ia": ("armature", None), "ce": ("stiffness", None), "dq": ("encoder_offset", None),
+                 "gt": ("torque_gain", None)}
+#: how a fitted coefficient becomes the description's value: compliance ce = 1 / stiffness,
+#: relative gain error gt = torque_gain - 1
+_CONVERT = {"ce": lambda v: 1.0 / v, "gt": lambda v: 1.0 + v}
 
 
 class ModelWriteError(MeasuredDataError):
@@ -36,8 +40,10 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
                       name: str | None = None, payload: dict | None = None, gravity=None, model=None) -> dict:
     """The starting description (file ``source``) with identified links and effects.
     ``links``: new link entries (None keeps the description's links, and its payload);
-    ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``, 1-based joints)
-    to values, replacing the description's friction and armature; ``payload``
+    ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``; ``ce1`` a compliance
+    written as ``stiffness = 1 / ce1``, ``dq1`` as ``encoder_offset``, ``gt1`` as ``torque_gain =
+    1 + gt1``; 1-based joints) to values, replacing the description's friction, armature and
+    sensing; ``payload``
     (``{mass, com, inertia}``) and ``gravity`` replace the description's when given. A URDF
     ``source`` is written as the YAML of ``model`` (the chain read from it; joints by origin
     and axis, :func:`kindyngen.description_writer.describe`)."""
@@ -60,14 +66,17 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
     if gravity is not None:
         data["gravity"] = [float(v) for v in gravity]
     for joint in data["joints"]:
-        joint.pop("friction", None)
-        joint.pop("armature", None)
+        for key in ("friction", "armature", "stiffness", "encoder_offset", "torque_gain"):
+            joint.pop(key, None)
     for key, value in effects.items():
         prefix, index = key[:2], int(key[2:]) - 1
         if prefix not in EFFECT_FIELDS or not 0 <= index < len(data["joints"]):
             raise ModelWriteError(f"unknown effect coefficient {key!r}")
         if not math.isfinite(value):
             raise ModelWriteError(f"effect coefficient {key} is {value}")
+        if prefix == "ce" and not value > 0:
+            raise ModelWriteError(f"compliance {key} = {value:g} is not positive (no finite stiffness)")
+        value = _CONVERT.get(prefix, float)(value)
         field, sub = EFFECT_FIELDS[prefix]
         joint = data["joints"][index]
         if sub is None:

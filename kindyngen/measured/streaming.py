@@ -46,7 +46,7 @@ from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, _consistency
 from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
                           time_span_of_file)
-from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess
+from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, filtered_rows, preprocess, split_time
 from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
 from .model_writer import ModelWriteError, model_yaml
 from .regressor_rows import torque_regressor
@@ -253,6 +253,9 @@ class FoldTask:
     settings: Preprocessing
     chunk_rows: int = CHUNK_ROWS
     cut_time: float | None = None
+    #: with ``role`` 'split': the fraction of this file's own span that trains (as
+    #: :func:`kindyngen.measured.identify.identify` splits each file)
+    split: float | None = None
     #: ``rows_factory(model, effects)`` -> the per-chunk callable (preprocessed piece -> regressor
     #: rows, torques); a top-level function, so that Dask and process pools can send it
     rows_factory: Callable | None = None
@@ -274,6 +277,8 @@ class FileFold:
     chunks: int
     samples: int
     seconds: float
+    #: training samples before decimation (what the refusal limits count)
+    train_samples_raw: int = 0
 
 
 def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: None) -> FileFold:
@@ -290,19 +295,73 @@ def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: Non
     names = joint_names_of(model)
     with threadpool_limits(1):      # the same arithmetic whatever the worker's thread count
         notes: list[str] = []
-        try:
-            parts = _accumulate(task, stream_segments(task.path, n, task.settings, names, task.chunk_rows, notes),
-                                rows_of, n, k, k_base, nominal_p, model, started, progress)
-        except _NotStreamable as exc:
-            notes = [f"preprocessed whole in memory ({exc})"]
-            whole = preprocess(read_any(task.path, n, names), task.settings)
-            notes += [note for s in whole for note in s.notes]
-            parts = _accumulate(task, _pieces(whole, task.chunk_rows), rows_of, n, k, k_base, nominal_p, model, started, progress)
-    train, valid, nominal_sums, reservoir, chunks, samples = parts
+        if task.settings.cutoff_hz is not None:
+            # parallel filtering (issue 24) is not streamed yet: the file is preprocessed and
+            # parallel-filtered whole, exactly as the in-memory identify() does, then folded
+            parts = _fold_filtered_whole(task, rows_of, n, k, k_base, nominal_p, model, notes)
+        else:
+            try:
+                parts = _accumulate(task, stream_segments(task.path, n, task.settings, names, task.chunk_rows,
+                                                          notes),
+                                    rows_of, n, k, k_base, nominal_p, model, started, progress)
+            except _NotStreamable as exc:
+                notes = [f"preprocessed whole in memory ({exc})"]
+                whole = preprocess(read_any(task.path, n, names), task.settings)
+                notes += [note for s in whole for note in s.notes]
+                parts = _accumulate(task, _pieces(whole, task.chunk_rows), rows_of, n, k, k_base, nominal_p, model,
+                                    started, progress)
+    train, valid, nominal_sums, reservoir, chunks, samples, raw = parts
     if samples == 0:
         raise LogError(task.path, "t", "no samples after preprocessing")
     return FileFold(task.path, train, valid, nominal_sums, reservoir.arrays(), tuple(dict.fromkeys(notes)),
-                    chunks, samples, time.perf_counter() - started)
+                    chunks, samples, time.perf_counter() - started, raw)
+
+
+def _fold_filtered_whole(task, rows_of, n, k, k_base, nominal_p, model, notes):
+    """One file preprocessed whole, split on its own (``task.split``), each segment's columns,
+    the description's declared effects and the unfiltered torque parallel-filtered
+    (:func:`kindyngen.measured.logs.filtered_rows`), then folded: what the in-memory
+    :func:`kindyngen.measured.identify.identify` does, in memory per file (not bounded)."""
+    whole = preprocess(read_any(task.path, n, joint_names_of(model)), task.settings)
+    notes.append("preprocessed and parallel-filtered whole in memory (parallel filtering is not streamed yet)")
+    notes.extend(note for s in whole for note in s.notes)
+    if task.role == "split":
+        train_segs, valid_segs = split_time(whole, task.split)
+    elif task.role == "validate":
+        train_segs, valid_segs = (), whole
+    else:
+        train_segs, valid_segs = whole, ()
+    declared = model.effects
+    declared_values = np.array([float(v) for v in effect_parameter_values(model)]) if declared else None
+    eps = coulomb_eps(model)
+    train, valid = LSFactor.empty(n, k), LSFactor.empty(n, k)
+    nominal_sums = np.zeros(n)
+    reservoir = _Reservoir(FIGURE_SAMPLES)
+    chunks = samples = raw = 0
+    valid_time = 0.0
+    for is_valid, segs in ((False, train_segs), (True, valid_segs)):
+        for seg in segs:
+            check_joint_limits(task.path, model, seg)
+            Y, _ = rows_of(seg)
+            parts = [Y] + ([effect_columns(declared, seg.qd, seg.qdd, eps)] if declared else [])
+            t, F, tau = filtered_rows(seg, np.concatenate(parts, axis=2))
+            Yf = F[:, :, :k]
+            if not is_valid:
+                train = train.fold(Yf, tau)
+                raw += len(seg.t)
+            else:
+                valid = valid.fold(Yf, tau)
+                nominal = Yf[:, :, :k_base] @ nominal_p
+                if declared:
+                    nominal = nominal + F[:, :, k:] @ declared_values
+                nominal_sums += np.sum((tau - nominal) ** 2, axis=0)
+                step = t[1] - t[0] if len(t) > 1 else seg.dt
+                x = valid_time + step * np.arange(len(tau))
+                valid_time += step * len(tau)
+                reservoir.add(x, Yf, tau, nominal)
+            chunks += 1
+            samples += len(tau)
+    return train, valid, nominal_sums, reservoir, chunks, samples, raw
 
 
 def _pieces(segments, rows: int) -> Iterator[Segment]:
@@ -353,7 +412,7 @@ def _accumulate(task, segments, rows_of, n, k, k_base, nominal_p, model, started
             last = now
             rate = samples / (now - started)
             progress(f"{task.path}: {samples} samples read, {chunks} chunks folded ({rate:,.0f} samples/s)")
-    return train, valid, nominal_sums, reservoir, chunks, samples
+    return train, valid, nominal_sums, reservoir, chunks, samples, train.samples
 
 
 def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> tuple[float, float]:
@@ -436,7 +495,8 @@ def identify_streamed(request: IdentificationRequest, progress: Callable[[str], 
         cut_rows = int(round(trim / dt)) if dt > 0 else 0
         start, end = first + cut_rows * dt, last - cut_rows * dt
         cut_time = start + request.split * (end - start)
-        tasks += [FoldTask(str(p), "split", cut_time=cut_time, **common) for p in request.data]
+        tasks += [FoldTask(str(p), "split", cut_time=cut_time, split=request.split, **common)
+                  for p in request.data]
     else:
         tasks += [FoldTask(str(p), "train", **common) for p in request.data]
     tasks += [FoldTask(str(p), "validate", **common) for p in request.validate]
@@ -452,13 +512,15 @@ def identify_streamed(request: IdentificationRequest, progress: Callable[[str], 
     return solve_folds(request, model, train, valid, folds, progress, limits)
 
 
-def _check_fit(train: LSFactor, limits: FitLimits) -> tuple[str, ...]:
+def _check_fit(train: LSFactor, limits: FitLimits, raw_samples: int | None = None) -> tuple[str, ...]:
     """Refuse (IdentificationDataError) a fit below ``limits``; with ``override`` the reasons
     come back as notes for the report instead."""
     reasons = []
-    per_column = train.samples / train.k
+    # counted before decimation: the limit is stated for samples of the log's own rate
+    samples = train.samples if raw_samples is None else raw_samples
+    per_column = samples / train.k
     if per_column < limits.min_samples_per_column:
-        reasons.append(f"{train.samples} training samples for {train.k} regressor columns ({per_column:.3g} per "
+        reasons.append(f"{samples} training samples for {train.k} regressor columns ({per_column:.3g} per "
                        f"column) is below the minimum of {limits.min_samples_per_column:g} per column "
                        f"(--min-samples-per-column): give more data or a larger --split")
     else:
@@ -484,7 +546,7 @@ def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progres
     prior = parameter_vector(model)
     if train.samples == 0:
         raise IdentificationDataError("no training samples")
-    overridden = _check_fit(train, limits)
+    overridden = _check_fit(train, limits, sum(f.train_samples_raw for f in folds))
     if request.consistent:
         progress(f"solving the semidefinite program ({train.samples} samples, {10 * n + len(enames)} unknowns)")
         fit = identify_consistent_factor(train, P, enames, prior=prior)
