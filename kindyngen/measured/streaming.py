@@ -18,8 +18,11 @@ order, so the result is the same bit for bit for any number of workers (BLAS is 
 thread inside a file's fold for that reason).
 
 Streaming needs a log whose chunks preprocess like the whole: one gap-free piece, no repeated
-rows, on its own clock (no ``rate_hz`` resampling).  Any other log is preprocessed whole, in
-memory, with a note saying so.
+rows, on its own clock (no ``rate_hz`` resampling), and no low-pass: with a low-pass (the
+default) each file is preprocessed whole and its regressor columns and torque are filtered
+together (:func:`kindyngen.measured.logs.filtered_rows`, parallel filtering), then folded, so
+memory grows with the longest file until that filter is applied chunk by chunk too.  Any other
+log is preprocessed whole, in memory, with a note saying so.
 
 Example:
 
