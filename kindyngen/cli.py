@@ -535,7 +535,8 @@ def parser() -> argparse.ArgumentParser:
                                     "accelerations, torques; Parquet with the CSV's column names; ROS 2 bags "
                                     "(a rosbag2 folder, MCAP or SQLite) and ROS 1 .bag files of "
                                     "sensor_msgs/msg/JointState, joints matched by name. Logs are read and "
-                                    "folded in chunks, so memory does not grow with their length. Each file is "
+                                    "folded into a QR factor (unfiltered, --cutoff none, in chunks whatever the length; with the default "
+                                    "low-pass each file is filtered whole, so memory grows with the longest file). Each file is "
                                     "one experiment; files are never differentiated across."))
     i.add_argument("--robot", required=True, metavar="ROBOT", help="the robot description, YAML or URDF (geometry, prior)")
     _robot_options(i)

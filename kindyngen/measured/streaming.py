@@ -1,4 +1,4 @@
-"""Identification of logs of any length in bounded memory, and of many logs at once.
+"""Identification folded into a QR factor (logs of any length in bounded memory when unfiltered), and of many logs at once.
 
 A log is read in chunks (:mod:`kindyngen.measured.log_formats`), each chunk preprocessed
 together with ``overlap`` samples of its neighbours on either side (:func:`overlap_rows`: long
@@ -470,7 +470,7 @@ def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], No
 def identify_streamed(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
                       workers: int = 1, client=None, chunk_rows: int = CHUNK_ROWS,
                       limits: FitLimits = FitLimits(), rows_factory: Callable | None = None) -> Identification:
-    """:func:`kindyngen.measured.identify.identify` in bounded memory (same request, same
+    """:func:`kindyngen.measured.identify.identify` folded into a QR factor (same request, same
     :class:`~kindyngen.measured.identify.Identification`; the validation arrays for the figure
     are decimated to at most about 2 x FIGURE_SAMPLES samples).  ``rows_factory``: see
     :class:`FoldTask` (default :func:`regressor_rows`)."""
