@@ -106,7 +106,7 @@ Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.logs.Segme
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -186,6 +186,14 @@ MATTER = 0.25
 #: verdict: the data is explained when every joint's held-out RMS is within this factor of
 #: its noise floor.
 EXPLAINED_FACTOR = 1.5
+#: a joint coefficient is *determined* by the data only when its relative standard error is
+#: at most this (the value at least 3 standard errors from zero); otherwise it is reported as
+#: not determined and model.yaml leaves it out (see :func:`undetermined`)
+REL_STD_MAX = 1.0 / 3.0
+#: ... and, for an elastic joint, only when its compliance is at least this many times what the
+#: torque sensor's noise alone produces through the spring-torque column (errors in variables:
+#: the column is built from the measured torque, whose noise the residual shares)
+NOISE_BIAS_FACTOR = 3.0
 #: eigenvalues of the column-scaled normal matrix below this times the largest are dropped
 #: (minimum-norm solution: the payload's columns are rank-deficient among themselves).
 RCOND = 1e-11
@@ -287,6 +295,8 @@ class Discovery:
     unexplained: tuple[str, ...] = ()   # where the rest lives, one sentence per joint
     filtering: tuple[str, ...] = ()     # the parallel filters of the recordings (LowPass.describe)
     negligible: tuple[str, ...] = ()    # fitted coefficients whose own torque stays below MATTER floors
+    #: joint coefficients the data does not determine, name -> why (not written to model.yaml)
+    undetermined: dict = field(default_factory=dict)
 
 
 def predict_effects(discovery: Discovery, model: RobotModel, q, qd, qdd, effects=None, spring=None) -> np.ndarray:
@@ -613,7 +623,7 @@ class _Rows:
 
     def __init__(self, model, segments, folds, eps, ripple_k, need_spring):
         self.model, self.segments, self.eps, self.ripple_k = model, tuple(segments), eps, ripple_k
-        self.motion, self.spring = [], []
+        self.motion, self.spring, self.noise = [], [], []
         nominal, measured, signals, fold_of, floors, weights = [], [], [], [], [], []
         for seg in self.segments:
             q, qd, qdd = seg.q, seg.qd, seg.qdd
@@ -626,6 +636,8 @@ class _Rows:
             smooth = seg.tau if seg.low_pass is not None or len(seg.t) < 60 else \
                 zero_phase_low_pass(seg.tau, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
             self.spring.append(spring_torque(smooth, seg.dt) if need_spring else None)
+            if need_spring:
+                self.noise.append(self._noise_spring(seg, raw - tau_nom, len(self.noise)))
             self.motion.append((q, qd, qdd, tau_nom))
             stack = np.stack([tau_nom, q, qd, qdd, np.sign(qd), tau_nom], axis=2)
             _, F, tau_f = filtered_rows(seg, stack)
@@ -661,6 +673,44 @@ class _Rows:
             parts.append(filtered_rows(seg, cols)[1])
         return np.concatenate(parts), names, detail
 
+    @staticmethod
+    def _noise_spring(seg, residual, index):
+        """(white noise of the residual's level (N, n), its spring torque): the torque sensor's
+        noise alone, smoothed as the measured torque is for the spring column (same seed on
+        every machine, one per recording, so the outcome is a function of the input)."""
+        sigma = noise_floor(residual, [len(residual)])
+        noise = sigma * np.random.default_rng(24 + index).standard_normal(residual.shape)
+        if seg.low_pass is not None:
+            lp = seg.low_pass
+            smooth = zero_phase_low_pass(noise, lp.rate_hz, lp.cutoff_hz, lp.order)
+        elif len(seg.t) < 60:
+            smooth = noise
+        else:
+            smooth = zero_phase_low_pass(noise, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
+        return noise, spring_torque(smooth, seg.dt)
+
+    def elasticity_noise_bias(self) -> np.ndarray:
+        """Per joint, the compliance ``ce_i`` (rad per N m) that the torque sensor's noise alone
+        gives: the least-squares coefficient of joint i's spring column built from noise,
+        against that noise through the same parallel filter, over the column's squared norm
+        with the measured torque.  The spring column is made of the measured torque, so its
+        noise correlates with the residual's; a compliance not well above this is noise."""
+        num = np.zeros(self.model.n)
+        den = np.zeros(self.model.n)
+        for seg, (q, qd, qdd, tau_nom), spring, (noise, noise_spring) in zip(
+                self.segments, self.motion, self.spring, self.noise):
+            measured, *_ = _columns("motor_side_elasticity", self.model, q, qd, qdd, tau_nom, self.eps,
+                                    self.ripple_k, None, spring)
+            alone, *_ = _columns("motor_side_elasticity", self.model, q, qd, qdd, tau_nom, self.eps,
+                                 self.ripple_k, None, noise_spring)
+            stack = np.concatenate([measured, alone, noise[:, :, None]], axis=2)
+            F = filtered_rows(seg, stack)[1]
+            n = self.model.n
+            C, Cn, r = F[:, :, :n], F[:, :, n:2 * n], F[:, :, 2 * n]
+            num += np.einsum("tji,tj->i", Cn, r)
+            den += np.einsum("tji,tji->i", C, C)
+        return np.abs(num) / np.where(den > 0, den, np.inf)
+
     def peak(self) -> np.ndarray:
         """Per joint, the largest |joint torque| (N m; 1 where it is zero)."""
         return np.where(self.spring_peak > 0, self.spring_peak, 1.0)
@@ -668,6 +718,57 @@ class _Rows:
     def natural(self, key, values) -> np.ndarray:
         """A block's fitted values in the candidate's own units (a peak deflection -> ce)."""
         return values / self.peak() if _public(key) == "motor_side_elasticity" else values
+
+
+#: candidates whose coefficients are one per joint (the ones judged by :func:`undetermined`)
+_WHOLE_BODY = ("payload", "base_tilt")
+#: candidates on the measurement, whose coefficient must also change some torque to be written
+SENSING = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
+
+
+def undetermined(blocks: dict, values: dict, std: dict, fitted: dict, negligible=(), elastic_bias=None) -> dict:
+    """The joint coefficients the data does not determine, name -> why: not to be written as
+    values.  ``blocks``: candidate -> its parameter names; ``values``/``std``: natural values
+    and standard deviations; ``fitted``: the values as fitted (the bounds apply to these);
+    ``negligible``: coefficients whose own torque stays below :data:`MATTER` noise floors;
+    ``elastic_bias``: per joint, the compliance the torque noise alone produces
+    (:meth:`_Rows.elasticity_noise_bias`).  A coefficient is undetermined when it sits at a
+    finite bound of its physical range (the data pulls beyond it), or at 0 of a range [0, x]
+    (nothing there, or not resolved), when its relative standard error exceeds
+    :data:`REL_STD_MAX`, when it is a sensing coefficient that changes no torque above the
+    noise, or a compliance not :data:`NOISE_BIAS_FACTOR` times above the noise's own.
+
+    >>> undetermined({"viscous_friction": ("fv1", "fv2")}, {"fv1": 0.5, "fv2": 0.01},
+    ...              {"fv1": 0.01, "fv2": 0.02}, {"fv1": 0.5, "fv2": 0.01})
+    {'fv2': 'relative standard error 2 > 0.33'}
+    """
+    out = {}
+    for candidate, names in blocks.items():
+        if candidate in _WHOLE_BODY:
+            continue
+        low, high = _bounds(candidate)
+        width = high - low if math.isfinite(high - low) else max(abs(fitted[nm]) for nm in names) or 1.0
+        for i, nm in enumerate(names):
+            v, e, f = values[nm], std.get(nm, 0.0), fitted[nm]
+            reasons = []
+            if math.isfinite(high) and abs(f - high) <= 1e-6 * width or \
+                    low < 0 and math.isfinite(low) and abs(f - low) <= 1e-6 * width:
+                reasons.append(f"at the edge of its physical range [{low:g}, {high:g}]: the data pulls beyond it")
+            elif low == 0 and abs(f) <= 1e-9 * width:
+                reasons.append("at 0, the edge of its physical range: absent, or not resolved")
+            elif v == 0 or e / abs(v) > REL_STD_MAX:
+                rel = math.inf if v == 0 else e / abs(v)
+                reasons.append(f"relative standard error {rel:.2g} > {REL_STD_MAX:.2g}")
+            if candidate in SENSING and nm in negligible:
+                reasons.append(f"its torque stays below {MATTER:g} noise floors on every joint")
+            if candidate == "motor_side_elasticity" and elastic_bias is not None and \
+                    abs(v) < NOISE_BIAS_FACTOR * elastic_bias[i]:
+                reasons.append(f"the torque sensor's noise alone gives ce = {elastic_bias[i]:.3g} through the "
+                               f"spring torque (needs {NOISE_BIAS_FACTOR:g} x that): the joint's torque is too small "
+                               f"against the noise to show its spring")
+            if reasons:
+                out[nm] = "; ".join(reasons)
+    return out
 
 
 def _where(fit, floor, signals, factor, rounding) -> tuple[str, ...]:
@@ -960,6 +1061,10 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     std_natural = np.concatenate([data.natural(c, std[final_problem.slices[c]]) for c in chosen]) \
         if chosen else np.zeros(0)
     std_of = dict(zip(names, map(float, std_natural)))
+    bias = data.elasticity_noise_bias() if any(_public(k) == "motor_side_elasticity" for k in chosen) else None
+    not_determined = undetermined(
+        {_public(k): final_blocks[k][1] for k in chosen}, value_of, std_of,
+        {nm: fitted_values[nm] for nm in names}, negligible, bias)
     payload = payload_mass = gravity = tilt = None
     fitted = tuple(_public(k) for k in chosen)
     for k in chosen:
@@ -992,4 +1097,4 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
                      payload=payload, payload_mass=payload_mass, gravity=gravity, tilt_deg=tilt, n_eff=n_eff,
                      samples=N, folds=folds, ripple_k=ripple_k, eps=eps,
                      stribeck_vs=vs_final, explained=not unexplained, unexplained=unexplained,
-                     filtering=data.low_pass, negligible=tuple(negligible))
+                     filtering=data.low_pass, negligible=tuple(negligible), undetermined=not_determined)

@@ -39,7 +39,7 @@ import yaml
 
 from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
-from .discovery import CANDIDATES, EXPLAINED_FACTOR, MATTER, Discovery, discover, predict_effects, spring_torque
+from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover, predict_effects, spring_torque
 from .effects import EFFECTS, coulomb_eps, effect_names
 from .logs import Preprocessing, filtered_rows, load_segments, split_time
 from .model_writer import model_yaml
@@ -110,22 +110,14 @@ def _model_text(request, model, d: Discovery) -> tuple[str | None, tuple[str, ..
     writable = [e for e in d.effects if e in SCHEMA_EFFECTS]
     not_written = tuple(e for e in d.effects if e not in SCHEMA_EFFECTS)
     joint_effects = [e for e in writable if e in EFFECTS]
-    values = {name: d.values[name] for name in effect_names(joint_effects, model.n)} if joint_effects else {}
-    for e in writable:
-        if e in SENSING_EFFECTS:
-            skipped = []
-            for i in range(model.n):
-                name = f"{_SENSING_PREFIX[e]}{i + 1}"
-                v, std = d.values[name], d.std.get(name, 0.0)
-                # a joint whose coefficient is within one std of zero (or exactly zero: a rigid
-                # joint, a column that vanishes) keeps the ideal sensor
-                if v != 0 and abs(v) > std and name not in d.negligible:
-                    values[name] = v
-                else:
-                    skipped.append(f"{name} = {v:.3g} +- {std:.2g}")
-            if skipped:
-                not_written += (f"{e} on joints where it is not distinguishable from zero or changes no torque by "
-                                f"{MATTER:g} noise floors ({', '.join(skipped)})",)
+    names = list(effect_names(joint_effects, model.n)) if joint_effects else []
+    names += [f"{_SENSING_PREFIX[e]}{i + 1}" for e in writable if e in SENSING_EFFECTS for i in range(model.n)]
+    # a coefficient the data does not determine is not written as a value: the joint keeps the
+    # description's default (no friction, a rigid joint, an ideal sensor), and the report says why
+    values = {name: d.values[name] for name in names if name not in d.undetermined}
+    skipped = [f"{name} ({d.undetermined[name]})" for name in names if name in d.undetermined]
+    if skipped:
+        not_written += ("not determined by the data, so not written: " + "; ".join(skipped),)
     payload = None
     if "payload" in writable:
         try:
@@ -292,6 +284,7 @@ def result_document(result: DiscrepancyResult) -> dict:
         "notes": list(d.notes), "preprocessing": list(result.preprocessing_notes),
         "parallel_filtering": list(d.filtering),
         "model_yaml_values": model_values(result),
+        "not_determined": {name: {"fitted": d.values[name], "reason": why} for name, why in d.undetermined.items()},
     }
 
 
@@ -418,10 +411,15 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     for name in d.values:
         final_names.setdefault(_group_of(name, d), []).append(name)
     for effect in d.fitted:
-        shown = ", ".join(f"{nm} = {d.values[nm]:.4g} +- {d.std[nm]:.2g}" for nm in final_names.get(effect, []))
+        shown = ", ".join(f"{nm} **not determined**" if nm in d.undetermined else
+                          f"{nm} = {d.values[nm]:.4g} +- {d.std[nm]:.2g}" for nm in final_names.get(effect, []))
         where = "in model.yaml" if effect in d.effects and effect in SCHEMA_EFFECTS else \
             ("not named" if effect not in d.effects else "not in model.yaml (the schema cannot hold it)")
         lines.append(f"- {effect} ({where}): {shown}")
+    if d.undetermined:
+        lines += ["", "Not determined by the data (not written to model.yaml; the joint keeps the description's "
+                  "default):", ""]
+        lines += [f"- {nm} (fitted {d.values[nm]:.4g}, not a measurement): {why}" for nm, why in d.undetermined.items()]
     lines += ["", "### Each step's own fit (as fitted at that step, beside the effects chosen before it only)", ""]
     for k, s in enumerate(d.steps, start=1):
         shown = ", ".join(f"{nm} = {v:.4g} +- {e:.2g}" for nm, v, e in zip(s.parameter_names, s.values, s.std))
