@@ -242,8 +242,8 @@ def _names_argument(what: str, known, allow_empty: bool = False):
 
 
 def _effect_names():
-    from .measured.effects import EFFECTS
-    return EFFECTS
+    from .measured.effects import EFFECTS, SENSING_EFFECTS
+    return EFFECTS + SENSING_EFFECTS
 
 
 def _candidate_names():
@@ -297,7 +297,8 @@ def _folds(text: str) -> int:
 
 
 def _cmd_identify(args) -> int:
-    from .measured.identify import IdentificationRequest, write_outputs
+    from .measured.effects import SENSING_EFFECTS
+    from .measured.identify import IdentificationRequest, identify, write_outputs
     from .measured.logs import Preprocessing
     from .measured.streaming import FitLimits, identify_streamed
     from .output_dir import replace_outputs
@@ -324,7 +325,14 @@ def _cmd_identify(args) -> int:
         except (OSError, TimeoutError, ValueError) as exc:
             raise UsageError(f"--scheduler {args.scheduler}: cannot connect to the Dask scheduler ({exc})") from None
     try:
-        result = identify_streamed(request, progress, workers=args.workers, client=client, limits=limits)
+        if set(args.effects) & set(SENSING_EFFECTS):
+            # the effects on the measurement are linearised at the identified parameters and
+            # fitted again: the regressor rows change between fits, so they are not folded once
+            progress(f"{', '.join(e for e in args.effects if e in SENSING_EFFECTS)}: identified in memory "
+                     f"(re-linearised fits; not streamed, --workers and --scheduler unused)")
+            result = identify(request, progress)
+        else:
+            result = identify_streamed(request, progress, workers=args.workers, client=client, limits=limits)
     finally:
         if client is not None:
             client.close()
@@ -545,7 +553,11 @@ def parser() -> argparse.ArgumentParser:
     i.add_argument("--split", type=_fraction, metavar="FRACTION",
                    help="train on the first FRACTION of the --data time span, validate on the rest")
     i.add_argument("--effects", type=_effects, default=(), metavar="LIST",
-                   help="comma-separated subset of viscous_friction,coulomb_friction,torque_offset,armature")
+                   help="comma-separated subset of viscous_friction,coulomb_friction,torque_offset,armature "
+                        "(joint torques) and motor_side_elasticity,encoder_offset,torque_sensor_gain (effects on "
+                        "the measurement, as discover names them: fitted to first order, re-linearised at the "
+                        "identified parameters, in memory; a coefficient the data does not determine is reported "
+                        "and left out of model.yaml)")
     i.add_argument("--consistent", action="store_true",
                    help="physically consistent identification (semidefinite program): positive definite "
                         "pseudo-inertias, non-negative friction and armature")

@@ -201,3 +201,23 @@ def test_identify_takes_two_recordings_each_from_zero(tmp_path):
     assert abs(result.samples_validation / (result.samples_train + result.samples_validation) - 0.3) < 0.01
     np.testing.assert_allclose(result.effect_values, FV, rtol=0.05)
     assert np.all(result.rms_validation < 1.5 * filtered_noise(NOISE))
+
+
+def test_identify_fits_the_discovered_elasticity(tmp_path, capsys):
+    # a discovered effect can be added to the model and re-identified: `identify --effects
+    # motor_side_elasticity` fits the rigid bodies and one stiffness per joint together
+    from kindyngen.cli import main
+    log = write_log(tmp_path / "log.npz", "lwr4", ("motor_side_elasticity",))
+    out = tmp_path / "id"
+    assert main(["identify", "--robot", "robots/lwr4.yaml", "--data", str(log), "--split", "0.7",
+                 "--effects", "motor_side_elasticity", "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    doc = json.loads((out / "identification.json").read_text())
+    values = dict(zip(doc["effects"]["names"], doc["effects"]["values"]))
+    stiffness = [j.stiffness for j in load_robot_text((out / "model.yaml").read_text()).joints]
+    for i in (1, 3):       # the joints carrying the arm's weight
+        assert abs(1.0 / values[f"ce{i + 1}"] - STIFFNESS[i]) < 0.1 * STIFFNESS[i], values
+        assert abs(float(stiffness[i]) - STIFFNESS[i]) < 0.1 * STIFFNESS[i], stiffness
+    # joint 7's torque is below the noise: not determined, the joint stays rigid in model.yaml
+    assert "ce7" in doc["effects_not_determined"] and stiffness[6] is None, doc["effects_not_determined"]
+    assert np.all(np.array(doc["rms_validation"]) < 1.5 * filtered_noise(NOISE)), doc["rms_validation"]

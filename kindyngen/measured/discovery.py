@@ -339,17 +339,100 @@ def _gravity_columns(model: RobotModel, q) -> np.ndarray:
     return np.stack(out, axis=2)
 
 
-def _directional(model, q, qd, qdd, dq, dqd, dqdd) -> np.ndarray:
-    """Derivative of the nominal torques along the motion change ``(dq, dqd, dqdd)`` (N, n
-    each), by central differences (exact in qdd and qd, where the torque is affine and
+def _directional(torques, q, qd, qdd, dq, dqd, dqdd) -> np.ndarray:
+    """Derivative of ``torques(q, qd, qdd)`` (N, n) along the motion change ``(dq, dqd, dqdd)``
+    (N, n each), by central differences (exact in qdd and qd, where the torque is affine and
     quadratic; the step is 1e-5 rad of the largest position change, error ~1e-10 relative)."""
     size = float(np.max(np.abs(dq))) if np.any(dq) else float(np.max(np.abs(np.concatenate([dqd, dqdd]))))
     if size == 0:
         return np.zeros_like(q)
     h = 1e-5 / size
-    plus = nominal_torques(model, q + h * dq, qd + h * dqd, qdd + h * dqdd)
-    minus = nominal_torques(model, q - h * dq, qd - h * dqd, qdd - h * dqdd)
+    plus = torques(q + h * dq, qd + h * dqd, qdd + h * dqdd)
+    minus = torques(q - h * dq, qd - h * dqd, qdd - h * dqdd)
     return (plus - minus) / (2 * h)
+
+
+def sensing_columns(name: str, torques, q, qd, qdd, spring=None) -> tuple[np.ndarray, tuple[str, ...]]:
+    """(columns (N, n, n), parameter names) of an effect on the measurement, to first order,
+    for the joint torques ``torques(q, qd, qdd)`` (N, n) of a model: ``encoder_offset``
+    (``q_logged = q + dq_i``: ``-dtau/dq_i``), ``motor_side_elasticity`` (``q_logged = q +
+    ce_i tau_i``: ``-D tau . (tau_i, taud_i, taudd_i) e_i``, ``spring`` the joint torque and
+    its derivatives, :func:`spring_torque`), ``torque_sensor_gain`` (``tau_logged = (1 + gt_i)
+    tau_i``: ``tau_i``).  Columns of joint i's coefficient in column i."""
+    n = q.shape[1]
+    out = np.zeros((len(q), n, n))
+    if name == "torque_sensor_gain":
+        rows = np.arange(n)
+        out[:, rows, rows] = torques(q, qd, qdd)
+        return out, tuple(f"gt{i + 1}" for i in range(n))
+    if name not in ("encoder_offset", "motor_side_elasticity"):
+        raise ValueError(f"{name!r} is not an effect on the measurement")
+    zero = np.zeros_like(q)
+    for i in range(n):
+        dq = zero.copy()
+        if name == "encoder_offset":
+            # q_logged = q + dq_i: the true torque is tau(q_logged - dq_i e_i) ~ tau - dtau/dq_i dq_i
+            dq[:, i] = 1.0
+            out[:, :, i] = -_directional(torques, q, qd, qdd, dq, zero, zero)
+        else:
+            # q_logged = q + tau_i / K_i: the true motion is the logged one minus
+            # (tau_i, taud_i, taudd_i) / K_i, linear in 1 / K_i to first order
+            s, sd, sdd = spring
+            dqd, dqdd = zero.copy(), zero.copy()
+            dq[:, i], dqd[:, i], dqdd[:, i] = s[:, i], sd[:, i], sdd[:, i]
+            out[:, :, i] = -_directional(torques, q, qd, qdd, dq, dqd, dqdd)
+    return out, tuple(f"{'dq' if name == 'encoder_offset' else 'ce'}{i + 1}" for i in range(n))
+
+
+def spring_of(segment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The joint torque of a motor-side encoder's spring along a segment and its first two
+    time derivatives: the low-passed measured torque (the joint torque itself, whatever the
+    model misses).  Its noise correlates with the residual's: :func:`elastic_noise_bias`
+    says how large a compliance that noise alone produces."""
+    smooth = segment.tau if segment.low_pass is not None or len(segment.t) < 60 else \
+        zero_phase_low_pass(segment.tau, 1.0 / segment.dt, min(5.0, 0.2 / segment.dt))
+    return spring_torque(smooth, segment.dt)
+
+
+def _noise_spring(segment, residual, index):
+    """(white noise of the residual's level (N, n), its spring torque): the torque sensor's
+    noise alone, smoothed as :func:`spring_of` smooths the measured torque (a fixed seed per
+    recording, so the outcome is a function of the input)."""
+    sigma = noise_floor(residual, [len(residual)])
+    noise = sigma * np.random.default_rng(24 + index).standard_normal(residual.shape)
+    if segment.low_pass is not None:
+        lp = segment.low_pass
+        smooth = zero_phase_low_pass(noise, lp.rate_hz, lp.cutoff_hz, lp.order)
+    elif len(segment.t) < 60:
+        smooth = noise
+    else:
+        smooth = zero_phase_low_pass(noise, 1.0 / segment.dt, min(5.0, 0.2 / segment.dt))
+    return noise, spring_torque(smooth, segment.dt)
+
+
+def elastic_noise_bias(torques, segments, springs=None) -> np.ndarray:
+    """Per joint, the compliance ``ce_i`` (rad per N m) that the torque sensor's noise alone
+    gives an elastic-joint fit: the least-squares coefficient of joint i's spring column
+    built from noise (of the level :func:`noise_floor` finds in the segment's residual against
+    ``torques(q, qd, qdd)``), against that noise, both through the segment's parallel filter,
+    over the squared norm of the column built from the measured torque (``springs``, default
+    :func:`spring_of` of each segment).  The spring column is made of the measured torque,
+    whose noise the residual shares (errors in variables): a compliance not well above this
+    is the noise's, not the joint's."""
+    num = den = 0.0
+    for index, seg in enumerate(segments):
+        q, qd, qdd = seg.q, seg.qd, seg.qdd
+        raw = seg.tau_unfiltered if seg.low_pass is not None else seg.tau
+        noise, noise_spring = _noise_spring(seg, raw - torques(q, qd, qdd), index)
+        spring = spring_of(seg) if springs is None else springs[index]
+        measured, _ = sensing_columns("motor_side_elasticity", torques, q, qd, qdd, spring)
+        alone, _ = sensing_columns("motor_side_elasticity", torques, q, qd, qdd, noise_spring)
+        n = q.shape[1]
+        F = filtered_rows(seg, np.concatenate([measured, alone, noise[:, :, None]], axis=2))[1]
+        C, Cn, r = F[:, :, :n], F[:, :, n:2 * n], F[:, :, 2 * n]
+        num = num + np.einsum("tji,tj->i", Cn, r)
+        den = den + np.einsum("tji,tji->i", C, C)
+    return np.abs(num) / np.where(den > 0, den, np.inf)
 
 
 def spring_torque(tau, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -378,24 +461,9 @@ def _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, stribeck_vs, sprin
     if name == "base_tilt":
         return _gravity_columns(model, q), ("dgx", "dgy", "dgz"), ""
     if name in ("encoder_offset", "motor_side_elasticity"):
-        out = np.zeros((len(q), n, n))
-        zero = np.zeros_like(q)
-        for i in range(n):
-            dq = zero.copy()
-            if name == "encoder_offset":
-                # q_logged = q + dq_i: the true torque is tau(q_logged - dq_i e_i) ~ tau - dtau/dq_i dq_i
-                dq[:, i] = 1.0
-                out[:, :, i] = -_directional(model, q, qd, qdd, dq, zero, zero)
-            else:
-                # q_logged = q + tau_i / K_i: the true motion is the logged one minus
-                # (tau_i, taud_i, taudd_i) / K_i, linear in 1 / K_i to first order
-                s, sd, sdd = spring
-                dqd, dqdd = zero.copy(), zero.copy()
-                dq[:, i], dqd[:, i], dqdd[:, i] = s[:, i], sd[:, i], sdd[:, i]
-                out[:, :, i] = -_directional(model, q, qd, qdd, dq, dqd, dqdd)
-        prefix = "dq" if name == "encoder_offset" else "ce"
+        out, names = sensing_columns(name, lambda *m: nominal_torques(model, *m), q, qd, qdd, spring)
         detail = "" if name == "encoder_offset" else "ce_i = 1 / K_i (rad per N m), K_i the joint stiffness"
-        return out, tuple(f"{prefix}{i + 1}" for i in range(n)), detail
+        return out, names, detail
     if name in ("stribeck_friction", "position_ripple", "load_dependent_friction", "torque_sensor_gain"):
         if name == "stribeck_friction":
             values = [np.exp(-(qd / stribeck_vs) ** 2) * np.sign(qd)]
@@ -623,21 +691,13 @@ class _Rows:
 
     def __init__(self, model, segments, folds, eps, ripple_k, need_spring):
         self.model, self.segments, self.eps, self.ripple_k = model, tuple(segments), eps, ripple_k
-        self.motion, self.spring, self.noise = [], [], []
+        self.motion, self.spring = [], []
         nominal, measured, signals, fold_of, floors, weights = [], [], [], [], [], []
         for seg in self.segments:
             q, qd, qdd = seg.q, seg.qd, seg.qdd
             tau_nom = nominal_torques(model, q, qd, qdd)
             raw = seg.tau_unfiltered if seg.low_pass is not None else seg.tau
-            # the joint torque of the spring: the low-passed measured torque (the joint torque
-            # itself, whatever the model misses); its noise correlates with the residual's, a
-            # bias that matters only where the torque is near the noise, and there the deflection
-            # bound and the negligible-coefficient rule keep the joint rigid in model.yaml
-            smooth = seg.tau if seg.low_pass is not None or len(seg.t) < 60 else \
-                zero_phase_low_pass(seg.tau, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
-            self.spring.append(spring_torque(smooth, seg.dt) if need_spring else None)
-            if need_spring:
-                self.noise.append(self._noise_spring(seg, raw - tau_nom, len(self.noise)))
+            self.spring.append(spring_of(seg) if need_spring else None)
             self.motion.append((q, qd, qdd, tau_nom))
             stack = np.stack([tau_nom, q, qd, qdd, np.sign(qd), tau_nom], axis=2)
             _, F, tau_f = filtered_rows(seg, stack)
@@ -673,43 +733,9 @@ class _Rows:
             parts.append(filtered_rows(seg, cols)[1])
         return np.concatenate(parts), names, detail
 
-    @staticmethod
-    def _noise_spring(seg, residual, index):
-        """(white noise of the residual's level (N, n), its spring torque): the torque sensor's
-        noise alone, smoothed as the measured torque is for the spring column (same seed on
-        every machine, one per recording, so the outcome is a function of the input)."""
-        sigma = noise_floor(residual, [len(residual)])
-        noise = sigma * np.random.default_rng(24 + index).standard_normal(residual.shape)
-        if seg.low_pass is not None:
-            lp = seg.low_pass
-            smooth = zero_phase_low_pass(noise, lp.rate_hz, lp.cutoff_hz, lp.order)
-        elif len(seg.t) < 60:
-            smooth = noise
-        else:
-            smooth = zero_phase_low_pass(noise, 1.0 / seg.dt, min(5.0, 0.2 / seg.dt))
-        return noise, spring_torque(smooth, seg.dt)
-
     def elasticity_noise_bias(self) -> np.ndarray:
-        """Per joint, the compliance ``ce_i`` (rad per N m) that the torque sensor's noise alone
-        gives: the least-squares coefficient of joint i's spring column built from noise,
-        against that noise through the same parallel filter, over the column's squared norm
-        with the measured torque.  The spring column is made of the measured torque, so its
-        noise correlates with the residual's; a compliance not well above this is noise."""
-        num = np.zeros(self.model.n)
-        den = np.zeros(self.model.n)
-        for seg, (q, qd, qdd, tau_nom), spring, (noise, noise_spring) in zip(
-                self.segments, self.motion, self.spring, self.noise):
-            measured, *_ = _columns("motor_side_elasticity", self.model, q, qd, qdd, tau_nom, self.eps,
-                                    self.ripple_k, None, spring)
-            alone, *_ = _columns("motor_side_elasticity", self.model, q, qd, qdd, tau_nom, self.eps,
-                                 self.ripple_k, None, noise_spring)
-            stack = np.concatenate([measured, alone, noise[:, :, None]], axis=2)
-            F = filtered_rows(seg, stack)[1]
-            n = self.model.n
-            C, Cn, r = F[:, :, :n], F[:, :, n:2 * n], F[:, :, 2 * n]
-            num += np.einsum("tji,tj->i", Cn, r)
-            den += np.einsum("tji,tji->i", C, C)
-        return np.abs(num) / np.where(den > 0, den, np.inf)
+        """Per joint, the compliance the torque noise alone gives (:func:`elastic_noise_bias`)."""
+        return elastic_noise_bias(lambda *m: nominal_torques(self.model, *m), self.segments, self.spring)
 
     def peak(self) -> np.ndarray:
         """Per joint, the largest |joint torque| (N m; 1 where it is zero)."""

@@ -39,8 +39,15 @@ import difflib
 import numpy as np
 
 EFFECTS = ("viscous_friction", "coulomb_friction", "torque_offset", "armature")
-NONNEGATIVE = ("viscous_friction", "coulomb_friction", "armature")   # coefficients physically >= 0
-PREFIXES = {"viscous_friction": "fv", "coulomb_friction": "fc", "torque_offset": "f0", "armature": "Ia"}
+#: effects on the measurement rather than torques at the joint (a description's joint keys
+#: ``stiffness``, ``encoder_offset``, ``torque_gain``): ``ce{i}`` a compliance 1 / stiffness
+#: (rad per N m), ``dq{i}`` an encoder offset (rad), ``gt{i}`` a relative torque-gain error.
+#: Their columns depend on the model's torques (first order,
+#: :func:`kindyngen.measured.discovery.sensing_columns`), so :func:`effect_columns` has none.
+SENSING_EFFECTS = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
+NONNEGATIVE = ("viscous_friction", "coulomb_friction", "armature", "motor_side_elasticity")   # physically >= 0
+PREFIXES = {"viscous_friction": "fv", "coulomb_friction": "fc", "torque_offset": "f0", "armature": "Ia",
+            "motor_side_elasticity": "ce", "encoder_offset": "dq", "torque_sensor_gain": "gt"}
 
 
 def _effects(effects) -> tuple[str, ...]:
@@ -48,20 +55,21 @@ def _effects(effects) -> tuple[str, ...]:
     if isinstance(effects, str):
         effects = (effects,)
     effects = tuple(effects)
+    known = EFFECTS + SENSING_EFFECTS
     for e in effects:
-        if e not in EFFECTS:
-            close = difflib.get_close_matches(str(e), EFFECTS, n=1, cutoff=0.0)
+        if e not in known:
+            close = difflib.get_close_matches(str(e), known, n=1, cutoff=0.0)
             hint = f"did you mean {close[0]!r}? " if close else ""
-            raise ValueError(f"unknown effect {e!r}; {hint}(known: {', '.join(EFFECTS)})")
+            raise ValueError(f"unknown effect {e!r}; {hint}(known: {', '.join(known)})")
     duplicates = sorted({e for e in effects if effects.count(e) > 1})
     if duplicates:
         raise ValueError(f"effect(s) listed more than once: {', '.join(duplicates)}")
-    return tuple(e for e in EFFECTS if e in effects)
+    return tuple(e for e in EFFECTS + SENSING_EFFECTS if e in effects)
 
 
 def effect_names(effects, n: int) -> tuple[str, ...]:
-    """Parameter names of ``effects`` for ``n`` joints: by effect (in :data:`EFFECTS` order),
-    then joint, e.g. ``('fv1', ..., 'fvn', 'fc1', ...)``."""
+    """Parameter names of ``effects`` for ``n`` joints: by effect (in :data:`EFFECTS` order,
+    then :data:`SENSING_EFFECTS` order), then joint, e.g. ``('fv1', ..., 'fvn', 'fc1', ...)``."""
     return tuple(f"{PREFIXES[e]}{i + 1}" for e in _effects(effects) for i in range(int(n)))
 
 
@@ -95,6 +103,10 @@ def effect_columns(effects, qd, qdd, eps: float | None = None) -> np.ndarray:
     :func:`effect_names`).  ``qd``, ``qdd``: samples x n (``qdd`` may be None when the armature
     is not requested); ``eps`` (rad/s, > 0): smooth Coulomb friction ``tanh(qd / eps)``."""
     effects = _effects(effects)
+    sensing = [e for e in effects if e in SENSING_EFFECTS]
+    if sensing:
+        raise ValueError(f"{', '.join(sensing)} act on the measurement: their columns depend on the model "
+                         f"(kindyngen.measured.discovery.sensing_columns)")
     qd = _joint_array(qd, "qd")
     N, n = qd.shape
     if "armature" in effects:

@@ -37,7 +37,8 @@ import yaml
 from ..inertial_parameters import parameter_vector
 from ..robot import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
-from .effects import NONNEGATIVE, coulomb_eps, effect_columns, effect_names, effect_of
+from .discovery import NOISE_BIAS_FACTOR, REL_STD_MAX, effective_samples, elastic_noise_bias, sensing_columns, spring_of
+from .effects import EFFECTS, NONNEGATIVE, SENSING_EFFECTS, coulomb_eps, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
 from .logs import Preprocessing, filtered_rows, load_segments, split_time
 from .model_writer import ModelWriteError, model_yaml
@@ -50,7 +51,9 @@ class IdentificationRequest:
     """What to identify from what. ``data``/``validate``: log files (CSV or npz), each one
     experiment; ``split``: when given, the time span of ``data`` is cut and its first
     ``split`` fraction trains, the rest validates (instead of, or besides, ``validate``);
-    ``effects``: effect names of :data:`kindyngen.measured.effects.EFFECTS`; ``consistent``:
+    ``effects``: effect names of :data:`kindyngen.measured.effects.EFFECTS` and
+    :data:`~kindyngen.measured.effects.SENSING_EFFECTS` (fitted to first order around the
+    model, re-linearised at the identified parameters :data:`SENSING_ITERATIONS` times); ``consistent``:
     the semidefinite program instead of least squares; ``weighted``: weighted least squares."""
 
     robot: str | Path
@@ -92,6 +95,42 @@ class Identification:
     validation_tau: np.ndarray | None
     validation_predicted: np.ndarray | None
     validation_nominal: np.ndarray | None
+    #: effect coefficients the data does not determine, name -> why (not in model.yaml)
+    undetermined: dict = field(default_factory=dict)
+
+
+#: fits of the effects on the measurement: their columns are linear in the coefficient around
+#: the model's torques, so the fit is repeated with the columns re-linearised at the
+#: identified base parameters until they change by less than SENSING_TOLERANCE (relative)
+SENSING_ITERATIONS = 4
+SENSING_TOLERANCE = 1e-3
+
+
+def undetermined_sensing(names, values, std_percent, bias) -> dict:
+    """Sensing coefficients (``ce``, ``dq``, ``gt``) the data does not determine, name -> why:
+    zero or negative compliance (no finite stiffness), a relative standard error above
+    :data:`kindyngen.measured.discovery.REL_STD_MAX`, or a compliance not
+    :data:`~kindyngen.measured.discovery.NOISE_BIAS_FACTOR` times above the torque noise's
+    own (``bias`` per joint, :func:`kindyngen.measured.discovery.elastic_noise_bias`).
+
+    >>> undetermined_sensing(("ce1", "ce2"), [1e-3, -1e-4], [5.0, 20.0], [1e-6, 1e-6])
+    {'ce2': 'compliance -0.0001 <= 0: no finite stiffness'}
+    """
+    out = {}
+    for k, (name, v) in enumerate(zip(names, values)):
+        if name[:2] not in ("ce", "dq", "gt"):
+            continue
+        reasons = []
+        if name.startswith("ce") and not v > 0:
+            reasons.append(f"compliance {v:.3g} <= 0: no finite stiffness")
+        elif std_percent is not None and not std_percent[k] <= 100 * REL_STD_MAX:
+            reasons.append(f"relative standard error {std_percent[k] / 100:.2g} > {REL_STD_MAX:.2g}")
+        if name.startswith("ce") and bias is not None and v > 0 and v < NOISE_BIAS_FACTOR * bias[int(name[2:]) - 1]:
+            reasons.append(f"the torque noise alone gives ce = {bias[int(name[2:]) - 1]:.3g} (needs "
+                           f"{NOISE_BIAS_FACTOR:g} x that): the joint's torque is too small against the noise")
+        if reasons:
+            out[name] = "; ".join(reasons)
+    return out
 
 
 def _segments(paths, n, settings, progress, what, split=None):
@@ -119,7 +158,7 @@ def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[s
         if not e > 0:
             notes.append(f"link {i + 1}: pseudo-inertia not positive definite (smallest eigenvalue {e:.3g})")
     for name, v in zip(names, values):
-        if effect_of(name) in NONNEGATIVE and v < 0:
+        if effect_of(name) in NONNEGATIVE and v < 0 and effect_of(name) not in SENSING_EFFECTS:
             notes.append(f"{name} = {v:.4g} is negative")
     return not notes, tuple(notes)
 
@@ -144,6 +183,21 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     regressor = torque_regressor(model)
     eps = coulomb_eps(model)
     enames = effect_names(request.effects, n)
+    joint_effects = tuple(e for e in request.effects if e in EFFECTS)
+    sensing = tuple(e for e in SENSING_EFFECTS if e in request.effects)
+
+    def sensing_rows(segments, base):
+        """The effects on the measurement, linearised at the base parameters ``base``,
+        parallel-filtered segment by segment (rows, n, k)."""
+        def torques(q, qd, qdd):
+            return regressor(q, qd, qdd) @ base
+        parts = []
+        for seg in segments:
+            spring = spring_of(seg) if "motor_side_elasticity" in sensing else None
+            S = np.concatenate([sensing_columns(e, torques, seg.q, seg.qd, seg.qdd, spring)[0] for e in sensing],
+                               axis=2)
+            parts.append(filtered_rows(seg, S)[1])
+        return np.concatenate(parts)
 
     def rows(segments, extra=None):
         """Regressor and effect columns and torque, parallel-filtered segment by segment;
@@ -151,7 +205,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         Ys, Es, taus, ts, extras, start = [], [], [], [], [], 0.0
         for seg in segments:
             Y = regressor(seg.q, seg.qd, seg.qdd)
-            E = effect_columns(request.effects, seg.qd, seg.qdd, eps) if enames else np.zeros((len(seg.t), n, 0))
+            E = effect_columns(joint_effects, seg.qd, seg.qdd, eps) if joint_effects else np.zeros((len(seg.t), n, 0))
             parts = [Y, E] + ([extra(seg)[:, :, None]] if extra is not None else [])
             t, F, tau = filtered_rows(seg, np.concatenate(parts, axis=2))
             Ys.append(F[:, :, :Y.shape[2]])
@@ -165,44 +219,77 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
             out += (np.concatenate(extras), np.concatenate(ts))
         return out
 
-    Yb, E, tau = rows(train)
+    Yb, E_joint, tau = rows(train)
     k_base = Yb.shape[2]
     P = regressor.base_map
     prior = parameter_vector(model)
-    if request.consistent:
-        progress(f"solving the semidefinite program ({len(tau)} samples, {10 * n + len(enames)} unknowns)")
-        fit = identify_consistent(Yb @ P, E, tau, n, enames, prior=prior, base_map=P)
-        full, evalues = fit.full_values, fit.effect_values
-        base = P @ full
-        base_std = effect_std = None
-        Y_all = np.concatenate([Yb, E], axis=2)
-        s = np.linalg.svd(Y_all.reshape(-1, Y_all.shape[2]), compute_uv=False)
-        cond = float(s[0] / s[-1])
-        method = "physically consistent (semidefinite program, CLARABEL)"
-    else:
-        progress(f"least squares ({len(tau)} samples, {k_base + len(enames)} columns)")
-        Y_all = np.concatenate([Yb, E], axis=2)
-        fit = least_squares(Y_all, tau, regressor.names + enames, weighted=request.weighted)
-        base, evalues = fit.values[:k_base], fit.values[k_base:]
-        base_std, effect_std = fit.std_percent[:k_base], fit.std_percent[k_base:]
-        cond = fit.condition_number
-        # the full parameters nearest the description's that reproduce the base values
-        full = prior + np.linalg.pinv(P) @ (base - P @ prior)
-        method = "weighted least squares" if request.weighted else "ordinary least squares"
+    linearised = P @ prior                    # the sensing columns' base parameters
+    sensing_notes = ()
+    for iteration in range(SENSING_ITERATIONS if sensing else 1):
+        used = linearised
+        E = np.concatenate([E_joint, sensing_rows(train, used)], axis=2) if sensing else E_joint
+        if request.consistent:
+            progress(f"solving the semidefinite program ({len(tau)} samples, {10 * n + len(enames)} unknowns)")
+            fit = identify_consistent(Yb @ P, E, tau, n, enames, prior=prior, base_map=P)
+            full, evalues = fit.full_values, fit.effect_values
+            base = P @ full
+            base_std = effect_std = None
+            Y_all = np.concatenate([Yb, E], axis=2)
+            s = np.linalg.svd(Y_all.reshape(-1, Y_all.shape[2]), compute_uv=False)
+            cond = float(s[0] / s[-1])
+            method = "physically consistent (semidefinite program, CLARABEL)"
+        else:
+            progress(f"least squares ({len(tau)} samples, {k_base + len(enames)} columns)")
+            Y_all = np.concatenate([Yb, E], axis=2)
+            fit = least_squares(Y_all, tau, regressor.names + enames, weighted=request.weighted)
+            base, evalues = fit.values[:k_base], fit.values[k_base:]
+            base_std, effect_std = fit.std_percent[:k_base], fit.std_percent[k_base:]
+            cond = fit.condition_number
+            # the full parameters nearest the description's that reproduce the base values
+            full = prior + np.linalg.pinv(P) @ (base - P @ prior)
+            method = "weighted least squares" if request.weighted else "ordinary least squares"
+        if not sensing:
+            break
+        change = float(np.linalg.norm(base - linearised) / max(np.linalg.norm(base), 1e-300))
+        linearised = np.asarray(base, float)
+        progress(f"effects on the measurement: fit {iteration + 1}, base parameters changed by {change:.3g} (relative)")
+        if change < SENSING_TOLERANCE:
+            break
+    if sensing:
+        sensing_notes = (f"effects on the measurement ({', '.join(sensing)}) fitted to first order, the columns "
+                         f"linearised at the identified parameters ({iteration + 1} fits, last relative change "
+                         f"{change:.2g})",)
 
     def predicted(Y, E_):
         return Y @ base + (E_ @ evalues if len(enames) else 0.0)
 
     rms_train = rms_per_joint(tau, predicted(Yb, E))
     consistent, consistency_notes = _consistency(full, n, enames, evalues)
+    consistency_notes = sensing_notes + consistency_notes
+    bias = None
+    if "motor_side_elasticity" in sensing:
+        bias = elastic_noise_bias(lambda q, qd, qdd: regressor(q, qd, qdd) @ base, train)
+    # the standard errors of least squares count every filtered sample as independent: judged
+    # here with the effective sample size of the residual (as discover does), so a coefficient
+    # is not called determined on autocorrelated samples
+    judged_std = None
+    if effect_std is not None:
+        residual = tau - predicted(Yb, E)
+        judged_std = np.asarray(effect_std) * math.sqrt(residual.size / float(np.sum(effective_samples(residual))))
+    not_determined = undetermined_sensing(enames, evalues, judged_std, bias)
+    # a sensing coefficient the data does not determine is not written: that joint keeps the
+    # ideal sensor (rigid, no offset, unit gain) and the report says why
+    written = {name: float(v) for name, v in zip(enames, evalues) if name not in not_determined}
+    if not_determined:
+        consistency_notes += ("not determined by the data, so not written to model.yaml: " + "; ".join(
+            f"{name} = {float(evalues[enames.index(name)]):.3g} ({why})" for name, why in not_determined.items()),)
 
     text = None
     if consistent:
         try:
             header = (f"Identified by KinDynGen from {', '.join(map(str, request.data))} ({method}).\n"
                       f"Geometry from {request.robot}; link parameters and joint effects identified.")
-            text = model_yaml(request.robot, links_from_barycentric(full, n), dict(zip(enames, map(float, evalues))),
-                              model=model,
+            text = model_yaml(request.robot, links_from_barycentric(full, n), written, model=model,
                               header=header, name=f"{model.name}_identified")
             parse_robot(yaml.safe_load(text), "model.yaml")     # the loader must take what we write
         except (ModelWriteError, ValueError) as exc:
@@ -217,6 +304,8 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     if validation:
         # the starting description's own prediction (rigid bodies and its declared effects)
         Yv, Ev, vtau, vnom, vt = rows(validation, lambda seg: description_torques(model, seg.q, seg.qd, seg.qdd))
+        if sensing:
+            Ev = np.concatenate([Ev, sensing_rows(validation, used)], axis=2)
         vpred = predicted(Yv, Ev)
         rms_val = rms_per_joint(vtau, vpred)
         rms_nominal = rms_per_joint(vtau, vnom)
@@ -228,7 +317,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         consistency_notes=consistency_notes, model_yaml=text,
         samples_train=int(len(tau)), samples_validation=int(0 if vtau is None else len(vtau)),
         preprocessing_notes=notes, validation_t=vt, validation_tau=vtau, validation_predicted=vpred,
-        validation_nominal=vnom)
+        validation_nominal=vnom, undetermined=not_determined)
 
 
 def _numbers(values) -> list:
@@ -257,6 +346,7 @@ def result_document(result: Identification) -> dict:
         "rms_validation_description": None if result.rms_validation_nominal is None
         else _numbers(result.rms_validation_nominal),
         "physically_consistent": result.physically_consistent,
+        "effects_not_determined": dict(result.undetermined),
         "notes": list(result.consistency_notes),
         "units": "torques and RMS in N m; std_percent = 100 std / |value|",
     }
