@@ -55,7 +55,13 @@ def friction_torque(QD, eps=None):
 
 def test_effect_names_and_order():
     assert EFFECTS == ("viscous_friction", "coulomb_friction", "torque_offset", "armature")
-    assert set(NONNEGATIVE) == {"viscous_friction", "coulomb_friction", "armature"}
+    # a compliance 1 / stiffness is physically >= 0 as well
+    assert set(NONNEGATIVE) == {"viscous_friction", "coulomb_friction", "armature", "motor_side_elasticity"}
+    # the effects on the measurement come after the joint effects; they have no columns here
+    assert effect_names(("torque_sensor_gain", "viscous_friction", "motor_side_elasticity"), 2) == \
+        ("fv1", "fv2", "ce1", "ce2", "gt1", "gt2")
+    with pytest.raises(ValueError, match="act on the measurement"):
+        effect_columns("encoder_offset", np.zeros((2, 3)), None)
     # EFFECTS order whatever order they are asked in, then joint, 1-based
     assert effect_names(("armature", "viscous_friction"), 3) == ("fv1", "fv2", "fv3", "Ia1", "Ia2", "Ia3")
     assert effect_names(EFFECTS, 2) == ("fv1", "fv2", "fc1", "fc2", "f01", "f02", "Ia1", "Ia2")
