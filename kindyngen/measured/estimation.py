@@ -305,6 +305,17 @@ def _effect_hint(error: RankDeficientError) -> str:
         text += (f"; the armature of a joint whose axis is fixed in the base has the column of the link "
                  f"inertia about that axis, so only their sum is seen: drop {', '.join(armature)} from the "
                  f"columns and read the inertia parameter as the sum")
+    offsets = [name for name in involved if effect_of(name) == "encoder_offset"]
+    gains = [name for name in involved if effect_of(name) == "torque_sensor_gain"]
+    if offsets:
+        text += (f"; an encoder offset turns the links after its joint, which for the last joint (and for one "
+                 f"whose axis is parallel to gravity and fixed in the base) is the same as turned inertial "
+                 f"parameters: drop those of {', '.join(offsets)}, fit with --consistent (the description "
+                 f"as prior), or find offsets against the nominal model with 'kindyngen discover'")
+    if gains:
+        text += ("; a gain error common to every torque sensor is the same as every mass and inertia scaled: "
+                 "torque gains are seen only against known masses (fit with --consistent, the description as "
+                 "prior, or find them against the nominal model with 'kindyngen discover')")
     return text + ")"
 
 

@@ -123,6 +123,8 @@ def undetermined_sensing(names, values, std_percent, bias) -> dict:
         reasons = []
         if name.startswith("ce") and not v > 0:
             reasons.append(f"compliance {v:.3g} <= 0: no finite stiffness")
+        elif std_percent is not None and not math.isfinite(std_percent[k]):
+            reasons.append("not separable from the rigid-body parameters on this data (the data alone does not fix it)")
         elif std_percent is not None and not std_percent[k] <= 100 * REL_STD_MAX:
             reasons.append(f"relative standard error {std_percent[k] / 100:.2g} > {REL_STD_MAX:.2g}")
         if name.startswith("ce") and bias is not None and v > 0 and v < NOISE_BIAS_FACTOR * bias[int(name[2:]) - 1]:
@@ -131,6 +133,24 @@ def undetermined_sensing(names, values, std_percent, bias) -> dict:
         if reasons:
             out[name] = "; ".join(reasons)
     return out
+
+
+def _std_percent(Y, residual, values) -> np.ndarray:
+    """``100 std / |value|`` of least squares on the rows ``Y`` (N, n, k) with ``residual``
+    (N, n), from the SVD of the column-scaled rows; a coefficient with a part in their
+    numerical null space gets infinity (the data alone does not fix it)."""
+    A = Y.reshape(-1, Y.shape[2])
+    scale = np.linalg.norm(A, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    _, sv, Vt = np.linalg.svd(A / scale, full_matrices=False)
+    keep = sv > 1e-10 * sv[0]
+    dof = max(A.shape[0] - int(keep.sum()), 1)
+    sigma2 = float(np.sum(residual ** 2)) / dof
+    var = sigma2 * np.sum((Vt[keep] / sv[keep, None]) ** 2, axis=0) / scale ** 2
+    null = np.linalg.norm(Vt[~keep], axis=0) > 1e-6 if (~keep).any() else np.zeros(A.shape[1], bool)
+    std = np.where(null, np.inf, np.sqrt(var))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(values) > 0, 100 * std / np.abs(values), np.inf)
 
 
 def _segments(paths, n, settings, progress, what, split=None):
@@ -272,10 +292,14 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     # the standard errors of least squares count every filtered sample as independent: judged
     # here with the effective sample size of the residual (as discover does), so a coefficient
     # is not called determined on autocorrelated samples
-    judged_std = None
-    if effect_std is not None:
-        residual = tau - predicted(Yb, E)
-        judged_std = np.asarray(effect_std) * math.sqrt(residual.size / float(np.sum(effective_samples(residual))))
+    residual = tau - predicted(Yb, E)
+    inflation = math.sqrt(residual.size / float(np.sum(effective_samples(residual))))
+    # the semidefinite program gives no standard errors: those of least squares on the same
+    # columns, a coefficient with a part in their null space (not separable from the rigid
+    # bodies, e.g. the common gain of all torque sensors) unbounded
+    std = effect_std if effect_std is not None else \
+        _std_percent(np.concatenate([Yb, E], axis=2), residual, np.concatenate([base, evalues]))[k_base:]
+    judged_std = np.asarray(std, float) * inflation
     not_determined = undetermined_sensing(enames, evalues, judged_std, bias)
     # a sensing coefficient the data does not determine is not written: that joint keeps the
     # ideal sensor (rigid, no offset, unit gain) and the report says why
