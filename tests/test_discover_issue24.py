@@ -273,5 +273,7 @@ def test_ur5_two_recordings_name_the_same_set_in_either_order(tmp_path):
         written = doc["model_yaml_values"]
         np.testing.assert_allclose([written[f"fv{i + 1}"] for i in range(6)], UR5_FV, rtol=0.1)
         np.testing.assert_allclose([written[f"f0{i}"] for i in (2, 3)], UR5_F0[1:3], rtol=0.1)
+        # the joints without an offset: their fitted ~0 is not a value, so none is written
+        assert set(doc["not_determined"]) == {"f01", "f04", "f05", "f06"}, doc["not_determined"]
     assert docs[0]["effects"] == docs[1]["effects"]
     assert docs[0]["model_yaml_values"] == pytest.approx(docs[1]["model_yaml_values"], rel=1e-9, abs=1e-12)
