@@ -277,3 +277,29 @@ def test_ur5_two_recordings_name_the_same_set_in_either_order(tmp_path):
         assert set(doc["not_determined"]) == {"f01", "f04", "f05", "f06"}, doc["not_determined"]
     assert docs[0]["effects"] == docs[1]["effects"]
     assert docs[0]["model_yaml_values"] == pytest.approx(docs[1]["model_yaml_values"], rel=1e-9, abs=1e-12)
+
+
+def test_identify_fits_encoder_offsets_where_the_data_separates_them(tmp_path):
+    from kindyngen.measured.estimation import RankDeficientError
+    from kindyngen.measured.identify import IdentificationRequest, identify
+    offsets = np.array([0.0, 0.01, -0.008, 0.012, 0.0, 0.0, 0.0])
+    t, q, qd, qdd = multisine()
+    model, data, _ = pinocchio_model(robot("lwr4"))
+    tau = np.array([pin.rnea(model, data, a, b, c) for a, b, c in zip(q, qd, qdd)])
+    rng = np.random.default_rng(7)
+    log = tmp_path / "log.npz"
+    np.savez(log, times=t, positions=q + offsets + ENCODER * rng.standard_normal(q.shape),
+             torques=tau + NOISE * rng.standard_normal(tau.shape))
+    # joint 1 turns about gravity and joint 7's offset turns only the last link: neither can be
+    # told from the rigid bodies, and plain least squares says so
+    with pytest.raises(RankDeficientError, match="encoder offset turns the links"):
+        identify(IdentificationRequest("robots/lwr4.yaml", (log,), effects=("encoder_offset",), split=0.7))
+    result = identify(IdentificationRequest("robots/lwr4.yaml", (log,), effects=("encoder_offset",), split=0.7,
+                                            consistent=True))
+    values = dict(zip(result.effect_names, result.effect_values))
+    joints = load_robot_text(result.model_yaml).joints
+    for i in (1, 2, 3):
+        assert abs(values[f"dq{i + 1}"] - offsets[i]) < 0.1 * abs(offsets[i]), values
+        assert abs(float(joints[i].encoder_offset) - offsets[i]) < 0.1 * abs(offsets[i])
+    for i in (0, 6):
+        assert f"dq{i + 1}" in result.undetermined and joints[i].encoder_offset is None, result.undetermined
