@@ -303,3 +303,24 @@ def test_identify_fits_encoder_offsets_where_the_data_separates_them(tmp_path):
         assert abs(float(joints[i].encoder_offset) - offsets[i]) < 0.1 * abs(offsets[i])
     for i in (0, 6):
         assert f"dq{i + 1}" in result.undetermined and joints[i].encoder_offset is None, result.undetermined
+
+
+def test_identify_refuses_to_call_torque_gains_determined(tmp_path):
+    # a gain common to every torque sensor is every mass scaled: with the rigid bodies unknown
+    # the data fixes no gain, least squares refuses and the semidefinite program writes none
+    from kindyngen.measured.estimation import RankDeficientError
+    from kindyngen.measured.identify import IdentificationRequest, identify
+    gains = np.array([0.0, 0.05, -0.04, 0.06, 0.0, 0.0, 0.0])
+    t, q, qd, qdd = multisine()
+    model, data, _ = pinocchio_model(robot("lwr4"))
+    tau = np.array([pin.rnea(model, data, a, b, c) for a, b, c in zip(q, qd, qdd)])
+    rng = np.random.default_rng(8)
+    log = tmp_path / "log.npz"
+    np.savez(log, times=t, positions=q + ENCODER * rng.standard_normal(q.shape),
+             torques=(1 + gains) * tau + NOISE * rng.standard_normal(tau.shape))
+    with pytest.raises(RankDeficientError, match="common to every torque sensor"):
+        identify(IdentificationRequest("robots/lwr4.yaml", (log,), effects=("torque_sensor_gain",), split=0.7))
+    result = identify(IdentificationRequest("robots/lwr4.yaml", (log,), effects=("torque_sensor_gain",), split=0.7,
+                                            consistent=True))
+    assert set(result.undetermined) == {f"gt{i + 1}" for i in range(7)}, result.undetermined
+    assert all(j.torque_gain is None for j in load_robot_text(result.model_yaml).joints)

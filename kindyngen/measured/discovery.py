@@ -91,6 +91,11 @@ Judgement (constants below; each rule says why):
   ``rms_after`` is honest), the group goes to ``indistinguishable`` with a motion that would
   separate it (:func:`separating_motion`), and ``effects`` does not list it.  The principal
   angle between the two column spaces is reported with it.
+* **Not determined**: a joint coefficient at a finite bound (or at 0 of ``[0, x]``), with a
+  relative standard error above :data:`REL_STD_MAX`, a sensing one whose torque stays below
+  :data:`MATTER` floors, or a compliance below :data:`NOISE_BIAS_FACTOR` times what the
+  torque noise alone gives (:func:`elastic_noise_bias`) is reported as not determined
+  (:func:`undetermined`), never as a value.
 * **Verdict**: ``explained`` when every joint's final held-out RMS is within
   :data:`EXPLAINED_FACTOR` x its noise floor; else ``unexplained`` says, per joint, how far
   above and what the rest correlates with.
