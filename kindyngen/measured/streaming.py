@@ -1,12 +1,17 @@
-"""Identification folded into a QR factor (logs of any length in bounded memory when unfiltered), and of many logs at once.
+"""Identification folded into a QR factor (logs of any length in bounded memory), and of many logs at once.
 
 A log is read in chunks (:mod:`kindyngen.measured.log_formats`), each chunk preprocessed
 together with ``overlap`` samples of its neighbours on either side (:func:`overlap_rows`: long
 enough that the zero-phase filter's and the differences' edge effects have decayed below 1e-15
-of the signal where the chunk's own samples begin), turned into regressor rows and torques by a
-per-chunk callable, and folded into the triangular factor of the stacked regressor
-(:class:`kindyngen.measured.ls_factor.LSFactor`).  Memory is the factor (O(columns^2)) plus one
-chunk, whatever the log length; the fit (ordinary or weighted least squares, or the
+of the signal where the chunk's own samples begin), turned into regressor rows by a per-chunk
+callable; with a low-pass (the default) the regressor columns, the description's declared
+effect columns and the unfiltered torque then pass through the same zero-phase filter and
+decimation (parallel filtering, :func:`kindyngen.measured.logs.parallel_filter`), again chunk by
+chunk with overlap (:class:`ChunkedParallelFilter`: chunks aligned to the decimation, so the
+kept samples are exactly the whole recording's, their values equal to rounding); the kept rows
+are folded into the triangular factor of the stacked regressor
+(:class:`kindyngen.measured.ls_factor.LSFactor`).  Memory is the factor (O(columns^2)) plus a
+few chunks, whatever the log length; the fit (ordinary or weighted least squares, or the
 semidefinite program) is solved from the factor.  Validation is folded the same way: the
 validation RMS of any parameters is exact from the validation factor, so one pass over the data
 suffices; the validation figure shows a decimated subset of the samples.
@@ -17,16 +22,18 @@ are combined in the order the files were given (left to right), and each file's 
 order, so the result is the same bit for bit for any number of workers (BLAS is held to one
 thread inside a file's fold for that reason).
 
+Each file is its own experiment, as in :func:`kindyngen.measured.identify.identify`: with a
+split, the first fraction of the file's own time span trains and the rest validates, and each
+side is filtered as a recording of its own (what ``identify()`` does to the parts
+:func:`kindyngen.measured.logs.split_time` cuts).
+
 Streaming needs a log whose chunks preprocess like the whole: one gap-free piece, no repeated
-rows, on its own clock (no ``rate_hz`` resampling), and no low-pass: with a low-pass (the
-default) each file is preprocessed whole and its regressor columns and torque are filtered
-together (:func:`kindyngen.measured.logs.filtered_rows`, parallel filtering), then folded, so
-memory grows with the longest file until that filter is applied chunk by chunk too.  Any other
-log is preprocessed whole, in memory, with a note saying so.
+rows, on its own clock (no ``rate_hz`` resampling).  Any other log is preprocessed whole, in
+memory, with a note saying so (its parallel filtering and folding still go chunk by chunk).
 
 Example:
 
->>> request = StreamedRequest("robots/panda.yaml", ("hour.parquet",), split=0.8)   # doctest: +SKIP
+>>> request = IdentificationRequest("robots/panda.yaml", ("hour.parquet",), split=0.8)  # doctest: +SKIP
 >>> result = identify_streamed(request, workers=2)                                  # doctest: +SKIP
 """
 from __future__ import annotations
