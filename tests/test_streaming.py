@@ -269,3 +269,23 @@ def test_semidefinite_program_from_the_factor_equals_the_stacked_one(ten_files):
     assert _relative(folded.effect_values, stacked.effect_values) < 1e-5
     assert np.allclose(folded.rms, stacked.rms, rtol=1e-5)
     assert folded.data_term == pytest.approx(stacked.data_term, rel=1e-5)
+
+
+def test_discover_reads_parquet_like_the_csv(log, tmp_path, capsys):
+    """discover's data entry reads every format identify reads (whole: discover is not streamed)."""
+    import json
+    from kindyngen.cli import main
+    root, path, (t, q, qd, qdd, tau) = log
+    raw = RawLog("sim", t[:6000], q[:6000], tau[:6000])
+    csv = _csv(tmp_path / "run.csv", raw.t, raw.q, raw.tau)
+    parquet = tmp_path / "run.parquet"
+    write_parquet(parquet, raw)
+    docs = []
+    for data in (csv, parquet):
+        code = main(["discover", "--robot", str(PANDA), "--data", str(data), "--candidates", "viscous_friction",
+                     "--out", str(tmp_path / data.suffix[1:]), "--quiet"])
+        assert code == 0, capsys.readouterr().err
+        docs.append(json.loads((tmp_path / data.suffix[1:] / "discovery.json").read_text()))
+    assert docs[0]["effects"] == docs[1]["effects"]
+    assert docs[0]["effects"]
+    assert docs[0]["rms_after"] == pytest.approx(docs[1]["rms_after"], rel=1e-9)
