@@ -349,6 +349,20 @@ def _pieces(segments, rows: int) -> Iterator[tuple[int, Segment]]:
             yield index, _rows(seg, a, a + rows)
 
 
+#: rows whose regressor is evaluated at once: (4096, 7, 43) doubles are 10 MB, below glibc's
+#: 32 MB mmap limit, so their memory is reused rather than faulted in for every piece
+REGRESSOR_ROWS = 4096
+
+
+def _sub_pieces(pieces) -> Iterator[tuple[int, Segment]]:
+    for index, piece in pieces:
+        if len(piece.t) <= REGRESSOR_ROWS:
+            yield index, piece
+        else:
+            for a in range(0, len(piece.t), REGRESSOR_ROWS):
+                yield index, _rows(piece, a, a + REGRESSOR_ROWS)
+
+
 class ChunkedParallelFilter:
     """:func:`kindyngen.measured.logs.parallel_filter` of one recording fed in consecutive
     pieces of rows, the kept (decimated) rows given back chunk by chunk in bounded memory.
@@ -379,19 +393,28 @@ class ChunkedParallelFilter:
         self.low_pass = low_pass
         self.overlap = -(-int(overlap) // d) * d
         self.chunk = max(d, int(chunk) // d * d)
-        self.buffer = None         # rows [b0, b0 + len) of the recording
+        self.buffers = None        # two (width, capacity) arrays, rows [b0, b0 + used) in the first
+        self.used = 0
         self.b0 = 0
         self.rows = 0              # rows pushed so far
         self.s = 0                 # first row of the next output chunk
 
     def push(self, rows: np.ndarray) -> list[np.ndarray]:
         """Append ``rows`` (m, width); the filtered, decimated rows that are now final."""
-        # held transposed, (width, rows) in C order: sosfiltfilt then filters contiguous
-        # signals instead of gathering every column through strided copies (~25 % less time)
-        rows = np.asarray(rows, float).T
-        self.buffer = np.ascontiguousarray(rows) if self.buffer is None else np.concatenate([self.buffer, rows],
-                                                                                             axis=1)
-        self.rows += rows.shape[1]
+        rows = np.asarray(rows, float)
+        m = len(rows)
+        # held transposed, (width, rows) in C order, so that sosfiltfilt filters contiguous
+        # signals; in two buffers allocated once and reused (shifting rows from one into the
+        # other), because fresh arrays of tens of MB cost as much in page faults as the filter
+        if self.buffers is None or self.used + m > self.buffers[0].shape[1]:
+            capacity = max(2 * (self.used + m), self.chunk + 2 * self.overlap + m)
+            grown = [np.empty((rows.shape[1], capacity)) for _ in range(2)]
+            if self.buffers is not None:
+                grown[0][:, :self.used] = self.buffers[0][:, :self.used]
+            self.buffers = grown
+        self.buffers[0][:, self.used:self.used + m] = rows.T
+        self.used += m
+        self.rows += m
         out = []
         while self.rows >= self.s + self.chunk + self.overlap:
             out.append(self._emit(self.s + self.chunk, self.s + self.chunk + self.overlap))
@@ -404,13 +427,22 @@ class ChunkedParallelFilter:
     def _emit(self, e: int, w1: int) -> np.ndarray:
         lp = self.low_pass
         w0 = max(0, self.s - self.overlap)
-        window = self.buffer[:, w0 - self.b0:w1 - self.b0].T        # (rows, width), a view
-        y = zero_phase_low_pass(window, lp.rate_hz, lp.cutoff_hz, lp.order)
-        kept = np.ascontiguousarray(y[self.s - w0:e - w0:lp.decimate])
+        window = self.buffers[0][:, w0 - self.b0:w1 - self.b0]
+        width = window.shape[0]
+        kept = np.empty((len(range(self.s - w0, e - w0, lp.decimate)), width))
+        # the columns are independent signals: filtered in groups, so that no temporary exceeds
+        # glibc's 32 MB mmap limit (below it, freed memory is reused instead of faulted in anew)
+        group = max(1, (16 << 20) // (8 * (w1 - w0 + 2 * int(round(lp.rate_hz / lp.cutoff_hz)))))
+        for g in range(0, width, group):
+            y = zero_phase_low_pass(window[g:g + group].T, lp.rate_hz, lp.cutoff_hz, lp.order)
+            kept[:, g:g + group] = y[self.s - w0:e - w0:lp.decimate]
         self.s = e
         drop = max(0, self.s - self.overlap - self.b0)      # rows no later window needs
         if drop:
-            self.buffer = self.buffer[:, drop:]
+            keep = self.used - drop
+            self.buffers[1][:, :keep] = self.buffers[0][:, drop:self.used]
+            self.buffers.reverse()
+            self.used = keep
             self.b0 += drop
         return kept
 
@@ -450,7 +482,7 @@ class _Folder:
         task = self.task
         part = None                # (segment index, is validation, filter or None, step after filtering)
         cut_time = None
-        for index, piece in pieces:
+        for index, piece in _sub_pieces(pieces):
             check_joint_limits(task.path, self.model, piece)
             if task.role == "split" and cut_time is None:
                 if spans:
