@@ -470,7 +470,7 @@ class _Folder:
         self.train, self.valid = LSFactor.empty(n, self.k), LSFactor.empty(n, self.k)
         self.nominal_sums = np.zeros(n)
         self.reservoir = _Reservoir(FIGURE_SAMPLES)
-        self.chunks = self.samples = self.raw = 0
+        self.chunks = self.samples = self.raw = self.read = 0
         self.valid_time = 0.0
         self.notes: list[str] = []
         self.last = time.perf_counter()
@@ -521,6 +521,7 @@ class _Folder:
                                           f"({lp.describe()}), in chunks of {filt.chunk} samples with "
                                           f"{filt.overlap} of overlap on each side (the filter of each part "
                                           f"whole to rounding)")
+                self.read += b - a
                 if not is_valid:
                     self.raw += b - a
                 if part[2] is None:
@@ -568,9 +569,9 @@ class _Folder:
         now = time.perf_counter()
         if now - self.last > 5.0:
             self.last = now
-            rate = self.samples / (now - self.started)
-            self.progress(f"{self.task.path}: {self.samples} samples folded in {self.chunks} chunks "
-                          f"({rate:,.0f} samples/s)")
+            rate = self.read / (now - self.started)
+            self.progress(f"{self.task.path}: {self.read} samples read ({rate:,.0f} samples/s), {self.samples} rows "
+                          f"folded in {self.chunks} chunks (after decimation)")
 
 
 def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> tuple[float, float]:
