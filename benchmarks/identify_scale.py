@@ -8,16 +8,21 @@ the joint limits), its rigid-body torques plus viscous friction and Gaussian tor
 dynamics are computed once and tiled (an excitation trajectory is replayed periodically on a
 real robot too); the noise makes every sample distinct.
 
-Runs, each ``identify --split 0.8`` in its own process timed by ``/usr/bin/time -v`` (wall
-time, maximum resident set size):
+Runs, each ``identify --split 0.8`` with the default preprocessing (5 Hz zero-phase low-pass,
+parallel filtering of the regressor columns and the torque, decimation by 25) in its own process
+timed by ``/usr/bin/time -v`` (wall time, maximum resident set size):
 
-* today's code (the commit this branch started from, ``--baseline-root``) on the 10-minute CSV;
-* the streaming code on the 10-minute CSV, the 1-hour CSV and the 10-hour Parquet file.
+* the in-memory peer, :func:`kindyngen.measured.identify.identify` of this commit (the whole
+  stacked regressor in memory, the same preprocessing and filter), on the 10-minute CSV
+  (``--baseline-root``: another checkout's ``kindyngen identify`` CLI instead);
+* the streaming ``kindyngen identify`` on the 10-minute CSV, the 1-hour CSV and the 10-hour
+  Parquet file; on the 10-minute log the largest relative difference of its base parameters
+  from the in-memory peer's is recorded.
 
 The 10-hour file (4 GB) is written in row groups while simulating, and deleted after its run;
 so are the others.  Results: ``benchmarks/results/identify_scale.json`` and ``.png``.
 
-    nice -n 10 python -m benchmarks.identify_scale [--baseline-root /work/main] [--hours 1 10]
+    nice -n 10 python -m benchmarks.identify_scale [--baseline-root CHECKOUT] [--hours 1 10]
 """
 from __future__ import annotations
 
@@ -103,19 +108,38 @@ def write_parquet(path: Path, seconds: float, period, seed: int = 1) -> None:
     writer.close()
 
 
-def run(label: str, code_root: Path, log: Path, out: Path, extra=()) -> dict:
-    argv = ["/usr/bin/time", "-v", sys.executable, "-m", "kindyngen", "identify", "--robot", str(ROBOT),
-            "--data", str(log), "--split", "0.8", "--out", str(out), *extra]
+def in_memory(log: str, out: str) -> int:
+    """The in-memory peer: ``identify()`` (everything stacked), the CLI's summary line."""
+    from kindyngen.measured.identify import IdentificationRequest, identify, write_outputs
+    result = identify(IdentificationRequest(ROBOT, (log,), split=0.8),
+                      lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
+    write_outputs(result, out)
+    print(json.dumps({"rms_train": [round(float(v), 4) for v in result.rms_train],
+                      "rms_validation": [round(float(v), 4) for v in result.rms_validation],
+                      "rms_validation_sum": round(float(np.sum(result.rms_validation)), 4),
+                      "physically_consistent": result.physically_consistent}))
+    return 0
+
+
+def run(label: str, code_root: Path, log: Path, out: Path, extra=(), peer: bool = False) -> dict:
+    command = (["-m", "benchmarks.identify_scale", "--in-memory", str(log), str(out)] if peer else
+               ["-m", "kindyngen", "identify", "--robot", str(ROBOT), "--data", str(log), "--split", "0.8",
+                "--out", str(out), *extra])
+    argv = ["/usr/bin/time", "-v", sys.executable, *command]
     env = dict(os.environ, PYTHONPATH=str(code_root))
     print(f"[{label}] {' '.join(argv[2:])}", flush=True)
+    load_before = [round(x, 2) for x in os.getloadavg()]
     started = time.perf_counter()
     # cwd = the code's root: ``python -m`` puts the working folder before PYTHONPATH
     proc = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=code_root)
     wall = time.perf_counter() - started
     peak_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
+    cpu_s = sum(float(re.search(rf"{kind} time \(seconds\): ([\d.]+)", proc.stderr).group(1))
+                for kind in ("User", "System"))
     progress = [line for line in proc.stderr.splitlines() if line.startswith("identify:")]
     record = {"label": label, "log": log.name, "log_bytes": log.stat().st_size, "exit_code": proc.returncode,
-              "wall_s": round(wall, 1), "peak_rss_gb": round(peak_kb / 1024 ** 2, 3),
+              "wall_s": round(wall, 1), "cpu_s": round(cpu_s, 1), "peak_rss_gb": round(peak_kb / 1024 ** 2, 3),
+              "load_average_before": load_before, "load_average_after": [round(x, 2) for x in os.getloadavg()],
               "stdout": proc.stdout.strip()[-400:], "progress_tail": progress[-4:]}
     if proc.returncode != 0:
         record["stderr_tail"] = proc.stderr.strip().splitlines()[-3:]
@@ -128,9 +152,14 @@ def main(argv=None) -> int:
     p.add_argument("--baseline-root", type=Path, default=None,
                    help="a checkout of today's code (default: none, the baseline run is skipped)")
     p.add_argument("--hours", type=float, nargs="*", default=[1.0, 10.0])
-    p.add_argument("--minutes-baseline", type=float, default=10.0)
+    p.add_argument("--minutes-baseline", type=float, default=10.0,
+                   help="length of the log the in-memory peer and the streaming code both run (0: skip both)")
+    p.add_argument("--results", default="identify_scale", help="name of the results (.json, .png) in benchmarks/results")
     p.add_argument("--work", type=Path, default=None, help="folder for the logs (default: a temporary one)")
+    p.add_argument("--in-memory", nargs=2, metavar=("LOG", "OUT"), help="run the in-memory peer alone (internal)")
     args = p.parse_args(argv)
+    if args.in_memory:
+        return in_memory(*args.in_memory)
     work = Path(tempfile.mkdtemp(prefix="identify_scale.", dir=args.work))
     cpu = next((line.split(":", 1)[1].strip() for line in subprocess.run(["lscpu"], capture_output=True,
                 text=True).stdout.splitlines() if line.startswith("Model name")), platform.processor())
@@ -139,11 +168,18 @@ def main(argv=None) -> int:
         print("simulating one 100 s period with Pinocchio", flush=True)
         period = _period()
         short = work / "panda_10min.csv"
-        write_csv(short, args.minutes_baseline * 60, period)
-        if args.baseline_root is not None:
-            records.append(run("today's code, 10 min CSV", args.baseline_root, short, work / "out_base"))
-        records.append(run("streaming, 10 min CSV", ROOT, short, work / "out_10min"))
-        short.unlink()
+        if args.minutes_baseline > 0:
+            write_csv(short, args.minutes_baseline * 60, period)
+            if args.baseline_root is not None:
+                records.append(run("other checkout, 10 min CSV", args.baseline_root, short, work / "out_base"))
+            else:
+                records.append(run("in-memory identify(), 10 min CSV", ROOT, short, work / "out_base", peer=True))
+            records.append(run("streaming, 10 min CSV", ROOT, short, work / "out_10min"))
+            peer, streamed = (json.loads((work / d / "identification.json").read_text())["base_params"]["values"]
+                              for d in ("out_base", "out_10min"))
+            records[-1]["base_params_max_relative_difference_from_peer"] = float(
+                np.max(np.abs(np.subtract(streamed, peer))) / np.max(np.abs(peer)))
+            short.unlink()
         for hours in args.hours:
             if hours <= 1:
                 log = work / f"panda_{hours:g}h.csv"
@@ -155,13 +191,17 @@ def main(argv=None) -> int:
             log.unlink()
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    doc = {"machine": {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version()},
+    doc = {"machine": {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+                       "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1024 ** 3, 1),
+                       "note": "shared with other jobs: the load average (1, 5, 15 min) before and after is beside each "
+                               "run, and its CPU time (user + system) beside its wall time"},
            "robot": "panda (robots/panda.yaml), 43 base columns", "rate_hz": RATE,
-           "command": "kindyngen identify --split 0.8 (defaults: 5 Hz zero-phase low-pass, OLS)",
+           "command": "kindyngen identify --split 0.8 (defaults: 5 Hz zero-phase low-pass, parallel filtering of "
+                      "the regressor columns with the torque, decimation 25, OLS)",
            "runs": records}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "identify_scale.json").write_text(json.dumps(doc, indent=1) + "\n")
-    _plot(doc, RESULTS / "identify_scale.png")
+    (RESULTS / f"{args.results}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    _plot(doc, RESULTS / f"{args.results}.png")
     return 0
 
 
@@ -172,7 +212,7 @@ def _plot(doc, path: Path) -> None:
     runs = doc["runs"]
     labels = [r["label"] for r in runs]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    colors = ["tab:red" if r["label"].startswith("today") else "tab:blue" for r in runs]
+    colors = ["tab:blue" if r["label"].startswith("streaming") else "tab:red" for r in runs]
     axes[0].barh(labels, [r["peak_rss_gb"] for r in runs], color=colors)
     axes[0].set_xlabel("peak resident memory (GB)")
     axes[1].barh(labels, [r["wall_s"] for r in runs], color=colors)

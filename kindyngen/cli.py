@@ -543,15 +543,15 @@ def parser() -> argparse.ArgumentParser:
                                     "accelerations, torques; Parquet with the CSV's column names; ROS 2 bags "
                                     "(a rosbag2 folder, MCAP or SQLite) and ROS 1 .bag files of "
                                     "sensor_msgs/msg/JointState, joints matched by name. Logs are read and "
-                                    "folded into a QR factor (unfiltered, --cutoff none, in chunks whatever the length; with the default "
-                                    "low-pass each file is filtered whole, so memory grows with the longest file). Each file is "
-                                    "one experiment; files are never differentiated across."))
+                                    "preprocessed, parallel-filtered and folded into a QR factor in chunks, in bounded memory "
+                                    "whatever the length. Each file is one experiment (with --split, each file's first "
+                                    "FRACTION trains); files are never differentiated or filtered across."))
     i.add_argument("--robot", required=True, metavar="ROBOT", help="the robot description, YAML or URDF (geometry, prior)")
     _robot_options(i)
     i.add_argument("--data", required=True, action="append", metavar="LOG", help="training log (repeatable)")
     i.add_argument("--validate", action="append", metavar="LOG", help="validation log (repeatable)")
     i.add_argument("--split", type=_fraction, metavar="FRACTION",
-                   help="train on the first FRACTION of the --data time span, validate on the rest")
+                   help="train on the first FRACTION of each --data file's time span, validate on the rest of it")
     i.add_argument("--effects", type=_effects, default=(), metavar="LIST",
                    help="comma-separated subset of viscous_friction,coulomb_friction,torque_offset,armature "
                         "(joint torques) and motor_side_elasticity,encoder_offset,torque_sensor_gain (effects on "

@@ -1,8 +1,10 @@
 """Identification in bounded memory (kindyngen.measured.ls_factor, .streaming, .log_formats)
 against the in-memory code path and plain numpy, on Panda logs simulated here with Pinocchio's
-rnea (nothing shared with the identification): the streamed fit equals the in-memory one, one
-file equals the same samples in ten files, Dask fleets of 1, 2 and 4 workers give the same bits,
-and Parquet, rosbag2 (MCAP, SQLite) and ROS 1 bag files give the CSV's result."""
+rnea (nothing shared with the identification): the chunked parallel filter equals the whole
+recording's, the streamed fit (the default low-pass, chunked) equals the in-memory one, one file
+equals the same samples in ten files, ten files split each on its own equal the in-memory split,
+Dask fleets of 1, 2 and 4 workers give the same bits, and Parquet, rosbag2 (MCAP, SQLite) and
+ROS 1 bag files give the CSV's result."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,9 +15,9 @@ from harness import ROOT
 from kindyngen.measured.estimation import least_squares
 from kindyngen.measured.identify import IdentificationRequest, identify
 from kindyngen.measured.log_formats import joint_names_of, read_any, write_parquet, write_rosbag1, write_rosbag2
-from kindyngen.measured.logs import LogError, Preprocessing, RawLog, preprocess
+from kindyngen.measured.logs import LogError, LowPass, Preprocessing, RawLog, parallel_filter, preprocess
 from kindyngen.measured.ls_factor import LSFactor, combine, combine_in_order, least_squares_factor
-from kindyngen.measured.streaming import identify_streamed, stream_segments
+from kindyngen.measured.streaming import ChunkedParallelFilter, identify_streamed, stream_segments
 from kindyngen.robot import load_robot
 from reference import pinocchio_model
 
@@ -102,25 +104,50 @@ def test_factor_matches_stacked_least_squares_in_any_order():
             assert fit.condition_number == pytest.approx(reference.condition_number, rel=1e-10)
 
 
+@pytest.mark.parametrize("total, piece, chunk, decimate", [(30000, 7000, 5000, 25), (29999, 1234, 2500, 25),
+                                                         (9001, 9001, 2500, 12), (900, 100, 50, 5)])
+def test_chunked_parallel_filter_equals_the_whole_recording(total, piece, chunk, decimate):
+    rng = np.random.default_rng(total)
+    columns = rng.normal(size=(total, 2, 3)).cumsum(axis=0)      # a random walk: slow content, as motion
+    tau = rng.normal(size=(total, 2))
+    low_pass = LowPass(1000.0, 5.0, 4, decimate)
+    whole_columns, whole_tau = parallel_filter(columns, tau, low_pass)
+    flat = np.concatenate([columns.reshape(total, -1), tau], axis=1)
+    f = ChunkedParallelFilter(low_pass, overlap=3530, chunk=chunk)
+    kept = [out for a in range(0, total, piece) for out in f.push(flat[a:a + piece])] + f.finish()
+    chunked = np.concatenate(kept)
+    assert len(chunked) == len(whole_tau) == -(-total // decimate)
+    assert _relative(chunked[:, :6], whole_columns.reshape(len(whole_tau), -1)) < 1e-12
+    assert _relative(chunked[:, 6:], whole_tau) < 1e-12
+    if total <= chunk + f.overlap:                # one window: the same operations as the whole
+        assert np.array_equal(chunked[:, 6:], whole_tau)
+
+
 def test_chunked_preprocessing_equals_the_whole_log(log):
     root, path, _ = log
     whole = preprocess(read_any(path, 7))
     (segment,) = whole
-    parts = list(stream_segments(path, 7, Preprocessing(), chunk_rows=2500))
-    assert len(parts) > 3
-    for channel in ("q", "qd", "qdd", "tau"):
+    notes = []
+    parts = list(stream_segments(path, 7, Preprocessing(), chunk_rows=1500, notes=notes))
+    assert len(parts) > 3 and any(note.startswith("streamed in chunks") for note in notes)
+    for channel in ("q", "qd", "qdd", "tau", "tau_unfiltered"):
         streamed = np.concatenate([getattr(p, channel) for p in parts])
         expected = getattr(segment, channel)
         assert streamed.shape == expected.shape
         assert _relative(streamed, expected) < 1e-9, channel
+    assert all(p.low_pass == segment.low_pass for p in parts)
 
 
 @pytest.mark.parametrize("options", [dict(), dict(weighted=True, effects=("viscous_friction",))])
 def test_streamed_fit_equals_the_in_memory_fit(log, options):
+    """The default low-pass: read, preprocessed and parallel-filtered in chunks (1500 rows, so a
+    12 s log is many chunks), against identify() filtering each part whole."""
     root, path, _ = log
     request = IdentificationRequest(PANDA, (str(path),), split=0.75, **options)
     memory = identify(request)
-    streamed = identify_streamed(request, chunk_rows=2500)
+    streamed = identify_streamed(request, chunk_rows=1500)
+    assert any(note.startswith("streamed in chunks") for note in streamed.preprocessing_notes)
+    assert any("in chunks of 1500 samples with 3550 of overlap" in note for note in streamed.preprocessing_notes)
     assert streamed.samples_train == memory.samples_train
     assert streamed.samples_validation == memory.samples_validation
     assert _relative(_values(streamed), _values(memory)) < 1e-9
@@ -131,17 +158,31 @@ def test_streamed_fit_equals_the_in_memory_fit(log, options):
 
 @pytest.fixture(scope="module")
 def ten_files(tmp_path_factory):
-    """The same samples of a 3-joint arm (q, qd, qdd given; no filtering) as one file and as ten."""
+    """The same samples of a 3-joint arm (q, qd, qdd given) as one file and as ten of 2 s."""
     root = tmp_path_factory.mktemp("fleet")
     arm = root / "panda3.yaml"
     arm.write_text(ARM3)
-    t, q, qd, qdd, tau = _simulate(6.0, 500.0, seed=5, noise=0.05, robot=arm)
+    t, q, qd, qdd, tau = _simulate(20.0, 500.0, seed=5, noise=0.05, robot=arm)
     one = _csv(root / "all.csv", t, q, tau, qd, qdd)
     parts = [_csv(root / f"part{k}.csv", t[idx], q[idx], tau[idx], qd[idx], qdd[idx])
              for k, idx in enumerate(np.array_split(np.arange(len(t)), 10))]
     t2, q2, qd2, qdd2, tau2 = _simulate(2.0, 500.0, seed=6, noise=0.05, robot=arm)
     held_out = _csv(root / "validate.csv", t2, q2, tau2, qd2, qdd2)
     return arm, one, parts, held_out
+
+
+@pytest.mark.parametrize("settings", [Preprocessing(), Preprocessing(cutoff_hz=None)], ids=["low-pass", "unfiltered"])
+def test_ten_files_split_each_on_its_own_as_in_memory(ten_files, settings):
+    """--split: each file is its own experiment, its first 75 % trains (identify()'s rule), with
+    the default low-pass and with none."""
+    arm, _, parts, _ = ten_files
+    request = IdentificationRequest(arm, tuple(map(str, parts)), split=0.75, preprocessing=settings)
+    memory = identify(request)
+    streamed = identify_streamed(request)
+    assert streamed.samples_train == memory.samples_train
+    assert streamed.samples_validation == memory.samples_validation
+    assert _relative(_values(streamed), _values(memory)) < 1e-9
+    assert np.allclose(streamed.rms_validation, memory.rms_validation, rtol=1e-9)
 
 
 def test_one_file_and_ten_files_and_dask_workers_agree(ten_files):
@@ -152,8 +193,11 @@ def test_one_file_and_ten_files_and_dask_workers_agree(ten_files):
                                                      preprocessing=settings))
     request = IdentificationRequest(arm, tuple(map(str, parts)), validate=(str(held_out),), preprocessing=settings)
     split = identify_streamed(request)
-    assert split.samples_train == single.samples_train == 3000
+    assert split.samples_train == single.samples_train == 10000
     assert _relative(_values(split), _values(single)) < 1e-9
+    # the fleet runs the default: low-pass, parallel filtering, each file split on its own
+    request = IdentificationRequest(arm, tuple(map(str, parts)), validate=(str(held_out),), split=0.75)
+    split = identify_streamed(request)
     bits = []
     with distributed.LocalCluster(n_workers=4, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
@@ -225,3 +269,23 @@ def test_semidefinite_program_from_the_factor_equals_the_stacked_one(ten_files):
     assert _relative(folded.effect_values, stacked.effect_values) < 1e-5
     assert np.allclose(folded.rms, stacked.rms, rtol=1e-5)
     assert folded.data_term == pytest.approx(stacked.data_term, rel=1e-5)
+
+
+def test_discover_reads_parquet_like_the_csv(log, tmp_path, capsys):
+    """discover's data entry reads every format identify reads (whole: discover is not streamed)."""
+    import json
+    from kindyngen.cli import main
+    root, path, (t, q, qd, qdd, tau) = log
+    raw = RawLog("sim", t[:6000], q[:6000], tau[:6000])
+    csv = _csv(tmp_path / "run.csv", raw.t, raw.q, raw.tau)
+    parquet = tmp_path / "run.parquet"
+    write_parquet(parquet, raw)
+    docs = []
+    for data in (csv, parquet):
+        code = main(["discover", "--robot", str(PANDA), "--data", str(data), "--candidates", "viscous_friction",
+                     "--out", str(tmp_path / data.suffix[1:]), "--quiet"])
+        assert code == 0, capsys.readouterr().err
+        docs.append(json.loads((tmp_path / data.suffix[1:] / "discovery.json").read_text()))
+    assert docs[0]["effects"] == docs[1]["effects"]
+    assert docs[0]["effects"]
+    assert docs[0]["rms_after"] == pytest.approx(docs[1]["rms_after"], rel=1e-9)

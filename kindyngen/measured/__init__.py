@@ -22,7 +22,7 @@ adds what meeting real data needs, one module per job:
   ROS 1 bags of JointState);
 * :mod:`kindyngen.measured.ls_factor`: least squares from the triangular factor, folded chunk
   by chunk and combined across logs;
-* :mod:`kindyngen.measured.streaming`: the ``identify`` command's run folded into a QR factor (bounded memory when unfiltered), and
+* :mod:`kindyngen.measured.streaming`: the ``identify`` command's run folded into a QR factor (bounded memory), and
   fleets of logs on a process pool or Dask;
 * :mod:`kindyngen.measured.discovery`, :mod:`kindyngen.measured.discrepancy`: naming the effect
   a model misses, and the ``discover`` command's run;

@@ -41,7 +41,8 @@ from ..robot import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover, predict_effects, spring_torque
 from .effects import EFFECTS, coulomb_eps, effect_names
-from .logs import Preprocessing, filtered_rows, load_segments, split_time
+from .log_formats import joint_names_of, read_any
+from .logs import Preprocessing, filtered_rows, preprocess, split_time
 from .model_writer import model_yaml
 from .regressor_rows import description_torques
 from .report import rms_table, torque_figure
@@ -189,7 +190,8 @@ def run_discrepancy(request: DiscrepancyRequest,
     # each file its own experiment, held-out part taken from each; in the order of the names
     for path in sorted(request.data, key=str):
         progress(f"reading {path}")
-        segments = load_segments(path, model.n, request.preprocessing)
+        # every format identify reads (CSV, npz, Parquet, bags), read whole: discover is not streamed
+        segments = preprocess(read_any(path, model.n, joint_names_of(model)), request.preprocessing)
         notes += [note for s in segments for note in s.notes]
         a, b = split_time(segments, 1.0 - request.holdout)
         train += a

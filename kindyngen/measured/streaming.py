@@ -1,12 +1,17 @@
-"""Identification folded into a QR factor (logs of any length in bounded memory when unfiltered), and of many logs at once.
+"""Identification folded into a QR factor (logs of any length in bounded memory), and of many logs at once.
 
 A log is read in chunks (:mod:`kindyngen.measured.log_formats`), each chunk preprocessed
 together with ``overlap`` samples of its neighbours on either side (:func:`overlap_rows`: long
 enough that the zero-phase filter's and the differences' edge effects have decayed below 1e-15
-of the signal where the chunk's own samples begin), turned into regressor rows and torques by a
-per-chunk callable, and folded into the triangular factor of the stacked regressor
-(:class:`kindyngen.measured.ls_factor.LSFactor`).  Memory is the factor (O(columns^2)) plus one
-chunk, whatever the log length; the fit (ordinary or weighted least squares, or the
+of the signal where the chunk's own samples begin), turned into regressor rows by a per-chunk
+callable; with a low-pass (the default) the regressor columns, the description's declared
+effect columns and the unfiltered torque then pass through the same zero-phase filter and
+decimation (parallel filtering, :func:`kindyngen.measured.logs.parallel_filter`), again chunk by
+chunk with overlap (:class:`ChunkedParallelFilter`: chunks aligned to the decimation, so the
+kept samples are exactly the whole recording's, their values equal to rounding); the kept rows
+are folded into the triangular factor of the stacked regressor
+(:class:`kindyngen.measured.ls_factor.LSFactor`).  Memory is the factor (O(columns^2)) plus a
+few chunks, whatever the log length; the fit (ordinary or weighted least squares, or the
 semidefinite program) is solved from the factor.  Validation is folded the same way: the
 validation RMS of any parameters is exact from the validation factor, so one pass over the data
 suffices; the validation figure shows a decimated subset of the samples.
@@ -17,16 +22,18 @@ are combined in the order the files were given (left to right), and each file's 
 order, so the result is the same bit for bit for any number of workers (BLAS is held to one
 thread inside a file's fold for that reason).
 
+Each file is its own experiment, as in :func:`kindyngen.measured.identify.identify`: with a
+split, the first fraction of the file's own time span trains and the rest validates, and each
+side is filtered as a recording of its own (what ``identify()`` does to the parts
+:func:`kindyngen.measured.logs.split_time` cuts).
+
 Streaming needs a log whose chunks preprocess like the whole: one gap-free piece, no repeated
-rows, on its own clock (no ``rate_hz`` resampling), and no low-pass: with a low-pass (the
-default) each file is preprocessed whole and its regressor columns and torque are filtered
-together (:func:`kindyngen.measured.logs.filtered_rows`, parallel filtering), then folded, so
-memory grows with the longest file until that filter is applied chunk by chunk too.  Any other
-log is preprocessed whole, in memory, with a note saying so.
+rows, on its own clock (no ``rate_hz`` resampling).  Any other log is preprocessed whole, in
+memory, with a note saying so (its parallel filtering and folding still go chunk by chunk).
 
 Example:
 
->>> request = StreamedRequest("robots/panda.yaml", ("hour.parquet",), split=0.8)   # doctest: +SKIP
+>>> request = IdentificationRequest("robots/panda.yaml", ("hour.parquet",), split=0.8)  # doctest: +SKIP
 >>> result = identify_streamed(request, workers=2)                                  # doctest: +SKIP
 """
 from __future__ import annotations
@@ -49,7 +56,7 @@ from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, _consistency
 from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
                           time_span_of_file)
-from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, filtered_rows, preprocess, split_time
+from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess, zero_phase_low_pass
 from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
 from .model_writer import ModelWriteError, model_yaml
 from .regressor_rows import torque_regressor
@@ -126,12 +133,25 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
                     chunk_rows: int = CHUNK_ROWS, notes: list | None = None) -> Iterator[Segment]:
     """Preprocessed consecutive pieces of the log at ``path`` whose concatenation equals (to
     ~1e-15 relative) the segments of ``preprocess(read_any(path))``; at most about ``2 chunk_rows``
-    samples each.  ``notes`` (a list) receives what was done."""
+    samples each, each carrying its unfiltered torque and low-pass when filtered (as the whole
+    log's segments do).  ``notes`` (a list) receives what was done."""
+    for _, piece in _segment_pieces(path, n, settings, joint_names, chunk_rows, notes):
+        yield piece
+
+
+def _segment_pieces(path, n: int, settings: Preprocessing, joint_names, chunk_rows: int, notes: list | None,
+                    spans: list | None = None) -> Iterator[tuple[int, Segment]]:
+    """``(segment index, piece)`` of :func:`stream_segments`.  When the log is preprocessed
+    whole (short, or resampled), ``spans`` (a list) receives the exact (first, last) time of its
+    segments before the first piece, as :func:`kindyngen.measured.logs.split_time` takes them."""
     source = str(path)
     notes = notes if notes is not None else []
+    spans = spans if spans is not None else []
     if settings.rate_hz is not None:
         notes.append("preprocessed whole in memory (resampling to --rate needs the whole log)")
-        yield from preprocess(read_any(path, n, joint_names), settings)
+        whole = preprocess(read_any(path, n, joint_names), settings)
+        spans.append((float(whole[0].t[0]), float(whole[-1].t[-1])))
+        yield from _pieces(whole, chunk_rows)
         return
     chunks = iter_chunks(path, n, joint_names, chunk_rows)
     buf = None           # arrays of global rows [b0, b1)
@@ -175,7 +195,8 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
             # short enough to preprocess whole: exactly what the in-memory path does
             whole = preprocess(_window_log(source, buf, 0, b1), settings)
             notes.extend(note for seg in whole for note in seg.notes)
-            yield from whole
+            spans.append((float(whole[0].t[0]), float(whole[-1].t[-1])))
+            yield from _pieces(whole, chunk_rows)
             return
         end_out = b1 - cut if exhausted else None
         if exhausted and s >= end_out:
@@ -196,7 +217,7 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
             notes.extend(kept)
             notes.append(f"streamed in chunks of {chunk_rows} samples with {L} samples of overlap on each side; "
                          f"trimmed {cut} samples at each end of the log")
-        yield Segment(source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b])
+        yield 0, _rows(seg, a, b)
         s = e
         drop = max(0, s - L - b0)        # rows no later window needs
         if drop:
@@ -243,8 +264,8 @@ class _Reservoir:
 
 @dataclass(frozen=True)
 class FoldTask:
-    """One file's part of a run: ``role`` 'train', 'validate', or 'split' (samples before
-    ``cut_time`` train, the rest validate)."""
+    """One file's part of a run: ``role`` 'train', 'validate', or 'split' (the first ``split``
+    fraction of the file's own time span trains, the rest validates)."""
 
     path: str
     role: str
@@ -255,7 +276,6 @@ class FoldTask:
     effects: tuple[str, ...]
     settings: Preprocessing
     chunk_rows: int = CHUNK_ROWS
-    cut_time: float | None = None
     #: with ``role`` 'split': the fraction of this file's own span that trains (as
     #: :func:`kindyngen.measured.identify.identify` splits each file)
     split: float | None = None
@@ -285,34 +305,28 @@ class FileFold:
 
 
 def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: None) -> FileFold:
-    """Read, preprocess, regress and fold one file (runs in a worker for fleets)."""
+    """Read, preprocess, regress, parallel-filter and fold one file (runs in a worker for fleets)."""
     from threadpoolctl import threadpool_limits
     started = time.perf_counter()
     model = load_robot(task.robot, task.snap_angles, task.base, task.tip)
     n = model.n
-    rows_of = (task.rows_factory or regressor_rows)(model, task.effects)
-    regressor = torque_regressor(model)
-    k_base = len(regressor.names)
-    k = k_base + len(effect_names(task.effects, n))
-    nominal_p = regressor.base_map @ parameter_vector(model)
     names = joint_names_of(model)
+    folder = _Folder(task, model, started, progress)
     with threadpool_limits(1):      # the same arithmetic whatever the worker's thread count
         notes: list[str] = []
-        if task.settings.cutoff_hz is not None:
-            # parallel filtering (issue 24) is not streamed yet: the file is preprocessed and
-            # parallel-filtered whole, exactly as the in-memory identify() does, then folded
-            parts = _fold_filtered_whole(task, rows_of, n, k, k_base, nominal_p, model, notes)
-        else:
-            try:
-                parts = _accumulate(task, stream_segments(task.path, n, task.settings, names, task.chunk_rows,
-                                                          notes),
-                                    rows_of, n, k, k_base, nominal_p, model, started, progress)
-            except _NotStreamable as exc:
-                notes = [f"preprocessed whole in memory ({exc})"]
-                whole = preprocess(read_any(task.path, n, names), task.settings)
-                notes += [note for s in whole for note in s.notes]
-                parts = _accumulate(task, _pieces(whole, task.chunk_rows), rows_of, n, k, k_base, nominal_p, model,
-                                    started, progress)
+        spans: list = []
+        raw_span = time_span(task.path, n, names, task.chunk_rows) if task.role == "split" else None
+        try:
+            parts = folder.run(_segment_pieces(task.path, n, task.settings, names, task.chunk_rows, notes, spans),
+                               spans, raw_span)
+        except _NotStreamable as exc:
+            notes = [f"preprocessed whole in memory ({exc})"]
+            whole = preprocess(read_any(task.path, n, names), task.settings)
+            notes += [note for s in whole for note in s.notes]
+            folder = _Folder(task, model, started, progress)
+            parts = folder.run(_pieces(whole, task.chunk_rows), [(float(whole[0].t[0]), float(whole[-1].t[-1]))],
+                               raw_span)
+    notes += folder.notes
     train, valid, nominal_sums, reservoir, chunks, samples, raw = parts
     if samples == 0:
         raise LogError(task.path, "t", "no samples after preprocessing")
@@ -320,102 +334,244 @@ def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: Non
                     chunks, samples, time.perf_counter() - started, raw)
 
 
-def _fold_filtered_whole(task, rows_of, n, k, k_base, nominal_p, model, notes):
-    """One file preprocessed whole, split on its own (``task.split``), each segment's columns,
-    the description's declared effects and the unfiltered torque parallel-filtered
-    (:func:`kindyngen.measured.logs.filtered_rows`), then folded: what the in-memory
-    :func:`kindyngen.measured.identify.identify` does, in memory per file (not bounded)."""
-    whole = preprocess(read_any(task.path, n, joint_names_of(model)), task.settings)
-    notes.append("preprocessed and parallel-filtered whole in memory (parallel filtering is not streamed yet)")
-    notes.extend(note for s in whole for note in s.notes)
-    if task.role == "split":
-        train_segs, valid_segs = split_time(whole, task.split)
-    elif task.role == "validate":
-        train_segs, valid_segs = (), whole
-    else:
-        train_segs, valid_segs = whole, ()
-    declared = model.effects
-    declared_values = np.array([float(v) for v in effect_parameter_values(model)]) if declared else None
-    eps = coulomb_eps(model)
-    train, valid = LSFactor.empty(n, k), LSFactor.empty(n, k)
-    nominal_sums = np.zeros(n)
-    reservoir = _Reservoir(FIGURE_SAMPLES)
-    chunks = samples = raw = 0
-    valid_time = 0.0
-    for is_valid, segs in ((False, train_segs), (True, valid_segs)):
-        for seg in segs:
-            check_joint_limits(task.path, model, seg)
-            Y, _ = rows_of(seg)
-            parts = [Y] + ([effect_columns(declared, seg.qd, seg.qdd, eps)] if declared else [])
-            t, F, tau = filtered_rows(seg, np.concatenate(parts, axis=2))
-            Yf = F[:, :, :k]
-            if not is_valid:
-                train = train.fold(Yf, tau)
-                raw += len(seg.t)
-            else:
-                valid = valid.fold(Yf, tau)
-                nominal = Yf[:, :, :k_base] @ nominal_p
-                if declared:
-                    nominal = nominal + F[:, :, k:] @ declared_values
-                nominal_sums += np.sum((tau - nominal) ** 2, axis=0)
-                step = t[1] - t[0] if len(t) > 1 else seg.dt
-                x = valid_time + step * np.arange(len(tau))
-                valid_time += step * len(tau)
-                reservoir.add(x, Yf, tau, nominal)
-            chunks += 1
-            samples += len(tau)
-    return train, valid, nominal_sums, reservoir, chunks, samples, raw
+def _rows(seg: Segment, a: int, b: int) -> Segment:
+    """Rows ``a:b`` of a segment, with its unfiltered torque and low-pass."""
+    unfiltered = None if seg.tau_unfiltered is None else seg.tau_unfiltered[a:b]
+    return Segment(seg.source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b], (),
+                   unfiltered, seg.low_pass)
 
 
-def _pieces(segments, rows: int) -> Iterator[Segment]:
-    """Segments cut into pieces of at most ``rows`` samples (the regressor of one at a time)."""
-    for seg in segments:
+def _pieces(segments, rows: int) -> Iterator[tuple[int, Segment]]:
+    """``(segment index, piece)``: segments cut into pieces of at most ``rows`` samples (the
+    regressor of one at a time)."""
+    for index, seg in enumerate(segments):
         for a in range(0, len(seg.t), rows):
-            b = a + rows
-            yield Segment(seg.source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b])
+            yield index, _rows(seg, a, a + rows)
 
 
-def _accumulate(task, segments, rows_of, n, k, k_base, nominal_p, model, started, progress):
-    """Fold the pieces of one file: (train factor, validation factor, nominal sums, reservoir,
-    chunks, samples)."""
-    declared = model.effects
-    declared_values = np.array([float(v) for v in effect_parameter_values(model)]) if declared else None
-    eps = coulomb_eps(model)
-    train, valid = LSFactor.empty(n, k), LSFactor.empty(n, k)
-    nominal_sums = np.zeros(n)
-    reservoir = _Reservoir(FIGURE_SAMPLES)
-    chunks = samples = 0
-    valid_time = 0.0
-    last = time.perf_counter()
-    for seg in segments:
-        check_joint_limits(task.path, model, seg)
-        Y, tau = rows_of(seg)
-        if task.role == "train":
-            is_valid = np.zeros(len(tau), bool)
-        elif task.role == "validate":
-            is_valid = np.ones(len(tau), bool)
+#: rows whose regressor is evaluated at once: (4096, 7, 43) doubles are 10 MB, below glibc's
+#: 32 MB mmap limit, so their memory is reused rather than faulted in for every piece
+REGRESSOR_ROWS = 4096
+
+
+def _sub_pieces(pieces) -> Iterator[tuple[int, Segment]]:
+    for index, piece in pieces:
+        if len(piece.t) <= REGRESSOR_ROWS:
+            yield index, piece
         else:
-            is_valid = seg.t >= task.cut_time
-        if (~is_valid).any():
-            train = train.fold(Y[~is_valid], tau[~is_valid])
-        if is_valid.any():
-            Yv, tv = Y[is_valid], tau[is_valid]
-            valid = valid.fold(Yv, tv)
-            nominal = Yv[:, :, :k_base] @ nominal_p
-            if declared:
-                nominal = nominal + effect_columns(declared, seg.qd[is_valid], seg.qdd[is_valid], eps) @ declared_values
-            nominal_sums += np.sum((tv - nominal) ** 2, axis=0)
-            x = valid_time + seg.dt * np.arange(len(tv))
-            valid_time += seg.dt * len(tv)
-            reservoir.add(x, Yv, tv, nominal)
-        chunks += 1
-        samples += len(tau)
+            for a in range(0, len(piece.t), REGRESSOR_ROWS):
+                yield index, _rows(piece, a, a + REGRESSOR_ROWS)
+
+
+class ChunkedParallelFilter:
+    """:func:`kindyngen.measured.logs.parallel_filter` of one recording fed in consecutive
+    pieces of rows, the kept (decimated) rows given back chunk by chunk in bounded memory.
+
+    Output chunk ``[s, e)`` (``s`` and ``e - s = chunk`` multiples of ``decimate``) is filtered
+    in the window ``[s - overlap, e + overlap]`` clipped to the recording, ``overlap`` rounded up
+    to a multiple of ``decimate``, and rows ``s, s + decimate, ...`` of it are kept: exactly the
+    rows ``parallel_filter`` keeps of the whole.  Where a window ends inside the recording, the
+    forwards-backwards filter's start-up differs from the whole recording's; that difference
+    decays like the filter's slowest pole, to ``e^-40`` (4e-18) of the signal over
+    :func:`overlap_rows` samples, so the kept rows equal the whole recording's filter to
+    rounding (tested to 1e-12 of the largest value).  A recording no longer than one window is
+    filtered whole (the same bits as ``parallel_filter``).  Memory: ``chunk + 2 overlap`` rows
+    plus one piece.
+
+    >>> from kindyngen.measured.logs import LowPass, parallel_filter
+    >>> rng = np.random.default_rng(0); x = rng.normal(size=(30000, 2)); lp = LowPass(1000.0, 5.0, 4, 25)
+    >>> f = ChunkedParallelFilter(lp, overlap=3530, chunk=5000)
+    >>> kept = [out for a in range(0, 30000, 7000) for out in f.push(x[a:a + 7000])] + f.finish()
+    >>> whole = parallel_filter(x[:, :1, None], x[:, 1:], lp)
+    >>> chunked = np.concatenate(kept)
+    >>> chunked.shape, bool(np.abs(chunked[:, 1:] - whole[1]).max() < 1e-12 * np.abs(whole[1]).max())
+    ((1200, 2), True)
+    """
+
+    def __init__(self, low_pass, overlap: int, chunk: int):
+        d = low_pass.decimate
+        self.low_pass = low_pass
+        self.overlap = -(-int(overlap) // d) * d
+        self.chunk = max(d, int(chunk) // d * d)
+        self.buffers = None        # two (width, capacity) arrays, rows [b0, b0 + used) in the first
+        self.used = 0
+        self.b0 = 0
+        self.rows = 0              # rows pushed so far
+        self.s = 0                 # first row of the next output chunk
+
+    def push(self, rows: np.ndarray) -> list[np.ndarray]:
+        """Append ``rows`` (m, width); the filtered, decimated rows that are now final."""
+        rows = np.asarray(rows, float)
+        m = len(rows)
+        # held transposed, (width, rows) in C order, so that sosfiltfilt filters contiguous
+        # signals; in two buffers allocated once and reused (shifting rows from one into the
+        # other), because fresh arrays of tens of MB cost as much in page faults as the filter
+        if self.buffers is None or self.used + m > self.buffers[0].shape[1]:
+            capacity = max(2 * (self.used + m), self.chunk + 2 * self.overlap + m)
+            grown = [np.empty((rows.shape[1], capacity)) for _ in range(2)]
+            if self.buffers is not None:
+                grown[0][:, :self.used] = self.buffers[0][:, :self.used]
+            self.buffers = grown
+        self.buffers[0][:, self.used:self.used + m] = rows.T
+        self.used += m
+        self.rows += m
+        out = []
+        while self.rows >= self.s + self.chunk + self.overlap:
+            out.append(self._emit(self.s + self.chunk, self.s + self.chunk + self.overlap))
+        return out
+
+    def finish(self) -> list[np.ndarray]:
+        """The rows after the last chunk (the recording ends here)."""
+        return [self._emit(self.rows, self.rows)] if self.rows > self.s else []
+
+    def _emit(self, e: int, w1: int) -> np.ndarray:
+        lp = self.low_pass
+        w0 = max(0, self.s - self.overlap)
+        window = self.buffers[0][:, w0 - self.b0:w1 - self.b0]
+        width = window.shape[0]
+        kept = np.empty((len(range(self.s - w0, e - w0, lp.decimate)), width))
+        # the columns are independent signals: filtered in groups, so that no temporary exceeds
+        # glibc's 32 MB mmap limit (below it, freed memory is reused instead of faulted in anew)
+        group = max(1, (16 << 20) // (8 * (w1 - w0 + 2 * int(round(lp.rate_hz / lp.cutoff_hz)))))
+        for g in range(0, width, group):
+            y = zero_phase_low_pass(window[g:g + group].T, lp.rate_hz, lp.cutoff_hz, lp.order)
+            kept[:, g:g + group] = y[self.s - w0:e - w0:lp.decimate]
+        self.s = e
+        drop = max(0, self.s - self.overlap - self.b0)      # rows no later window needs
+        if drop:
+            keep = self.used - drop
+            self.buffers[1][:, :keep] = self.buffers[0][:, drop:self.used]
+            self.buffers.reverse()
+            self.used = keep
+            self.b0 += drop
+        return kept
+
+
+class _Folder:
+    """One file's pieces -> training and validation factors.  The file's samples form parts:
+    each segment, and with ``role`` 'split' its training side (before the cut) and validation
+    side, split as :func:`kindyngen.measured.logs.split_time` splits the file; each part's
+    regressor columns, the description's declared effect columns and the unfiltered torque are
+    parallel-filtered as one recording (:class:`ChunkedParallelFilter`), as
+    :func:`kindyngen.measured.identify.identify` filters each segment it split, and folded."""
+
+    def __init__(self, task: FoldTask, model, started: float, progress):
+        self.task, self.model, self.started, self.progress = task, model, started, progress
+        n = model.n
+        self.rows_of = (task.rows_factory or regressor_rows)(model, task.effects)
+        regressor = torque_regressor(model)
+        self.k_base = len(regressor.names)
+        self.k = self.k_base + len(effect_names(task.effects, n))
+        self.nominal_p = regressor.base_map @ parameter_vector(model)
+        self.declared = model.effects
+        self.declared_values = (np.array([float(v) for v in effect_parameter_values(model)])
+                                if self.declared else None)
+        self.eps = coulomb_eps(model)
+        self.train, self.valid = LSFactor.empty(n, self.k), LSFactor.empty(n, self.k)
+        self.nominal_sums = np.zeros(n)
+        self.reservoir = _Reservoir(FIGURE_SAMPLES)
+        self.chunks = self.samples = self.raw = self.read = 0
+        self.valid_time = 0.0
+        self.notes: list[str] = []
+        self.last = time.perf_counter()
+
+    def run(self, pieces, spans: list, raw_span):
+        """Fold ``(segment index, piece)`` in time order.  ``spans``: the exact (first, last)
+        time of the file's segments when known before the first piece; else (streamed) the
+        span is the raw time stamps' ``raw_span`` less the trim at each end."""
+        task = self.task
+        part = None                # (segment index, is validation, filter or None, step after filtering)
+        cut_time = None
+        for index, piece in _sub_pieces(pieces):
+            check_joint_limits(task.path, self.model, piece)
+            if task.role == "split" and cut_time is None:
+                if spans:
+                    start, end = spans[0]
+                else:
+                    trim = int(round(task.settings.effective_trim_s / piece.dt)) * piece.dt
+                    start = float(piece.t[0])
+                    end = start + (raw_span[1] - raw_span[0]) - 2 * trim
+                cut_time = start + task.split * (end - start)
+                self.notes.append(f"split on its own: samples before t = {cut_time:.6g} s (the first "
+                                  f"{100 * task.split:g} % of the span {start:.6g} .. {end:.6g} s) train, the rest "
+                                  f"validate")
+            Y, tau = self.rows_of(piece)
+            columns = np.concatenate([Y] + ([effect_columns(self.declared, piece.qd, piece.qdd, self.eps)]
+                                            if self.declared else []), axis=2)
+            if piece.low_pass is not None:
+                tau = piece.tau_unfiltered
+            if task.role == "split":
+                c = int(np.searchsorted(piece.t, cut_time, side="left"))
+                ranges = [(0, c, False), (c, len(piece.t), True)]
+            else:
+                ranges = [(0, len(piece.t), task.role == "validate")]
+            for a, b, is_valid in ranges:
+                if a == b:
+                    continue
+                if part is None or part[:2] != (index, is_valid):
+                    self._finish(part)
+                    lp = piece.low_pass
+                    if lp is None:
+                        part = (index, is_valid, None, piece.dt)
+                    else:
+                        filt = ChunkedParallelFilter(lp, overlap_rows(task.settings, piece.dt), task.chunk_rows)
+                        part = (index, is_valid, filt, piece.dt * lp.decimate)
+                        self.notes.append(f"parallel filtering: regressor and effect columns computed from the "
+                                          f"filtered motion, then filtered together with the unfiltered torque "
+                                          f"({lp.describe()}), in chunks of {filt.chunk} samples with "
+                                          f"{filt.overlap} of overlap on each side (the filter of each part "
+                                          f"whole to rounding)")
+                self.read += b - a
+                if not is_valid:
+                    self.raw += b - a
+                if part[2] is None:
+                    self._fold(is_valid, columns[a:b], tau[a:b], part[3])
+                else:
+                    m = b - a
+                    flat = np.concatenate([columns[a:b].reshape(m, -1), tau[a:b]], axis=1)
+                    for out in part[2].push(flat):
+                        self._fold_flat(out, is_valid, part[3])
+            self._progress()
+        self._finish(part)
+        return (self.train, self.valid, self.nominal_sums, self.reservoir, self.chunks, self.samples,
+                self.raw)
+
+    def _finish(self, part):
+        if part is not None and part[2] is not None:
+            for out in part[2].finish():
+                self._fold_flat(out, part[1], part[3])
+
+    def _fold_flat(self, out, is_valid, step):
+        """Fold rows of the filter: (m, n * width) columns then (m, n) torques."""
+        n = self.model.n
+        width = (out.shape[1] - n) // n
+        self._fold(is_valid, out[:, :-n].reshape(len(out), n, width), out[:, -n:], step)
+
+    def _fold(self, is_valid, F, tau, step):
+        """Fold filtered rows: ``F`` (m, n, k + declared effects), ``tau`` (m, n)."""
+        k, k_base = self.k, self.k_base
+        Yf = F[:, :, :k]
+        if not is_valid:
+            self.train = self.train.fold(Yf, tau)
+        else:
+            self.valid = self.valid.fold(Yf, tau)
+            nominal = Yf[:, :, :k_base] @ self.nominal_p
+            if self.declared:
+                nominal = nominal + F[:, :, k:] @ self.declared_values
+            self.nominal_sums += np.sum((tau - nominal) ** 2, axis=0)
+            x = self.valid_time + step * np.arange(len(tau))
+            self.valid_time += step * len(tau)
+            self.reservoir.add(x, Yf, tau, nominal)
+        self.chunks += 1
+        self.samples += len(tau)
+
+    def _progress(self):
         now = time.perf_counter()
-        if now - last > 5.0:
-            last = now
-            rate = samples / (now - started)
-            progress(f"{task.path}: {samples} samples read, {chunks} chunks folded ({rate:,.0f} samples/s)")
-    return train, valid, nominal_sums, reservoir, chunks, samples, train.samples
+        if now - self.last > 5.0:
+            self.last = now
+            rate = self.read / (now - self.started)
+            self.progress(f"{self.task.path}: {self.read} samples read ({rate:,.0f} samples/s), {self.samples} rows "
+                          f"folded in {self.chunks} chunks (after decimation)")
 
 
 def time_span(path, n: int, joint_names=None, chunk_rows: int = CHUNK_ROWS) -> tuple[float, float]:
@@ -480,28 +636,11 @@ def identify_streamed(request: IdentificationRequest, progress: Callable[[str], 
     common = dict(robot=str(request.robot), base=request.base, tip=request.tip, snap_angles=request.snap_angles,
                   effects=tuple(request.effects), settings=settings, chunk_rows=chunk_rows,
                   rows_factory=rows_factory)
-    tasks = []
     if request.split is not None:
-        progress("finding the time span of the training logs for --split")
-        spans = [time_span(p, n, joint_names_of(model), chunk_rows) for p in request.data]
-        dt = None
-        first, last = min(s[0] for s in spans), max(s[1] for s in spans)
-        # the in-memory split cuts the span of the trimmed segments
-        trim = settings.effective_trim_s
-        steps = []
-        for p in request.data[:1]:
-            for chunk in iter_chunks(p, n, joint_names_of(model), chunk_rows):
-                d = np.diff(chunk.t)
-                steps = d[d > 0]
-                break
-        dt = float(np.median(steps)) if len(steps) else 0.0
-        cut_rows = int(round(trim / dt)) if dt > 0 else 0
-        start, end = first + cut_rows * dt, last - cut_rows * dt
-        cut_time = start + request.split * (end - start)
-        tasks += [FoldTask(str(p), "split", cut_time=cut_time, split=request.split, **common)
-                  for p in request.data]
+        # each file is its own experiment, split on its own time span (as identify() splits)
+        tasks = [FoldTask(str(p), "split", split=request.split, **common) for p in request.data]
     else:
-        tasks += [FoldTask(str(p), "train", **common) for p in request.data]
+        tasks = [FoldTask(str(p), "train", **common) for p in request.data]
     tasks += [FoldTask(str(p), "validate", **common) for p in request.validate]
 
     started = time.perf_counter()
