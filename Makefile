@@ -17,8 +17,10 @@ $(VENV)/.installed: pyproject.toml
 generate: $(VENV)/.installed
 	$(PY) -m kindyngen generate $(ROBOTS) --out generated
 
+# one worker per core; --dist loadfile keeps a file's tests on one worker, so its module fixtures
+# (derivations, compiled libraries) are built once
 test: $(VENV)/.installed
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto --dist loadfile
 
 bench: $(VENV)/.installed
 	$(PY) -m benchmarks.run
