@@ -1,7 +1,7 @@
 """kindyngen.kinematics_dualquat's algebra on its own: the Hamilton product against scipy's
 rotation composition, dual-quaternion products against 4x4 matrix products, the conjugate as
 the inverse, and each joint's constant factors A M(q) B against the DH formula written out in
-numpy (the whole fk_dq is checked against Pinocchio in tests/test_kinematics.py)."""
+numpy (the whole fk_dq is held to fk_hom, itself to Pinocchio, in tests/test_kinematics.py)."""
 from __future__ import annotations
 
 import math
