@@ -50,7 +50,11 @@ def _probe(env: dict) -> list[str] | None:
 
 
 def _tree(root):
-    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+    """{relative path: bytes} of the generated files; bytecode is left out: a test (or a
+    worker running beside this one) that imports a committed Python module writes
+    __pycache__ there unless PYTHONDONTWRITEBYTECODE is set, and it is no generated output."""
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file() and "__pycache__" not in p.parts}
 
 
 def test_committed_tree_has_one_folder_per_description():
