@@ -17,8 +17,11 @@ $(VENV)/.installed: pyproject.toml
 generate: $(VENV)/.installed
 	$(PY) -m kindyngen generate $(ROBOTS) --out generated
 
+# the suite on every logical CPU ("-n auto" counts physical cores: one on a 2-vCPU runner with
+# hyperthreads; PYTEST_XDIST_AUTO_NUM_WORKERS=N overrides); --dist loadfile keeps each test
+# file on one worker, so its module fixtures (derivations, compiled libraries) are built once
 test: $(VENV)/.installed
-	$(PY) -m pytest
+	$(PY) -m pytest -n logical --dist loadfile
 
 bench: $(VENV)/.installed
 	$(PY) -m benchmarks.run

@@ -7,6 +7,7 @@ the slow header-only Pinocchio build in particular is done once per machine.
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
 import subprocess
 import time
@@ -53,7 +54,7 @@ def build(name: str, compiler: str, sources: list[Path], flags: list[str],
         seconds = float(record.read_text()) if record.exists() else None
         return Built(out, seconds, True)
     BUILD.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
+    tmp = out.with_suffix(f".{os.getpid()}.tmp")   # two processes building the same target do not share a file
     cmd = [compiler, *flags, *map(str, sources), "-o", str(tmp), *libs]
     start = time.perf_counter()
     result = subprocess.run(cmd, capture_output=True, text=True)

@@ -2,56 +2,25 @@
 time side by side (``python -m benchmarks.urdf_vs_yaml [--repeats 3] [--out DIR]``, writes
 ``results/urdf_vs_yaml.json``).
 
-The pair describes the same arm in the same frames: example-robot-data's ``panda.urdf``
-without the hand (joints and links named ``*hand*``, ``*finger*`` removed), chain from
-``panda_link0`` to ``panda_link8``; and the modified-DH table of ``robots/panda.yaml`` with
-the URDF's 0.107 m flange offset as its ``tool``. The Franka URDF's link frames are the DH
-frames and both use the same identified inertial parameters (Gaz et al. 2019), so the two
-models must give the same kinematics and dynamics (``tests/test_urdf_panda.py``)."""
+The pair (``tests/robot_files.py``, which says why it is one arm) describes the same arm in
+the same frames: example-robot-data's ``panda.urdf`` without the hand, and ``robots/panda.yaml``
+with the URDF's flange offset as its ``tool``; ``tests/test_urdf_panda.py`` checks they agree."""
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
 import json
 import statistics
+import sys
 import tempfile
 import time
-import xml.etree.ElementTree as ET
 from pathlib import Path
-
-import yaml
 
 from .common import RESULTS, machine
 
 ROOT = Path(__file__).resolve().parents[1]
-TOOL = {"xyz": [0, 0, 0.107]}      # panda_joint8: link7 -> link8 (the flange)
-
-
-def example_robot_data() -> Path:
-    """The robots folder of the installed example-robot-data wheel (a test extra)."""
-    dist = importlib.metadata.distribution("example-robot-data")
-    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
-
-
-def panda_arm_urdf(folder: Path) -> Path:
-    """example-robot-data's panda.urdf without the hand, written to ``folder``."""
-    tree = ET.parse(example_robot_data() / "panda_description" / "urdf" / "panda.urdf")
-    robot = tree.getroot()
-    for element in list(robot):
-        if element.tag in ("link", "joint") and any(k in element.get("name", "") for k in ("hand", "finger")):
-            robot.remove(element)
-    path = folder / "panda_arm.urdf"
-    tree.write(path)
-    return path
-
-
-def panda_pair(folder: Path):
-    """(model from the URDF, model from the YAML with the flange tool)."""
-    from kindyngen.robot import load_robot, parse_robot
-    urdf = load_robot(panda_arm_urdf(folder), tip="panda_link8")
-    data = yaml.safe_load((ROOT / "robots" / "panda.yaml").read_text())
-    data["tool"] = TOOL
-    return urdf, parse_robot(data, "robots/panda.yaml + tool")
+sys.path.insert(0, str(ROOT / "tests"))
+from robot_files import example_robot_data, panda_arm_urdf, panda_yaml_with_tool  # noqa: E402,F401
+# (the pair is the tests'; example_robot_data is also what benchmarks/trees.py and tree_scaling.py import from here)
 
 
 def _timed_counts(loads: dict, repeats: int):
@@ -80,8 +49,7 @@ def main(argv=None) -> int:
     from kindyngen.robot import load_robot, parse_robot
     with tempfile.TemporaryDirectory() as tmp:
         urdf_path = panda_arm_urdf(Path(tmp))
-        data = yaml.safe_load((ROOT / "robots" / "panda.yaml").read_text())
-        data["tool"] = TOOL
+        data = panda_yaml_with_tool()
         # loading is part of generation: each run reads its description again
         timed = _timed_counts({"urdf": lambda: load_robot(urdf_path, tip="panda_link8"),
                                "yaml": lambda: parse_robot(data, "panda.yaml")}, args.repeats)

@@ -10,7 +10,7 @@ calls in one). Each input may carry one leading batch dimension.
 Example:
 
 >>> lib = load_generated("generated/lwr4", "python")            # doctest: +SKIP
->>> lib.call("fk_hom", {"q": [0, 0, 0, 0, 0, 0, 0]})["T"][2, 3]  # doctest: +SKIP
+>>> float(lib.call("fk_hom", {"q": [0, 0, 0, 0, 0, 0, 0]})["T"][2, 3])  # doctest: +SKIP
 0.79
 """
 from __future__ import annotations

@@ -248,13 +248,11 @@ def ports(model: RobotModel, programs) -> tuple[list, list]:
     return inputs, outputs
 
 
-def dls_manifest_entry(model: RobotModel, programs=None) -> dict:
+def dls_manifest_entry(model: RobotModel, programs) -> dict:
     """The functions.json entry of ik_dls: "kind": "iterative", the languages it exists in,
     and instead of "before"/"after" op counts the cost of one iteration ("per_iteration",
-    from the fk_hom and jacobian counts) and the iteration limit."""
-    if programs is None:
-        from .pipeline import build_programs
-        programs = build_programs(model, only={"fk_hom", "jacobian"}, progress=False)
+    from the fk_hom and jacobian counts of ``programs``, the pipeline's) and the iteration
+    limit."""
     inputs, outputs = ports(model, programs)
     return {
         "name": NAME,

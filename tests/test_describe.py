@@ -12,6 +12,7 @@ import symengine as se
 from kindyngen.catalog import derive_all
 from kindyngen.cli import main
 from kindyngen.robot import load_robot
+from robot_files import example_robot_data_or_skip
 
 DATA = Path(__file__).resolve().parent / "data" / "urdf"
 # (file under example-robot-data's robots folder, or None: the slider arm of tests/data; tip)
@@ -23,11 +24,7 @@ ARMS = [("panda_description/urdf/panda.urdf", "panda_hand"), ("ur_description/ur
 def _path(file):
     if file is None:
         return DATA / "slider_arm.urdf"
-    from benchmarks.urdf_vs_yaml import example_robot_data
-    try:
-        return example_robot_data() / file
-    except Exception as exc:          # PackageNotFoundError without the test extra
-        pytest.skip(f"example-robot-data is not installed ({exc})")
+    return example_robot_data_or_skip() / file
 
 
 def _values(model, names, inputs):

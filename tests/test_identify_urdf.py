@@ -11,20 +11,17 @@ import pytest
 import symengine as se
 
 pin = pytest.importorskip("pinocchio")
-from benchmarks.urdf_vs_yaml import example_robot_data  # noqa: E402
 from kindyngen.catalog import derive_all  # noqa: E402
 from kindyngen.cli import main  # noqa: E402
 from kindyngen.robot import load_robot  # noqa: E402
+from robot_files import example_robot_data_or_skip  # noqa: E402
 
 FV = np.array([0.6, 0.5, 0.4, 0.4, 0.2, 0.2, 0.1])
 
 
 @pytest.fixture(scope="module")
 def panda_urdf():
-    try:
-        return example_robot_data() / "panda_description" / "urdf" / "panda.urdf"
-    except Exception as exc:        # PackageNotFoundError without the test extra
-        pytest.skip(f"example-robot-data is not installed ({exc})")
+    return example_robot_data_or_skip() / "panda_description" / "urdf" / "panda.urdf"
 
 
 def _pinocchio(path):

@@ -17,15 +17,17 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from benchmarks import inputs, pinocchio_casadi, pinocchio_cpp
-from benchmarks.common import ROBOTS
+from benchmarks import inputs, pinocchio_casadi, pinocchio_cpp   # the benchmark code under test
 from kindyngen.robot import load_robot
 from reference import pinocchio_model
+
+ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 
 RTOL = 1e-9  # double rounding of differently ordered sums; a wrong term is off by far more
 STEP = 1e-6  # central differences: error ~ step^2 * third derivative, well under FD_TOL

@@ -50,7 +50,11 @@ def _probe(env: dict) -> list[str] | None:
 
 
 def _tree(root):
-    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+    """{relative path: bytes} of the generated files; bytecode is left out: a test (or a
+    worker running beside this one) that imports a committed Python module writes
+    __pycache__ there unless PYTHONDONTWRITEBYTECODE is set, and it is no generated output."""
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file() and "__pycache__" not in p.parts}
 
 
 def test_committed_tree_has_one_folder_per_description():
@@ -71,6 +75,10 @@ def test_generation_is_identical_under_every_blas_kernel(tmp_path):
         runs[label] = (env, kernels)
     # OpenBLAS names a kernel by its own table (Prescott runs as 'Katmai'): count what really ran
     ran = {kernels[0] for env, kernels in runs.values() if "OPENBLAS_CORETYPE" in env}
+    if "default" in runs and len(runs["default"][1]) == 1 and runs["default"][1][0] in ran:
+        # the processor's own kernel is one of the forced ones: the same generation twice
+        print(f"default: runs the forced kernel {runs['default'][1][0]}, left out")
+        del runs["default"]
     assert len(ran) >= MIN_KERNELS, f"only the kernels {sorted(ran)} could run; need {MIN_KERNELS}"
     assert "Prescott, numpy SIMD off" in runs
 

@@ -14,7 +14,6 @@ largest entry beyond that; for fd this is relative to the largest joint accelera
 """
 from __future__ import annotations
 
-import importlib.metadata
 import json
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import pytest
 from kindyngen.evaluate import load_generated
 from kindyngen.pipeline import generate
 from kindyngen.robot import load_robot, parse_robot
+from robot_files import example_robot_data_or_skip
 
 pin = pytest.importorskip("pinocchio")
 
@@ -54,17 +54,8 @@ ARMS = [
     ("slider_arm", None, None, "tool", True),
 ]
 
-def _example_robot_data() -> Path:
-    """The robots folder of the example-robot-data wheel (data only; a test extra)."""
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
-
-
 def _urdf_path(file) -> Path:
-    return DATA / "slider_arm.urdf" if file is None else _example_robot_data() / file
+    return DATA / "slider_arm.urdf" if file is None else example_robot_data_or_skip() / file
 
 
 def _reduced(pmodel, model):

@@ -3,7 +3,6 @@ Pinocchio's parse of the same file, and every malformed file is an error naming 
 the element."""
 from __future__ import annotations
 
-import importlib.metadata
 import math
 from pathlib import Path
 
@@ -14,6 +13,7 @@ import sympy
 from kindyngen.model import RobotDescriptionError
 from kindyngen.robot import load_robot
 from kindyngen.urdf import load_urdf
+from robot_files import example_robot_data_or_skip
 
 pin = pytest.importorskip("pinocchio")
 
@@ -329,20 +329,6 @@ def test_unreadable_file(tmp_path):
 
 # ------------------------------------------------------------------ real robots
 
-def _example_robot_data() -> Path:
-    """The robots folder of example-robot-data (its Python module, or the cmeel wheel's data)."""
-    try:
-        import example_robot_data
-        return Path(example_robot_data.getModelPath("panda_description/urdf/panda.urdf"))
-    except ImportError:
-        pass
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
-
-
 REAL_ROBOTS = [("panda_description/urdf/panda.urdf", "panda_link8", 7),
                ("panda_description/urdf/panda.urdf", "panda_hand", 7),
                ("ur_description/urdf/ur5_robot.urdf", "tool0", 6),
@@ -353,7 +339,7 @@ REAL_ROBOTS = [("panda_description/urdf/panda.urdf", "panda_link8", 7),
 
 @pytest.mark.parametrize("file, tip, n", REAL_ROBOTS)
 def test_real_robot_matches_pinocchio(file, tip, n):
-    path = _example_robot_data() / file
+    path = example_robot_data_or_skip() / file
     model = load_urdf(path, tip=tip, snap_angles=False)      # the angles as written: Pinocchio's
     assert model.n == n
     _check_against_pinocchio(model, pin.buildModelFromUrdf(str(path)), tip or model.flange_name, 1e-9)

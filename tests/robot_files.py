@@ -1,0 +1,61 @@
+"""Robot descriptions the tests (and the benchmarks that measure the same pairs) read from
+outside the repository: example-robot-data's URDFs, and the Panda as a URDF/YAML pair.
+
+The Panda pair describes one arm in the same frames: example-robot-data's ``panda.urdf``
+without the hand (joints and links named ``*hand*``, ``*finger*`` removed), chain from
+``panda_link0`` to ``panda_link8``; and the modified-DH table of ``robots/panda.yaml`` with the
+URDF's 0.107 m flange offset as its ``tool``. The Franka URDF's link frames are the DH frames
+and both use the same identified inertial parameters (Gaz et al. 2019), so the two models must
+give the same kinematics and dynamics (tests/test_urdf_panda.py)."""
+from __future__ import annotations
+
+import importlib.metadata
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PANDA_TOOL = {"xyz": [0, 0, 0.107]}      # panda_joint8: link7 -> link8 (the flange)
+
+
+def example_robot_data() -> Path:
+    """The robots folder of the installed example-robot-data wheel (a test extra); raises
+    importlib.metadata.PackageNotFoundError without it."""
+    dist = importlib.metadata.distribution("example-robot-data")
+    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+
+
+def example_robot_data_or_skip() -> Path:
+    """:func:`example_robot_data` inside a test: the test is skipped without the wheel."""
+    import pytest
+    try:
+        return example_robot_data()
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed (a test extra)")
+
+
+def panda_arm_urdf(folder: Path) -> Path:
+    """example-robot-data's panda.urdf without the hand, written to ``folder``."""
+    tree = ET.parse(example_robot_data() / "panda_description" / "urdf" / "panda.urdf")
+    robot = tree.getroot()
+    for element in list(robot):
+        if element.tag in ("link", "joint") and any(k in element.get("name", "") for k in ("hand", "finger")):
+            robot.remove(element)
+    path = folder / "panda_arm.urdf"
+    tree.write(path)
+    return path
+
+
+def panda_yaml_with_tool() -> dict:
+    """robots/panda.yaml as data, with the URDF's flange offset as its tool."""
+    data = yaml.safe_load((ROOT / "robots" / "panda.yaml").read_text())
+    data["tool"] = PANDA_TOOL
+    return data
+
+
+def panda_pair(folder: Path):
+    """(model from the URDF, model from the YAML with the flange tool)."""
+    from kindyngen.robot import load_robot, parse_robot
+    urdf = load_robot(panda_arm_urdf(folder), tip="panda_link8")
+    return urdf, parse_robot(panda_yaml_with_tool(), "robots/panda.yaml + tool")
