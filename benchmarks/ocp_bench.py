@@ -2,7 +2,11 @@
 run, each solution checked by Pinocchio; the same formulation built from adam's and
 urdf2casadi's forward dynamics when they are installed.
 
-    nice -n 10 .venv/bin/python -m benchmarks.ocp_bench [--out benchmarks/results/ocp.json] [--quick]
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.ocp_bench [--out benchmarks/results/ocp.json]
+
+(one BLAS thread: on a shared machine OpenBLAS's spinning threads inflate the CPU time of
+MUMPS.) The "stages" rows are examples/ocp_stages.py: the per-interval functions compiled to C
+(the first run compiles them), IPOPT given the assembled Jacobian and Hessian.
 
 Rows: solve wall and CPU time (the ratio to the baseline is on CPU time, which other jobs on a
 shared machine disturb far less than the wall time) (cold, from rest with gravity-compensating torques), iterations,
