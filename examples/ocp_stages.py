@@ -138,8 +138,6 @@ class StageReach:
         Ht = self.ext["reach_ht"](xN, lam_g[-(3 + n):])
         Hfull = ca.diagcat(*Hb, Ht)
         self.nlp = {"x": Z, "p": P, "f": f, "g": g}
-        self.f_hess_blocks = ca.Function("hess_blocks", [Z, P, lam_f, lam_g], [H, Ht], ["x", "p", "lam_f", "lam_g"],
-                                         ["stages", "terminal"])
         self.f_jac_g = ca.Function("nlp_jac_g", [Z, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
         self.f_hess = ca.Function("nlp_hess_l", [Z, P, lam_f, lam_g], [Hfull], ["x", "p", "lam_f", "lam_g"],
                                   ["triu_hess_gamma_x_x"])
