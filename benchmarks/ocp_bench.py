@@ -2,7 +2,11 @@
 run, each solution checked by Pinocchio; the same formulation built from adam's and
 urdf2casadi's forward dynamics when they are installed.
 
-    nice -n 10 .venv/bin/python -m benchmarks.ocp_bench [--out benchmarks/results/ocp.json] [--quick]
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.ocp_bench [--out benchmarks/results/ocp.json]
+
+(one BLAS thread: on a shared machine OpenBLAS's spinning threads inflate the CPU time of
+MUMPS.) The "stages" rows are examples/ocp_stages.py: the per-interval functions compiled to C
+(the first run compiles them), IPOPT given the assembled Jacobian and Hessian.
 
 Rows: solve wall and CPU time (the ratio to the baseline is on CPU time, which other jobs on a
 shared machine disturb far less than the wall time) (cold, from rest with gravity-compensating torques), iterations,
@@ -33,7 +37,10 @@ sys.path.insert(0, str(ROOT / "examples"))
 import ocp_reach  # noqa: E402
 
 VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
-            ("id_rk4", "ipopt", 2)]
+            ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1)]
+# "stages": examples/ocp_stages.py, the per-interval functions compiled to C and IPOPT given the
+# assembled Jacobian and Hessian; "mu_init=1e-2" starts IPOPT's barrier lower (the default 0.1)
+STAGE_OPTIONS = {"stages": {}, "stages mu_init=1e-2": {"ipopt.mu_init": 1e-2}}
 
 
 def _version(dist):
@@ -88,6 +95,23 @@ def peer_fds(funcs):
         except Exception as exc:  # noqa: BLE001 - a peer that does not load is reported, not fatal
             failures.append({"source": name, "error": repr(exc)})
     return out, failures
+
+
+def warm_resolve_stages(funcs, repeats=5):
+    """warm_resolve() with examples/ocp_stages.py's compiled per-interval functions."""
+    import ocp_stages
+    from mpc import WARM
+    s = ocp_stages.StageReach(20, funcs)
+    solver = s.ipopt(WARM)
+    cold = s.solve_ipopt(solver)
+    times, its = [], []
+    for _ in range(repeats):
+        x1 = np.concatenate([cold["q"][1], cold["qd"][1]])
+        r = s.solve_ipopt(solver, x_init=x1, z0=s.shifted(cold["z"]), lam_g0=s.shifted_lam(cold["lam_g"]))
+        times.append(r["solve_cpu_s"])
+        its.append(r["iterations"])
+    return {"what": "compiled stages + IPOPT warm start (shifted solution, mu_init 1e-4), CPU time",
+            "solve_cpu_s": times, "iterations": its, "median_ms": 1e3 * float(np.median(times))}
 
 
 def warm_resolve(funcs, repeats=5):
@@ -169,6 +193,10 @@ def main(argv=None):
         name = f"{form} {solver} M={M}"
         if form == "baseline":
             res = ocp_reach.solve_baseline(funcs=funcs, substeps=M)
+        elif solver in STAGE_OPTIONS:
+            import ocp_stages
+            stages = ocp_stages.StageReach(20, funcs)
+            res = stages.solve_ipopt(stages.ipopt(STAGE_OPTIONS[solver]))
         else:
             res = ocp_reach.reach_problem(form, solver, funcs=funcs, substeps=M).solve()
         doc["rows"].append(_row(name, "generated", res, setup, funcs, base_s))
@@ -191,6 +219,9 @@ def main(argv=None):
         print(f"crocoddyl: {doc['crocoddyl']}", flush=True)
     doc["warm_resolve"] = warm_resolve(funcs)
     print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
+    doc["warm_resolve_stages"] = warm_resolve_stages(funcs)
+    print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
+          f"iterations {doc['warm_resolve_stages']['iterations']}")
     out.write_text(json.dumps(doc, indent=1) + "\n")
     plot(doc, out.with_suffix(".png"))
     print(f"wrote {out} and {out.with_suffix('.png')}")

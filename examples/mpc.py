@@ -7,8 +7,9 @@ model, RK4 at 1 kHz) moves the arm.
 
 Each control step (one shooting interval, h = T / N = 50 ms at N = 20): the planner gets the
 measured plant state, re-solves the reach (goal at rest at the end of the horizon, which moves
-with time; id_rk4 + IPOPT, warm start from the previous solution shifted by one interval), and
-the plant integrates the first torque, held constant, for h at 1 kHz. The first step is the
+with time; id_rk4 + IPOPT, warm start from the previous solution shifted by one interval; with
+--solver stages on examples/ocp_stages.py's compiled per-interval functions and IPOPT's adaptive
+barrier), and the plant integrates the first torque, held constant, for h at 1 kHz. The first step is the
 cold solve from rest. A failed solve applies the previous plan's next torque.
 
 Output in --out: mpc.json (solve_ms per step, its median, 95th percentile and worst,
@@ -34,6 +35,10 @@ for _p in (str(ROOT), str(EXAMPLES), str(ROOT / "tests")):
 PLANT_HZ = 1000
 WARM = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4, "ipopt.warm_start_bound_push": 1e-6,
         "ipopt.warm_start_mult_bound_push": 1e-6}
+# the compiled stages' warm re-solve, chosen by measurement (one shifted re-solve, AMD EPYC):
+# the adaptive barrier takes 17 iterations (115 ms CPU) where the monotone one at mu_init 1e-4
+# takes 28 (186 ms), at 1e-6 46 and at 1e-8 53; adaptive with mu_init 1e-4, 1e-6 or 1e-8 alike
+WARM_STAGES = dict(WARM, **{"ipopt.mu_strategy": "adaptive", "ipopt.mu_init": 1e-6})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -70,10 +75,22 @@ def plant(robot):
     return step, tip
 
 
-def run(steps: int = 30, N: int = 20, verbose: bool = False) -> dict:
+def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipopt") -> dict:
     import ocp_reach
     funcs = ocp_reach.load()
-    nlp = ocp_reach.reach_problem("id_rk4", "ipopt", N, funcs, options=WARM)
+    if solver == "stages":
+        import ocp_stages
+        nlp = ocp_stages.StageReach(N, funcs)
+        built = nlp.ipopt(WARM_STAGES)
+
+        def solve(x_init, z, lam):
+            return nlp.solve_ipopt(built, x_init=x_init, z0=None if z is None else nlp.shifted(z),
+                                   lam_g0=None if lam is None else nlp.shifted_lam(lam))
+    else:
+        nlp = ocp_reach.reach_problem("id_rk4", "ipopt", N, funcs, options=WARM)
+
+        def solve(x_init, z, lam):
+            return nlp.solve(x_init=x_init, z0=None if z is None else nlp.shifted(z), lam_g0=lam)
     setup = nlp.setup
     n, h = setup["n"], setup["T"] / N
     step, tip = plant(setup["robot"])
@@ -84,7 +101,7 @@ def run(steps: int = 30, N: int = 20, verbose: bool = False) -> dict:
     u_next = setup["gravity_torque"]
     tol = 1e-6
     for i in range(steps):
-        res = nlp.solve(x_init=x, z0=None if z is None else nlp.shifted(z), lam_g0=lam)
+        res = solve(x, z, lam)
         log["solve_ms"].append(1e3 * res["solve_s"])
         log["solve_cpu_ms"].append(1e3 * res["solve_cpu_s"])
         log["iterations"].append(res["iterations"])
@@ -115,7 +132,8 @@ def run(steps: int = 30, N: int = 20, verbose: bool = False) -> dict:
     warm = ms[1:] if len(ms) > 1 else ms
     tr = np.array([v for v in log["tracking"] if np.isfinite(v)])
     return {"problem": "lwr4", "N": N, "h_s": h, "plant_hz": PLANT_HZ, "steps": steps,
-            "formulation": "id_rk4", "solver": "ipopt (warm start)", **log,
+            "formulation": "id_rk4",
+            "solver": "ipopt (warm start)" + (", compiled stages" if solver == "stages" else ""), **log,
             "solve_ms_cold": float(ms[0]), "solve_ms_median": float(np.median(warm)),
             "solve_ms_p95": float(np.percentile(warm, 95)), "solve_ms_worst": float(warm.max()),
             "solve_cpu_ms_median": float(np.median(np.array(log["solve_cpu_ms"])[1:] if steps > 1 else log["solve_cpu_ms"])),
@@ -158,6 +176,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="output folder (created)")
     ap.add_argument("--steps", type=int, default=30, help="control steps (default 30, 1.5 s)")
     ap.add_argument("--N", type=int, default=20, help="shooting intervals of the 1 s horizon (default 20)")
+    ap.add_argument("--solver", choices=("ipopt", "stages"), default="ipopt",
+                    help="ipopt: IPOPT on the SX graph (examples/ocp_reach.py); stages: IPOPT with the "
+                         "per-interval functions compiled to C (examples/ocp_stages.py; the first run "
+                         "compiles for minutes, later runs load the cache)")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
     if args.steps < 1:
@@ -166,7 +188,7 @@ def main(argv=None) -> int:
         ap.error(f"--N {args.N}: must be at least 2")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    doc = run(args.steps, args.N, args.verbose)
+    doc = run(args.steps, args.N, args.verbose, args.solver)
     doc["plots"] = [plot(doc, out)]
     (out / "mpc.json").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"lwr4 MPC: {args.steps} steps, re-solve median {doc['solve_ms_median']:.1f} ms, p95 "

@@ -6,6 +6,9 @@ Pinocchio (tests/reference.py's model), not by the generated code.
   the same RK4 step must land on the next planned node (1e-6, IPOPT tol 1e-8).
 - the flange (Pinocchio's forward kinematics of the planned last node) at the goal within
   1e-6 m, at rest; torques within their bounds exactly; q and qd at the nodes within 1e-6.
+- examples/ocp_stages.py (the per-interval functions compiled to C, IPOPT given the assembled
+  derivatives) solves the same discrete problem: the same Pinocchio checks, and its optimum
+  equals that of IPOPT on the whole SX graph (1e-6 relative).
 - a short MPC run writes the documented fields; no torque or joint-position violation and no
   failed solve (speed limits hold at the nodes only, so the 1 kHz plant samples may pass them:
   counted, not asserted; see docs/optimal_control.md).
@@ -58,10 +61,36 @@ def test_reach_limits(reach):
     assert lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
 
 
-def test_mpc_short_run(tmp_path):
+@pytest.fixture(scope="module")
+def stages(reach):
+    import ocp_stages
+    funcs = reach[3]
+    s = ocp_stages.StageReach(20, funcs)
+    res = s.solve_ipopt()
+    return s.setup, res, ocp_reach.check(s.setup, res, funcs)
+
+
+def test_compiled_stages_reach(stages, reach):
+    import pinocchio as pin
+    from reference import pinocchio_model
+    setup, res, sim = stages
+    assert res["success"], res["status"]
+    assert sim["plan_step_error"] < 1e-6
+    model, data, flange = pinocchio_model(setup["robot"])
+    pin.framesForwardKinematics(model, data, res["q"][-1])
+    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
+    assert np.abs(res["qd"][-1]).max() < 1e-6
+    lim = sim["limit_excess"]
+    assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+    assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
+
+
+def test_mpc_short_run(tmp_path, stages):
+    """Two steps with the compiled per-interval functions (the fastest solver; N = 20 reuses
+    the library the `stages` fixture built, another N would compile another)."""
     out = tmp_path / "mpc"
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "mpc.py"), "--problem", "lwr4", "--out", str(out),
-                        "--steps", "2", "--N", "10"], capture_output=True, text=True, cwd=ROOT)
+                        "--steps", "2", "--N", "20", "--solver", "stages"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     doc = json.loads((out / "mpc.json").read_text())
     assert len(doc["solve_ms"]) == 2 and doc["steps"] == 2
