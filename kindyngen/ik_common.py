@@ -84,7 +84,7 @@ import numpy as np
 import sympy
 import symengine as se
 
-from .geometry import exact
+from .geometry import constant, exact
 from .robot import RobotModel
 
 # --- status codes ------------------------------------------------------------------------
@@ -453,16 +453,6 @@ def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
 
 
 # --- the target in the canonical frames ----------------------------------------------------
-def constant(value) -> se.Basic:
-    """An exact sympy constant as symengine: exact where it has a closed form (rationals,
-    radicals, symbols), else the double of its 30-digit value (cos(3/10))."""
-    value = sympy.sympify(value)
-    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan,
-                                           sympy.atan2, sympy.tan):
-        return se.sympify(value)
-    return se.RealDouble(float(value.evalf(30)))
-
-
 def _translation_size(geometry: LwrGeometry) -> float:
     """1 + |p_B| + |p_F| (m): how much the map can lengthen the target's translation (100
     when a length is a name)."""

@@ -186,7 +186,7 @@ def test_both_fd_routes_equal_pinocchio_and_the_cheaper_is_generated(case, tmp_p
     as its own function (C and Python), equal Pinocchio's aba; the generated ``fd`` is the
     route with fewer additions + multiplications after CSE, and its header says so."""
     model = case["model"]
-    programs = [optimize(forward_dynamics_tree(model, "fd_ltdl")), optimize(forward_dynamics_aba(model, "fd_aba"))]
+    programs = [optimize(forward_dynamics_tree(model, name="fd_ltdl")), optimize(forward_dynamics_aba(model, name="fd_aba"))]
     (tmp_path / "functions.json").write_text(json.dumps(manifest(model, programs, "numeric")))
     for lang in ("c", "python"):
         for filename, text in RENDERERS[lang](model, programs).items():
