@@ -386,7 +386,7 @@ def _map_holds(model, d3, d5, signs, offsets, base, flange) -> bool:
 @lru_cache(maxsize=None)    # exact geometry and a numeric check: once per model, not per IK form
 def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     """The LWR geometry of ``model`` and its map onto the canonical LWR, or None when the
-    arm is not of LWR type.
+    arm is not of LWR type (or the model is not a chain).
 
     LWR type, decided on the exact zero configuration (whatever the description: DH table
     of either convention, joint offsets, origins and axes, tool): seven revolute joints;
@@ -408,7 +408,7 @@ def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     >>> lwr_geometry(load_robot("robots/lwr4.yaml")).d5           # doctest: +SKIP
     39/100
     """
-    if model.n != 7:
+    if model.n != 7 or not model.is_chain:      # a branched tree or a floating base: no closed form here
         return None
     zero = _zero_configuration(model)
     if zero is None:
