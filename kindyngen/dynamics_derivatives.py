@@ -5,8 +5,11 @@
 * ``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv``.
 
 Both follow the model of ``tau`` and ``fd`` exactly (same grouped bodies, joint frames, params
-mode, prismatic joints, friction and armature), derived by hand-written forward and reverse
-(adjoint) sweeps over the joint-frame Newton-Euler pass, which reuse its intermediates instead of
+mode, prismatic joints, friction and armature; any fixed-base tree, an arm being the tree
+whose parent of joint j is j - 1), derived by hand-written forward and reverse (adjoint)
+sweeps over the joint-frame Newton-Euler pass of :class:`kindyngen.tree_dynamics.NewtonEulerPass`
+(written over ``parents[]``: a tangent runs down the subtree of its joint, an adjoint
+gathers what the children carry back), which reuse its intermediates instead of
 differentiating the expression DAG (``se.diff`` rebuilds ``d(Rz x)/dq`` from cos and sin as new
 expressions that CSE cannot match with ``Rz x``; here the rotated vector itself is reused):
 
@@ -62,14 +65,14 @@ from dataclasses import replace
 
 import symengine as se
 
-from .dynamics_newton_euler import NewtonEulerPass, mat3, u_matrix
+from .dynamics_newton_euler import mat3, u_matrix
 from .forward_dynamics import ldlt_factor, ldlt_substitute
 from .joint_effects import coulomb_shape, effect_torques, with_armature
 from .kinematics_homogeneous import q_port
-from .rigid_bodies import (ZERO, cross, dot, dynamics_function, flat, gravity, matvec, qd_port, qdd_port,
+from .rigid_bodies import (ZERO, cross, dot, dynamics_function, flat, matvec, qd_port, qdd_port,
                            tau_port, vadd, vscale)
 from .model import RobotModel
-from .tree_dynamics import crba, setup
+from .tree_dynamics import NewtonEulerPass, crba, setup
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 
@@ -140,7 +143,7 @@ def solve_columns(L, inv_d, B):
 # ----------------------------------------------------------------------------- tangent Newton-Euler
 
 class _NewtonEuler(NewtonEulerPass):
-    """:class:`kindyngen.dynamics_newton_euler.NewtonEulerPass` with the sweeps of
+    """:class:`kindyngen.tree_dynamics.NewtonEulerPass` with the sweeps of
     :meth:`tangent` and :meth:`adjoint` over its intermediates."""
 
     def seed(self, m: int):
@@ -152,7 +155,7 @@ class _NewtonEuler(NewtonEulerPass):
         joint, zero = self.joints[m], [ZERO] * 3
         if joint.prismatic:
             parent = self.parents[m]
-            if parent < 0:      # the root does not move: U = 0
+            if parent < 0 or self.U[parent] is None:      # the parent does not turn: U = 0
                 return zero, zero, zero
             return zero, zero, joint.rot_t(mat3(self.U[parent], [joint.C[r][2] for r in range(3)]))
         wr, wdr, ar = self.wr[m], self.wdr[m], self.ar[m]
@@ -335,13 +338,21 @@ def _conventions_note(model: RobotModel) -> str:
 
 # ----------------------------------------------------------------------------- functions
 
+def _fixed_base_setup(model: RobotModel, params: str):
+    """The tree setup the sweeps run on: a fixed base (a floating base's six coordinates have
+    no sweep here)."""
+    if model.floating_base:
+        raise ValueError(f"{model.name}: the derivatives are derived for a fixed base")
+    return setup(model, params)
+
+
 def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau_derivatives") -> SymbolicFunction:
     """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` of ``tau`` with its joint effects."""
-    ts = setup(model, params)
-    q, joints, bodies, ports, syms = ts.q, ts.joints, ts.bodies, ts.param_ports, ts.param_symbols
+    ts = _fixed_base_setup(model, params)
+    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
     n = model.n
     qd, qdd = port_symbols("qd", (n,)), port_symbols("qdd", (n,))
-    ne = _NewtonEuler(joints, bodies, qd, qdd, gravity(model), model.parents)
+    ne = _NewtonEuler(ts, qd, qdd)
     rows = [ne.adjoint(i) for i in range(n)]
     dq, dqd = [row[0] for row in rows], [row[1] for row in rows]
     dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
@@ -358,13 +369,13 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
 
 def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives") -> SymbolicFunction:
     """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` of ``fd`` with its joint effects."""
-    ts = setup(model, params)
-    q, joints, bodies, ports, syms = ts.q, ts.joints, ts.bodies, ts.param_ports, ts.param_symbols
+    ts = _fixed_base_setup(model, params)
+    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
     n = model.n
     qd, tau = port_symbols("qd", (n,)), port_symbols("tau", (n,))
     M = crba(ts)[0]
     L, inv_d = ldlt_factor(with_armature(model, M))
-    rigid_bias = _NewtonEuler(joints, bodies, qd, None, gravity(model), model.parents)
+    rigid_bias = _NewtonEuler(ts, qd, None)
     bias = [b + e for b, e in zip(rigid_bias.tau, effect_torques(model, qd, None))]
     qdd = ldlt_substitute(L, inv_d, [t - b for t, b in zip(tau, bias)])
     dM = mass_matrix_partials(M, q)

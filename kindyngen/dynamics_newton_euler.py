@@ -1,8 +1,8 @@
 """The Newton-Euler primitives in joint frames with exact zeros (customised symbolic
 Newton-Euler in the manner of Khalil & Kleinfinger) that the tree recursions of
 :mod:`kindyngen.tree_dynamics` are written with (an arm is the tree whose parent of joint j
-is j - 1), and the pass over the tree that keeps its intermediates for the derivatives
-(:class:`NewtonEulerPass`: :mod:`kindyngen.dynamics_derivatives` sweeps over it).
+is j - 1): rotating a body into its parent's frame, one joint's step of velocities and
+accelerations, and ``U = skew(w') + skew(w)^2``.
 
 Everything runs on the grouped barycentric parameters of :mod:`kindyngen.rigid_bodies`
 (every link's mass, MZ and YY moved towards the base), so that the link forces of
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import symengine as se
 
-from .rigid_bodies import ZERO, Body, cross, vadd, vscale
+from .rigid_bodies import Body
 
 
 def rotate_body(joint, body: Body) -> Body:
@@ -48,65 +48,6 @@ def rotate_body(joint, body: Body) -> Body:
     rotated = Body(body.m, [c * h[0] - s * h[1], s * h[0] + c * h[1], h[2]],
                    [[xx, xy, xz], [xy, yy, yz], [xz, yz, I[2][2]]])
     return rotated.moved(joint.C, joint.t)
-
-
-class NewtonEulerPass:
-    """Recursive Newton-Euler over a tree (``parents[j]``, -1 the fixed root; None: the chain
-    j - 1) with its intermediates kept per link j (in frame j): the incoming velocity,
-    angular and linear acceleration rotated into frame j (``wr``, ``wdr``, ``ar``), the
-    angular velocity ``w``, ``U``, ``Iw = I w``, the wrench ``f``, ``nn`` link j passes to
-    its parent and ``tau``. :mod:`kindyngen.dynamics_derivatives` sweeps over them.
-
-    Per link (Khalil-Kleinfinger form, all in frame j): ``U = skew(w') + skew(w)^2`` from the
-    six products of w's components; ``F = m a + U h``; ``N = I w' + w x (I w) + h x a``;
-    the origin's acceleration is ``R^T (a_parent + U_parent t)``, plus ``qdd e_z + 2 w x (qd
-    e_z)`` after a prismatic joint, whose torque is the force along its axis; each link's
-    wrench is its own plus its children's, carried over. (Variants with cross products for
-    F, or products of w for ``w x I w``, cost more after CSE on the LWR and Panda.)"""
-
-    def __init__(self, joints, bodies, qd, qdd, gam, parents=None):
-        n = len(joints)
-        self.joints, self.bodies, self.qd = joints, bodies, qd
-        self.parents = tuple(range(-1, n - 1)) if parents is None else tuple(parents)
-        self.children = [[c for c in range(n) if self.parents[c] == j] for j in range(n)]
-        self.wr, self.wdr, self.ar, self.w, self.U, self.Iw = ([None] * n for _ in range(6))
-        self.a, self.wd = [None] * n, [None] * n
-        zero = [ZERO] * 3
-        root = ([-x for x in gam] if gam is not None else zero, zero, zero, None)
-        forces = []
-        for j, (joint, body) in enumerate(zip(joints, bodies)):
-            p = self.parents[j]
-            a, w, wd, U = (self.a[p], self.w[p], self.wd[p], self.U[p]) if p >= 0 else root
-            a_in = a if U is None else vadd(a, mat3(U, joint.t))
-            self.ar[j] = a = joint.rot_t(a_in)
-            self.wr[j] = wr = joint.rot_t(w)
-            self.wdr[j] = wdr = joint.rot_t(wd)
-            a, w, wd = joint_step(joint, a, wr, wdr, qd[j] if qd is not None else ZERO,
-                                  qdd[j] if qdd is not None else ZERO)
-            self.a[j], self.w[j], self.wd[j] = a, w, wd
-            self.U[j] = U = u_matrix(w, wd, omega_products(w))
-            h, I, m = body.h, body.I, body.m
-            self.Iw[j] = Iw = mat3(I, w)
-            forces.append((vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, Iw), cross(h, a))))
-        self.f, self.nn, self.tau = [None] * n, [None] * n, [None] * n
-        for j in range(n - 1, -1, -1):
-            F, N = forces[j]
-            fs, ns = [F], [N]
-            for c in self.children[j]:
-                joint = joints[c]
-                fr = joint.rot(self.f[c])
-                fs.append(fr)
-                ns += [joint.rot(self.nn[c]), cross(joint.t, fr)]
-            self.f[j], self.nn[j] = (vadd(*fs), vadd(*ns)) if self.children[j] else (F, N)
-            self.tau[j] = self.f[j][2] if joints[j].prismatic else self.nn[j][2]
-
-    def subtree(self, j: int) -> frozenset:
-        """Link j and every link below it."""
-        out = {j}
-        for k in range(j + 1, len(self.joints)):
-            if self.parents[k] in out:
-                out.add(k)
-        return frozenset(out)
 
 
 def joint_step(joint, a, wr, wdr, qdj, qddj):

@@ -211,13 +211,14 @@ def wrench(body: Body, a, w, wd, U):
     return (vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a)))
 
 
-def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None):
+def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None, record=None):
     """The forward pass of :func:`rnea`: (root state, state of each joint frame), a state
     being (origin acceleration a, angular velocity w, angular acceleration wd, ``U =
     skew(wd) + skew(w)^2`` or None when w and wd are exact zeros), gravity entering as the
     root's acceleration ``-gamma``; ``qd``/``qdd`` None are zero (Khalil-Kleinfinger form,
     each joint starting from its parent's state). With ``stages``, every joint's state is
-    named there."""
+    named there; ``record`` (a :class:`NewtonEulerPass`) gets the incoming vectors rotated into
+    each joint frame (``ar``, ``wr``, ``wdr``)."""
     model = ts.model
     name = naming(stages)
     base = FREE_FLYER_NV if model.floating_base else 0
@@ -236,6 +237,10 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Sta
         a, w, wd, U = state[parent] if parent >= 0 else root_state
         a = joint.rot_t(a if U is None else vadd(a, mat3(U, joint.t)))
         wr, wdr = joint.rot_t(w), joint.rot_t(wd)
+        if record is not None:
+            record.ar.append(a)
+            record.wr.append(wr)
+            record.wdr.append(wdr)
         a, w, wd = joint_step(joint, a, wr, wdr, qd[base + j] if qd is not None else ZERO,
                               qdd[base + j] if qdd is not None else ZERO)
         a, w, wd = ([name(e) for e in v] for v in (a, w, wd))
@@ -245,29 +250,63 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Sta
 
 
 def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None) -> list:
-    """tau (size nv) by recursive Newton-Euler over the tree; ``qd``/``qdd`` None are zero:
-    :func:`motion_states`, then each joint's wrench plus its children's, tip first (with
-    ``stages``, every state and summed wrench named there)."""
-    model, n = ts.model, ts.model.n
-    name = naming(stages)
-    root_state, state = motion_states(ts, qd, qdd, with_gravity, stages)
-    forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
-    f_parts = [[F] for F, _ in forces]
-    n_parts = [[N] for _, N in forces]
-    root_f, root_n = [], []
-    tau = [None] * n
-    for j in range(n - 1, -1, -1):
-        joint, parent = ts.joints[j], model.parents[j]
-        f, nn = [name(e) for e in vadd(*f_parts[j])], [name(e) for e in vadd(*n_parts[j])]
-        tau[j] = f[2] if joint.prismatic else nn[2]
-        fr, nr = carry(joint, f, nn)
-        targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
-        targets[0].append(fr)
-        targets[1].append(nr)
-    if not model.floating_base:
-        return tau
-    F, N = wrench(ts.root, *root_state)
-    return vadd(F, *root_f) + vadd(N, *root_n) + tau
+    """tau (size nv) by recursive Newton-Euler over the tree (:class:`NewtonEulerPass`);
+    ``qd``/``qdd`` None are zero."""
+    return NewtonEulerPass(ts, qd, qdd, with_gravity, stages).tau
+
+
+class NewtonEulerPass:
+    """Recursive Newton-Euler over the tree, its intermediates kept per joint j (in frame j):
+    the incoming velocity, angular and linear acceleration rotated into frame j (``wr``,
+    ``wdr``, ``ar``), the angular velocity ``w``, ``U`` (None where w and w' are exact zeros),
+    ``Iw = I w``, the wrench ``f``, ``nn`` link j passes to its parent; ``tau`` (size nv);
+    :mod:`kindyngen.dynamics_derivatives` sweeps over them (fixed base). Forward:
+    :func:`motion_states`; backward: each joint's wrench plus its children's, tip first (with
+    ``stages``, every state and summed wrench named there).
+
+    Per link (Khalil-Kleinfinger form, all in frame j): ``U = skew(w') + skew(w)^2`` from the
+    six products of w's components; ``F = m a + U h``; ``N = I w' + w x (I w) + h x a``.
+    (Variants with cross products for F, or products of w for ``w x I w``, cost more after
+    CSE on the LWR and Panda.)"""
+
+    def __init__(self, ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None):
+        model, n = ts.model, ts.model.n
+        name = naming(stages)
+        base = FREE_FLYER_NV if model.floating_base else 0
+        self.joints, self.bodies, self.parents = ts.joints, ts.bodies, model.parents
+        self.children = [[c for c in range(n) if model.parents[c] == j] for j in range(n)]
+        self.qd = None if qd is None else list(qd[base:])
+        self.ar, self.wr, self.wdr = [], [], []
+        root_state, state = motion_states(ts, qd, qdd, with_gravity, stages, self)
+        self.w = [s[1] for s in state]
+        self.U = [s[3] for s in state]
+        self.Iw = [mat3(body.I, s[1]) for body, s in zip(ts.bodies, state)]
+        forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
+        f_parts = [[F] for F, _ in forces]
+        n_parts = [[N] for _, N in forces]
+        root_f, root_n = [], []
+        self.f, self.nn, tau = [None] * n, [None] * n, [None] * n
+        for j in range(n - 1, -1, -1):
+            joint, parent = ts.joints[j], model.parents[j]
+            f, nn = [name(e) for e in vadd(*f_parts[j])], [name(e) for e in vadd(*n_parts[j])]
+            self.f[j], self.nn[j] = f, nn
+            tau[j] = f[2] if joint.prismatic else nn[2]
+            fr, nr = carry(joint, f, nn)
+            targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
+            targets[0].append(fr)
+            targets[1].append(nr)
+        if model.floating_base:
+            F, N = wrench(ts.root, *root_state)
+            tau = vadd(F, *root_f) + vadd(N, *root_n) + tau
+        self.tau = tau
+
+    def subtree(self, j: int) -> frozenset:
+        """Joint j and every joint below it."""
+        out = {j}
+        for k in range(j + 1, len(self.joints)):
+            if self.parents[k] in out:
+                out.add(k)
+        return frozenset(out)
 
 
 def carry(joint: JointFrame, f, nn):
