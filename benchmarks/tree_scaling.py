@@ -6,7 +6,7 @@ Synthetic humanoid-like trees (a torso and ``limbs`` branches of ``per_limb`` re
 floating base) are written as URDF text and read by :func:`kindyngen.urdf.parse_urdf_tree`;
 single-branch fixed-base chains of the same style are the like-for-like case of Featherstone's
 formulas, which are stated for unbranched chains. Every function of
-:data:`kindyngen.catalog.TREE_BUILDERS` is derived and optimised (CSE) separately, each size in
+:data:`kindyngen.catalog.TREE_NAMES` is derived and optimised (CSE) separately, each size in
 a fresh forked worker so that one that blows up can be stopped; a function stops growing once
 its next size is predicted to exceed the budget. The whole ``kindyngen generate`` of the 29-joint
 Unitree G1 (example-robot-data, floating base, all languages) is timed as a command
@@ -116,7 +116,7 @@ def synthetic_urdf(limbs: int, per_limb: int) -> str:
 
 
 def synthetic_tree(limbs: int, per_limb: int, floating: bool = True):
-    """A humanoid-like :class:`kindyngen.tree_model.TreeModel` (:func:`synthetic_urdf`)."""
+    """A humanoid-like :class:`kindyngen.model.RobotModel` tree (:func:`synthetic_urdf`)."""
     from kindyngen.urdf import parse_urdf_tree
     return parse_urdf_tree(synthetic_urdf(limbs, per_limb), source=f"<synthetic tree {limbs}x{per_limb}>",
                            floating_base=floating)
@@ -200,9 +200,9 @@ def best_of(build, model, repeats: int) -> dict | None:
 
 def _worker(series: str, size, names: list, repeats: int, out) -> None:
     """Measure ``names`` at one size in this (fresh, forked) process, announcing each."""
-    from kindyngen.catalog import TREE_BUILDERS
+    from kindyngen.catalog import BUILDERS
     model = _model(series, size)
-    builders = dict(TREE_BUILDERS)
+    builders = {name: (lambda model, build=build: build(model, "numeric")) for name, build in BUILDERS}
     for name in names:
         out.put(("start", name, None))
         try:
@@ -417,10 +417,12 @@ def g1_generate(repeats: int, log) -> dict:
 def g1_functions(model, log) -> dict:
     """Derive + CSE time of each function of the G1 in this process: where generate's time
     goes (the rest is rendering and writing the languages)."""
-    from kindyngen.catalog import TREE_BUILDERS
+    from kindyngen.catalog import BUILDERS, TREE_NAMES
     rows = {}
-    for name, build in TREE_BUILDERS:
-        row = measure(build, model)
+    for name, build in BUILDERS:
+        if name not in TREE_NAMES:
+            continue
+        row = measure(lambda model, build=build: build(model, "numeric"), model)
         if row:
             rows[name] = row
             log(f"tree_scaling: G1 {name}: {row['total_s']:.2f} s ({row['cpu_s']:.2f} s CPU)")
@@ -529,8 +531,8 @@ def study(settings: dict, log=print) -> dict:
     own dict with the same keys)."""
     started, load_start = time.perf_counter(), os.getloadavg()[0]
     # the first derivation pays imports and caches; the forked workers inherit them warm
-    from kindyngen.catalog import TREE_BUILDERS
-    measure(dict(TREE_BUILDERS)["tau"], synthetic_tree(2, 1))
+    from kindyngen.catalog import BUILDERS
+    measure(lambda model: dict(BUILDERS)["tau"](model, "numeric"), synthetic_tree(2, 1))
     limbs = settings["tree_limbs"]
     budget, repeats = settings["budget_s"], settings["repeats"]
     tree = series_study("tree", [(limbs, k) for k in settings["tree_per_limb"]], budget, repeats, log)
@@ -561,7 +563,7 @@ def cse_study(log) -> dict:
     expressions), and the G1's add + mul summed over every function (both fd routes) and the
     CPU time, per chunk size."""
     import kindyngen.optimize as optimize_module
-    from kindyngen.catalog import TREE_BUILDERS
+    from kindyngen.catalog import BUILDERS, TREE_NAMES
     from kindyngen.tree_articulated import forward_dynamics_aba
     from kindyngen.tree_dynamics import forward_dynamics_tree, mass_matrix_tree
     from kindyngen.urdf import load_urdf_tree
@@ -588,7 +590,7 @@ def cse_study(log) -> dict:
             f"{row['one_cse']['cpu_s']:.2f} s, chunks of {default} {row['chunked']['cpu_s']:.2f} s")
         chains.append(row)
     model = load_urdf_tree(g1_urdf(), floating_base=True)
-    functions = [build(model) for name, build in TREE_BUILDERS if name != "fd"]
+    functions = [build(model, "numeric") for name, build in BUILDERS if name in TREE_NAMES and name != "fd"]
     functions += [forward_dynamics_tree(model), forward_dynamics_aba(model)]
     g1 = []
     for chunk in CSE_G1_CHUNKS:

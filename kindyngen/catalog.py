@@ -14,93 +14,96 @@ import symengine as se
 from .dynamics_derivatives import fd_derivatives, tau_derivatives
 from .dynamics_dualquat import coriolis_dq, gravity_dq, inverse_dynamics_dq, mass_matrix_dq, regressor_dq
 from .dynamics_lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
-from .dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
-from .forward_dynamics import forward_dynamics
 from .ik_lwr_dualquat import ik_dq
 from .ik_lwr_homogeneous import ik_hom
 from .kinematics_dualquat import fk_dq, jacobian_dq, pose_jacobian_dq
-from .kinematics_homogeneous import fk_hom, jacobian
+from .model import RobotModel
 from .regressors import base_params_document as arm_base_params_document, regressor
 from .regressors import undecided_notes as arm_undecided_notes
-from .robot import RobotModel
 from .symbolic import Port, SymbolicFunction
+from .tree_articulated import forward_dynamics_aba
 from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
                             inverse_dynamics_tree, mass_matrix_tree)
-from .tree_articulated import forward_dynamics_aba
 from .tree_kinematics import fk_hom_tree, jacobian_tree
-from .tree_model import TreeModel
 from .tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
+
+def forward_dynamics_routes(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
+    """fd by the sparse L^T D L route, with the articulated-body route as its alternative:
+    optimisation keeps whichever has fewer operations after CSE on this robot."""
+    return replace(forward_dynamics_tree(model, params, name), alternatives=(forward_dynamics_aba(model, params, name),))
+
+
+def arm_only(build: Builder) -> Builder:
+    """A derivation written for serial arms (the Lagrange, dual-quaternion and derivative
+    routes, the closed-form IK, the gravity and inertia regressors): None for a model read
+    as a tree."""
+    def arm_build(model, params):
+        return None if model.is_tree else build(model, params)
+    arm_build.arm_only = True
+    return arm_build
+
+
+def tree_only(build: Builder) -> Builder:
+    """A function of trees only (the centre of mass): None for an arm."""
+    def tree_build(model, params):
+        return build(model, params) if model.is_tree else None
+    tree_build.tree_only = True
+    return tree_build
+
+
+# every robot's functions, in output order; one builder per function, each written over the
+# tree (an arm is the tree whose parent of joint j is j - 1) or marked arm_only / tree_only
 BUILDERS: tuple[tuple[str, Builder], ...] = (
-    ("fk_hom", lambda model, params: fk_hom(model)),
-    ("fk_dq", lambda model, params: fk_dq(model)),
-    ("jacobian", lambda model, params: jacobian(model)),
-    ("pose_jacobian_dq", lambda model, params: pose_jacobian_dq(model)),
-    ("jacobian_dq", lambda model, params: jacobian_dq(model)),
+    ("fk_hom", lambda model, params: fk_hom_tree(model)),
+    ("fk_dq", arm_only(lambda model, params: fk_dq(model))),
+    ("jacobian", lambda model, params: jacobian_tree(model)),
+    ("pose_jacobian_dq", arm_only(lambda model, params: pose_jacobian_dq(model))),
+    ("jacobian_dq", arm_only(lambda model, params: jacobian_dq(model))),
     # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
-    # the other route under a suffixed name (kindyngen/dynamics_*.py, forward_dynamics.py)
-    ("M", lambda model, params: mass_matrix_crba(model, params, "M")),
-    ("g", lambda model, params: gravity_rnea(model, params, "g")),
-    ("c", lambda model, params: coriolis_rnea(model, params, "c")),
-    ("S", lambda model, params: coriolis_matrix(model, params, "S")),
-    ("tau", lambda model, params: inverse_dynamics(model, params, "tau")),
-    ("fd", lambda model, params: forward_dynamics(model, params, "fd")),
+    # the other route under a suffixed name (kindyngen/dynamics_*.py, tree_*.py)
+    ("M", lambda model, params: mass_matrix_tree(model, params, "M")),
+    ("g", lambda model, params: gravity_tree(model, params, "g")),
+    ("c", lambda model, params: coriolis_tree(model, params, "c")),
+    ("S", arm_only(lambda model, params: coriolis_matrix(model, params, "S"))),
+    ("tau", lambda model, params: inverse_dynamics_tree(model, params, "tau")),
+    ("fd", lambda model, params: forward_dynamics_routes(model, params, "fd")),
+    ("com", tree_only(lambda model, params: centre_of_mass_tree(model, params, "com"))),
     # their partial derivatives, for optimal control (kindyngen/dynamics_derivatives.py)
-    ("tau_derivatives", lambda model, params: tau_derivatives(model, params, "tau_derivatives")),
-    ("fd_derivatives", lambda model, params: fd_derivatives(model, params, "fd_derivatives")),
-    ("M_lagrange", lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange")),
-    ("g_lagrange", lambda model, params: gravity_lagrange(model, params, "g_lagrange")),
-    ("c_christoffel", lambda model, params: coriolis_christoffel(model, params, "c_christoffel")),
+    ("tau_derivatives", arm_only(lambda model, params: tau_derivatives(model, params, "tau_derivatives"))),
+    ("fd_derivatives", arm_only(lambda model, params: fd_derivatives(model, params, "fd_derivatives"))),
+    ("M_lagrange", arm_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
+    ("g_lagrange", arm_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
+    ("c_christoffel", arm_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),
     # the same dynamics in dual-quaternion form (kindyngen/dynamics_dualquat.py); Y_dq: the
     # regressor of tau_dq on Y's base parameters, the same function in both params modes
-    ("M_dq", lambda model, params: mass_matrix_dq(model, params, "M_dq")),
-    ("g_dq", lambda model, params: gravity_dq(model, params, "g_dq")),
-    ("c_dq", lambda model, params: coriolis_dq(model, params, "c_dq")),
-    ("tau_dq", lambda model, params: inverse_dynamics_dq(model, params, "tau_dq")),
-    ("Y_dq", lambda model, params: regressor_dq(model, "Y_dq")),
+    ("M_dq", arm_only(lambda model, params: mass_matrix_dq(model, params, "M_dq"))),
+    ("g_dq", arm_only(lambda model, params: gravity_dq(model, params, "g_dq"))),
+    ("c_dq", arm_only(lambda model, params: coriolis_dq(model, params, "c_dq"))),
+    ("tau_dq", arm_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
+    ("Y_dq", arm_only(lambda model, params: regressor_dq(model, "Y_dq"))),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik_lwr_*.py
-    ("ik_hom", lambda model, params: ik_hom(model)),
-    ("ik_dq", lambda model, params: ik_dq(model)),
-    # regressors on base parameters (kindyngen/regressors.py): same functions in both params modes
-    ("Y_g", lambda model, params: regressor(model, "Y_g")),
-    ("Y_m", lambda model, params: regressor(model, "Y_m")),
-    ("Y", lambda model, params: regressor(model, "Y")),
-)
-
-
-def forward_dynamics_routes(model: TreeModel) -> SymbolicFunction:
-    """fd of a tree by the sparse L^T D L route, with the articulated-body route as its
-    alternative: optimisation keeps whichever has fewer operations after CSE on this tree."""
-    return replace(forward_dynamics_tree(model), alternatives=(forward_dynamics_aba(model),))
-
-
-# the functions of a kinematic tree (kindyngen/tree_*.py): numeric parameters only
-TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] = (
-    ("fk_hom", fk_hom_tree),
-    ("jacobian", jacobian_tree),
-    ("M", mass_matrix_tree),
-    ("g", gravity_tree),
-    ("c", coriolis_tree),
-    ("tau", inverse_dynamics_tree),
-    ("fd", forward_dynamics_routes),
-    ("com", centre_of_mass_tree),
-    ("Y", tree_regressor),          # None where the base parameters cannot be decided
+    ("ik_hom", arm_only(lambda model, params: ik_hom(model))),
+    ("ik_dq", arm_only(lambda model, params: ik_dq(model))),
+    # regressors on base parameters (kindyngen/regressors.py, tree_regressors.py): the same
+    # functions in both params modes
+    ("Y_g", arm_only(lambda model, params: regressor(model, "Y_g"))),
+    ("Y_m", arm_only(lambda model, params: regressor(model, "Y_m"))),
+    ("Y", lambda model, params: tree_regressor(model) if model.is_tree else regressor(model, "Y")),
 )
 
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
-TREE_NAMES: tuple[str, ...] = tuple(name for name, _ in TREE_BUILDERS)
+# the functions a model read as a tree gets
+TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "arm_only", False))
 
 
-def derive_all(model: RobotModel | TreeModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
+def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
     """All applicable functions for ``model`` (optionally only the named ones)."""
-    if isinstance(model, TreeModel):
-        if params != "numeric":
-            raise ValueError("a kinematic tree is generated with its description's parameters only "
-                             "(--params numeric)")
-        found = (build(model) for name, build in TREE_BUILDERS if only is None or name in only)
-        return [function for function in found if function is not None]
+    if model.is_tree and params != "numeric":
+        raise ValueError("a kinematic tree is generated with its description's parameters only "
+                         "(--params numeric)")
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:
@@ -111,16 +114,16 @@ def derive_all(model: RobotModel | TreeModel, params: str = "numeric", only=None
     return out
 
 
-def base_params_document(model: RobotModel | TreeModel) -> dict | None:
+def base_params_document(model: RobotModel) -> dict | None:
     """Content of ``base_params.json`` for either kind of model (None for an arm with symbolic
     lengths)."""
-    return tree_base_params_document(model) if isinstance(model, TreeModel) else arm_base_params_document(model)
+    return tree_base_params_document(model) if model.is_tree else arm_base_params_document(model)
 
 
-def undecided_notes(model: RobotModel | TreeModel, only=None) -> list[str]:
+def undecided_notes(model: RobotModel, only=None) -> list[str]:
     """One line per regressor (of ``only``, default all) left out because its base parameters
     could not be decided."""
-    if not isinstance(model, TreeModel):
+    if not model.is_tree:
         return arm_undecided_notes(model, only)
     reason = tree_regressor_unavailable(model) if only is None or "Y" in only else None
     return [f"{model.identifier}: regressor Y not generated: {reason}"] if reason else []

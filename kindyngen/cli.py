@@ -18,7 +18,7 @@ from .c_trig import TRIG_MODES
 from .render import SCALARS
 from .evaluate import EvaluationError
 from .measured import MeasuredDataError
-from .robot import RobotDescriptionError, load_robot, load_robot_tree
+from .robot import RobotDescriptionError, load_robot
 
 
 LANGS = ("c", "python", "casadi", "jax", "matlab")
@@ -88,8 +88,8 @@ def load(path, args):
         if getattr(args, "params", "numeric") != "numeric":
             raise UsageError("--params symbolic: a kinematic tree is generated with its description's "
                              "parameters only (the regressor Y is the identification route)")
-        model = load_robot_tree(path, frames=args.frames, floating_base=args.floating_base,
-                                snap_angles=not args.keep_angles)
+        model = load_robot(path, snap_angles=not args.keep_angles, tree=True, frames=args.frames,
+                           floating_base=args.floating_base)
     else:
         model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
     for note in model.notes:
@@ -139,14 +139,14 @@ def _cmd_describe(args) -> int:
 
 
 def _cmd_count(args) -> int:
-    from .catalog import NAMES, TREE_NAMES, undecided_notes
+    from .catalog import NAMES, undecided_notes
     from .pipeline import build_programs
     from .report import opcounts_json, opcounts_markdown
     only = None
     if args.only is not None:
         if not args.only:
             raise UsageError("--only needs at least one function name")
-        known = NAMES + tuple(name for name in TREE_NAMES if name not in NAMES)
+        known = NAMES
         unknown = [name for name in args.only if name not in known]
         if unknown:
             raise UsageError(f"--only: unknown function(s) {', '.join(unknown)}; known: {', '.join(known)}")
@@ -223,8 +223,8 @@ def _cmd_build_python(args) -> int:
 
 
 def _all_function_names() -> tuple[str, ...]:
-    from .catalog import NAMES, TREE_NAMES
-    return NAMES + tuple(name for name in TREE_NAMES if name not in NAMES)
+    from .catalog import NAMES
+    return NAMES
 
 
 def _names_argument(what: str, known, allow_empty: bool = False):

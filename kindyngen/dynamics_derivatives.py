@@ -5,8 +5,11 @@
 * ``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv``.
 
 Both follow the model of ``tau`` and ``fd`` exactly (same grouped bodies, joint frames, params
-mode, prismatic joints, friction and armature), derived by hand-written forward and reverse
-(adjoint) sweeps over the joint-frame Newton-Euler pass, which reuse its intermediates instead of
+mode, prismatic joints, friction and armature; any fixed-base tree, an arm being the tree
+whose parent of joint j is j - 1), derived by hand-written forward and reverse (adjoint)
+sweeps over the joint-frame Newton-Euler pass of :class:`kindyngen.tree_dynamics.NewtonEulerPass`
+(written over ``parents[]``: a tangent runs down the subtree of its joint, an adjoint
+gathers what the children carry back), which reuse its intermediates instead of
 differentiating the expression DAG (``se.diff`` rebuilds ``d(Rz x)/dq`` from cos and sin as new
 expressions that CSE cannot match with ``Rz x``; here the rotated vector itself is reused):
 
@@ -62,13 +65,14 @@ from dataclasses import replace
 
 import symengine as se
 
-from .dynamics_newton_euler import NewtonEulerPass, crba, mat3, setup, u_matrix
+from .dynamics_newton_euler import mat3, u_matrix
 from .forward_dynamics import ldlt_factor, ldlt_substitute
 from .joint_effects import coulomb_shape, effect_torques, with_armature
 from .kinematics_homogeneous import q_port
-from .rigid_bodies import (ZERO, cross, dot, dynamics_function, flat, gravity, matvec, qd_port, qdd_port,
+from .rigid_bodies import (ZERO, cross, dot, dynamics_function, flat, matvec, qd_port, qdd_port,
                            tau_port, vadd, vscale)
 from .model import RobotModel
+from .tree_dynamics import NewtonEulerPass, crba, setup
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 
@@ -139,7 +143,7 @@ def solve_columns(L, inv_d, B):
 # ----------------------------------------------------------------------------- tangent Newton-Euler
 
 class _NewtonEuler(NewtonEulerPass):
-    """:class:`kindyngen.dynamics_newton_euler.NewtonEulerPass` with the sweeps of
+    """:class:`kindyngen.tree_dynamics.NewtonEulerPass` with the sweeps of
     :meth:`tangent` and :meth:`adjoint` over its intermediates."""
 
     def seed(self, m: int):
@@ -150,29 +154,32 @@ class _NewtonEuler(NewtonEulerPass):
         t0 + C e_z q`` (in the incoming ``a + U t``)."""
         joint, zero = self.joints[m], [ZERO] * 3
         if joint.prismatic:
-            if m == 0:      # the base does not move: U = 0
+            parent = self.parents[m]
+            if parent < 0 or self.U[parent] is None:      # the parent does not turn: U = 0
                 return zero, zero, zero
-            return zero, zero, joint.rot_t(mat3(self.U[m - 1], [joint.C[r][2] for r in range(3)]))
+            return zero, zero, joint.rot_t(mat3(self.U[parent], [joint.C[r][2] for r in range(3)]))
         wr, wdr, ar = self.wr[m], self.wdr[m], self.ar[m]
         qdm = self.qd[m] if self.qd is not None else ZERO
         return [wr[1], -wr[0], ZERO], [wdr[1] - qdm * wr[0], -wdr[0] - qdm * wr[1], ZERO], [ar[1], -ar[0], ZERO]
 
     def tangent(self, m: int) -> list:
         """``d tau / d q_m`` for all joints: one forward (tangent) sweep from link m's
-        :meth:`seed` (links before m carry no tangent), then backward over the whole chain,
-        where joint m also turns the wrench it passes down, ``d(Rz x)/dq = Rz (e_z x x)``
-        (prismatic: moves its origin)."""
+        :meth:`seed` over the links below m (the others carry no tangent), then backward over
+        the whole tree, where joint m also turns the wrench it passes to its parent,
+        ``d(Rz x)/dq = Rz (e_z x x)`` (prismatic: moves its origin)."""
         joints, bodies, qd = self.joints, self.bodies, self.qd
         n = len(joints)
         zero = [ZERO] * 3
-        dw, dwd, da = self.seed(m)
-        dforces = {}
-        dU = None  # the previous link's, set in the first iteration (k = m) before any use
-        for k in range(m, n):
-            if k > m:
+        below = self.subtree(m)
+        tangents, dforces = {}, {}
+        for k in sorted(below):
+            if k == m:
+                dw, dwd, da = self.seed(m)
+            else:
                 joint = joints[k]
-                da = joint.rot_t(vadd(da, mat3(dU, joint.t)))
-                dwr, dwdr = joint.rot_t(dw), joint.rot_t(dwd)
+                pw, pwd, pa, dU = tangents[self.parents[k]]
+                da = joint.rot_t(vadd(pa, mat3(dU, joint.t)))
+                dwr, dwdr = joint.rot_t(pw), joint.rot_t(pwd)
                 qdk = qd[k] if qd is not None else ZERO
                 if joint.prismatic:
                     dw, dwd = dwr, dwdr
@@ -182,60 +189,72 @@ class _NewtonEuler(NewtonEulerPass):
                     dwd = [dwdr[0] + qdk * dwr[1], dwdr[1] - qdk * dwr[0], dwdr[2]]
             w = self.w[k]
             dU = u_matrix(dw, dwd, _product_tangents(w, dw))
+            tangents[k] = (dw, dwd, da, dU)
             body = bodies[k]
             h, I = body.h, body.I
             dforces[k] = (vadd(vscale(body.m, da), mat3(dU, h)),
                           vadd(mat3(I, dwd), cross(dw, self.Iw[k]), cross(w, mat3(I, dw)), cross(h, da)))
         out = [None] * n
-        df, dnn = zero, zero
+        wrenches = [None] * n
         for k in range(n - 1, -1, -1):
             dF, dN = dforces.get(k, (zero, zero))
-            if k + 1 < n:
-                joint = joints[k + 1]
+            dfs, dns = [dF], [dN]
+            for c in self.children[k]:
+                joint = joints[c]
+                df, dnn = wrenches[c]
                 dfr, dnnr = joint.rot(df), joint.rot(dnn)
                 extra = zero
-                if k + 1 == m:
+                if c == m:
                     f, nn = self.f[m], self.nn[m]
                     if joint.prismatic:
                         extra = cross([joint.C[r][2] for r in range(3)], joint.rot(f))
                     else:
                         dfr = vadd(dfr, _rot_ez_cross(joint, f))
                         dnnr = vadd(dnnr, _rot_ez_cross(joint, nn))
-                dnn = vadd(dN, dnnr, cross(joint.t, dfr), extra)
-                df = vadd(dF, dfr)
-            else:
-                df, dnn = dF, dN
+                dfs.append(dfr)
+                dns += [dnnr, cross(joint.t, dfr), extra]
+            wrenches[k] = (vadd(*dfs), vadd(*dns)) if self.children[k] else (dF, dN)
+            df, dnn = wrenches[k]
             out[k] = df[2] if joints[k].prismatic else dnn[2]
         return out
 
     def adjoint(self, i: int) -> tuple[list, list]:
         """Row i of ``dtau/dq`` and of ``dtau/dqd``: one reverse sweep from ``tau_i``.
 
-        Up the chain, the adjoints ``(lf, ln)`` of the wrench of links k >= i in frame k
-        (``lf_k = R^T (lf_{k-1} + ln_{k-1} x t)``, ``ln_k = R^T ln_{k-1}``); down the chain,
-        the adjoints ``(Lw, Lwd, La)`` of each link's w, w', a: from its own force ``F = m a +
-        w' x h + w x (w x h)``, ``N = I w' + w x I w + h x a`` when k >= i (``d(l . (w x (w x
-        h)))/dw = l (w.h) + h (l.w) - 2 (l.h) w``, ``d(l . (w x I w))/dw = I w x l + I (l x w)``)
-        plus those carried back from link k+1 through its rotation, velocity terms and the
-        ``U t`` of its origin's acceleration. Column m is then these adjoints dotted with the
-        :meth:`seed` of link m (q) and with its velocity terms (qd), plus, for m > i, joint m turning the wrench it
-        passes down: ``lf_m . (e_z x f_m) + ln_m . (e_z x n_m)`` (prismatic: the moving origin,
-        ``ln_m . (e_z x f_m)``)."""
+        Down the tree from link i, the adjoints ``(lf, ln)`` of the wrench of each link k
+        below i in frame k (``lf_k = R^T (lf_p + ln_p x t)``, ``ln_k = R^T ln_p``, p its
+        parent); back up to the root, the adjoints ``(Lw, Lwd, La)`` of each link's w, w', a:
+        from its own force ``F = m a + w' x h + w x (w x h)``, ``N = I w' + w x I w + h x a``
+        when k is below i (``d(l . (w x (w x h)))/dw = l (w.h) + h (l.w) - 2 (l.h) w``,
+        ``d(l . (w x I w))/dw = I w x l + I (l x w)``) plus those carried back from its
+        children through their rotations, velocity terms and the ``U t`` of their origins'
+        acceleration. Column m is then these adjoints dotted with the :meth:`seed` of link m
+        (q) and with its velocity terms (qd), plus, for m strictly below i, joint m turning
+        the wrench it passes to its parent: ``lf_m . (e_z x f_m) + ln_m . (e_z x n_m)``
+        (prismatic: the moving origin, ``ln_m . (e_z x f_m)``)."""
         joints, bodies, qd = self.joints, self.bodies, self.qd
         n = len(joints)
         zero, ez = [ZERO] * 3, [ZERO, ZERO, se.Integer(1)]
+        below = self.subtree(i)
         lf, ln = [None] * n, [None] * n
         lf[i], ln[i] = (ez, zero) if joints[i].prismatic else (zero, ez)
-        for k in range(i + 1, n):
-            joint = joints[k]
-            lf[k] = joint.rot_t(vadd(lf[k - 1], cross(ln[k - 1], joint.t)))
-            ln[k] = joint.rot_t(ln[k - 1])
+        for k in sorted(below - {i}):
+            joint, p = joints[k], self.parents[k]
+            lf[k] = joint.rot_t(vadd(lf[p], cross(ln[p], joint.t)))
+            ln[k] = joint.rot_t(ln[p])
         dq, dqd = [None] * n, [None] * n
-        Lw = Lwd = La = zero
+        carried = [[] for _ in range(n)]
         for k in range(n - 1, -1, -1):
             joint, body = joints[k], bodies[k]
             w = self.w[k]
-            if k >= i:
+            parts = carried[k]
+            if len(parts) == 1:
+                Lw, Lwd, La = parts[0]
+            elif parts:
+                Lw, Lwd, La = (vadd(*(part[r] for part in parts)) for r in range(3))
+            else:
+                Lw = Lwd = La = zero
+            if k in below:
                 F, N, h, I = lf[k], ln[k], body.h, body.I
                 La = vadd(La, vscale(body.m, F), cross(N, h))
                 Lwd = vadd(Lwd, cross(h, F), mat3(I, N))
@@ -248,21 +267,23 @@ class _NewtonEuler(NewtonEulerPass):
                 dqd[k] = 2 * (La[0] * w[1] - La[1] * w[0])
             else:
                 dqd[k] = Lw[2] + Lwd[0] * wr[1] - Lwd[1] * wr[0]
-            if k > i:
+            if k in below and k != i:
                 f, nn = self.f[k], self.nn[k]
                 turned = ln[k][1] * f[0] - ln[k][0] * f[1]
                 if not joint.prismatic:
                     turned = lf[k][1] * f[0] - lf[k][0] * f[1] + ln[k][1] * nn[0] - ln[k][0] * nn[1]
                 dq[k] = dq[k] + turned
-            if k > 0:
+            p = self.parents[k]
+            if p >= 0:
                 if joint.prismatic:
                     Lwr = vadd(Lw, [-2 * qdk * La[1], 2 * qdk * La[0], ZERO])
                 else:
                     Lwr = vadd(Lw, [-qdk * Lwd[1], qdk * Lwd[0], ZERO])
-                t, wp = joint.t, self.w[k - 1]
+                t, wp = joint.t, self.w[p]
                 La = joint.rot(La)
                 Lwd = vadd(joint.rot(Lwd), cross(t, La))
                 Lw = vadd(joint.rot(Lwr), vscale(dot(wp, t), La), vscale(dot(La, wp), t), vscale(-2 * dot(La, t), wp))
+                carried[p].append((Lw, Lwd, La))
         return dq, dqd
 
 
@@ -317,12 +338,21 @@ def _conventions_note(model: RobotModel) -> str:
 
 # ----------------------------------------------------------------------------- functions
 
+def _fixed_base_setup(model: RobotModel, params: str):
+    """The tree setup the sweeps run on: a fixed base (a floating base's six coordinates have
+    no sweep here)."""
+    if model.floating_base:
+        raise ValueError(f"{model.name}: the derivatives are derived for a fixed base")
+    return setup(model, params)
+
+
 def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau_derivatives") -> SymbolicFunction:
     """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` of ``tau`` with its joint effects."""
-    q, joints, bodies, ports, syms = setup(model, params)
+    ts = _fixed_base_setup(model, params)
+    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
     n = model.n
     qd, qdd = port_symbols("qd", (n,)), port_symbols("qdd", (n,))
-    ne = _NewtonEuler(joints, bodies, qd, qdd, gravity(model))
+    ne = _NewtonEuler(ts, qd, qdd)
     rows = [ne.adjoint(i) for i in range(n)]
     dq, dqd = [row[0] for row in rows], [row[1] for row in rows]
     dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
@@ -339,12 +369,13 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
 
 def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives") -> SymbolicFunction:
     """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` of ``fd`` with its joint effects."""
-    q, joints, bodies, ports, syms = setup(model, params)
+    ts = _fixed_base_setup(model, params)
+    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
     n = model.n
     qd, tau = port_symbols("qd", (n,)), port_symbols("tau", (n,))
-    M = crba(joints, bodies)
+    M = crba(ts)[0]
     L, inv_d = ldlt_factor(with_armature(model, M))
-    rigid_bias = _NewtonEuler(joints, bodies, qd, None, gravity(model))
+    rigid_bias = _NewtonEuler(ts, qd, None)
     bias = [b + e for b, e in zip(rigid_bias.tau, effect_torques(model, qd, None))]
     qdd = ldlt_substitute(L, inv_d, [t - b for t, b in zip(tau, bias)])
     dM = mass_matrix_partials(M, q)

@@ -25,7 +25,7 @@ Conventions (all quantities of link j in joint frame j, whose z axis is joint j'
 * **Dual inertia operator** of a body with mass m, first moment h = m c and inertia I about
   the frame origin: ``M(w + e v) = (m v + w x h) + e (I w + h x v)`` (momentum, then angular
   momentum about the origin).  The bodies are the grouped barycentric bodies of the
-  homogeneous route (:func:`kindyngen.rigid_bodies.dynamic_bodies`), so the parameter
+  homogeneous route (:func:`kindyngen.tree_dynamics.setup`), so the parameter
   dependence, numeric or symbolic, is the same.
 * **Newton-Euler.** ``xi_j = Ad(x_j*) xi_{j-1} + s_j qd_j``, ``a_j = Ad(x_j*) a_{j-1} + s_j
   qdd_j + [xi_j, s_j qd_j]`` with ``s_j = k`` (revolute) or ``e k`` (prismatic) and the base
@@ -61,9 +61,9 @@ from .kinematics_dualquat import dq_conjugate, dq_mul, joint_factors
 from .kinematics_homogeneous import q_port
 from .model import RobotModel
 from .regressors import base_parameters, full_regressor, regressor
-from .rigid_bodies import (ZERO, Body, dynamic_bodies, dynamics_function, flat, gravity, joint_frames, qd_port,
-                           qdd_port, tau_port)
+from .rigid_bodies import ZERO, Body, dynamics_function, flat, gravity, qd_port, qdd_port, tau_port
 from .symbolic import Port, SymbolicFunction, port_symbols
+from .tree_dynamics import setup as tree_setup
 
 DQ = "Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): "
 
@@ -275,9 +275,8 @@ def crba_dq(poses, bodies):
 def setup(model: RobotModel, params: str):
     """Joint symbols, poses and the grouped bodies (the grouping uses the joint frames'
     constants only)."""
-    q = port_symbols("q", (model.n,))
-    bodies, ports, syms = dynamic_bodies(model, params, joint_frames(model, q))
-    return q, joint_poses(model, q), bodies, ports, syms
+    ts = tree_setup(model, params)
+    return ts.q, joint_poses(model, ts.q), list(ts.bodies), ts.param_ports, ts.param_symbols
 
 
 def inverse_dynamics_dq(model: RobotModel, params: str = "numeric", name: str = "tau_dq",
@@ -351,6 +350,6 @@ def regressor_dq(model: RobotModel, name: str = "Y_dq") -> SymbolicFunction | No
     assert source.input_symbols[:3] == full.input_symbols and tuple(source.input_symbols[3]) == full.p[:10 * model.n]
     dq = replace(full, rigid_rows=tuple(source.output_exprs[0]))
     exprs = dq.columns(base_parameters(model, "Y").base)
-    return replace(homogeneous, output_exprs=(exprs,),
+    return replace(homogeneous, output_exprs=(exprs,), stages=(),
                    summary="Torque regressor on base parameters from the dual-quaternion route: "
                            "tau = Y_dq(q, qd, qdd) pi (the columns and values of Y).")

@@ -18,11 +18,10 @@ from dataclasses import dataclass
 
 import symengine as se
 
-from .dynamics_newton_euler import crba, setup
 from .joint_effects import with_armature
 from .kinematics_homogeneous import q_port
-from .rigid_bodies import (ZERO, cross, dot, dynamic_bodies, dynamics_function, flat, gravity, joint_frames,
-                           qd_port, vadd, vscale)
+from .rigid_bodies import ZERO, cross, dot, dynamics_function, flat, gravity, qd_port, vadd, vscale
+from .tree_dynamics import crba, setup
 from .model import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -101,9 +100,9 @@ class LagrangeModel:
 
 
 def lagrange_model(model: RobotModel, params: str = "numeric") -> LagrangeModel:
-    q, qd = port_symbols("q", (model.n,)), port_symbols("qd", (model.n,))
-    joints = joint_frames(model, q)
-    bodies, ports, syms = dynamic_bodies(model, params, joints)
+    ts = setup(model, params)
+    q, qd, joints, bodies = ts.q, port_symbols("qd", (model.n,)), ts.joints, ts.bodies
+    ports, syms = ts.param_ports, ts.param_symbols
     T = kinetic_energy(bodies, moving_frames(joints, qd))
     U = potential_energy(model, bodies, joints)
     n = model.n
@@ -146,8 +145,8 @@ def _christoffel_setup(model: RobotModel, params: str, route: str):
     if route == "lagrange":
         L = lagrange_model(model, params)
         return L.M, L.q, L.ports, L.syms
-    q, joints, bodies, ports, syms = setup(model, params)
-    return crba(joints, bodies), q, ports, syms
+    ts = setup(model, params)
+    return crba(ts)[0], ts.q, ts.param_ports, ts.param_symbols
 
 
 def coriolis_matrix(model: RobotModel, params: str = "numeric", name: str = "S", route: str = "crba") -> SymbolicFunction:

@@ -1,9 +1,9 @@
-"""Forward dynamics ``fd(q, qd, tau) -> qdd = M(q)^-1 (tau - c(q, qd) - g(q))`` as one
-straight-line function: M by composite rigid bodies, the bias ``c + g`` by one Newton-Euler
-pass with ``qdd = 0``, then a fixed-size, fully unrolled ``L D L^T`` factorisation and the
-two triangular solves, all written as symengine expressions on the same DAG.  No square
-roots; one division per joint (``1 / D_j``, D_j > 0 because M is positive definite), so the
-generated C is allocation-free straight-line code.
+"""The unrolled solves of forward dynamics ``qdd = M(q)^-1 (tau - c(q, qd) - g(q))``
+(:func:`kindyngen.tree_dynamics.forward_dynamics_tree` builds M and the bias): a fixed-size
+``L D L^T`` factorisation and the two triangular solves, dense or as sparse as the tree,
+all written as symengine expressions on the same DAG.  No square roots; one division per
+joint (``1 / D_j``, D_j > 0 because M is positive definite), so the generated C is
+allocation-free straight-line code.
 
 Example:
 
@@ -14,12 +14,7 @@ from __future__ import annotations
 
 import symengine as se
 
-from .dynamics_newton_euler import crba, rnea, setup
-from .joint_effects import effect_torques, with_armature
-from .kinematics_homogeneous import q_port
-from .rigid_bodies import dynamics_function, gravity, qd_port, tau_port
-from .robot import RobotModel
-from .symbolic import Port, SymbolicFunction, naming, port_symbols
+from .symbolic import naming
 
 
 def ldlt_solve(M, b):
@@ -98,18 +93,3 @@ def tree_ldlt_solve(M, parents, b, stages=None):
     for k in range(n):                 # L x = y / D, root first
         x[k] = name(se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k])))
     return x
-
-
-def forward_dynamics(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
-    """``fd(q, qd, tau) -> qdd``."""
-    q, joints, bodies, ports, syms = setup(model, params)
-    qd, tau = port_symbols("qd", (model.n,)), port_symbols("tau", (model.n,))
-    # the armature belongs to the inertia, friction and offset to the bias
-    M = with_armature(model, crba(joints, bodies))
-    bias = [b + e for b, e in zip(rnea(joints, bodies, qd, None, gravity(model)), effect_torques(model, qd, None))]
-    qdd = ldlt_solve(M, [t - b for t, b in zip(tau, bias)])
-    return dynamics_function(
-        name, "Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one "
-        "Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).",
-        model, params, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),
-        (Port("qdd", (model.n,), "joint accelerations", "rad/s^2"),), (qdd,), ports, syms)

@@ -69,12 +69,21 @@ def constant_transform(placement: Placement) -> tuple[se.Matrix, se.Matrix] | No
             se.Matrix([constant(p[r]) for r in range(3)]))
 
 
+def constant_parts(placement: Placement) -> tuple[list, list]:
+    """A placement as (R as 3x3 nested lists, p as a list) of :func:`constant` entries: the
+    form the joint-frame recursions compute with."""
+    R, p = placement.matrix()
+    return [[constant(R[r, c]) for c in range(3)] for r in range(3)], [constant(p[r]) for r in range(3)]
+
+
 def constant(value) -> se.Basic:
-    """An exact sympy constant as symengine: exact where sympy has a closed form (rationals,
-    sqrt(2)/2, symbols), else the double of its 30-digit value (cos(3/10)): evaluated by
+    """The one sympy-to-symengine conversion of constants (placements, IK geometry, joint
+    frames): exact where sympy has a closed form (rationals, sqrt(2)/2, symbols), else the
+    double of its 30-digit value (cos(3/10)): evaluated by
     mpmath, the same on every machine."""
     value = sympy.sympify(value)
-    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan, sympy.tan):
+    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan, sympy.atan2,
+                                           sympy.tan):
         return se.sympify(value)
     return se.RealDouble(float(value.evalf(30)))
 

@@ -84,7 +84,7 @@ import numpy as np
 import sympy
 import symengine as se
 
-from .geometry import exact
+from .geometry import constant, exact
 from .robot import RobotModel
 
 # --- status codes ------------------------------------------------------------------------
@@ -386,7 +386,7 @@ def _map_holds(model, d3, d5, signs, offsets, base, flange) -> bool:
 @lru_cache(maxsize=None)    # exact geometry and a numeric check: once per model, not per IK form
 def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     """The LWR geometry of ``model`` and its map onto the canonical LWR, or None when the
-    arm is not of LWR type.
+    arm is not of LWR type (or the model is not a chain).
 
     LWR type, decided on the exact zero configuration (whatever the description: DH table
     of either convention, joint offsets, origins and axes, tool): seven revolute joints;
@@ -408,7 +408,7 @@ def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
     >>> lwr_geometry(load_robot("robots/lwr4.yaml")).d5           # doctest: +SKIP
     39/100
     """
-    if model.n != 7:
+    if model.n != 7 or not model.is_chain:      # a branched tree or a floating base: no closed form here
         return None
     zero = _zero_configuration(model)
     if zero is None:
@@ -453,16 +453,6 @@ def lwr_geometry(model: RobotModel) -> Optional[LwrGeometry]:
 
 
 # --- the target in the canonical frames ----------------------------------------------------
-def constant(value) -> se.Basic:
-    """An exact sympy constant as symengine: exact where it has a closed form (rationals,
-    radicals, symbols), else the double of its 30-digit value (cos(3/10))."""
-    value = sympy.sympify(value)
-    if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan,
-                                           sympy.atan2, sympy.tan):
-        return se.sympify(value)
-    return se.RealDouble(float(value.evalf(30)))
-
-
 def _translation_size(geometry: LwrGeometry) -> float:
     """1 + |p_B| + |p_F| (m): how much the map can lengthen the target's translation (100
     when a length is a name)."""

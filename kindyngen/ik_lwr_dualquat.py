@@ -34,8 +34,8 @@ from typing import Optional
 import sympy
 import symengine as se
 
-from .geometry import joint_cos_sin
-from .ik_common import (CONVENTIONS, TINY, WRIST_S6, LwrGeometry, Wrist, assemble, constant, elbow_cosine,
+from .geometry import constant, joint_cos_sin
+from .ik_common import (CONVENTIONS, TINY, WRIST_S6, LwrGeometry, Wrist, assemble, elbow_cosine,
                         half_angle, indicator, input_bound, lwr_geometry, quaternion, sanitize, solve_position)
 from .kinematics_dualquat import quat_add, quat_mul
 from .robot import RobotModel

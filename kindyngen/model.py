@@ -1,10 +1,16 @@
 """The robot model every derivation reads: immutable dataclasses, exact numbers.
 
-A :class:`RobotModel` is a serial chain of revolute and prismatic :class:`Joint` s, each
-placed on its parent link by exact constant placements (:mod:`kindyngen.placement`), with
-the inertial parameters of every :class:`Link` in that link's frame. Readers build it from
-a YAML description (:mod:`kindyngen.robot`) or a URDF (:mod:`kindyngen.urdf`); derivations
-read it and never change it.
+A :class:`RobotModel` is a kinematic tree of revolute and prismatic :class:`Joint` s, each
+placed on the link frame of its parent ``parents[j]`` (-1: the root body) by exact constant
+placements (:mod:`kindyngen.placement`), with the inertial parameters of every :class:`Link`
+in that link's frame. A serial arm is the tree whose parent of joint j is j - 1 (the
+default when ``parents`` is not given); it carries the arm's extras (joint effects, payload,
+tool, DH rows). Optionally the root moves freely (a *floating base*, Pinocchio's free-flyer
+layout: ``q`` = base position, base orientation quaternion x, y, z, w, then the joints;
+``qd`` = base linear and angular velocity in the base frame, then the joints). Readers
+build it from a YAML description (:mod:`kindyngen.robot`) or a URDF (:mod:`kindyngen.urdf`);
+derivations read it and never change it. ``frames`` are the frames of interest of a tree
+(FK and Jacobians); an arm's is its flange moved by the tool.
 
 Example:
 
@@ -121,23 +127,85 @@ class Link:
         return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
 
 
+FREE_FLYER_NQ, FREE_FLYER_NV = 7, 6
+
+
 @dataclass(frozen=True)
-class RobotModel:
-    """A serial arm of revolute and prismatic joints. Constant: derivations read it, never
-    change it."""
+class Frame:
+    """A frame of interest: link ``name``'s frame, ``placement`` on the frame of the body it
+    belongs to (``body`` = a joint index, -1 the root body)."""
 
     name: str
-    convention: str  # "standard" or "modified" DH, or "frames" (joints by origin and axis)
+    body: int
+    placement: Placement = Placement()
+
+
+ZERO_LINK = Link(mass=sympy.Integer(0), com=(sympy.Integer(0),) * 3, inertia=(sympy.Integer(0),) * 6)
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A kinematic tree (see the module text); a serial arm by default. Constant:
+    derivations read it, never change it."""
+
+    name: str
+    # "standard" or "modified" DH, "frames" (an arm by origin and axis) or "tree" (read as a tree)
+    convention: str
     gravity: tuple[sympy.Rational, sympy.Rational, sympy.Rational]  # exact, m/s^2
     joints: tuple[Joint, ...]
-    links: tuple[Link, ...]
+    links: tuple[Link, ...]             # each joint's link (its child link and links fixed to it)
     source: str = "<memory>"
+    parents: tuple[int, ...] | None = None  # parent joint of each joint, -1 the root; None: j - 1
+    root: Link = ZERO_LINK              # the root body (moves only with a floating base)
+    frames: tuple[Frame, ...] = ()      # a tree's frames of interest (an arm: its flange, see flange_frame)
+    floating_base: bool = False
     payload: Link | None = None                     # a rigid body fixed to the flange, flange frame
     coulomb_smoothing: sympy.Rational | None = None  # eps (rad/s) of tanh(qd / eps); None: sign(qd)
     tool: Placement = Placement()                   # flange (last link frame) -> tool frame
     base_name: str = ""                             # the base frame's name (URDF root link)
     flange_name: str = ""                           # the last link's name
     notes: tuple[str, ...] = ()                     # what reading the description changed, for the user
+
+    def __post_init__(self):
+        if self.parents is None:
+            object.__setattr__(self, "parents", tuple(range(-1, len(self.joints) - 1)))
+        assert len(self.parents) == len(self.joints) == len(self.links)
+        assert all(-1 <= p < j for j, p in enumerate(self.parents)), "parents must come first"
+
+    @property
+    def is_tree(self) -> bool:
+        """Read as a tree (its functions: those of a tree, every frame of interest); else an
+        arm (the arm's functions, the flange)."""
+        return self.convention == "tree"
+
+    @property
+    def is_chain(self) -> bool:
+        """Fixed base, each joint's parent the joint before it: what the chain-only
+        derivations (closed-form IK, DH-based code) need."""
+        return not self.floating_base and self.parents == tuple(range(-1, self.n - 1))
+
+    @property
+    def flange_frame(self) -> Frame:
+        """The arm's flange frame (the last link frame moved by the tool)."""
+        return Frame(self.flange_name or "flange", self.n - 1, self.tool)
+
+    @property
+    def frames_of_interest(self) -> tuple[Frame, ...]:
+        """The frames FK and Jacobians give: a tree's ``frames``, an arm's flange."""
+        return self.frames if self.is_tree else (self.flange_frame,)
+
+    def ancestors(self, j: int) -> tuple[int, ...]:
+        """Joint j and the joints above it, from j up (frame bodies: -1 gives ())."""
+        out = []
+        while j >= 0:
+            out.append(j)
+            j = self.parents[j]
+        return tuple(out)
+
+    @property
+    def depth(self) -> int:
+        """The most joints on a path from the root (d of the O(n d^2) costs)."""
+        return max((len(self.ancestors(j)) for j in range(self.n)), default=0)
 
     @property
     def is_dh(self) -> bool:
@@ -146,11 +214,17 @@ class RobotModel:
     @property
     def order_text(self) -> str:
         """How the joints are ordered, for port descriptions."""
+        if self.is_tree:
+            return "depth-first order (Pinocchio's)"
         return "DH order" if self.is_dh else "chain order from the base"
 
     @property
     def frames_text(self) -> str:
         """Which frames the outputs refer to (stated in every generated header)."""
+        if self.is_tree:
+            world = ("the world frame (the base pose is q[0:7])" if self.floating_base
+                     else f"the frame of the root link '{self.base_name}'")
+            return f"Frames: poses and Jacobians in {world}."
         if self.is_dh:
             base, flange = "DH frame 0", f"last DH frame ({self.n})"
         else:
@@ -185,18 +259,22 @@ class RobotModel:
 
     @property
     def nq(self) -> int:
-        """Configuration coordinates: the joint positions (as a kinematic tree names them)."""
-        return self.n
+        """Configuration coordinates: the joint positions (after the base pose's 7)."""
+        return self.n + (FREE_FLYER_NQ if self.floating_base else 0)
 
     @property
     def nv(self) -> int:
-        """Velocity coordinates: the joint velocities."""
-        return self.n
+        """Velocity coordinates: the joint velocities (after the base twist's 6)."""
+        return self.n + (FREE_FLYER_NV if self.floating_base else 0)
 
     @property
-    def structure_text(self) -> None:
-        """A tree's generated files say what it is; an arm's state n and its convention."""
-        return None
+    def structure_text(self) -> str | None:
+        """What a tree's generated files say it is (an arm's state n and its convention)."""
+        if not self.is_tree:
+            return None
+        kinds = sorted({j.kind for j in self.joints})
+        base = (f"floating base (nq {self.nq}, nv {self.nv})" if self.floating_base else "fixed base")
+        return f"{self.n} {' and '.join(kinds)} joints in a tree of depth {self.depth}, {base}"
 
     @property
     def lower(self) -> np.ndarray:

@@ -17,7 +17,6 @@ from .optimize import Program, optimize
 from .render import RENDERERS
 from .report import opcounts_json, opcounts_markdown
 from .model import RobotModel
-from .tree_model import TreeModel
 
 LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
 
@@ -44,7 +43,7 @@ class Progress:
             self.stream.write("\n")
 
 
-def build_programs(model: RobotModel | TreeModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
+def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
     """Derive and optimise every applicable function of ``model``."""
     functions = derive_all(model, params, only)
     bar = Progress(f"{model.identifier}", len(functions)) if progress else None
@@ -87,7 +86,7 @@ def measure_float_error(model, programs, document: dict, trig: str) -> dict:
         return {}
 
 
-def generate(model: RobotModel | TreeModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
+def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
              batch: bool = True) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under

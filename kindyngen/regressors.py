@@ -42,11 +42,12 @@ import sympy
 
 from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
 from .dynamics_lagrange import gravity_lagrange, mass_matrix_lagrange
-from .dynamics_newton_euler import inverse_dynamics
+from .tree_dynamics import inverse_dynamics_tree
 from .inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
 from .joint_effects import effect_columns, effect_parameter_names, effect_parameter_values
 from .robot import RobotModel
-from .symbolic import Port, SymbolicFunction
+from .symbolic import Port, Stages, SymbolicFunction
+from .tree_regressors import link_parameter_columns
 
 KINDS = ("Y_g", "Y_m", "Y")
 # catalog functions each regressor is differentiated from, first available wins: the routes
@@ -57,7 +58,7 @@ KINDS = ("Y_g", "Y_m", "Y")
 # (rigid bodies only: the joint effects are appended as their own columns, see full_regressor)
 SOURCES = {"Y_g": gravity_lagrange,
            "Y_m": lambda model, params: mass_matrix_lagrange(model, params, effects=False),
-           "Y": lambda model, params: inverse_dynamics(model, params, effects=False)}
+           "Y": lambda model, params: inverse_dynamics_tree(model, params, effects=False, named=False)}
 QUANTITY = {"Y_g": "g", "Y_m": "M", "Y": "tau"}
 SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random samples for the rank analysis
 SEEDS = (20140, 20141)                             # analysis, verification
@@ -259,7 +260,8 @@ def regressor(model: RobotModel, kind: str, name: str | None = None) -> Symbolic
     full = full_regressor(model, kind)
     base = base_parameters(model, kind)
     rows, cols = len(full.rows), len(base.base)
-    exprs = full.columns(base.base)
+    stages = Stages()
+    exprs = torque_columns(model, full, base.base, stages) if kind == "Y" else full.columns(base.base)
     what = {"Y_g": "gravity torques g", "Y_m": "inertia stack (lower triangle of M, row by row)",
             "Y": "joint torques tau"}[kind]
     unit = {"Y_g": "N m per base parameter", "Y_m": "kg m^2 per base parameter", "Y": "N m per base parameter"}[kind]
@@ -278,7 +280,20 @@ def regressor(model: RobotModel, kind: str, name: str | None = None) -> Symbolic
         name=name or kind, summary=SUMMARIES[kind],
         inputs=full.inputs, outputs=(port,), input_symbols=full.input_symbols, output_exprs=(exprs,),
         conventions=conventions,
-        metadata={"params": "none", "base_parameters": base.names})
+        metadata={"params": "none", "base_parameters": base.names}, stages=stages.definitions)
+
+
+def torque_columns(model: RobotModel, full: FullRegressor, indices, stages: Stages) -> tuple[se.Basic, ...]:
+    """Row-major entries of the torque regressor restricted to columns ``indices``: a link
+    parameter's column as the torque its unit value causes, carried up the tree
+    (:mod:`kindyngen.tree_regressors`: nothing differentiated, fewer operations after CSE
+    than ``d tau / d p``), an effect coefficient's as :attr:`FullRegressor.effect_columns`."""
+    rigid = len(full.p) - len(full.effect_columns)
+    wanted = sorted(k for k in indices if k < rigid)
+    _, columns = link_parameter_columns(model, frozenset(wanted), stages)
+    column = dict(zip(wanted, columns))
+    return tuple(column[k][r] if k < rigid else full.effect_columns[k - rigid][r]
+                 for r in range(len(full.rows)) for k in indices)
 
 
 def base_params_document(model: RobotModel) -> dict | None:

@@ -1,6 +1,6 @@
-"""Joint frames, link bodies with grouped inertial parameters, gravity, ports and the
-function assembly every dynamics route shares (:mod:`kindyngen.dynamics_lagrange`,
-:mod:`kindyngen.dynamics_newton_euler`, :mod:`kindyngen.forward_dynamics`).
+"""Joint frames, link bodies, gravity, ports and the function assembly every dynamics
+route shares; :func:`kindyngen.tree_dynamics.setup` builds the frames and the grouped
+bodies of a model (an arm being the tree whose parent of joint j is j - 1).
 
 * **Joint frames.** Frame j is attached to link j with its z axis on joint j, so that every
   revolute joint is ``R_{j-1,j} = C_j Rz(q_j)``, ``p_{j-1,j} = t_j`` and every prismatic one
@@ -24,24 +24,19 @@ function assembly every dynamics route shares (:mod:`kindyngen.dynamics_lagrange
 Example:
 
 >>> from kindyngen.robot import load_robot
->>> from kindyngen.symbolic import port_symbols
->>> model = load_robot("robots/lwr4.yaml")                            # doctest: +SKIP
->>> frames = joint_frames(model, port_symbols("q", (model.n,)))       # doctest: +SKIP
->>> bodies, ports, syms = dynamic_bodies(model, "symbolic", frames)    # doctest: +SKIP
->>> [p.name for p in ports], bodies[-1].m                             # doctest: +SKIP
+>>> from kindyngen.tree_dynamics import setup
+>>> ts = setup(load_robot("robots/lwr4.yaml"), "symbolic")
+>>> [p.name for p in ts.param_ports], ts.bodies[-1].m
 (['p'], 0)
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import sympy
 import symengine as se
 
-from .placement import Placement
 from .inertial_parameters import LinkInertials, numeric_inertials, parameter_symbols, symbolic_inertials
 from .joint_effects import description_text
-from .geometry import exact
 from .kinematics_homogeneous import joint_units
 from .model import RobotModel
 from .symbolic import Port, SymbolicFunction
@@ -59,12 +54,20 @@ def p_port(model: RobotModel) -> Port:
                 "Ixz, Iyz, Izz about the link frame origin", "kg, kg m, kg m^2")
 
 
+def _velocity_text(model: RobotModel, what: str, base: str) -> str:
+    joints = f"joint {what}s, {model.order_text}"
+    return f"base {base} in the base frame, then {joints}" if model.floating_base else joints
+
+
 def qd_port(model: RobotModel) -> Port:
-    return Port("qd", (model.n,), f"joint velocities, {model.order_text}", joint_units(model, "rad/s", "m/s"))
+    return Port("qd", (model.nv,), _velocity_text(model, "velocity", "linear and angular velocity"),
+                ("m/s, rad/s, " if model.floating_base else "") + joint_units(model, "rad/s", "m/s"))
 
 
-def qdd_port(model: RobotModel) -> Port:
-    return Port("qdd", (model.n,), f"joint accelerations, {model.order_text}", joint_units(model, "rad/s^2", "m/s^2"))
+def qdd_port(model: RobotModel, name: str = "qdd") -> Port:
+    return Port(name, (model.nv,), _velocity_text(model, "acceleration", "linear and angular acceleration "
+                                                  "(the derivative of its twist)"),
+                ("m/s^2, rad/s^2, " if model.floating_base else "") + joint_units(model, "rad/s^2", "m/s^2"))
 
 
 def torque_unit(model: RobotModel) -> str:
@@ -134,32 +137,6 @@ def sym_matmat(C, I):
 
 # ----------------------------------------------------------------------------- joint frames
 
-def _exact_trig(angle):
-    """cos, sin of a constant angle: exact when sympy finds a closed form, else floats."""
-    angle = sympy.sympify(angle)
-    out = []
-    for v in (sympy.cos(angle), sympy.sin(angle)):
-        out.append(v if not v.has(sympy.cos, sympy.sin) else sympy.Float(float(v)))
-    return out
-
-
-def _rz(theta):
-    c, s = _exact_trig(theta)
-    return sympy.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-
-
-def _constant(v) -> se.Basic:
-    """An exact sympy constant as symengine: exact where it is (rationals, sqrt(2)/2),
-    a double where floats entered."""
-    v = sympy.nsimplify(v) if isinstance(v, float) else sympy.sympify(v)
-    return se.RealDouble(float(v)) if v.has(sympy.Float) else se.sympify(v)
-
-
-def _to_se(matrix: sympy.Matrix):
-    matrix = sympy.simplify(matrix)
-    return [[_constant(matrix[r, c]) for c in range(matrix.cols)] for r in range(matrix.rows)]
-
-
 @dataclass(frozen=True)
 class JointFrame:
     """Joint j in joint frames: ``R_{j-1,j} = C Rz(q)``, origin of frame j at ``t`` in frame
@@ -183,22 +160,6 @@ class JointFrame:
         return [self.c * x + self.s * y, self.c * y - self.s * x, z]
 
 
-def joint_frames(model: RobotModel, q) -> tuple[JointFrame, ...]:
-    """Constant parts of every joint in joint frames (see the module text)."""
-    out = []
-    for j, (joint, qj) in enumerate(zip(model.joints, q)):
-        placement = (model.joints[j - 1].after if j > 0 else Placement()) * joint.before
-        R, p = placement.matrix()
-        C, t = _to_se(R * (sympy.eye(3) if joint.prismatic else _rz(joint.offset))), [row[0] for row in _to_se(p)]
-        if joint.prismatic:
-            slide = qj + exact(joint.offset)
-            t = [t[r] + C[r][2] * slide for r in range(3)]
-            out.append(JointFrame(C=C, t=t, c=se.Integer(1), s=ZERO, prismatic=True))
-        else:
-            out.append(JointFrame(C=C, t=t, c=se.cos(qj), s=se.sin(qj)))
-    return tuple(out)
-
-
 # ----------------------------------------------------------------------------- parameters
 
 @dataclass(frozen=True)
@@ -218,6 +179,11 @@ class Body:
     def __add__(self, other: "Body") -> "Body":
         return Body(self.m + other.m, vadd(self.h, other.h),
                     [[self.I[r][c] + other.I[r][c] for c in range(3)] for r in range(3)])
+
+    def collected(self) -> "Body":
+        """The body with every entry :func:`_collect` ed (symbolic parameters: exact
+        cancellations happen, each coefficient is paid once)."""
+        return Body(_collect(self.m), [_collect(x) for x in self.h], [[_collect(x) for x in row] for row in self.I])
 
     def moved(self, R, p) -> "Body":
         """The same body seen from a frame in which this body's frame has the constant
@@ -248,46 +214,6 @@ def inertials(model: RobotModel, params: str):
     raise ValueError(f"params must be one of {PARAMS}, got {params!r}")
 
 
-def joint_frame_bodies(model: RobotModel, links) -> list[Body]:
-    """Each link's parameters in its joint frame: moved from the link frame by ``after``
-    (standard DH: from DH frame j; modified DH and URDF-style axes along z: unchanged)."""
-    out = []
-    for joint, li in zip(model.joints, links):
-        body = Body.from_inertials(li)
-        if not joint.after.is_identity:
-            R, p = joint.after.matrix()
-            body = body.moved(_to_se(R), [row[0] for row in _to_se(p)])
-        out.append(body)
-    return out
-
-
-def grouped_bodies(model: RobotModel, bodies, joints) -> list[Body]:
-    """Move each link's rotation-invariant part (m, MZ, YY) to the previous link, tip first
-    (base-parameter grouping for revolute joints; the first link's part is dropped)."""
-    bodies = list(bodies)
-    for j in range(model.n - 1, -1, -1):
-        b = bodies[j]
-        if joints[j].prismatic:
-            # the rotational inertia turns with link j-1: a pure rotation (no translation)
-            bodies[j] = Body(b.m, list(b.h), [[ZERO] * 3 for _ in range(3)])
-            part = Body(ZERO, [ZERO] * 3, b.I)
-            if j > 0:
-                bodies[j - 1] = bodies[j - 1] + part.moved(joints[j].C, [ZERO] * 3)
-            else:
-                bodies[j] = b
-            continue
-        yy, mz = b.I[1][1], b.h[2]
-        rest = Body(ZERO, [b.h[0], b.h[1], ZERO],
-                    [[b.I[0][0] - yy, b.I[0][1], b.I[0][2]], [b.I[1][0], ZERO, b.I[1][2]],
-                     [b.I[2][0], b.I[2][1], b.I[2][2]]])
-        bodies[j] = rest
-        if j > 0:
-            part = Body(b.m, [ZERO, ZERO, mz], [[yy, ZERO, ZERO], [ZERO, yy, ZERO], [ZERO, ZERO, ZERO]])
-            bodies[j - 1] = bodies[j - 1] + part.moved(joints[j].C, joints[j].t)
-    return [Body(_collect(b.m), [_collect(x) for x in b.h], [[_collect(x) for x in row] for row in b.I])
-            for b in bodies]
-
-
 def _collect(e: se.Basic) -> se.Basic:
     """A symbolic parameter expression (linear in p, at most 10 n terms, so expanding it is
     safe) as sum over distinct coefficients of coefficient * (sum of symbols): exact
@@ -303,15 +229,6 @@ def _collect(e: se.Basic) -> se.Basic:
     return se.Add(*(coeff * se.Add(*terms) for coeff, terms in groups.items()))
 
 
-def dynamic_bodies(model: RobotModel, params: str, joints, group: bool = True):
-    """Link bodies in joint frames, grouped, plus the extra ports and symbols of ``params``."""
-    links, ports, syms = inertials(model, params)
-    bodies = joint_frame_bodies(model, links)
-    if group:
-        bodies = grouped_bodies(model, bodies, joints)
-    return bodies, ports, syms
-
-
 def gravity(model: RobotModel):
     """Gravity acceleration in the base frame (exact zeros kept)."""
     return [se.sympify(v) for v in model.gravity]
@@ -322,8 +239,9 @@ def gravity(model: RobotModel):
 def dynamics_function(name, summary, model, params, inputs, input_symbols, outputs, output_exprs,
                       extra_ports, extra_syms) -> SymbolicFunction:
     """A dynamics SymbolicFunction: the route's inputs followed by the parameter ports of
-    ``params`` (``extra_ports``/``extra_syms`` from :func:`dynamic_bodies`), the shared
-    conventions text and ``metadata = {"params": params}``."""
+    ``params`` (``extra_ports``/``extra_syms``: ``param_ports``/``param_symbols`` of
+    :func:`kindyngen.tree_dynamics.setup`), the shared conventions text and ``metadata =
+    {"params": params}``."""
     return SymbolicFunction(
         name=name, summary=summary,
         inputs=tuple(inputs) + tuple(extra_ports), outputs=tuple(outputs),

@@ -24,11 +24,10 @@ from pathlib import Path
 import sympy
 import yaml
 
-from .model import (CONVENTIONS, DHRow, Friction, Joint, Link, RobotDescriptionError, RobotModel,  # noqa: F401
+from .model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,  # noqa: F401
                     check_inertia)
 from .placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                         unit_axis)
-from .tree_model import Frame, TreeModel
 from .urdf import load_urdf, load_urdf_tree
 
 _SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
@@ -352,11 +351,17 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> Rob
 
 
 def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = None,
-               tip: str | None = None) -> RobotModel:
-    """Read and validate a robot description file: YAML, or URDF (``.urdf``; ``base`` and
-    ``tip`` name the chain's first and last link, see :mod:`kindyngen.urdf`)."""
+               tip: str | None = None, tree: bool = False, frames=None, floating_base: bool = False) -> RobotModel:
+    """Read and validate a robot description file, the one entry point of both formats: YAML,
+    or URDF (``.urdf``; ``base`` and ``tip`` name the chain's first and last link, see
+    :mod:`kindyngen.urdf`). With ``tree`` (implied by ``frames`` or ``floating_base``) every
+    branch is read (:func:`parse_robot_tree`, :func:`kindyngen.urdf.parse_urdf_tree`)."""
     path = Path(path)
     source = str(path)
+    if tree or frames is not None or floating_base:
+        if path.suffix.lower() == ".urdf":
+            return load_urdf_tree(path, frames=frames, floating_base=floating_base, snap_angles=snap_angles)
+        return parse_robot_tree(_read_yaml(path), source, frames, floating_base, snap_angles)
     if path.suffix.lower() == ".urdf":
         return load_urdf(path, base=base, tip=tip, snap_angles=snap_angles)
     if base is not None or tip is not None:
@@ -392,7 +397,7 @@ BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the 
 
 
 def parse_robot_tree(data, source: str = "<memory>", frames=None, floating_base: bool = False,
-                     snap_angles: bool = True) -> TreeModel:
+                     snap_angles: bool = True) -> RobotModel:
     """A kinematic tree from already-parsed YAML data: joints by origin and axis (``dh:
     none``), each with a unique ``name`` and an optional ``parent`` (an earlier joint's name;
     absent: the base), and an optional ``base`` body (mass, com, inertia; the root body of a
@@ -447,15 +452,7 @@ def parse_robot_tree(data, source: str = "<memory>", frames=None, floating_base:
             close = difflib.get_close_matches(str(frame), list(named), n=1)
             raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
                                         + (f"; closest: {close[0]}" if close else ""))
-    return TreeModel(name=name.strip(), joints=tuple(joints), parents=tuple(parents), links=links, root=root,
-                     frames=tuple(Frame(frame, named[frame]) for frame in wanted), floating_base=floating_base,
-                     gravity=gravity, source=source, base_name=BASE_NAME, notes=tuple(reading.notes))
-
-
-def load_robot_tree(path: str | Path, frames=None, floating_base: bool = False, snap_angles: bool = True) -> TreeModel:
-    """Read a kinematic tree: a URDF (every branch, :func:`kindyngen.urdf.load_urdf_tree`) or a
-    YAML tree (:func:`parse_robot_tree`)."""
-    path = Path(path)
-    if path.suffix.lower() == ".urdf":
-        return load_urdf_tree(path, frames=frames, floating_base=floating_base, snap_angles=snap_angles)
-    return parse_robot_tree(_read_yaml(path), str(path), frames, floating_base, snap_angles)
+    return RobotModel(name=name.strip(), convention="tree", joints=tuple(joints), parents=tuple(parents),
+                      links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
+                      floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
+                      notes=tuple(reading.notes))

@@ -57,6 +57,23 @@ class SymbolicFunction:
     # optimisation keeps the one with the fewest operations after CSE
     alternatives: tuple["SymbolicFunction", ...] = ()
 
+    def inlined_outputs(self) -> tuple[tuple[se.Basic, ...], ...]:
+        """``output_exprs`` with the named intermediates substituted: expressions of the
+        inputs only, to evaluate or differentiate directly (a DAG: nothing is expanded).
+
+        >>> x, s = se.symbols("x s")
+        >>> f = SymbolicFunction("f", "", (Port("x", (1,), ""),), (Port("y", (1,), ""),), ((x,),),
+        ...                      ((s * s,),), stages=((s, x + 1),))
+        >>> f.inlined_outputs()
+        (((1 + x)**2,),)
+        """
+        if not self.stages:
+            return self.output_exprs
+        values: dict = {}
+        for symbol, expr in self.stages:
+            values[symbol] = expr.xreplace(values) if values else expr
+        return tuple(tuple(e.xreplace(values) for e in exprs) for exprs in self.output_exprs)
+
     def __post_init__(self):
         for port, syms in zip(self.inputs, self.input_symbols):
             assert len(syms) == port.size, f"{self.name}: input {port.name} has {len(syms)} symbols"

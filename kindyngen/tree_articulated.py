@@ -28,7 +28,7 @@ R^T gamma)``, the derivative of its twist in the base frame (Pinocchio's ``aba``
 Example:
 
 >>> from kindyngen.urdf import parse_urdf_tree
->>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> from kindyngen.urdf import TWO_PENDULUMS
 >>> f = forward_dynamics_aba(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
 >>> [(p.name, p.shape) for p in f.outputs]
 [('qdd', (8,))]
@@ -38,10 +38,11 @@ from __future__ import annotations
 import symengine as se
 
 from .forward_dynamics import ldlt_solve
-from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, vadd, vscale
+from .kinematics_homogeneous import q_port
+from .model import FREE_FLYER_NV, RobotModel
+from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, qd_port, qdd_port, vadd, vscale
 from .symbolic import Stages, SymbolicFunction, port_symbols
-from .tree_dynamics import ROUTE, TreeSetup, carry, force_port, q_port, qd_port, qdd_port, setup, tree_function
-from .tree_model import FREE_FLYER_NV, TreeModel
+from .tree_dynamics import ROUTE, TreeSetup, carry, force_port, joint_effects, setup, tree_function
 
 
 def _skew(v):
@@ -130,9 +131,10 @@ def _motion_to_child(joint, w, v):
     return joint.rot_t(w), joint.rot_t(vadd(v, [-x for x in cross(joint.t, w)]))
 
 
-def aba(ts: TreeSetup, qd, tau, stages: Stages) -> list:
+def aba(ts: TreeSetup, qd, tau, stages: Stages, armature=None) -> list:
     """qdd (size nv) by the articulated-body algorithm (module text), its intermediates named
-    in ``stages``."""
+    in ``stages``; ``armature`` (per joint, or None) adds each joint's rotor inertia to its
+    ``D`` (the motor turns with the joint only)."""
     model = ts.model
     n, base = model.n, FREE_FLYER_NV if model.floating_base else 0
     ez = [ZERO, ZERO, se.Integer(1)]
@@ -168,7 +170,10 @@ def aba(ts: TreeSetup, qd, tau, stages: Stages) -> list:
         pn, pf = _named_pair(stages, (vadd(*(p[0] for p in pA[j])), vadd(*(p[1] for p in pA[j]))))
         k = 5 if joint.prismatic else 2
         U[j] = inertia.column(k)
-        inv_d[j] = stages.cut(se.Pow(U[j][1][2] if joint.prismatic else U[j][0][2], -1))
+        d = U[j][1][2] if joint.prismatic else U[j][0][2]
+        if armature is not None and armature[j] != 0:
+            d = d + armature[j]
+        inv_d[j] = stages.cut(se.Pow(d, -1))
         u[j] = stages.cut(tau[base + j] - (pf[2] if joint.prismatic else pn[2]))
         if parent < 0 and not model.floating_base:
             continue
@@ -208,13 +213,16 @@ def aba(ts: TreeSetup, qd, tau, stages: Stages) -> list:
     return out + qdd
 
 
-def forward_dynamics_aba(model: TreeModel, name: str = "fd") -> SymbolicFunction:
-    """``fd(q, qd, tau) -> qdd`` by the articulated-body algorithm."""
-    ts = setup(model)
+def forward_dynamics_aba(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
+    """``fd(q, qd, tau) -> qdd`` by the articulated-body algorithm (the armature in each
+    joint's D, friction and offset taken from the applied torque)."""
+    ts = setup(model, params)
     qd, tau = port_symbols("qd", (model.nv,)), port_symbols("tau", (model.nv,))
     stages = Stages()
-    qdd = aba(ts, qd, tau, stages)
+    applied = [t - e for t, e in zip(tau, joint_effects(model, qd, None))]
+    armature = [se.sympify(model.armature(j)) for j in range(model.n)] if "armature" in model.effects else None
+    qdd = aba(ts, qd, applied, stages, armature)
     return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g) by the articulated-body algorithm "
-                         "(O(n), no inertia matrix).", model,
+                         "(O(n), no inertia matrix).", ts,
                          (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")),
                          (ts.q, qd, tau), (qdd_port(model),), (qdd,), stages, route="articulated-body")

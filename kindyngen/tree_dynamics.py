@@ -1,7 +1,9 @@
-"""Dynamics of a kinematic tree, fixed or floating base, derived symbolically in joint frames.
-
-The serial routes of :mod:`kindyngen.dynamics_newton_euler` generalised to a parent array
-(a serial arm is the tree whose parent of joint j is j - 1):
+"""Dynamics of every robot, a kinematic tree with a fixed or floating base (a serial arm is
+the tree whose parent of joint j is j - 1), derived symbolically in joint frames with the
+primitives of :mod:`kindyngen.dynamics_newton_euler`; one recursion per algorithm, for arms
+and trees alike, in both inertial-parameter modes ("numeric": the description's values;
+"symbolic": the input ``p`` of 10 n barycentric parameters) and with the description's joint
+effects (friction and offset in tau and fd's bias, the armature on M's diagonal):
 
 * **Joint frames.** Joint j's frame is placed on its parent's joint frame by an exact
   constant rotation ``C_j`` and translation ``t_j`` (``after_parent * before_j``), so every
@@ -36,10 +38,10 @@ The serial routes of :mod:`kindyngen.dynamics_newton_euler` generalised to a par
   [c_b]x M_lin)]`` (world-aligned axes at the CoM: Pinocchio's ``ccrba``). With a fixed base
   the root link is not counted (as in Pinocchio: it is the universe).
 
-Example: the two pendulums on a floating body of :mod:`kindyngen.tree_model`:
+Example: the two pendulums on a floating body of :mod:`kindyngen.urdf`:
 
 >>> from kindyngen.urdf import parse_urdf_tree
->>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> from kindyngen.urdf import TWO_PENDULUMS
 >>> tree = parse_urdf_tree(TWO_PENDULUMS, floating_base=True)
 >>> f = inverse_dynamics_tree(tree)
 >>> [(p.name, p.shape) for p in f.inputs], f.outputs[0].shape
@@ -54,51 +56,31 @@ import symengine as se
 
 from .dynamics_newton_euler import joint_step, mat3, omega_products, rotate_body, u_matrix
 from .forward_dynamics import tree_ldlt_solve
-from .geometry import constant, exact, joint_cos_sin
+from .geometry import constant_parts, exact, joint_cos_sin
 from .inertial_parameters import barycentric
-from .kinematics_homogeneous import joint_units
+from .kinematics_homogeneous import joint_units, q_port
 from .placement import Placement
-from .rigid_bodies import ZERO, Body, JointFrame, cross, vadd, vscale
+from .joint_effects import effect_torques, with_armature
+from .rigid_bodies import (ZERO, Body, JointFrame, conventions as arm_conventions, cross, inertials, qd_port, qdd_port,
+                           vadd, vscale)
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
-from .tree_model import FREE_FLYER_NV, TreeModel
+from .model import FREE_FLYER_NV, RobotModel
 
-ROUTE = "Tree route (joint frames, grouped parameters): "
+ROUTE = "Newton-Euler family over the tree (joint frames, grouped parameters): "
 
 
 # ----------------------------------------------------------------------------- ports
 
-def q_port(model: TreeModel) -> Port:
-    joints = f"joint positions in {model.order_text}"
-    if model.floating_base:
-        return Port("q", (model.nq,), "base position in the world, base orientation as a unit quaternion "
-                    f"(x, y, z, w), then {joints}", "m, 1, " + joint_units(model, "rad", "m"))
-    return Port("q", (model.nq,), joints, joint_units(model, "rad", "m"))
-
-
-def _velocity_text(model: TreeModel, what: str, base: str) -> str:
-    joints = f"joint {what}s in {model.order_text}"
-    return f"base {base} in the base frame, then {joints}" if model.floating_base else joints
-
-
-def qd_port(model: TreeModel) -> Port:
-    return Port("qd", (model.nv,), _velocity_text(model, "velocity", "linear and angular velocity"),
-                ("m/s, rad/s, " if model.floating_base else "") + joint_units(model, "rad/s", "m/s"))
-
-
-def qdd_port(model: TreeModel, name: str = "qdd") -> Port:
-    return Port(name, (model.nv,), _velocity_text(model, "acceleration", "linear and angular acceleration "
-                                                  "(the derivative of its twist)"),
-                ("m/s^2, rad/s^2, " if model.floating_base else "") + joint_units(model, "rad/s^2", "m/s^2"))
-
-
-def force_port(model: TreeModel, name: str, what: str) -> Port:
+def force_port(model: RobotModel, name: str, what: str) -> Port:
     text = (f"base {what} (force, then moment about the base origin) in the base frame, then joint {what}s"
             if model.floating_base else f"joint {what}s")
     return Port(name, (model.nv,), text, ("N, N m, " if model.floating_base else "") + joint_units(model, "N m", "N"))
 
 
-def conventions(model: TreeModel) -> str:
-    """The text every tree dynamics header carries."""
+def conventions(model: RobotModel, params: str = "numeric") -> str:
+    """The text every dynamics header carries (an arm's: :func:`kindyngen.rigid_bodies.conventions`)."""
+    if not model.is_tree:
+        return arm_conventions(model, params)
     gx, gy, gz = (float(v) for v in model.gravity)
     base = ("Floating base (Pinocchio's free-flyer layout): q = base position, unit quaternion (x, y, z, w), "
             "joints; qd, qdd and tau start with the base's 6 entries (linear, angular) in the base frame. "
@@ -116,13 +98,16 @@ class TreeSetup:
     the root body (all of it with a floating base; with a fixed base only the parts grouped
     into it, for the centre of mass) and the base pose (None with a fixed base)."""
 
-    model: TreeModel
+    model: RobotModel
     q: tuple
     joints: tuple[JointFrame, ...]
     bodies: tuple[Body, ...]
     root: Body
     rotation: list | None        # R (world <- base), 3x3 nested lists, from the quaternion
     position: list | None
+    params: str = "numeric"
+    param_ports: tuple = ()      # the input p in symbolic mode
+    param_symbols: tuple = ()
 
     def gravity_in_base(self) -> list:
         """The gravity vector in the root frame (R^T gamma with a floating base)."""
@@ -144,17 +129,12 @@ def quaternion_rotation(x, y, z, w) -> list:
     return [[1 - yy - zz, xy - wz, xz + wy], [xy + wz, 1 - xx - zz, yz - wx], [xz - wy, yz + wx, 1 - xx - yy]]
 
 
-def _constant_transform(placement: Placement):
-    R, p = placement.matrix()
-    return [[constant(R[r, c]) for c in range(3)] for r in range(3)], [constant(p[r]) for r in range(3)]
-
-
-def joint_frames(model: TreeModel, joint_q) -> tuple[JointFrame, ...]:
+def joint_frames(model: RobotModel, joint_q) -> tuple[JointFrame, ...]:
     """Each joint's frame on its parent's joint frame (the root: the root link frame)."""
     out = []
     for joint, parent, qj in zip(model.joints, model.parents, joint_q):
         above = model.joints[parent].after if parent >= 0 else Placement()
-        C, t = _constant_transform(above * joint.before)
+        C, t = constant_parts(above * joint.before)
         if joint.prismatic:
             slide = qj + exact(joint.offset)
             out.append(JointFrame(C=C, t=[t[r] + C[r][2] * slide for r in range(3)], c=se.Integer(1), s=ZERO,
@@ -173,10 +153,10 @@ def frame_body(values, after: Placement | None = None) -> Body:
     body = Body(m, [mx, my, mz], [[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
     if after is None or after.is_identity:
         return body
-    return body.moved(*_constant_transform(after))
+    return body.moved(*constant_parts(after))
 
 
-def grouped(model: TreeModel, joints, bodies, root: Body) -> tuple[list[Body], Body]:
+def grouped(model: RobotModel, joints, bodies, root: Body) -> tuple[list[Body], Body]:
     """Hand each link's rotation-invariant part to its parent, tip first (module text);
     returns the bodies and the root body with the parts that reached it."""
     bodies = list(bodies)
@@ -199,19 +179,25 @@ def grouped(model: TreeModel, joints, bodies, root: Body) -> tuple[list[Body], B
     return bodies, root
 
 
-@lru_cache(maxsize=4)
-def setup(model: TreeModel) -> TreeSetup:
-    """Joint frames, grouped bodies and base pose of ``model`` on ``q`` symbols; cached: every
-    tree function starts from it (its exact constant transforms cost a tenth of a second on a
-    humanoid) and nothing changes it."""
+@lru_cache(maxsize=8)
+def setup(model: RobotModel, params: str = "numeric") -> TreeSetup:
+    """Joint frames, grouped bodies and base pose of ``model`` on ``q`` symbols, with the
+    inertial parameters of ``params`` ("numeric": the description's, a payload merged into
+    the last link; "symbolic": the input ``p`` of 10 n barycentric parameters, grouped
+    expressions collected); cached: every function starts from it (its exact constant
+    transforms cost a tenth of a second on a humanoid) and nothing changes it."""
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)
-    bodies = [frame_body(barycentric(link), joint.after) for link, joint in zip(model.links, model.joints)]
+    links, ports, syms = inertials(model, params)
+    bodies = [frame_body(li.as_vector(), joint.after) for li, joint in zip(links, model.joints)]
     empty = Body(ZERO, [ZERO] * 3, [[ZERO] * 3 for _ in range(3)])
     bodies, root = grouped(model, joints, bodies, frame_body(barycentric(model.root)) if model.floating_base else empty)
+    if params == "symbolic":
+        bodies = [b.collected() for b in bodies]
     rotation = quaternion_rotation(*q[3:7]) if model.floating_base else None
-    return TreeSetup(model, q, joints, tuple(bodies), root, rotation, list(q[0:3]) if model.floating_base else None)
+    return TreeSetup(model, q, joints, tuple(bodies), root, rotation, list(q[0:3]) if model.floating_base else None,
+                     params, ports, syms)
 
 
 # ----------------------------------------------------------------------------- algorithms
@@ -225,13 +211,14 @@ def wrench(body: Body, a, w, wd, U):
     return (vadd(vscale(m, a), mat3(U, h)), vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a)))
 
 
-def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None):
+def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None, record=None):
     """The forward pass of :func:`rnea`: (root state, state of each joint frame), a state
     being (origin acceleration a, angular velocity w, angular acceleration wd, ``U =
     skew(wd) + skew(w)^2`` or None when w and wd are exact zeros), gravity entering as the
     root's acceleration ``-gamma``; ``qd``/``qdd`` None are zero (Khalil-Kleinfinger form,
     each joint starting from its parent's state). With ``stages``, every joint's state is
-    named there."""
+    named there; ``record`` (a :class:`NewtonEulerPass`) gets the incoming vectors rotated into
+    each joint frame (``ar``, ``wr``, ``wdr``)."""
     model = ts.model
     name = naming(stages)
     base = FREE_FLYER_NV if model.floating_base else 0
@@ -250,6 +237,10 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Sta
         a, w, wd, U = state[parent] if parent >= 0 else root_state
         a = joint.rot_t(a if U is None else vadd(a, mat3(U, joint.t)))
         wr, wdr = joint.rot_t(w), joint.rot_t(wd)
+        if record is not None:
+            record.ar.append(a)
+            record.wr.append(wr)
+            record.wdr.append(wdr)
         a, w, wd = joint_step(joint, a, wr, wdr, qd[base + j] if qd is not None else ZERO,
                               qdd[base + j] if qdd is not None else ZERO)
         a, w, wd = ([name(e) for e in v] for v in (a, w, wd))
@@ -259,29 +250,63 @@ def motion_states(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Sta
 
 
 def rnea(ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None) -> list:
-    """tau (size nv) by recursive Newton-Euler over the tree; ``qd``/``qdd`` None are zero:
-    :func:`motion_states`, then each joint's wrench plus its children's, tip first (with
-    ``stages``, every state and summed wrench named there)."""
-    model, n = ts.model, ts.model.n
-    name = naming(stages)
-    root_state, state = motion_states(ts, qd, qdd, with_gravity, stages)
-    forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
-    f_parts = [[F] for F, _ in forces]
-    n_parts = [[N] for _, N in forces]
-    root_f, root_n = [], []
-    tau = [None] * n
-    for j in range(n - 1, -1, -1):
-        joint, parent = ts.joints[j], model.parents[j]
-        f, nn = [name(e) for e in vadd(*f_parts[j])], [name(e) for e in vadd(*n_parts[j])]
-        tau[j] = f[2] if joint.prismatic else nn[2]
-        fr, nr = carry(joint, f, nn)
-        targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
-        targets[0].append(fr)
-        targets[1].append(nr)
-    if not model.floating_base:
-        return tau
-    F, N = wrench(ts.root, *root_state)
-    return vadd(F, *root_f) + vadd(N, *root_n) + tau
+    """tau (size nv) by recursive Newton-Euler over the tree (:class:`NewtonEulerPass`);
+    ``qd``/``qdd`` None are zero."""
+    return NewtonEulerPass(ts, qd, qdd, with_gravity, stages).tau
+
+
+class NewtonEulerPass:
+    """Recursive Newton-Euler over the tree, its intermediates kept per joint j (in frame j):
+    the incoming velocity, angular and linear acceleration rotated into frame j (``wr``,
+    ``wdr``, ``ar``), the angular velocity ``w``, ``U`` (None where w and w' are exact zeros),
+    ``Iw = I w``, the wrench ``f``, ``nn`` link j passes to its parent; ``tau`` (size nv);
+    :mod:`kindyngen.dynamics_derivatives` sweeps over them (fixed base). Forward:
+    :func:`motion_states`; backward: each joint's wrench plus its children's, tip first (with
+    ``stages``, every state and summed wrench named there).
+
+    Per link (Khalil-Kleinfinger form, all in frame j): ``U = skew(w') + skew(w)^2`` from the
+    six products of w's components; ``F = m a + U h``; ``N = I w' + w x (I w) + h x a``.
+    (Variants with cross products for F, or products of w for ``w x I w``, cost more after
+    CSE on the LWR and Panda.)"""
+
+    def __init__(self, ts: TreeSetup, qd, qdd, with_gravity: bool = True, stages: Stages | None = None):
+        model, n = ts.model, ts.model.n
+        name = naming(stages)
+        base = FREE_FLYER_NV if model.floating_base else 0
+        self.joints, self.bodies, self.parents = ts.joints, ts.bodies, model.parents
+        self.children = [[c for c in range(n) if model.parents[c] == j] for j in range(n)]
+        self.qd = None if qd is None else list(qd[base:])
+        self.ar, self.wr, self.wdr = [], [], []
+        root_state, state = motion_states(ts, qd, qdd, with_gravity, stages, self)
+        self.w = [s[1] for s in state]
+        self.U = [s[3] for s in state]
+        self.Iw = [mat3(body.I, s[1]) for body, s in zip(ts.bodies, state)]
+        forces = [wrench(body, *s) for body, s in zip(ts.bodies, state)]
+        f_parts = [[F] for F, _ in forces]
+        n_parts = [[N] for _, N in forces]
+        root_f, root_n = [], []
+        self.f, self.nn, tau = [None] * n, [None] * n, [None] * n
+        for j in range(n - 1, -1, -1):
+            joint, parent = ts.joints[j], model.parents[j]
+            f, nn = [name(e) for e in vadd(*f_parts[j])], [name(e) for e in vadd(*n_parts[j])]
+            self.f[j], self.nn[j] = f, nn
+            tau[j] = f[2] if joint.prismatic else nn[2]
+            fr, nr = carry(joint, f, nn)
+            targets = (f_parts[parent], n_parts[parent]) if parent >= 0 else (root_f, root_n)
+            targets[0].append(fr)
+            targets[1].append(nr)
+        if model.floating_base:
+            F, N = wrench(ts.root, *root_state)
+            tau = vadd(F, *root_f) + vadd(N, *root_n) + tau
+        self.tau = tau
+
+    def subtree(self, j: int) -> frozenset:
+        """Joint j and every joint below it."""
+        out = {j}
+        for k in range(j + 1, len(self.joints)):
+            if self.parents[k] in out:
+                out.add(k)
+        return frozenset(out)
 
 
 def carry(joint: JointFrame, f, nn):
@@ -382,12 +407,12 @@ def gravity_composite(ts: TreeSetup) -> list:
     return vscale(-mc, gam0) + [-x for x in cross(hc, gam0)] + g
 
 
-def expanded_parents(model: TreeModel) -> tuple[int, ...]:
+def expanded_parents(model: RobotModel) -> tuple[int, ...]:
     """The parent of each velocity coordinate: the floating base's six form a chain, its
     children hang from the last of them.
 
     >>> from kindyngen.urdf import parse_urdf_tree
-    >>> from kindyngen.tree_model import TWO_PENDULUMS
+    >>> from kindyngen.urdf import TWO_PENDULUMS
     >>> expanded_parents(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
     (-1, 0, 1, 2, 3, 4, 5, 5)
     """
@@ -424,15 +449,17 @@ def centroidal(ts: TreeSetup, root_columns, whole: Body, M):
 
 # ----------------------------------------------------------------------------- functions
 
-def tree_function(name, summary, model, inputs, input_symbols, outputs, output_exprs,
+def tree_function(name, summary, ts: TreeSetup, inputs, input_symbols, outputs, output_exprs,
                   stages: Stages | None = None, route: str | None = None) -> SymbolicFunction:
-    """A tree dynamics SymbolicFunction with the shared conventions text (and the named
-    intermediates of ``stages``; ``route`` names the algorithm where a function has several)."""
+    """A dynamics SymbolicFunction: the inputs followed by the parameter port of the params
+    mode, the shared conventions text, the named intermediates of ``stages`` (``route``
+    names the algorithm where a function has several)."""
     return SymbolicFunction(
-        name=name, summary=summary, inputs=tuple(inputs), outputs=tuple(outputs),
-        input_symbols=tuple(input_symbols),
+        name=name, summary=summary, inputs=tuple(inputs) + ts.param_ports, outputs=tuple(outputs),
+        input_symbols=tuple(input_symbols) + ts.param_symbols,
         output_exprs=tuple(tuple(se.sympify(e) for e in exprs) for exprs in output_exprs),
-        conventions=conventions(model), metadata={"params": "numeric", **({"route": route} if route else {})},
+        conventions=conventions(ts.model, ts.params),
+        metadata={"params": ts.params, **({"route": route} if route else {})},
         stages=stages.definitions if stages is not None else ())
 
 
@@ -440,68 +467,102 @@ def _flat(matrix):
     return [e for row in matrix for e in row]
 
 
-def inverse_dynamics_tree(model: TreeModel, name: str = "tau") -> SymbolicFunction:
-    """``tau(q, qd, qdd) -> tau = M qdd + c + g`` by recursive Newton-Euler (O(n))."""
-    ts, stages = setup(model), Stages()
+def joint_effects(model: RobotModel, qd, qdd) -> list:
+    """The description's friction, offset and armature torques (:mod:`kindyngen.joint_effects`)
+    on the velocity coordinates (zeros on a floating base's six)."""
+    base = FREE_FLYER_NV if model.floating_base else 0
+    if not model.effects:
+        return [ZERO] * model.nv
+    return [ZERO] * base + effect_torques(model, None if qd is None else qd[base:], None if qdd is None else qdd[base:])
+
+
+def mass_matrix_with_armature(model: RobotModel, M):
+    """M with each joint's armature on its diagonal entry."""
+    if "armature" not in model.effects:
+        return M
+    base = FREE_FLYER_NV if model.floating_base else 0
+    inner = with_armature(model, [row[base:] for row in M[base:]])
+    return [list(row) for row in M[:base]] + [list(row[:base]) + inner[k] for k, row in enumerate(M[base:])]
+
+
+def _mass_unit(model: RobotModel) -> str:
+    return "kg m^2" if not model.floating_base and not any(j.prismatic for j in model.joints) else "kg, kg m, kg m^2"
+
+
+def inverse_dynamics_tree(model: RobotModel, params: str = "numeric", name: str = "tau",
+                          effects: bool = True, named: bool = True) -> SymbolicFunction:
+    """``tau(q, qd, qdd) -> tau = M qdd + c + g`` by recursive Newton-Euler (O(n)), plus the
+    description's friction, offset and armature torques (``effects=False``: rigid bodies only;
+    ``named=False``: one DAG without named intermediates, to differentiate)."""
+    ts, stages = setup(model, params), Stages() if named else None
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
+    tau = rnea(ts, qd, qdd, True, stages)
+    if effects:
+        tau = [t + e for t, e in zip(tau, joint_effects(model, qd, qdd))]
     return tree_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
-                     model, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
-                     (force_port(model, "tau", "torque"),), (rnea(ts, qd, qdd, True, stages),), stages)
+                         ts, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
+                         (force_port(model, "tau", "torque"),), (tau,), stages)
 
 
-def coriolis_tree(model: TreeModel, name: str = "c") -> SymbolicFunction:
+def coriolis_tree(model: RobotModel, params: str = "numeric", name: str = "c") -> SymbolicFunction:
     """``c(q, qd) -> tau(q, qd, 0)`` without gravity."""
-    ts, stages = setup(model), Stages()
+    ts, stages = setup(model, params), Stages()
     qd = port_symbols("qd", (model.nv,))
     return tree_function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
-                     "recursive Newton-Euler.", model, (q_port(model), qd_port(model)), (ts.q, qd),
-                     (force_port(model, "c", "Coriolis and centrifugal torque"),), (rnea(ts, qd, None, False, stages),),
-                     stages)
+                         "recursive Newton-Euler.", ts, (q_port(model), qd_port(model)), (ts.q, qd),
+                         (force_port(model, "c", "Coriolis and centrifugal torque"),),
+                         (rnea(ts, qd, None, False, stages),), stages)
 
 
-def gravity_tree(model: TreeModel, name: str = "g") -> SymbolicFunction:
+def gravity_tree(model: RobotModel, params: str = "numeric", name: str = "g") -> SymbolicFunction:
     """``g(q) -> tau(q, 0, 0)`` by composite first moments."""
-    ts = setup(model)
-    return tree_function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", model,
-                     (q_port(model),), (ts.q,), (force_port(model, "g", "gravity torque"),), (gravity_composite(ts),))
+    ts = setup(model, params)
+    return tree_function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", ts,
+                         (q_port(model),), (ts.q,), (force_port(model, "g", "gravity torque"),),
+                         (gravity_composite(ts),))
 
 
-def mass_matrix_tree(model: TreeModel, name: str = "M") -> SymbolicFunction:
-    """``M(q) -> M`` by composite rigid bodies over the tree."""
-    ts, stages = setup(model), Stages()
+def mass_matrix_tree(model: RobotModel, params: str = "numeric", name: str = "M",
+                     effects: bool = True) -> SymbolicFunction:
+    """``M(q) -> M`` by composite rigid bodies over the tree (plus the armature)."""
+    ts, stages = setup(model, params), Stages()
     M, _, _ = crba(ts, stages)
+    if effects:
+        M = mass_matrix_with_armature(model, M)
     return tree_function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
-                     "branch (entries between branches are exact zeros).", model, (q_port(model),), (ts.q,),
-                     (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
-                           "kg, kg m, kg m^2"),), (_flat(M),), stages)
+                         "branch (entries between branches are exact zeros).", ts, (q_port(model),), (ts.q,),
+                         (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
+                               _mass_unit(model)),), (_flat(M),), stages)
 
 
-def forward_dynamics_tree(model: TreeModel, name: str = "fd") -> SymbolicFunction:
-    """``fd(q, qd, tau) -> qdd = M^-1 (tau - c - g)`` by the tree-sparse ``L^T D L``."""
-    ts = setup(model)
+def forward_dynamics_tree(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
+    """``fd(q, qd, tau) -> qdd = M^-1 (tau - c - g)`` by the tree-sparse ``L^T D L`` (the
+    armature in M, friction and offset in the bias)."""
+    ts = setup(model, params)
     qd, tau = port_symbols("qd", (model.nv,)), port_symbols("tau", (model.nv,))
     stages = Stages()
     M, _, _ = crba(ts, stages)
-    bias = rnea(ts, qd, None, True, stages)
+    M = mass_matrix_with_armature(model, M)
+    bias = [b + e for b, e in zip(rnea(ts, qd, None, True, stages), joint_effects(model, qd, None))]
     qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)], stages)
     return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
-                     "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
-                     "and the two sparse triangular solves.", model,
-                     (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
-                     (qdd_port(model),), (qdd,), stages, route="sparse L^T D L")
+                         "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
+                         "and the two sparse triangular solves.", ts,
+                         (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
+                         (qdd_port(model),), (qdd,), stages, route="sparse L^T D L")
 
 
-def centre_of_mass_tree(model: TreeModel, name: str = "com") -> SymbolicFunction:
+def centre_of_mass_tree(model: RobotModel, params: str = "numeric", name: str = "com") -> SymbolicFunction:
     """``com(q) -> c, J_c, A_g``: centre of mass, its Jacobian and the centroidal momentum matrix."""
-    ts, stages = setup(model), Stages()
+    ts, stages = setup(model, params), Stages()
     M, root_columns, whole = crba(ts, stages)
     com, jac, ag = centroidal(ts, root_columns, whole, M)
     frame = "world" if model.floating_base else f"root link '{model.base_name}'"
     counted = "" if model.floating_base else " (the fixed root link not counted, as in Pinocchio)"
     return tree_function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
-                     "(from the base rows of composite rigid bodies).", model, (q_port(model),), (ts.q,),
-                     (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
-                      Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),
-                      Port("A_g", (6, model.nv), "centroidal momentum matrix: h_G = A_g qd, linear then angular "
-                           f"momentum about the CoM, {frame} axes (Pinocchio's ccrba)", "kg m, kg m^2 per unit of qd")),
-                     (com, _flat(jac), _flat(ag)), stages)
+                         "(from the base rows of composite rigid bodies).", ts, (q_port(model),), (ts.q,),
+                         (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
+                          Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),
+                          Port("A_g", (6, model.nv), "centroidal momentum matrix: h_G = A_g qd, linear then angular "
+                               f"momentum about the CoM, {frame} axes (Pinocchio's ccrba)", "kg m, kg m^2 per unit of qd")),
+                         (com, _flat(jac), _flat(ag)), stages)

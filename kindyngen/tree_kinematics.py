@@ -13,7 +13,7 @@ the base frame: ``[R, -[p_f - p_b]x R]`` (linear), ``[0, R]`` (angular).
 Example:
 
 >>> from kindyngen.urdf import parse_urdf_tree
->>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> from kindyngen.urdf import TWO_PENDULUMS
 >>> f = jacobian_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
 >>> f.outputs[0].shape
 (2, 6, 8)
@@ -23,18 +23,19 @@ from __future__ import annotations
 import symengine as se
 
 from .geometry import compose, constant_transform, motion
+from .kinematics_homogeneous import frame_convention, q_port
+from .model import FREE_FLYER_NV, RobotModel
 from .symbolic import Port, Stages, SymbolicFunction, flatten, port_symbols
-from .tree_dynamics import q_port, quaternion_rotation
-from .tree_model import FREE_FLYER_NV, TreeModel
+from .tree_dynamics import quaternion_rotation
 
 
-def _root_pose(model: TreeModel, q):
+def _root_pose(model: RobotModel, q):
     if not model.floating_base:
         return se.eye(3), se.zeros(3, 1)
     return se.Matrix(quaternion_rotation(*q[3:7])), se.Matrix(list(q[0:3]))
 
 
-def link_poses(model: TreeModel, q, stages: Stages | None = None):
+def link_poses(model: RobotModel, q, stages: Stages | None = None):
     """(root pose, [(R, p) of each joint's link frame], [(axis, origin) of each joint]) in
     the world (root) frame; with ``stages``, each link pose is named there."""
     joint_q = q[7:] if model.floating_base else q
@@ -51,44 +52,49 @@ def link_poses(model: TreeModel, q, stages: Stages | None = None):
     return root, links, axes
 
 
-def frame_poses(model: TreeModel, q, stages: Stages | None = None):
+def frame_poses(model: RobotModel, q, stages: Stages | None = None):
     """(R, p) of each requested frame, and the poses of :func:`link_poses`."""
     root, links, axes = link_poses(model, q, stages)
     poses = [compose(links[f.body] if f.body >= 0 else root, constant_transform(f.placement))
-             for f in model.frames]
+             for f in model.frames_of_interest]
     return poses, root, axes
 
 
-def _frame_text(model: TreeModel) -> str:
-    names = ", ".join(f.name for f in model.frames)
+def _frame_text(model: RobotModel) -> str:
+    names = ", ".join(f.name for f in model.frames_of_interest)
     where = "world" if model.floating_base else f"root link '{model.base_name}'"
     return f"frames {names} (links of the description), in the {where} frame"
 
 
-def fk_hom_tree(model: TreeModel, name: str = "fk_hom") -> SymbolicFunction:
-    """``fk_hom(q) -> T``: the requested frames' poses."""
+def fk_hom_tree(model: RobotModel, name: str = "fk_hom") -> SymbolicFunction:
+    """``fk_hom(q) -> T``: the requested frames' poses (an arm: its flange's, 4 x 4)."""
     q = port_symbols("q", (model.nq,))
     poses, _, _ = frame_poses(model, q)
     out = []
     for R, p in poses:
         out.extend(flatten(R.row_join(p).col_join(se.Matrix([[0, 0, 0, 1]]))))
-    k = len(model.frames)
-    return SymbolicFunction(
-        name, f"Forward kinematics of the {k} requested frames as homogeneous transforms.",
-        (q_port(model),),
-        (Port("T", (k, 4, 4), f"poses of {_frame_text(model)}: frame to world coordinates, row-major, "
-              "last row 0 0 0 1", "m"),),
-        (q,), (tuple(out),), conventions=f"{model.frames_text} Lengths in m, angles in rad.")
+    k = len(poses)
+    if model.is_tree:
+        summary = f"Forward kinematics of the {k} requested frames as homogeneous transforms."
+        port = Port("T", (k, 4, 4), f"poses of {_frame_text(model)}: frame to world coordinates, row-major, "
+                    "last row 0 0 0 1", "m")
+        conventions = f"{model.frames_text} Lengths in m, angles in rad."
+    else:
+        summary = "Forward kinematics: flange pose as a 4x4 homogeneous transform."
+        port = Port("T", (4, 4), "flange pose in the base frame (row-major)", "m (translation), 1 (rotation)")
+        conventions = frame_convention(model)
+    return SymbolicFunction(name, summary, (q_port(model),), (port,), (q,), (tuple(out),), conventions=conventions)
 
 
-def jacobian_tree(model: TreeModel, name: str = "jacobian") -> SymbolicFunction:
-    """``jacobian(q) -> J``: the requested frames' geometric Jacobians (module text)."""
+def jacobian_tree(model: RobotModel, name: str = "jacobian") -> SymbolicFunction:
+    """``jacobian(q) -> J``: the requested frames' geometric Jacobians (module text; an arm:
+    its flange's, 6 x n)."""
     q = port_symbols("q", (model.nq,))
     stages = Stages()
     poses, root, axes = frame_poses(model, q, stages)
     base = FREE_FLYER_NV if model.floating_base else 0
     out = []
-    for frame, (_, p) in zip(model.frames, poses):
+    for frame, (_, p) in zip(model.frames_of_interest, poses):
         J = se.zeros(6, model.nv)
         if model.floating_base:
             R, pb = root
@@ -107,11 +113,18 @@ def jacobian_tree(model: TreeModel, name: str = "jacobian") -> SymbolicFunction:
                                               z[0] * d[1] - z[1] * d[0]])
                 J[3:6, base + j] = z
         out.extend(flatten(J))
-    k = len(model.frames)
-    return SymbolicFunction(
-        name, f"Geometric Jacobians of the {k} requested frames.", (q_port(model),),
-        (Port("J", (k, 6, model.nv), f"Jacobians of {_frame_text(model)}: rows linear velocity of the frame "
-              "origin, then angular velocity, world-aligned (Pinocchio's LOCAL_WORLD_ALIGNED); [v; w] = J qd",
-              "m or 1 per unit of qd"),),
-        (q,), (tuple(out),), conventions=f"{model.frames_text} Lengths in m, angles in rad.",
-        stages=stages.definitions)
+    k = len(poses)
+    if model.is_tree:
+        summary = f"Geometric Jacobians of the {k} requested frames."
+        port = Port("J", (k, 6, model.nv), f"Jacobians of {_frame_text(model)}: rows linear velocity of the frame "
+                    "origin, then angular velocity, world-aligned (Pinocchio's LOCAL_WORLD_ALIGNED); [v; w] = J qd",
+                    "m or 1 per unit of qd")
+        conventions = f"{model.frames_text} Lengths in m, angles in rad."
+    else:
+        summary = "Geometric Jacobian of the flange: [v; w] = J(q) qd."
+        port = Port("J", (6, model.n), "rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; "
+                    "both in base-frame axes (row-major)", "m/rad (rows 0-2), 1 (rows 3-5)")
+        conventions = (frame_convention(model) + " J is expressed in base-frame axes at the flange origin "
+                       "(Pinocchio LOCAL_WORLD_ALIGNED).")
+    return SymbolicFunction(name, summary, (q_port(model),), (port,), (q,), (tuple(out),), conventions=conventions,
+                            stages=stages.definitions)

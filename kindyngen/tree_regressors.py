@@ -15,7 +15,7 @@ the base columns.
 Example:
 
 >>> from kindyngen.urdf import parse_urdf_tree
->>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> from kindyngen.urdf import TWO_PENDULUMS
 >>> b = tree_base_parameters(parse_urdf_tree(TWO_PENDULUMS))
 >>> b.rank, b.names      # left turns about y: mx, mz, Iyy act; right about x: my, mz, Ixx
 (6, ('mx1', 'mz1', 'Iyy1', 'my2', 'mz2', 'Ixx2'))
@@ -32,30 +32,32 @@ from .inertial_parameters import NAMES, barycentric
 from .rigid_bodies import ZERO, cross, vadd, vscale
 from .dynamics_newton_euler import mat3
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
-from .tree_dynamics import carry, conventions, frame_body, motion_states, q_port, qd_port, qdd_port, setup
-from .tree_model import FREE_FLYER_NV, TreeModel
+from .kinematics_homogeneous import q_port
+from .rigid_bodies import qd_port, qdd_port
+from .tree_dynamics import carry, conventions, frame_body, motion_states, setup
+from .model import FREE_FLYER_NV, RobotModel
 
 SAMPLES, SEEDS = 40, (20140, 20141)      # random states for the rank analysis; analysis, verification
 
 
-def body_labels(model: TreeModel) -> tuple[str, ...]:
+def body_labels(model: RobotModel) -> tuple[str, ...]:
     """The link each parameter block belongs to, in column order."""
     return ((model.base_name,) if model.floating_base else ()) + tuple(
         _link_name(model, j) for j in range(model.n))
 
 
-def _link_name(model: TreeModel, j: int) -> str:
+def _link_name(model: RobotModel, j: int) -> str:
     names = [f.name for f in model.frames if f.body == j and f.placement.is_identity]
     return names[0] if names else model.joints[j].name
 
 
-def parameter_names(model: TreeModel) -> tuple[str, ...]:
+def parameter_names(model: RobotModel) -> tuple[str, ...]:
     """``m0 .. Izz0`` for a floating base's root body, then ``m1 .. Izz1`` for joint 0's link, ..."""
     first = 0 if model.floating_base else 1
     return tuple(f"{name}{first + b}" for b in range(len(body_labels(model))) for name in NAMES)
 
 
-def parameter_values(model: TreeModel) -> tuple:
+def parameter_values(model: RobotModel) -> tuple:
     """The description's barycentric parameters, exact, in :func:`parameter_names` order."""
     links = ((model.root,) if model.floating_base else ()) + tuple(model.links)
     return tuple(v for link in links for v in barycentric(link))
@@ -74,13 +76,13 @@ def _unit_wrenches(after, a, w, wd, U):
 
 
 @lru_cache(maxsize=None)
-def full_tree_regressor(model: TreeModel):
+def full_tree_regressor(model: RobotModel):
     """(q, qd, qdd symbols, rows: nv lists of 10 B expressions) of the full regressor."""
-    symbols, columns = _regressor_columns(model)
+    symbols, columns = link_parameter_columns(model)
     return symbols, tuple(tuple(column[r] for column in columns) for r in range(model.nv))
 
 
-def _regressor_columns(model: TreeModel, wanted=None, stages: Stages | None = None):
+def link_parameter_columns(model: RobotModel, wanted=None, stages: Stages | None = None):
     """(q, qd, qdd symbols, the regressor's columns in parameter order, only those in
     ``wanted`` if given); with ``stages``, every motion state and carried wrench is named
     there."""
@@ -109,7 +111,7 @@ def _regressor_columns(model: TreeModel, wanted=None, stages: Stages | None = No
     return (ts.q, qd, qdd), columns
 
 
-def random_states(model: TreeModel, count: int, seed: int) -> np.ndarray:
+def random_states(model: RobotModel, count: int, seed: int) -> np.ndarray:
     """q (joints within limits, clipped to +-pi; a floating base anywhere within 1 m with a
     random unit quaternion), qd and qdd standard normal, stacked per sample."""
     rng = np.random.default_rng(seed)
@@ -165,7 +167,7 @@ def evaluate_dag(exprs, values: dict) -> list:
     return [done[e] for e in exprs]
 
 
-def _full_numeric(model: TreeModel, states: np.ndarray) -> np.ndarray:
+def _full_numeric(model: RobotModel, states: np.ndarray) -> np.ndarray:
     """The full regressor at stacked states (samples x (nq + 2 nv)): samples x nv x 10 B."""
     symbols, rows = full_tree_regressor(model)
     args = [s for group in symbols for s in group]
@@ -176,7 +178,7 @@ def _full_numeric(model: TreeModel, states: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=None)
-def tree_base_parameters(model: TreeModel) -> BaseParameters:
+def tree_base_parameters(model: RobotModel) -> BaseParameters:
     """Rank analysis and grouping of the full regressor (see the module text)."""
     names = parameter_names(model)
 
@@ -186,7 +188,7 @@ def tree_base_parameters(model: TreeModel) -> BaseParameters:
     return find_base_parameters(evaluate, names, SEEDS, None)
 
 
-def unavailable(model: TreeModel) -> str | None:
+def unavailable(model: RobotModel) -> str | None:
     """Why Y is not generated (a rank or column decision the samples cannot make with the
     stated margin), or None."""
     try:
@@ -196,13 +198,13 @@ def unavailable(model: TreeModel) -> str | None:
     return None
 
 
-def tree_regressor(model: TreeModel, name: str = "Y") -> SymbolicFunction | None:
+def tree_regressor(model: RobotModel, name: str = "Y") -> SymbolicFunction | None:
     """``Y(q, qd, qdd)`` on the base parameters (None where :func:`unavailable` says why not)."""
     if unavailable(model):
         return None
     b = tree_base_parameters(model)
     stages = Stages()
-    (q, qd, qdd), columns = _regressor_columns(model, frozenset(b.base), stages)
+    (q, qd, qdd), columns = link_parameter_columns(model, frozenset(b.base), stages)
     column = {k: columns[i] for i, k in enumerate(sorted(b.base))}
     exprs = tuple(column[k][r] for r in range(model.nv) for k in b.base)
     port = Port("Y", (model.nv, len(b.base)), "regressor of tau on the base parameters (row-major; columns: "
@@ -218,7 +220,7 @@ def tree_regressor(model: TreeModel, name: str = "Y") -> SymbolicFunction | None
                             metadata={"params": "none", "base_parameters": b.names}, stages=stages.definitions)
 
 
-def tree_base_params_document(model: TreeModel) -> dict:
+def tree_base_params_document(model: RobotModel) -> dict:
     """Content of ``base_params.json`` for a tree: Y's base parameters, their expressions in the
     barycentric symbols, their values for the description, and which link each body is."""
     reason = unavailable(model)

@@ -54,9 +54,8 @@ from pathlib import Path
 import numpy as np     # only to check inertias as written: nothing in the model is computed with it
 import sympy
 
-from .model import Joint, Link, RobotDescriptionError, RobotModel, check_inertia
+from .model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia
 from .placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
-from .tree_model import Frame, TreeModel
 
 GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
@@ -66,6 +65,19 @@ TINY_RESIDUE = 1e-20    # an evaluated inertia or CoM entry below this is an exa
 SIGNIFICANT_DIGITS = 17  # a double's worth: non-rational entries are rounded to this
 # a decimal as URDF parsers read it (float() would also accept nan, inf and 1_0)
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+# a floating body with two pendulums, the example of the tree modules
+TWO_PENDULUMS = """<robot name="two_pendulums">
+  <link name="body"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial></link>
+  <link name="left"><inertial><mass value="1"/><origin xyz="0 0 -0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.001"/></inertial></link>
+  <link name="right"><inertial><mass value="1"/><origin xyz="0 0 -0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="left_joint" type="revolute"><parent link="body"/><child link="left"/>
+    <origin xyz="0 0.2 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="right_joint" type="revolute"><parent link="body"/><child link="right"/>
+    <origin xyz="0 -0.2 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"""
 
 
 def _error(reading: Reading, field: str, reason: str) -> RobotDescriptionError:
@@ -476,8 +488,8 @@ def _file_text(path: str | Path) -> bytes:
 # ------------------------------------------------------------------ the whole tree
 
 def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, floating_base: bool = False,
-                    snap_angles: bool = True) -> TreeModel:
-    """Every moving joint of a URDF text as a :class:`kindyngen.tree_model.TreeModel`.
+                    snap_angles: bool = True) -> RobotModel:
+    """Every moving joint of a URDF text as a tree :class:`kindyngen.model.RobotModel`.
 
     Joints are numbered depth first from the root link, children in the order Pinocchio's
     ``buildModelFromUrdf`` takes them (urdfdom's: by joint name), so that q, qd and tau line
@@ -485,7 +497,6 @@ def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, fl
     it; ``frames`` names the links whose poses and Jacobians are wanted (default: the link
     of every joint without children, the tips).
 
-    >>> from kindyngen.tree_model import TWO_PENDULUMS
     >>> tree = parse_urdf_tree(TWO_PENDULUMS, frames=["right", "body"])
     >>> [j.name for j in tree.joints], [(f.name, f.body) for f in tree.frames]
     (['left_joint', 'right_joint'], [('right', 1), ('body', -1)])
@@ -520,13 +531,13 @@ def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, fl
         if frame not in placed:
             raise _error(reading, "--frames", f"no link named '{frame}' in the URDF{_closest(frame, placed)}")
         chosen.append(placed[frame])
-    return TreeModel(name=name, joints=tuple(joints), parents=tuple(parents), links=links, root=root,
-                     frames=tuple(chosen), floating_base=floating_base, gravity=GRAVITY, source=source,
-                     base_name=tree.root, notes=tuple(reading.notes))
+    return RobotModel(name=name, convention="tree", joints=tuple(joints), parents=tuple(parents), links=links,
+                      root=root, frames=tuple(chosen), floating_base=floating_base, gravity=GRAVITY, source=source,
+                      base_name=tree.root, notes=tuple(reading.notes))
 
 
 def load_urdf_tree(path: str | Path, frames=None, floating_base: bool = False,
-                   snap_angles: bool = True) -> TreeModel:
+                   snap_angles: bool = True) -> RobotModel:
     """Read a URDF file as a tree: :func:`parse_urdf_tree` of its text, errors naming the file."""
     return parse_urdf_tree(_file_text(path), str(path), frames=frames, floating_base=floating_base,
                            snap_angles=snap_angles)

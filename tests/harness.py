@@ -40,7 +40,7 @@ def symbolic_function(robot_name: str, function_name: str, params: str = "numeri
 def _lambdified(robot_name: str, function_name: str, params: str):
     f = symbolic_function(robot_name, function_name, params)
     args = [s for syms in f.input_symbols for s in syms]
-    outs = [e for exprs in f.output_exprs for e in exprs]
+    outs = [e for exprs in f.inlined_outputs() for e in exprs]
     return f, se.Lambdify(args, outs, cse=True)
 
 

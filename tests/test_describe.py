@@ -30,7 +30,7 @@ def _path(file):
 def _values(model, names, inputs):
     out = {}
     for f in derive_all(model, only=set(names)):
-        fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.output_exprs for e in exprs],
+        fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.inlined_outputs() for e in exprs],
                          cse=True)
         x = np.concatenate([inputs[p.name] for p in f.inputs], axis=1)
         out[f.name] = np.array([fn(row) for row in x])

@@ -17,8 +17,8 @@ from reference import pinocchio_model, random_configurations
 
 from kindyngen.catalog import derive_all
 from kindyngen.dynamics_lagrange import coriolis_christoffel, gravity_lagrange, mass_matrix_lagrange
-from kindyngen.dynamics_newton_euler import coriolis_rnea, gravity_rnea, inverse_dynamics, mass_matrix_crba
-from kindyngen.forward_dynamics import forward_dynamics
+from kindyngen.catalog import forward_dynamics_routes
+from kindyngen.tree_dynamics import coriolis_tree, gravity_tree, inverse_dynamics_tree, mass_matrix_tree
 from kindyngen.inertial_parameters import parameter_symbols, parameter_vector
 from kindyngen.optimize import optimize
 from kindyngen.robot import parse_robot
@@ -177,7 +177,7 @@ def test_energy_conservation(case, source):
     zero = np.zeros(n)
     if source == "derived":
         f = symbolic_function(name, "fd")
-        lambdified = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.output_exprs[0]), cse=True)
+        lambdified = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.inlined_outputs()[0]), cse=True)
 
         def fd(x):
             return np.ravel(lambdified(np.concatenate([x, zero])))
@@ -277,15 +277,16 @@ def test_general_geometry(convention):
     qd = rng.normal(0, 1.5, q.shape)
     qdd = rng.normal(0, 3, q.shape)
     refs = reference(model, data, q, qd, qdd)
-    builders = {"M": (mass_matrix_crba, ("q",), "M"), "M_lagrange": (mass_matrix_lagrange, ("q",), "M"),
-                "g": (gravity_rnea, ("q",), "g"), "g_lagrange": (gravity_lagrange, ("q",), "g"),
-                "c": (coriolis_rnea, ("q", "qd"), "c"), "c_christoffel": (coriolis_christoffel, ("q", "qd"), "c"),
-                "tau": (inverse_dynamics, ("q", "qd", "qdd"), "tau"), "fd": (forward_dynamics, ("q", "qd", "tau"), "fd")}
+    builders = {"M": (mass_matrix_tree, ("q",), "M"), "M_lagrange": (mass_matrix_lagrange, ("q",), "M"),
+                "g": (gravity_tree, ("q",), "g"), "g_lagrange": (gravity_lagrange, ("q",), "g"),
+                "c": (coriolis_tree, ("q", "qd"), "c"), "c_christoffel": (coriolis_christoffel, ("q", "qd"), "c"),
+                "tau": (inverse_dynamics_tree, ("q", "qd", "qdd"), "tau"),
+                "fd": (forward_dynamics_routes, ("q", "qd", "tau"), "fd")}
     values = {"q": q, "qd": qd, "qdd": qdd, "tau": qdd}
     for params in ("numeric", "symbolic"):
         for fname, (build, ins, key) in builders.items():
             f = build(r, params)
-            fn = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.output_exprs[0]), cse=True)
+            fn = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.inlined_outputs()[0]), cse=True)
             args = np.concatenate([values[k] for k in ins], axis=1)
             if params == "symbolic":
                 args = np.concatenate([args, np.tile(parameter_vector(r), (len(q), 1))], axis=1)

@@ -271,7 +271,7 @@ def derived_call(functions, extra):
     """Evaluate derived SymbolicFunctions (symengine Lambdify, no generated code) on batches;
     ``extra``: the inputs beyond the joint-space ones (p, lengths), the same for every state."""
     compiled = {f.name: (f, se.Lambdify([s for syms in f.input_symbols for s in syms],
-                                        [e for exprs in f.output_exprs for e in exprs], cse=True)) for f in functions}
+                                        [e for exprs in f.inlined_outputs() for e in exprs], cse=True)) for f in functions}
 
     def call(name, inputs):
         f, fn = compiled[name]

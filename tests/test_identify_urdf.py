@@ -75,7 +75,7 @@ def test_identify_from_urdf_writes_a_reloadable_model(panda_urdf, tmp_path, caps
     reloaded = load_robot(out / "model.yaml")
     assert [j.name for j in reloaded.joints] == [f"panda_joint{i}" for i in range(1, 8)]
     f = derive_all(reloaded, only={"tau"})[0]
-    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.output_exprs[0]), cse=True)
+    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], list(f.inlined_outputs()[0]), cse=True)
     q, qd, qdd, tau = runs[1][1]
     predicted = np.array([fn(np.concatenate([a, b, c])) for a, b, c in zip(q[::20], qd[::20], qdd[::20])])
     np.testing.assert_allclose(predicted, tau[::20], atol=1e-6)

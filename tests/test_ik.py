@@ -394,7 +394,7 @@ def test_applicability_checks():
 
 def evaluate_function(f, **inputs):
     args = [s for syms in f.input_symbols for s in syms]
-    fn = se.Lambdify(args, [e for exprs in f.output_exprs for e in exprs], backend="lambda", cse=True)
+    fn = se.Lambdify(args, [e for exprs in f.inlined_outputs() for e in exprs], backend="lambda", cse=True)
     flat = np.concatenate([np.asarray(inputs[p.name], float).reshape(len(inputs[p.name]), -1) for p in f.inputs], axis=1)
     out = np.array([fn(row) for row in flat])
     return out[:, :56].reshape(-1, 8, 7), out[:, 56:].astype(int)
@@ -423,14 +423,14 @@ def test_symbolic_lengths(builder):
     """d3, d5 as names in the YAML: one function for a family of arms (extra inputs)."""
     model = lwr_variant("l1", "l2")
     f = builder(model)
-    symbols = sorted({str(s) for exprs in f.output_exprs for e in exprs for s in e.free_symbols} - {
+    symbols = sorted({str(s) for exprs in f.inlined_outputs() for e in exprs for s in e.free_symbols} - {
         str(s) for syms in f.input_symbols for s in syms})
     assert symbols == ["l1", "l2"]
     numeric = lwr_variant(0.40, 0.39)
     Q = random_configurations(numeric, 200, seed=14)
     T = fk_batch(numeric, Q)
     args = [s for syms in f.input_symbols for s in syms] + [se.Symbol("l1"), se.Symbol("l2")]
-    fn = se.Lambdify(args, [e for exprs in f.output_exprs for e in exprs], backend="lambda", cse=True)
+    fn = se.Lambdify(args, [e for exprs in f.inlined_outputs() for e in exprs], backend="lambda", cse=True)
     pose = T.reshape(len(T), -1) if f.name == "ik_hom" else matrix_to_dq(T)
     out = np.array([fn(np.concatenate([pose[k], [Q[k, 2], 0.40, 0.39]])) for k in range(len(Q))])
     q, status = out[:, :56].reshape(-1, 8, 7), out[:, 56:].astype(int)

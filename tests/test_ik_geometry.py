@@ -47,7 +47,7 @@ def solve(model, form, T, theta3, rng=None):
         f = BUILDERS[form](model)
         assert f is not None, f"{model.name}: {form} not derived"
         args = [s for syms in f.input_symbols for s in syms]
-        _COMPILED[key] = (model, se.Lambdify(args, [e for exprs in f.output_exprs for e in exprs], cse=True))
+        _COMPILED[key] = (model, se.Lambdify(args, [e for exprs in f.inlined_outputs() for e in exprs], cse=True))
     fn = _COMPILED[key][1]
     pose = T.reshape(len(T), 16) if form == "ik_hom" else matrix_to_dq(T, rng)
     theta3 = np.broadcast_to(np.asarray(theta3, float), (len(T),))
@@ -295,7 +295,7 @@ def test_mapped_arm_finite_for_any_input(form):
     raw[:20] = 0.0
     raw[20:40] = np.sign(raw[20:40]) * 1.7976931348623157e308
     f = BUILDERS[form](model)
-    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.output_exprs for e in exprs],
+    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.inlined_outputs() for e in exprs],
                      cse=True)
     theta3 = rng.uniform(-1e3, 1e3, n)
     out = np.array([fn(row) for row in np.concatenate([raw, theta3[:, None]], axis=1)])

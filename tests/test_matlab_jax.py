@@ -113,11 +113,11 @@ def test_tree_with_rank_3_outputs_in_octave_mex_and_jax(tmp_path, jax):
     q has the quaternion; .m, MEX and JAX equal the numpy module of the same generation."""
     from kindyngen.evaluate import run_octave
     from kindyngen.pipeline import generate
-    from kindyngen.robot import load_robot_tree
+    from kindyngen.robot import load_robot
     _octave()
     if shutil.which("mkoctfile") is None:
         pytest.skip("mkoctfile not installed (Debian: liboctave-dev)")
-    model = load_robot_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    model = load_robot(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
     out = generate(model, tmp_path, languages=("c", "python", "jax", "matlab"), progress=False,
                    only={"fk_hom", "jacobian", "tau"})
     robot_id = model.identifier

@@ -190,8 +190,8 @@ def test_both_fd_routes_equal_pinocchio_and_the_cheaper_is_generated(case, tmp_p
     records, the re-derived one's count among them, and its header says so."""
     model = case["model"]
     recorded = json.loads((case["folder"] / "opcounts.json").read_text())["fd"]
-    routes = {"sparse L^T D L": lambda: forward_dynamics_tree(model, "fd_ltdl"),
-              "articulated-body": lambda: forward_dynamics_aba(model, "fd_aba")}
+    routes = {"sparse L^T D L": lambda: forward_dynamics_tree(model, name="fd_ltdl"),
+              "articulated-body": lambda: forward_dynamics_aba(model, name="fd_aba")}
     assert set(recorded["routes"]) == set(routes) and recorded["route"] in routes
     other = next(name for name in routes if name != recorded["route"])
     program = optimize(routes[other]())

@@ -30,7 +30,7 @@ def pair(tmp_path_factory):
 
 def _evaluate(model, name, inputs):
     f = derive_all(model, only={name})[0]
-    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.output_exprs for e in exprs],
+    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for exprs in f.inlined_outputs() for e in exprs],
                      cse=True)
     x = np.concatenate([inputs[p.name] for p in f.inputs], axis=1)
     return np.array([fn(row) for row in x])

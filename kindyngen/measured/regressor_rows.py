@@ -55,7 +55,7 @@ class BaseRegressor:
         self.shape = function.outputs[0].shape
         self._ports = function.inputs
         args = [s for syms in function.input_symbols for s in syms]
-        self._fn = se.Lambdify(args, list(function.output_exprs[0]), cse=True)
+        self._fn = se.Lambdify(args, list(function.inlined_outputs()[0]), cse=True)
 
     def __call__(self, *inputs) -> np.ndarray:
         """The regressor at N samples of its inputs (each (N, size) or one sample)."""

@@ -89,9 +89,9 @@ void lwr4_hartl_fk_dq_batch(long count, const double *q, double *x);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
  *
- * Cost: 36 add, 76 mul, 12 call
- * (as derived, before CSE: 226 add, 613 mul, 795 call);
- * critical path 84 cycles, 12 dependent operations.
+ * Cost: 35 add, 72 mul, 12 call
+ * (as derived, before CSE: 53 add, 102 mul, 68 call);
+ * critical path 81 cycles, 11 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_jacobian(const double *q, double *J);
@@ -133,7 +133,7 @@ void lwr4_hartl_jacobian_dq(const double *q, double *J);
 void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
 
 /*
- * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
+ * M: Newton-Euler family over the tree (joint frames, grouped parameters): inertia matrix M(q) by composite rigid bodies, each column carried up its branch (entries between branches are exact zeros).
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -143,16 +143,16 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
  *
- * Cost: 157 add, 172 mul, 12 call
- * (as derived, before CSE: 5919 add, 8715 mul, 6724 call);
- * critical path 138 cycles, 30 dependent operations.
+ * Cost: 137 add, 161 mul, 12 call
+ * (as derived, before CSE: 270 add, 411 mul, 353 call);
+ * critical path 123 cycles, 25 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_M(const double *q, double *M);
 void lwr4_hartl_M_batch(long count, const double *q, double *M);
 
 /*
- * g: Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
+ * g: Newton-Euler family over the tree (joint frames, grouped parameters): gravity forces g = tau(q, 0, 0), by composite first moments.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -160,7 +160,7 @@ void lwr4_hartl_M_batch(long count, const double *q, double *M);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * out g[7]: 7 double, gravity torques [N m]
+ * out g[7]: 7 double, joint gravity torques [N m]
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
@@ -171,7 +171,7 @@ void lwr4_hartl_g(const double *q, double *g);
 void lwr4_hartl_g_batch(long count, const double *q, double *g);
 
 /*
- * c: Newton-Euler route (joint frames, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
+ * c: Newton-Euler family over the tree (joint frames, grouped parameters): Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -179,11 +179,11 @@ void lwr4_hartl_g_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
- * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * out c[7]: 7 double, joint Coriolis and centrifugal torques [N m]
  *
  * Cost: 241 add, 311 mul, 12 call
- * (as derived, before CSE: 42081 add, 81748 mul, 70825 call);
+ * (as derived, before CSE: 329 add, 466 mul, 130 call);
  * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
@@ -199,7 +199,7 @@ void lwr4_hartl_c_batch(long count, const double *q, const double *qd, double *c
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
  * Cost: 786 add, 868 mul, 12 call
@@ -211,7 +211,7 @@ void lwr4_hartl_S(const double *q, const double *qd, double *S);
 void lwr4_hartl_S_batch(long count, const double *q, const double *qd, double *S);
 
 /*
- * tau: Newton-Euler route (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.
+ * tau: Newton-Euler family over the tree (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -219,12 +219,12 @@ void lwr4_hartl_S_batch(long count, const double *q, const double *qd, double *S
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
- * Cost: 263 add, 331 mul, 12 call
- * (as derived, before CSE: 49900 add, 87783 mul, 76848 call);
+ * Cost: 263 add, 329 mul, 12 call
+ * (as derived, before CSE: 361 add, 487 mul, 138 call);
  * critical path 150 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
@@ -232,7 +232,7 @@ void lwr4_hartl_tau(const double *q, const double *qd, const double *qdd, double
 void lwr4_hartl_tau_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
 
 /*
- * fd: Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).
+ * fd: Newton-Euler family over the tree (joint frames, grouped parameters): forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) and the two sparse triangular solves. Route chosen by the fewest additions + multiplications after CSE: sparse L^T D L 492 + 620; articulated-body 675 + 907.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -240,13 +240,13 @@ void lwr4_hartl_tau_batch(long count, const double *q, const double *qd, const d
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
- * in  tau[7]: 7 double, applied joint torques [N m]
- * out qdd[7]: 7 double, joint accelerations [rad/s^2]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  tau[7]: 7 double, joint applied torques [N m]
+ * out qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  *
- * Cost: 512 add, 648 mul, 12 call
- * (as derived, before CSE: 309295256 add, 485366443 mul, 383369247 call);
- * critical path 343 cycles, 75 dependent operations.
+ * Cost: 492 add, 620 mul, 12 call
+ * (as derived, before CSE: 717 add, 1045 mul, 487 call);
+ * critical path 231 cycles, 41 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -262,7 +262,7 @@ void lwr4_hartl_fd_batch(long count, const double *q, const double *qd, const do
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out dtau_dq[49]: 7 x 7 double, dtau_i / dq_j (row-major) [N m/rad]
  * out dtau_dqd[49]: 7 x 7 double, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -285,7 +285,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  tau[7]: 7 double, applied joint torques [N m]
  * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
  * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
@@ -293,7 +293,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  *
  * Cost: 3050 add, 3584 mul, 12 call
  * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call);
- * critical path 442 cycles, 108 dependent operations.
+ * critical path 454 cycles, 112 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -346,7 +346,7 @@ void lwr4_hartl_g_lagrange_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 827 add, 918 mul, 12 call
@@ -402,7 +402,7 @@ void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 290 add, 420 mul, 12 call
@@ -421,7 +421,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -443,7 +443,7 @@ void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, cons
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
@@ -574,12 +574,12 @@ void lwr4_hartl_Y_m_batch(long count, const double *q, double *Y);
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
- * Cost: 585 add, 718 mul, 12 call
- * (as derived, before CSE: 53044 add, 94126 mul, 83664 call);
+ * Cost: 441 add, 695 mul, 12 call
+ * (as derived, before CSE: 774 add, 1450 mul, 1058 call);
  * critical path 135 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
@@ -628,9 +628,9 @@ void lwr4_hartl_Y_batch(long count, const double *q, const double *qd, const dou
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (31 add, 67 mul, 14 call) + jacobian (36 add, 76 mul, 12 call, only after
+ * fk_hom (31 add, 67 mul, 14 call) + jacobian (35 add, 72 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 340 add, 475 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 339 add, 471 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void lwr4_hartl_ik_dls(const double *T, const double *q0, double *q, int *status);

@@ -1,5 +1,5 @@
 function [g] = lwr4_hartl_g(q)
-%LWR4_HARTL_G Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
+%LWR4_HARTL_G Newton-Euler family over the tree (joint frames, grouped parameters): gravity forces g = tau(q, 0, 0), by composite first moments.
 %   [g] = lwr4_hartl_g(q) for the robot "lwr4_hartl"
 %   (7 revolute joints, standard DH, from lwr4_hartl.yaml).
 %
@@ -18,7 +18,7 @@ function [g] = lwr4_hartl_g(q)
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
 %   Outputs:
-%     g: 7 x N double, gravity torques [N m]
+%     g: 7 x N double, joint gravity torques [N m]
 %
 %   Cost per configuration: 32 add, 50 mul, 12 call after CSE
 %   (as derived: 114 add, 212 mul, 200 call). The same

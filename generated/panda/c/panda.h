@@ -89,9 +89,9 @@ void panda_fk_dq_batch(long count, const double *q, double *x);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
  *
- * Cost: 66 add, 97 mul, 12 call
- * (as derived, before CSE: 845 add, 2007 mul, 2601 call);
- * critical path 96 cycles, 16 dependent operations.
+ * Cost: 64 add, 99 mul, 12 call
+ * (as derived, before CSE: 115 add, 145 mul, 68 call);
+ * critical path 93 cycles, 15 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_jacobian(const double *q, double *J);
@@ -133,7 +133,7 @@ void panda_jacobian_dq(const double *q, double *J);
 void panda_jacobian_dq_batch(long count, const double *q, double *J);
 
 /*
- * M: Newton-Euler route (joint frames, grouped parameters): inertia matrix M(q) by the composite-rigid-body algorithm.
+ * M: Newton-Euler family over the tree (joint frames, grouped parameters): inertia matrix M(q) by composite rigid bodies, each column carried up its branch (entries between branches are exact zeros).
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -143,16 +143,16 @@ void panda_jacobian_dq_batch(long count, const double *q, double *J);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out M[49]: 7 x 7 double, joint-space inertia matrix (symmetric, row-major) [kg m^2]
  *
- * Cost: 198 add, 214 mul, 12 call
- * (as derived, before CSE: 7832 add, 11019 mul, 8564 call);
- * critical path 135 cycles, 29 dependent operations.
+ * Cost: 180 add, 209 mul, 12 call
+ * (as derived, before CSE: 354 add, 535 mul, 429 call);
+ * critical path 123 cycles, 25 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_M(const double *q, double *M);
 void panda_M_batch(long count, const double *q, double *M);
 
 /*
- * g: Newton-Euler route (joint frames, grouped parameters): gravity torques g = tau(q, 0, 0), by composite first moments.
+ * g: Newton-Euler family over the tree (joint frames, grouped parameters): gravity forces g = tau(q, 0, 0), by composite first moments.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -160,7 +160,7 @@ void panda_M_batch(long count, const double *q, double *M);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * out g[7]: 7 double, gravity torques [N m]
+ * out g[7]: 7 double, joint gravity torques [N m]
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
@@ -171,7 +171,7 @@ void panda_g(const double *q, double *g);
 void panda_g_batch(long count, const double *q, double *g);
 
 /*
- * c: Newton-Euler route (joint frames, grouped parameters): Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
+ * c: Newton-Euler family over the tree (joint frames, grouped parameters): Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by recursive Newton-Euler.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -179,11 +179,11 @@ void panda_g_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
- * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * out c[7]: 7 double, joint Coriolis and centrifugal torques [N m]
  *
- * Cost: 269 add, 350 mul, 12 call
- * (as derived, before CSE: 65491 add, 128314 mul, 109167 call);
+ * Cost: 270 add, 349 mul, 12 call
+ * (as derived, before CSE: 361 add, 505 mul, 144 call);
  * critical path 153 cycles, 35 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
@@ -199,7 +199,7 @@ void panda_c_batch(long count, const double *q, const double *qd, double *c);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
  * Cost: 1018 add, 1004 mul, 12 call
@@ -211,7 +211,7 @@ void panda_S(const double *q, const double *qd, double *S);
 void panda_S_batch(long count, const double *q, const double *qd, double *S);
 
 /*
- * tau: Newton-Euler route (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler.
+ * tau: Newton-Euler family over the tree (joint frames, grouped parameters): inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -219,12 +219,12 @@ void panda_S_batch(long count, const double *q, const double *qd, double *S);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
- * Cost: 288 add, 364 mul, 12 call
- * (as derived, before CSE: 78018 add, 137165 mul, 117612 call);
+ * Cost: 288 add, 361 mul, 12 call
+ * (as derived, before CSE: 387 add, 520 mul, 150 call);
  * critical path 156 cycles, 36 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
@@ -232,7 +232,7 @@ void panda_tau(const double *q, const double *qd, const double *qdd, double *tau
 void panda_tau_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
 
 /*
- * fd: Forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), unrolled LDL^T factorisation and solve (no square roots).
+ * fd: Newton-Euler family over the tree (joint frames, grouped parameters): forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) and the two sparse triangular solves. Route chosen by the fewest additions + multiplications after CSE: sparse L^T D L 559 + 700; articulated-body 789 + 1045.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
  * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
@@ -240,13 +240,13 @@ void panda_tau_batch(long count, const double *q, const double *qd, const double
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
- * in  tau[7]: 7 double, applied joint torques [N m]
- * out qdd[7]: 7 double, joint accelerations [rad/s^2]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  tau[7]: 7 double, joint applied torques [N m]
+ * out qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  *
- * Cost: 577 add, 719 mul, 12 call
- * (as derived, before CSE: 409012967 add, 629618682 mul, 497749580 call);
- * critical path 358 cycles, 80 dependent operations.
+ * Cost: 559 add, 700 mul, 12 call
+ * (as derived, before CSE: 827 add, 1202 mul, 575 call);
+ * critical path 231 cycles, 41 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -262,7 +262,7 @@ void panda_fd_batch(long count, const double *q, const double *qd, const double 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out dtau_dq[49]: 7 x 7 double, dtau_i / dq_j (row-major) [N m/rad]
  * out dtau_dqd[49]: 7 x 7 double, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -285,7 +285,7 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  tau[7]: 7 double, applied joint torques [N m]
  * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
  * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
@@ -293,7 +293,7 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  *
  * Cost: 3398 add, 3875 mul, 12 call
  * (as derived, before CSE: 12664599226860 add, 19495258176161 mul, 15412087385897 call);
- * critical path 454 cycles, 112 dependent operations.
+ * critical path 442 cycles, 108 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -346,7 +346,7 @@ void panda_g_lagrange_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 1058 add, 1047 mul, 12 call
@@ -402,7 +402,7 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 332 add, 468 mul, 12 call
@@ -421,7 +421,7 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -443,7 +443,7 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
@@ -508,13 +508,13 @@ void panda_Y_m_batch(long count, const double *q, double *Y);
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
- * Cost: 685 add, 783 mul, 12 call
- * (as derived, before CSE: 79704 add, 141096 mul, 122494 call);
- * critical path 138 cycles, 30 dependent operations.
+ * Cost: 496 add, 771 mul, 12 call
+ * (as derived, before CSE: 865 add, 1563 mul, 1172 call);
+ * critical path 144 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
@@ -562,9 +562,9 @@ void panda_Y_batch(long count, const double *q, const double *qd, const double *
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (41 add, 76 mul, 14 call) + jacobian (66 add, 97 mul, 12 call, only after
+ * fk_hom (41 add, 76 mul, 14 call) + jacobian (64 add, 99 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 380 add, 505 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 378 add, 507 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void panda_ik_dls(const double *T, const double *q0, double *q, int *status);
