@@ -28,6 +28,7 @@ from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics
                             inverse_dynamics_tree, mass_matrix_tree)
 from .tree_articulated import forward_dynamics_aba
 from .tree_kinematics import fk_hom_tree, jacobian_tree
+from .tree_derivatives import fd_derivatives_tree, tau_derivatives_tree
 from .tree_model import TreeModel
 from .tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
 
@@ -85,6 +86,11 @@ TREE_BUILDERS: tuple[tuple[str, Callable[[TreeModel], SymbolicFunction]], ...] =
     ("c", coriolis_tree),
     ("tau", inverse_dynamics_tree),
     ("fd", forward_dynamics_routes),
+    # partial derivatives in the world-frame formulation (kindyngen/tree_derivatives.py)
+    ("tau_derivatives", tau_derivatives_tree),
+    ("fd_derivatives", fd_derivatives_tree),
+    # the same without Minv, for callers that do not need it (each column through the factor)
+    ("fd_derivatives_no_minv", lambda model: fd_derivatives_tree(model, "fd_derivatives_no_minv", with_minv=False)),
     ("com", centre_of_mass_tree),
     ("Y", tree_regressor),          # None where the base parameters cannot be decided
 )
