@@ -3,12 +3,13 @@ Pinocchio's computeRNEADerivatives / computeABADerivatives (ddq_dq, ddq_dv, Minv
 floating base, on ``tests/data/urdf/mobile_slider_tree.urdf`` (a prismatic lift carrying an
 arm beside a leg, a skewed continuous joint) and on the LWR IV+ wrapped as a one-branch tree.
 
-Pinocchio's model is built here from the tree's joint placements and link inertias (floats),
+Python code on all, C code on the floating tree. Pinocchio's model is built here from the tree's joint placements and link inertias (floats),
 sharing nothing with the derivation but the description. Tolerance per state: |ours -
 Pinocchio| <= 1e-9 * max(1, max |Pinocchio's value|), 50 random states.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -74,31 +75,32 @@ def pinocchio_tree(tree: TreeModel):
     return model
 
 
-def _library(tmp_path, tree, functions):
+def _library(tmp_path, tree, functions, lang):
     programs = [optimize(f) for f in functions]
-    for filename, text in RENDERERS["python"](tree, programs).items():
-        (tmp_path / "python").mkdir(exist_ok=True)
-        (tmp_path / "python" / filename).write_text(text)
-    import json
+    for filename, text in RENDERERS[lang](tree, programs).items():
+        (tmp_path / lang).mkdir(exist_ok=True)
+        (tmp_path / lang / filename).write_text(text)
     (tmp_path / "functions.json").write_text(json.dumps(manifest(tree, programs, "numeric")))
-    return load_generated(tmp_path, "python")
+    return load_generated(tmp_path, lang)
 
 
 def _error(got, expected):
     return float(np.abs(got - expected).max() / max(1.0, np.abs(expected).max()))
 
 
-CASES = [("mobile_slider_tree", False), ("mobile_slider_tree", True), ("lwr4", False)]
+# the C (compiled at -O0) on one case, the Python on all: the renderers are generic over the ports
+CASES = [("mobile_slider_tree", False, "python"), ("mobile_slider_tree", True, "c"), ("lwr4", False, "python")]
 
 
-@pytest.mark.parametrize("key,floating", CASES, ids=[f"{k}-{'floating' if f else 'fixed'}" for k, f in CASES])
-def test_tree_derivatives_equal_pinocchio(key, floating, tmp_path):
+@pytest.mark.parametrize("key,floating,lang", CASES,
+                         ids=[f"{k}-{'floating' if f else 'fixed'}-{lang}" for k, f, lang in CASES])
+def test_tree_derivatives_equal_pinocchio(key, floating, lang, tmp_path):
     if key == "lwr4":
         tree = arm_as_tree(load_robot(ROOT / "robots" / "lwr4.yaml"))
     else:
         tree = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / f"{key}.urdf", floating_base=floating)
     functions = [tau_derivatives_tree(tree), fd_derivatives_tree(tree), fd_derivatives_tree(tree, "fd_der_no_minv", False)]
-    library = _library(tmp_path, tree, functions)
+    library = _library(tmp_path, tree, functions, lang)
     model = pinocchio_tree(tree)
     data = model.createData()
     rng = np.random.default_rng(30)
