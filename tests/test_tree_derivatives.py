@@ -1,7 +1,8 @@
 """Tree dynamics derivatives (kindyngen.tree_derivatives, world-frame formulation) equal
 Pinocchio's computeRNEADerivatives / computeABADerivatives (ddq_dq, ddq_dv, Minv), fixed and
 floating base, on ``tests/data/urdf/mobile_slider_tree.urdf`` (a prismatic lift carrying an
-arm beside a leg, a skewed continuous joint) and on the LWR IV+ wrapped as a one-branch tree.
+arm beside a leg, a skewed continuous joint), on Solo12 (example-robot-data, floating base) and on
+the LWR IV+ wrapped as a one-branch tree.
 
 Python code on all, C code on the floating tree. Pinocchio's model is built here from the tree's joint placements and link inertias (floats),
 sharing nothing with the derivation but the description. Tolerance per state: |ours -
@@ -9,6 +10,7 @@ Pinocchio| <= 1e-9 * max(1, max |Pinocchio's value|), 50 random states.
 """
 from __future__ import annotations
 
+import importlib.metadata
 import json
 from pathlib import Path
 
@@ -89,7 +91,8 @@ def _error(got, expected):
 
 
 # the C (compiled at -O0) on one case, the Python on all: the renderers are generic over the ports
-CASES = [("mobile_slider_tree", False, "python"), ("mobile_slider_tree", True, "c"), ("lwr4", False, "python")]
+CASES = [("mobile_slider_tree", False, "python"), ("mobile_slider_tree", True, "c"), ("lwr4", False, "python"),
+         ("solo12", True, "python")]
 
 
 @pytest.mark.parametrize("key,floating,lang", CASES,
@@ -97,6 +100,13 @@ CASES = [("mobile_slider_tree", False, "python"), ("mobile_slider_tree", True, "
 def test_tree_derivatives_equal_pinocchio(key, floating, lang, tmp_path):
     if key == "lwr4":
         tree = arm_as_tree(load_robot(ROOT / "robots" / "lwr4.yaml"))
+    elif key == "solo12":
+        try:
+            dist = importlib.metadata.distribution("example-robot-data")
+        except importlib.metadata.PackageNotFoundError:
+            pytest.skip("example-robot-data is not installed")
+        path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/solo_description/robots/solo12.urdf"))
+        tree = load_urdf_tree(path, floating_base=floating)
     else:
         tree = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / f"{key}.urdf", floating_base=floating)
     functions = [tau_derivatives_tree(tree), fd_derivatives_tree(tree), fd_derivatives_tree(tree, "fd_der_no_minv", False)]
