@@ -37,6 +37,17 @@ fd(q, qd, tau)) = tau``), ``M`` factorised once as the tree-sparse ``L^T D L`` o
 factor, ``M^-1`` only where the caller asks for it.
 
 Trees carry no joint effects (friction, armature): these are the rigid-body derivatives.
+
+Example: a body with two pendulums, floating (nv = 8); the pendulums hang from the body, so
+neither joint's torque depends on the other joint's angle:
+
+>>> from kindyngen.urdf import parse_urdf_tree
+>>> from kindyngen.tree_model import TWO_PENDULUMS
+>>> f = tau_derivatives_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> [(p.name, p.shape) for p in f.outputs]
+[('dtau_dq', (8, 8)), ('dtau_dqd', (8, 8))]
+>>> f.output_exprs[0][6 * 8 + 7], f.output_exprs[0][7 * 8 + 6]
+(0, 0)
 """
 from __future__ import annotations
 
@@ -55,7 +66,12 @@ from .tree_model import FREE_FLYER_NV, TreeModel
 # motions (v, w) and forces (f, n) are lists of 6 expressions, linear part first
 
 def mcross(a, b):
-    """Motion cross product ``a x b``."""
+    """Motion cross product ``a x b``; with :func:`fcross` dual: ``(a x b) . f = -b . (a x* f)``.
+
+    >>> a, b, f = [1, 2, 3, 4, 5, 6], [0, 1, 0, 2, 0, 1], [3, 1, 4, 1, 5, 9]
+    >>> dot6(mcross(a, b), f), -dot6(b, fcross(a, f))
+    (-52, -52)
+    """
     return vadd(cross(a[3:], b[:3]), cross(a[:3], b[3:])) + cross(a[3:], b[3:])
 
 
