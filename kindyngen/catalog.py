@@ -25,6 +25,7 @@ from .tree_articulated import forward_dynamics_aba
 from .tree_dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
                             inverse_dynamics_tree, mass_matrix_tree)
 from .tree_kinematics import fk_hom_tree, jacobian_tree
+from .tree_derivatives import fd_derivatives_tree, tau_derivatives_tree
 from .tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
@@ -71,9 +72,18 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("tau", lambda model, params: inverse_dynamics_tree(model, params, "tau")),
     ("fd", lambda model, params: forward_dynamics_routes(model, params, "fd")),
     ("com", tree_only(lambda model, params: centre_of_mass_tree(model, params, "com"))),
-    # their partial derivatives, for optimal control (kindyngen/dynamics_derivatives.py)
-    ("tau_derivatives", arm_only(lambda model, params: tau_derivatives(model, params, "tau_derivatives"))),
-    ("fd_derivatives", arm_only(lambda model, params: fd_derivatives(model, params, "fd_derivatives"))),
+    # their partial derivatives, for optimal control: on a fixed base by the adjoint sweeps
+    # over the Newton-Euler pass (kindyngen/dynamics_derivatives.py; they carry the joint
+    # effects), on a tree read as such by the world-frame formulation (tree_derivatives.py,
+    # which takes a floating base; on lwr4 and panda read as trees it costs 7-9 % more
+    # operations than the sweeps, with a shorter critical path: docs/latency.md)
+    ("tau_derivatives", lambda model, params: tau_derivatives_tree(model, "tau_derivatives") if model.is_tree
+     else tau_derivatives(model, params, "tau_derivatives")),
+    ("fd_derivatives", lambda model, params: fd_derivatives_tree(model, "fd_derivatives") if model.is_tree
+     else fd_derivatives(model, params, "fd_derivatives")),
+    # the same without Minv, for callers that do not need it (each column through the factor)
+    ("fd_derivatives_no_minv", tree_only(lambda model, params: fd_derivatives_tree(
+        model, "fd_derivatives_no_minv", with_minv=False))),
     ("M_lagrange", arm_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
     ("g_lagrange", arm_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
     ("c_christoffel", arm_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),

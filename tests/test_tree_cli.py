@@ -43,13 +43,18 @@ def _refused(argv, capsys, monkeypatch, message):
 
 
 def test_generate_floating_base_tree(tmp_path, capsys, monkeypatch):
+    # --no-batch: the strict -O2 compile below of every function twice took minutes on a loaded
+    # 2-core machine once the derivatives came (the batch variants: tests/test_c_batch.py)
     code, _, err = _run(["generate", TREE, "--floating-base", "--frames", "gripper_frame,foot",
-                         "--lang", "c,python", "--out", str(tmp_path), "--quiet"], capsys, monkeypatch)
+                         "--lang", "c,python", "--no-batch", "--out", str(tmp_path), "--quiet"], capsys, monkeypatch)
     assert code == 0, err
     folder = tmp_path / "mobile_slider_tree"
     interface = json.loads((folder / "functions.json").read_text())
     ports = {f["name"]: f for f in interface["functions"]}
-    assert set(ports) == {"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "Y"}
+    assert set(ports) == {"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "tau_derivatives", "fd_derivatives",
+                          "fd_derivatives_no_minv", "com", "Y"}
+    assert ports["fd_derivatives"]["outputs"][2]["shape"] == [11, 11]
+    assert [p["name"] for p in ports["fd_derivatives_no_minv"]["outputs"]] == ["dqdd_dq", "dqdd_dqd"]
     assert ports["tau"]["inputs"][0]["shape"] == [12] and ports["tau"]["outputs"][0]["shape"] == [11]
     assert ports["fk_hom"]["outputs"][0]["shape"] == [2, 4, 4]
     assert ports["jacobian"]["outputs"][0]["shape"] == [2, 6, 11]
