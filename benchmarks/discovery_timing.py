@@ -23,7 +23,7 @@ def simulate(path: Path, seconds: float = 40.0, rate: float = 200.0) -> Path:
     import pinocchio as pin
     sys.path.insert(0, str(ROOT / "tests"))
     from reference import pinocchio_model
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     rng = np.random.default_rng(1)
     t = np.arange(0, seconds, 1 / rate)
     amp, w = rng.uniform(0.2, 0.6, size=(7, 3)), 2 * np.pi * rng.uniform(0.1, 0.5, size=(7, 3))
@@ -44,10 +44,10 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
-    from kindyngen.cli import main as cli
+    from kindyngen.cli.main import main as cli
     from kindyngen.measured.discovery import discover
-    from kindyngen.measured.logs import Preprocessing, load_segments
-    from kindyngen.robot import load_robot
+    from kindyngen.measured.log_preparing import Preprocessing, load_segments
+    from kindyngen.readers.yaml_description import load_robot
     with tempfile.TemporaryDirectory() as tmp:
         log = simulate(Path(tmp) / "log.csv")
         robot = load_robot(ROOT / "robots" / "lwr4.yaml")

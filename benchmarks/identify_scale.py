@@ -54,7 +54,7 @@ def _period():
     sys.path.insert(0, str(ROOT / "tests"))
     import pinocchio as pin
     from reference import pinocchio_model
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     model = load_robot(ROBOT)
     pm, pd, _ = pinocchio_model(model)
     rng = np.random.default_rng(7)

@@ -66,7 +66,7 @@ def jax_run(robot_name: str, batches, progress) -> dict:
     jax.config.update("jax_enable_x64", True)
     from adam.jax import KinDynComputations
     from dh_to_urdf import urdf_string
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
 
     robot = load_robot(ROOT / "robots" / f"{robot_name}.yaml")
     ours = _load(GENERATED / robot_name / "jax" / f"{robot_name}_jax.py", f"bench_jax_{robot_name}")
@@ -143,7 +143,7 @@ def octave_run(robot_name: str, batches, progress) -> dict | None:
     if shutil.which("octave-cli") is None or shutil.which("mkoctfile") is None:
         progress("octave or mkoctfile not installed: Octave timings left out")
         return None
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     n = load_robot(ROOT / "robots" / f"{robot_name}.yaml").n
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -14,7 +14,7 @@ alone against its latency bound, and what FMA contraction buys; results/latency.
 * ``kernel``: kdg_sincos on 8 angles, as the generated code calls it, alone: latency (the next
   call's angles depend on this call's results) and throughput (independent calls), both net
   of the same harness around an empty kernel, in cycles of this core (calibrated by a chain of
-  dependent additions, 3 cycles each on Zen 4), against :func:`kindyngen.c_trig.kernel_latency`.
+  dependent additions, 3 cycles each on Zen 4), against :func:`kindyngen.codegen.trig_kernel.kernel_latency`.
 
 Times are medians over interleaved rounds; CPU-time noise from other processes is reduced by
 taking the minimum over repetitions for the kernel. Nothing here asserts on a time.
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kindyngen import c_trig
-from kindyngen.robot import load_robot
+from kindyngen.codegen import trig_kernel
+from kindyngen.readers.yaml_description import load_robot
 
 from . import compiled, inputs
 from .build import BUILD, build
@@ -168,7 +168,7 @@ int main(int argc, char **argv)
 
 def time_kernel(workdir: Path, repeats: int) -> dict:
     workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / "kernel.h").write_text("#include <math.h>\n" + c_trig.kernel_c())
+    (workdir / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c())
     (workdir / "kernel_driver.c").write_text(KERNEL_DRIVER)
     out = {}
     for variant, flags in VARIANTS.items():
@@ -182,7 +182,7 @@ def time_kernel(workdir: Path, repeats: int) -> dict:
                         "latency_cycles_net": (lat - lat0) / cycle,
                         "throughput_ns": thr, "throughput_empty_ns": thr0,
                         "throughput_cycles_net": (thr - thr0) / cycle}
-    bound = c_trig.kernel_latency()
+    bound = trig_kernel.kernel_latency()
     out["bound_cycles"] = bound
     out["strict"]["ratio_to_bound"] = out["strict"]["latency_cycles_net"] / bound
     return out

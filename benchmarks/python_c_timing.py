@@ -112,8 +112,8 @@ def measure(robot_name: str, K: int = DEFAULTS["K"], repeats: int = DEFAULTS["re
             progress=None) -> dict:
     """{function: {"python_c": stats, "pinocchio_python": stats + note + check, ["python": stats]}}
     for every function of generated/<robot_name> (stats: median_ns, min_ns, max_ns per call)."""
-    from kindyngen import python_c
-    from kindyngen.robot import load_robot
+    from kindyngen.runtime import python_c
+    from kindyngen.readers.yaml_description import load_robot
     folder = generated / robot_name
     robot = load_robot(ROBOTS / f"{robot_name}.yaml")
     ext = python_c.load(folder)

@@ -27,10 +27,10 @@ PAPER = {"T": {"add": 2, "mul": 6, "call": 4}, "u": {"add": 4, "mul": 20, "call"
 def general_dh_transform() -> dict:
     """Op counts of one standard DH transform with theta, d, a, alpha all symbolic: T (4x4)
     and the dual quaternion u = Rz(theta) T(a, 0, d) Rx(alpha), as derived and after CSE."""
-    from kindyngen.geometry import rot_x, rot_z
-    from kindyngen.kinematics_dualquat import dq_mul
-    from kindyngen.optimize import optimize
-    from kindyngen.symbolic import Port, SymbolicFunction
+    from kindyngen.algorithms.geometry import rot_x, rot_z
+    from kindyngen.algorithms.dualquat.dq_kinematics import dq_mul
+    from kindyngen.codegen.optimize import optimize
+    from kindyngen.algorithms.symbolic import Port, SymbolicFunction
     theta, d, a, alpha = se.symbols("theta d a alpha")
     c, s, ca, sa = se.cos(theta), se.sin(theta), se.cos(alpha), se.sin(alpha)
     R = rot_z(c, s) * rot_x(ca, sa)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kindyngen.robot import load_robot
+from kindyngen.readers.yaml_description import load_robot
 
 from . import (c_batch, casadi_codegen, compiled, inputs, pinocchio_casadi, pinocchio_cpp, python_c_timing,
                python_timing, scaling, tree_scaling, trees)

@@ -1,7 +1,7 @@
 """How generation time and operation count grow with the number of joints, per derivation
 route, on synthetic chains of n = 2 ... 12 revolute joints.
 
-A route is a builder registered in kindyngen.catalog.BUILDERS whose name is a family (M, c,
+A route is a builder registered in kindyngen.codegen.catalog.BUILDERS whose name is a family (M, c,
 tau, and g) or starts with the family and an underscore (M_lagrange, c_christoffel, tau_rnea, ...);
 fk_hom and jacobian are timed as a baseline. Routes that do not exist are simply absent.
 Each route runs in a forked worker so that one that blows up can be stopped: a route stops
@@ -21,7 +21,7 @@ BASELINE = ("fk_hom", "jacobian")
 def synthetic_chain(n: int):
     """An n-joint arm in the style of the LWR: alternating twists of +-pi/2, some link
     lengths and offsets non-zero, masses decreasing towards the tip, full inertia tensors."""
-    from kindyngen.robot import parse_robot
+    from kindyngen.readers.yaml_description import parse_robot
     joints, links = [], []
     for i in range(n):
         joints.append({"a": 0.05 if i % 3 == 1 else 0, "alpha": 0 if i == n - 1 else ("pi/2" if i % 2 == 0 else "-pi/2"),
@@ -36,7 +36,7 @@ def synthetic_chain(n: int):
 
 def routes() -> dict:
     """{route name: family} for what the catalogue offers now."""
-    from kindyngen.catalog import BUILDERS
+    from kindyngen.codegen.catalog import BUILDERS
     found = {}
     for name, _ in BUILDERS:
         family = name.split("_", 1)[0] if "_" in name else name
@@ -46,8 +46,8 @@ def routes() -> dict:
 
 
 def measure(route: str, n: int) -> dict | None:
-    from kindyngen.catalog import derive_all
-    from kindyngen.optimize import optimize
+    from kindyngen.codegen.catalog import derive_all
+    from kindyngen.codegen.optimize import optimize
     model = synthetic_chain(n)
     start = time.perf_counter()
     functions = derive_all(model, "numeric", only={route})

@@ -3,15 +3,15 @@ against the operation counts of Featherstone's algorithms (``python -m benchmark
 [--quick] [--out DIR]``, writes ``results/tree_scaling.json`` and ``tree_scaling.png``).
 
 Synthetic humanoid-like trees (a torso and ``limbs`` branches of ``per_limb`` revolute joints,
-floating base) are written as URDF text and read by :func:`kindyngen.urdf.parse_urdf_tree`;
+floating base) are written as URDF text and read by :func:`kindyngen.readers.urdf.parse_urdf_tree`;
 single-branch fixed-base chains of the same style are the like-for-like case of Featherstone's
 formulas, which are stated for unbranched chains. Every function of
-:data:`kindyngen.catalog.TREE_NAMES` is derived and optimised (CSE) separately, each size in
+:data:`kindyngen.codegen.catalog.TREE_NAMES` is derived and optimised (CSE) separately, each size in
 a fresh forked worker so that one that blows up can be stopped; a function stops growing once
 its next size is predicted to exceed the budget. The whole ``kindyngen generate`` of the 29-joint
 Unitree G1 (example-robot-data, floating base, all languages) is timed as a command
 (``--g1-only`` re-measures just that), and :func:`cse_study` measures what chunking CSE
-(:data:`kindyngen.optimize.CSE_CHUNK`) gains and costs (``--cse-only``).
+(:data:`kindyngen.codegen.optimize.CSE_CHUNK`) gains and costs (``--cse-only``).
 
 Reference counts (m = multiplications, a = additions, n = degrees of freedom = nv):
 
@@ -116,8 +116,8 @@ def synthetic_urdf(limbs: int, per_limb: int) -> str:
 
 
 def synthetic_tree(limbs: int, per_limb: int, floating: bool = True):
-    """A humanoid-like :class:`kindyngen.model.RobotModel` tree (:func:`synthetic_urdf`)."""
-    from kindyngen.urdf import parse_urdf_tree
+    """A humanoid-like :class:`kindyngen.model.robot_model.RobotModel` tree (:func:`synthetic_urdf`)."""
+    from kindyngen.readers.urdf import parse_urdf_tree
     return parse_urdf_tree(synthetic_urdf(limbs, per_limb), source=f"<synthetic tree {limbs}x{per_limb}>",
                            floating_base=floating)
 
@@ -141,14 +141,14 @@ def path_pairs(parents) -> int:
 
 def velocity_parents(model) -> list:
     """The parent of each velocity coordinate, a floating base counted as a chain of six."""
-    from kindyngen.tree_dynamics import expanded_parents
+    from kindyngen.algorithms.dynamics import expanded_parents
     return list(expanded_parents(model))
 
 
 # ------------------------------------------------------------------ measuring
 
 def _program(function):
-    from kindyngen.optimize import optimize
+    from kindyngen.codegen.optimize import optimize
     return optimize(function)
 
 
@@ -177,7 +177,7 @@ def m_and_c(model) -> dict:
 
     import symengine as se
 
-    from kindyngen.tree_dynamics import coriolis_tree, mass_matrix_tree
+    from kindyngen.algorithms.dynamics import coriolis_tree, mass_matrix_tree
     mass, bias = mass_matrix_tree(model), coriolis_tree(model)
     # both name their intermediates from _s0: give c's their own names
     rename = {symbol: se.Symbol(f"_c{symbol}") for symbol, _ in bias.stages}
@@ -200,7 +200,7 @@ def best_of(build, model, repeats: int) -> dict | None:
 
 def _worker(series: str, size, names: list, repeats: int, out) -> None:
     """Measure ``names`` at one size in this (fresh, forked) process, announcing each."""
-    from kindyngen.catalog import BUILDERS
+    from kindyngen.codegen.catalog import BUILDERS
     model = _model(series, size)
     builders = {name: (lambda model, build=build: build(model, "numeric")) for name, build in BUILDERS}
     for name in names:
@@ -281,7 +281,7 @@ def predicted_next(times: list, sizes: list, next_size: float) -> float:
 
 def series_study(series: str, sizes: list, budget_s: float, repeats: int, log) -> dict:
     """{"sizes": [...size info], "functions": {name: {"rows": [...], "stopped": str|None}}}."""
-    from kindyngen.catalog import TREE_NAMES
+    from kindyngen.codegen.catalog import TREE_NAMES
     context = multiprocessing.get_context("fork")
     functions = {name: {"rows": [], "stopped": None} for name in TREE_NAMES}
     infos = []
@@ -391,7 +391,7 @@ def g1_generate(repeats: int, log) -> dict:
     """Wall time of ``kindyngen generate G1 --floating-base`` (all languages) as a command,
     each run into a fresh folder, with its CPU time and the load average (the machine may be
     shared); plus M+c under one CSE (for Robotran's figure)."""
-    from kindyngen.urdf import load_urdf_tree
+    from kindyngen.readers.urdf import load_urdf_tree
     seconds, cpu, load = [], [], []
     for k in range(repeats):
         with tempfile.TemporaryDirectory() as folder:
@@ -417,7 +417,7 @@ def g1_generate(repeats: int, log) -> dict:
 def g1_functions(model, log) -> dict:
     """Derive + CSE time of each function of the G1 in this process: where generate's time
     goes (the rest is rendering and writing the languages)."""
-    from kindyngen.catalog import BUILDERS, TREE_NAMES
+    from kindyngen.codegen.catalog import BUILDERS, TREE_NAMES
     rows = {}
     for name, build in BUILDERS:
         if name not in TREE_NAMES:
@@ -531,7 +531,7 @@ def study(settings: dict, log=print) -> dict:
     own dict with the same keys)."""
     started, load_start = time.perf_counter(), os.getloadavg()[0]
     # the first derivation pays imports and caches; the forked workers inherit them warm
-    from kindyngen.catalog import BUILDERS
+    from kindyngen.codegen.catalog import BUILDERS
     measure(lambda model: dict(BUILDERS)["tau"](model, "numeric"), synthetic_tree(2, 1))
     limbs = settings["tree_limbs"]
     budget, repeats = settings["budget_s"], settings["repeats"]
@@ -558,15 +558,15 @@ CSE_G1_CHUNKS = (1024, 2048, 4096)  # what the chunk size costs on the G1
 
 
 def cse_study(log) -> dict:
-    """Why :data:`kindyngen.optimize.CSE_CHUNK` is what it is: CPU time of ``optimize`` on a
+    """Why :data:`kindyngen.codegen.optimize.CSE_CHUNK` is what it is: CPU time of ``optimize`` on a
     chain's M with one symengine cse call and with chunks (how cse grows with the number of
     expressions), and the G1's add + mul summed over every function (both fd routes) and the
     CPU time, per chunk size."""
-    import kindyngen.optimize as optimize_module
-    from kindyngen.catalog import BUILDERS, TREE_NAMES
-    from kindyngen.tree_articulated import forward_dynamics_aba
-    from kindyngen.tree_dynamics import forward_dynamics_tree, mass_matrix_tree
-    from kindyngen.urdf import load_urdf_tree
+    import kindyngen.codegen.optimize as optimize_module
+    from kindyngen.codegen.catalog import BUILDERS, TREE_NAMES
+    from kindyngen.algorithms.articulated_body import forward_dynamics_aba
+    from kindyngen.algorithms.dynamics import forward_dynamics_tree, mass_matrix_tree
+    from kindyngen.readers.urdf import load_urdf_tree
     default = optimize_module.CSE_CHUNK
 
     def timed(function, chunk):

@@ -32,8 +32,8 @@ from pathlib import Path
 import casadi
 import numpy as np
 
-from kindyngen.pipeline import generate
-from kindyngen.urdf import load_urdf_tree
+from kindyngen.codegen.pipeline import generate
+from kindyngen.readers.urdf import load_urdf_tree
 
 from . import c_harness, casadi_codegen, compiled, pinocchio_casadi, pinocchio_cpp, python_timing
 from .build import BUILD, build, compiler_version, target

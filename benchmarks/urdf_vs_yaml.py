@@ -4,7 +4,7 @@ time side by side (``python -m benchmarks.urdf_vs_yaml [--repeats 3] [--out DIR]
 
 The pair (``tests/robot_files.py``, which says why it is one arm) describes the same arm in
 the same frames: example-robot-data's ``panda.urdf`` without the hand, and ``robots/panda.yaml``
-with the URDF's flange offset as its ``tool``; ``tests/test_urdf_panda.py`` checks they agree."""
+with the URDF's flange offset as its ``tool``; ``tests/readers/test_urdf_panda.py`` checks they agree."""
 from __future__ import annotations
 
 import argparse
@@ -27,7 +27,7 @@ def _timed_counts(loads: dict, repeats: int):
     """{name: (op counts after CSE, seconds of each timed run)} for each description loader; one
     untimed warm-up run first (imports, caches), then the descriptions alternate, so that
     neither pays for going first."""
-    from kindyngen.pipeline import build_programs
+    from kindyngen.codegen.pipeline import build_programs
     for load in loads.values():
         build_programs(load(), progress=False)
     seconds = {name: [] for name in loads}
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed generation runs per description (median)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="results folder")
     args = parser.parse_args(argv)
-    from kindyngen.robot import load_robot, parse_robot
+    from kindyngen.readers.yaml_description import load_robot, parse_robot
     with tempfile.TemporaryDirectory() as tmp:
         urdf_path = panda_arm_urdf(Path(tmp))
         data = panda_yaml_with_tool()

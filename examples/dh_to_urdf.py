@@ -34,7 +34,7 @@ for _p in (str(ROOT), str(ROOT / "tests")):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
-from kindyngen.robot import load_robot  # noqa: E402
+from kindyngen.readers.yaml_description import load_robot  # noqa: E402
 
 
 def _rz(t):

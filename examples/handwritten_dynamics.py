@@ -6,7 +6,7 @@ a KinDynGen robot description, evaluated on SX symbols. No simplification beyond
 does by itself (x*0 -> 0, x*1 -> x) and no common-subexpression elimination beyond SX's
 shared nodes.
 
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     fd = handwritten_fd(load_robot("robots/lwr4.yaml"))   # casadi.Function fd(q, qd, tau) -> qdd
 
 Frames as in tests/reference.py: body i's frame is the joint frame of joint i after the

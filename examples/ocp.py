@@ -48,7 +48,7 @@ for _p in (str(ROOT), str(EXAMPLES)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
-from kindyngen.robot import load_robot  # noqa: E402
+from kindyngen.readers.yaml_description import load_robot  # noqa: E402
 
 PROBLEMS = ("two_link", "lwr4", "panda", "lwr4_reach")
 MODES = ("sx", "mx", "mx_expand", "mx_map")
@@ -98,7 +98,7 @@ def load_functions(problem: str, workdir: str | None = None) -> dict:
     """The robot description and the generated Functions of ``problem`` (two_link: generated
     into ``workdir``, a temporary folder by default)."""
     if problem == "two_link":
-        from kindyngen.pipeline import generate
+        from kindyngen.codegen.pipeline import generate
         robot = load_robot(EXAMPLES / "two_link.yaml")
         out = generate(robot, Path(workdir or tempfile.mkdtemp(prefix="kindyngen_two_link_")),
                        languages=("casadi",), progress=False)

@@ -57,7 +57,7 @@ SOLVERS = ("ipopt", "fatrop", "sqp")
 
 def load(robot_name: str = "lwr4", folder: Path | None = None) -> dict:
     """The robot description and the generated Functions fd, tau, fk_hom."""
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     folder = Path(folder or ROOT / "generated" / robot_name / "casadi")
     funcs = {"robot": load_robot(ROOT / "robots" / f"{robot_name}.yaml")}
     for name in ("fd", "tau", "fk_hom"):

@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     import pinocchio as pin
-    from kindyngen.robot import load_robot
+    from kindyngen.readers.yaml_description import load_robot
     from reference import pinocchio_model
 
     robot = load_robot(args.robot)

@@ -5,7 +5,7 @@ carries a leading batch dimension and outputs come back with their port shapes a
 
 lang "symbolic" evaluates the SymbolicFunction straight from the derivation (symengine
 Lambdify), the others run the committed generated code under ``generated/`` through
-:mod:`kindyngen.evaluate`.
+:mod:`kindyngen.runtime.evaluate`.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import symengine as se
 
-from kindyngen.catalog import derive_all
-from kindyngen.robot import load_robot
+from kindyngen.codegen.catalog import derive_all
+from kindyngen.readers.yaml_description import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 GENERATED = ROOT / "generated"
@@ -60,5 +60,5 @@ def evaluate_symbolic(robot_name: str, function_name: str, params: str = "numeri
 def evaluate(robot_name: str, lang: str, function_name: str, **inputs):
     if lang == "symbolic":
         return evaluate_symbolic(robot_name, function_name, **inputs)
-    from kindyngen.evaluate import load_generated
+    from kindyngen.runtime.evaluate import load_generated
     return load_generated(GENERATED / robot_name, lang).call(function_name, inputs)

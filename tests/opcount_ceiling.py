@@ -3,7 +3,7 @@ and function, the additions and multiplications the generated code may cost at m
 
 A count may fall freely (then lower the table, so that the gain is kept); a rise fails until
 the table is edited in the same commit, which makes every rise a visible, reviewed change.
-The byte comparison of generated/ (tests/test_reproducibility.py) cannot tell fewer
+The byte comparison of generated/ (tests/integration/test_reproducibility.py) cannot tell fewer
 operations from broken code; this table can tell more from fewer."""
 from __future__ import annotations
 

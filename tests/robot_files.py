@@ -6,7 +6,7 @@ without the hand (joints and links named ``*hand*``, ``*finger*`` removed), chai
 ``panda_link0`` to ``panda_link8``; and the modified-DH table of ``robots/panda.yaml`` with the
 URDF's 0.107 m flange offset as its ``tool``. The Franka URDF's link frames are the DH frames
 and both use the same identified inertial parameters (Gaz et al. 2019), so the two models must
-give the same kinematics and dynamics (tests/test_urdf_panda.py)."""
+give the same kinematics and dynamics (tests/readers/test_urdf_panda.py)."""
 from __future__ import annotations
 
 import importlib.metadata
@@ -56,6 +56,6 @@ def panda_yaml_with_tool() -> dict:
 
 def panda_pair(folder: Path):
     """(model from the URDF, model from the YAML with the flange tool)."""
-    from kindyngen.robot import load_robot, parse_robot
+    from kindyngen.readers.yaml_description import load_robot, parse_robot
     urdf = load_robot(panda_arm_urdf(folder), tip="panda_link8")
     return urdf, parse_robot(panda_yaml_with_tool(), "robots/panda.yaml + tool")

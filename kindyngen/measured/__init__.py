@@ -3,9 +3,9 @@
 It uses the pipeline's public names (robot descriptions, regressors, base parameters) and
 adds what meeting real data needs, one module per job:
 
-* :mod:`kindyngen.measured.logs`: reading logs (CSV, npz), cleaning and resampling them,
+* :mod:`kindyngen.measured.log_preparing`: reading logs (CSV, npz), cleaning and resampling them,
   zero-phase filtering and differentiation;
-* :mod:`kindyngen.measured.effects`: friction, torque offset and armature as regressor
+* :mod:`kindyngen.measured.effect_columns`: friction, torque offset and armature as regressor
   columns and torques (the same formulas the generated code uses);
 * :mod:`kindyngen.measured.estimation`: least squares (ordinary and weighted) with standard
   deviations, refusing unidentifiable excitations;
@@ -15,7 +15,7 @@ adds what meeting real data needs, one module per job:
   number of the regressor;
 * :mod:`kindyngen.measured.regressor_rows`: the pipeline's base regressors evaluated in batches,
   and what a description predicts along motion;
-* :mod:`kindyngen.measured.model_writer`, :mod:`kindyngen.measured.report`: identified models
+* :mod:`kindyngen.measured.identified_model`, :mod:`kindyngen.measured.identification_report`: identified models
   written back as descriptions, figures and tables;
 * :mod:`kindyngen.measured.identify`: the ``identify`` command's run (in memory);
 * :mod:`kindyngen.measured.log_formats`: logs read in chunks (CSV, npz, Parquet, ROS 2 and

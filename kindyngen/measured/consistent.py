@@ -5,8 +5,8 @@ Ordinary least squares identifies the base parameters only, and with noisy or po
 exciting data their values may belong to no rigid body (a negative mass, an inertia that
 violates the triangle inequality).  Here the unknowns are the full parameters ``p`` (10 per
 link, Pinocchio's order ``m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz`` about the link-frame
-origin, :mod:`kindyngen.inertial_parameters`) and the effect coefficients ``e``
-(:mod:`kindyngen.measured.effects`), constrained so that:
+origin, :mod:`kindyngen.model.inertial_parameters`) and the effect coefficients ``e``
+(:mod:`kindyngen.measured.effect_columns`), constrained so that:
 
 * every link's pseudo-inertia ``J = [[0.5 tr(I) 1 - I, h], [h^T, m]]`` (``I`` the 3x3 inertia
   about the link origin, ``h = (mx, my, mz)``) satisfies ``J - epsilon 1 >= 0`` (positive
@@ -17,7 +17,7 @@ origin, :mod:`kindyngen.inertial_parameters`) and the effect coefficients ``e``
   implies that the second moment about the CoM, ``Sigma_c = Sigma - h h^T / m``, is
   ``>= epsilon 1`` (kg m^2), so the inertia about the CoM has principal moments ``>= 2 epsilon``
   and satisfies the triangle inequality with a margin ``2 epsilon`` (what the robot loader,
-  :func:`kindyngen.robot.parse_robot`, checks).  The smallest such moment of a real arm link is
+  :func:`kindyngen.readers.yaml_description.parse_robot`, checks).  The smallest such moment of a real arm link is
   ~1e-4 kg m^2 or more;
 * ``m >= min_mass`` (1e-3 kg by default) per link;
 * viscous and Coulomb friction and armature coefficients ``>= 0``; torque offsets free.
@@ -76,8 +76,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ..inertial_parameters import NAMES
-from .effects import NONNEGATIVE, effect_of
+from ..model.inertial_parameters import NAMES
+from .effect_columns import NONNEGATIVE, effect_of
 from .estimation import IdentificationDataError, check_rows
 from . import MeasuredDataError
 
@@ -235,7 +235,7 @@ def identify_consistent(Y_full, E, tau, n: int, effect_names=(), prior=None,
     for the program, its scaling and the defaults).
 
     ``Y_full``: regressor rows on the full parameters (N, n, 10 n), e.g. ``Y @ base_map``;
-    ``E``: effect columns (N, n, k) from :func:`kindyngen.measured.effects.effect_columns`, or
+    ``E``: effect columns (N, n, k) from :func:`kindyngen.measured.effect_columns.effect_columns`, or
     None for none; ``tau``: measured torques (N, n); ``effect_names``: the k names of E's
     columns (their effect decides the sign constraint); ``prior``: full parameters the
     regulariser pulls towards (10 n; default zeros); ``base_map``: P with ``base = P @ full``,

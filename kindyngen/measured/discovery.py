@@ -46,7 +46,7 @@ joint torque ``tau_i`` taken from the low-passed measured torque (:func:`spring_
 **Parallel filtering.**  Every column (and ``tau_nom``) is computed from each recording's
 motion estimate (the low-passed q and its derivatives), then filtered with the recording's
 *unfiltered* torque by the same linear filter and decimated
-(:func:`kindyngen.measured.logs.filtered_rows`).  ``sign(qd)`` of a filtered velocity
+(:func:`kindyngen.measured.log_preparing.filtered_rows`).  ``sign(qd)`` of a filtered velocity
 against a filtered torque would smear a Coulomb step into a spurious negative Stribeck dip;
 a linear filter applied to both sides keeps every linear-in-parameters law exact.
 
@@ -66,7 +66,7 @@ Judgement (constants below; each rule says why):
   Both models of a comparison use the same ``N_eff``.
 * **Noise floor** per joint: ``1.4826 median|d2 r| / sqrt(6)``, the robust (MAD) scale of
   the second difference of the *unfiltered* residual within each segment, times the noise
-  gain of the parallel filter (:func:`kindyngen.measured.logs.noise_gain`) (white noise of std s gives
+  gain of the parallel filter (:func:`kindyngen.measured.log_preparing.noise_gain`) (white noise of std s gives
   ``d2`` of std ``sqrt(6) s``; smooth effects contribute ``(omega dt)^2`` of their amplitude,
   sparse jumps such as Coulomb reversals are ignored by the median).  Torques low-passed
   before logging have correlated noise whose second difference is small: the floor is then
@@ -100,9 +100,9 @@ Judgement (constants below; each rule says why):
   :data:`EXPLAINED_FACTOR` x its noise floor; else ``unexplained`` says, per joint, how far
   above and what the rest correlates with.
 
-Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.logs.Segment`):
+Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.log_preparing.Segment`):
 
->>> from kindyngen.robot import load_robot                          # doctest: +SKIP
+>>> from kindyngen.readers.yaml_description import load_robot                          # doctest: +SKIP
 >>> d = discover(load_robot("robots/lwr4.yaml"), segments)          # doctest: +SKIP
 >>> d.effects, d.indistinguishable                                  # doctest: +SKIP
 (('viscous_friction',), ())
@@ -117,11 +117,11 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.stats import chi2
 
-from ..inertial_parameters import NAMES as BARYCENTRIC_NAMES
-from ..inertial_parameters import parameter_vector
-from ..robot import RobotModel
-from .effects import effect_columns, effect_names
-from .logs import Segment, filtered_rows, noise_gain, zero_phase_low_pass
+from ..model.inertial_parameters import NAMES as BARYCENTRIC_NAMES
+from ..model.inertial_parameters import parameter_vector
+from ..readers.yaml_description import RobotModel
+from .effect_columns import effect_columns, effect_names
+from .log_preparing import Segment, filtered_rows, noise_gain, zero_phase_low_pass
 from .regressor_rows import description_torques, torque_regressor
 
 CANDIDATES = ("viscous_friction", "coulomb_friction", "torque_offset", "armature", "payload",
@@ -689,7 +689,7 @@ def _principal_cosine(A, B) -> float:
 
 class _Rows:
     """Every recording's candidate columns, computed from its motion estimate and filtered
-    together with its unfiltered torque (:func:`kindyngen.measured.logs.filtered_rows`)."""
+    together with its unfiltered torque (:func:`kindyngen.measured.log_preparing.filtered_rows`)."""
 
     #: signals filtered alongside, for the "what the residual left correlates with" verdict
     SIGNALS = ("q", "qd", "qdd", "sign(qd)", "nominal torque")

@@ -5,7 +5,7 @@ effect is missing, the model with it, and the gap before and after on data held 
 ``write_outputs(result, out)`` writes ``discovery.json``, ``report.md`` with its figures, and
 ``model.yaml``.  The steps:
 
-1. logs -> segments (:mod:`kindyngen.measured.logs`); every file is its own experiment
+1. logs -> segments (:mod:`kindyngen.measured.log_preparing`); every file is its own experiment
    (its own clock, filtering and trimming), and the last ``holdout`` fraction of *each*
    file's time span is held out and never seen by the selection; the files are taken in the
    order of their names, so the outcome does not depend on the order they are given in;
@@ -37,15 +37,15 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from ..robot import load_robot, parse_robot
+from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover, predict_effects, spring_torque
-from .effects import EFFECTS, coulomb_eps, effect_names
+from .effect_columns import EFFECTS, coulomb_eps, effect_names
 from .log_formats import joint_names_of, read_any
-from .logs import Preprocessing, filtered_rows, preprocess, split_time
-from .model_writer import model_yaml
+from .log_preparing import Preprocessing, filtered_rows, preprocess, split_time
+from .identified_model import model_yaml
 from .regressor_rows import description_torques
-from .report import rms_table, torque_figure
+from .identification_report import rms_table, torque_figure
 
 SENSING_EFFECTS = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
 SCHEMA_EFFECTS = EFFECTS + ("payload", "base_tilt") + SENSING_EFFECTS   # what a robot description can hold
@@ -60,7 +60,7 @@ class DiscrepancyRequest:
     candidates: tuple[str, ...] = CANDIDATES
     folds: int = 5
     preprocessing: Preprocessing = field(default_factory=Preprocessing)
-    base: str | None = None          # a URDF's chain: first and last link (kindyngen.urdf)
+    base: str | None = None          # a URDF's chain: first and last link (kindyngen.readers.urdf)
     tip: str | None = None
     snap_angles: bool = True
 

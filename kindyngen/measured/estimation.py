@@ -16,7 +16,7 @@ Identification of one quantity (the identification paper's eqs. 21-25):
 
 ``check_identifiable`` runs these checks alone (least squares below reuses them).
 ``identify_samples(model, kind, inputs, measured)`` stacks the base regressor of ``kind``
-("Y_g", "Y_m", "Y", see :mod:`kindyngen.regressors`) at the given samples first.
+("Y_g", "Y_m", "Y", see :mod:`kindyngen.algorithms.regressors`) at the given samples first.
 
 Torques with uncertainties: ``least_squares(Y, tau, names, weighted=False)`` -> :class:`Fit`
 (values, standard deviations, condition numbers, per-joint residual RMS), ordinary or
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ..base_parameters import RANK_TOL, numeric_rank
+from ..algorithms.base_parameters import RANK_TOL, numeric_rank
 from . import MeasuredDataError
 
 
@@ -187,7 +187,7 @@ def identify(Y, y, names=None, rank_tol: float = RANK_TOL, hint: str = "") -> Es
 def stacked_regressor(model, kind: str, inputs: dict) -> np.ndarray:
     """The base regressor ``kind`` of ``model`` at samples (samples x rows x base params);
     ``inputs``: ``q`` (and for "Y" ``qd``, ``qdd``), each samples x n."""
-    from ..regressors import base_parameters, evaluate_full, full_regressor
+    from ..algorithms.regressors import base_parameters, evaluate_full, full_regressor
     full = full_regressor(model, kind)
     missing = [port.name for port in full.inputs if port.name not in inputs]
     if missing:
@@ -210,7 +210,7 @@ def stacked_regressor(model, kind: str, inputs: dict) -> np.ndarray:
 def identify_samples(model, kind: str, inputs: dict, measured, rank_tol: float = RANK_TOL) -> Estimate:
     """Identify the base parameters of regressor ``kind`` ("Y_g": measured g; "Y_m": the
     inertia stack, lower triangle of M row by row; "Y": tau) from samples."""
-    from ..regressors import base_parameters
+    from ..algorithms.regressors import base_parameters
     names = base_parameters(model, kind).names
     Y = stacked_regressor(model, kind, inputs)
     measured = np.asarray(measured, float)
@@ -287,7 +287,7 @@ def rms_per_joint(tau, predicted) -> np.ndarray:
 
 def _effect_hint(error: RankDeficientError) -> str:
     """A hint when effect coefficients are among the unidentifiable directions."""
-    from .effects import effect_of
+    from .effect_columns import effect_of
     involved = []
     for vector in error.null_space:
         for value, name in zip(vector, error.names):

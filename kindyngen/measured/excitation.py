@@ -14,7 +14,7 @@ differentiate it in the frequency domain without edge effects.
 
 Example (the numbers depend on the robot, harmonics and budget; a few seconds for the LWR):
 
->>> from kindyngen.robot import load_robot                                # doctest: +SKIP
+>>> from kindyngen.readers.yaml_description import load_robot                                # doctest: +SKIP
 >>> model = load_robot("robots/lwr4.yaml")                                # doctest: +SKIP
 >>> result = optimise_excitation(model, default_limits(model))           # doctest: +SKIP
 >>> result.feasible, result.condition_number < result.initial_condition_number  # doctest: +SKIP
@@ -44,12 +44,12 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize
 
-from ..robot import RobotModel
-from .effects import coulomb_eps, effect_columns, effect_names
+from ..readers.yaml_description import RobotModel
+from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .regressor_rows import TorqueRegressor, torque_regressor
 from . import MeasuredDataError
 
-# the friction columns appended to the rigid-body base regressor (kindyngen.measured.effects)
+# the friction columns appended to the rigid-body base regressor (kindyngen.measured.effect_columns)
 FRICTION_EFFECTS = ("viscous_friction", "coulomb_friction", "torque_offset")
 
 # Defaults of default_limits().  The robot descriptions carry position limits only.
@@ -231,7 +231,7 @@ def default_limits(model: RobotModel, velocity=DEFAULT_VELOCITY, acceleration=DE
     each side, and ``velocity`` (rad/s) and ``acceleration`` (rad/s^2), one number for all
     joints or one per joint (the descriptions have no velocity limits).
 
-    >>> from kindyngen.robot import load_robot                # doctest: +SKIP
+    >>> from kindyngen.readers.yaml_description import load_robot                # doctest: +SKIP
     >>> lim = default_limits(load_robot("robots/lwr4.yaml"))  # doctest: +SKIP
     >>> round(float(lim.upper[1]), 4), float(lim.velocity[1])  # doctest: +SKIP
     (1.9944, 1.0)
@@ -248,12 +248,12 @@ def default_limits(model: RobotModel, velocity=DEFAULT_VELOCITY, acceleration=DE
 def friction_columns(qd: np.ndarray, eps: float | None = None) -> np.ndarray:
     """(N, n, 3 n): viscous ``qd_i``, Coulomb ``sign(qd_i)`` (``tanh(qd_i / eps)`` with eps)
     and offset ``1`` on row i, ordered as :func:`friction_column_names` (by effect, then
-    joint): the columns of :mod:`kindyngen.measured.effects`."""
+    joint): the columns of :mod:`kindyngen.measured.effect_columns`."""
     return effect_columns(FRICTION_EFFECTS, qd, None, eps)
 
 
 def friction_column_names(n: int) -> tuple[str, ...]:
-    """``fv1..fvn, fc1..fcn, f01..f0n`` (:func:`kindyngen.measured.effects.effect_names`)."""
+    """``fv1..fvn, fc1..fcn, f01..f0n`` (:func:`kindyngen.measured.effect_columns.effect_names`)."""
     return effect_names(FRICTION_EFFECTS, n)
 
 
@@ -426,7 +426,7 @@ def optimise_excitation(model: RobotModel, limits: ExcitationLimits, harmonics: 
     Jacobians) for at most ``max_iterations`` iterations; ``progress`` receives one line per
     iteration.
 
-    >>> from kindyngen.robot import load_robot                                  # doctest: +SKIP
+    >>> from kindyngen.readers.yaml_description import load_robot                                  # doctest: +SKIP
     >>> model = load_robot("robots/lwr4.yaml")                                  # doctest: +SKIP
     >>> r = optimise_excitation(model, default_limits(model), harmonics=3, max_iterations=20)  # doctest: +SKIP
     >>> r.feasible, r.trajectory.a.shape                                        # doctest: +SKIP

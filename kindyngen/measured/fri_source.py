@@ -24,7 +24,7 @@ imported when a FriSource is built, with a clear error when missing.
 
 Example:
 
->>> from kindyngen.robot import load_robot
+>>> from kindyngen.readers.yaml_description import load_robot
 >>> src = FriSource(load_robot("robots/lwr4.yaml"))                   # doctest: +SKIP
 >>> src.gravity(np.zeros((3, 7))).shape, src.inertia(np.zeros(7)).shape  # doctest: +SKIP
 ((3, 7), (1, 7, 7))
@@ -36,7 +36,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..robot import RobotModel
+from ..readers.yaml_description import RobotModel
 
 
 class MissingPinocchioError(ImportError):
@@ -94,7 +94,7 @@ class LinkParameters:
 
     def barycentric(self) -> np.ndarray:
         """m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz (inertia about the link origin), the
-        order of :data:`kindyngen.inertial_parameters.NAMES`."""
+        order of :data:`kindyngen.model.inertial_parameters.NAMES`."""
         m, c = self.mass, np.asarray(self.com, float)
         I = np.asarray(self.inertia, float) + m * (c @ c * np.eye(3) - np.outer(c, c))
         return np.array([m, m * c[0], m * c[1], m * c[2], I[0, 0], I[0, 1], I[1, 1], I[0, 2], I[1, 2], I[2, 2]])

@@ -5,18 +5,18 @@ parameters, prediction errors, an identified robot description and a report out.
 ``write_outputs(result, out)`` writes ``identification.json``, ``model.yaml``, ``report.md``
 and the figures.  The steps, each from its own module:
 
-1. logs -> uniformly sampled, filtered segments (:mod:`kindyngen.measured.logs`); several
+1. logs -> uniformly sampled, filtered segments (:mod:`kindyngen.measured.log_preparing`); several
    files are several experiments (each its own clock, filtering, trimming and, with
    ``split``, its own validation part), stacked but never differentiated across their seams;
 2. the rigid-body base regressor along the motion (:mod:`kindyngen.measured.regressor_rows`)
-   plus the chosen effects' columns (:mod:`kindyngen.measured.effects`), computed from the
+   plus the chosen effects' columns (:mod:`kindyngen.measured.effect_columns`), computed from the
    filtered motion and then filtered with the unfiltered torque by the same filter
-   (:func:`kindyngen.measured.logs.filtered_rows`: parallel filtering and decimation);
+   (:func:`kindyngen.measured.log_preparing.filtered_rows`: parallel filtering and decimation);
 3. least squares, ordinary or weighted, with standard deviations
    (:mod:`kindyngen.measured.estimation`), or the physically consistent semidefinite program
    (:mod:`kindyngen.measured.consistent`) with the description's parameters as the prior;
 4. predictions on the training and validation data, RMS per joint;
-5. the identified model as a robot description (:mod:`kindyngen.measured.model_writer`).
+5. the identified model as a robot description (:mod:`kindyngen.measured.identified_model`).
 
 Example:
 
@@ -34,16 +34,16 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from ..inertial_parameters import parameter_vector
-from ..robot import load_robot, parse_robot
+from ..model.inertial_parameters import parameter_vector
+from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
 from .discovery import NOISE_BIAS_FACTOR, REL_STD_MAX, effective_samples, elastic_noise_bias, sensing_columns, spring_of
-from .effects import EFFECTS, NONNEGATIVE, SENSING_EFFECTS, coulomb_eps, effect_columns, effect_names, effect_of
+from .effect_columns import EFFECTS, NONNEGATIVE, SENSING_EFFECTS, coulomb_eps, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
-from .logs import Preprocessing, filtered_rows, load_segments, split_time
-from .model_writer import ModelWriteError, model_yaml
+from .log_preparing import Preprocessing, filtered_rows, load_segments, split_time
+from .identified_model import ModelWriteError, model_yaml
 from .regressor_rows import description_torques, torque_regressor
-from .report import rms_table, torque_figure
+from .identification_report import rms_table, torque_figure
 
 
 @dataclass(frozen=True)
@@ -51,8 +51,8 @@ class IdentificationRequest:
     """What to identify from what. ``data``/``validate``: log files (CSV or npz), each one
     experiment; ``split``: when given, the time span of ``data`` is cut and its first
     ``split`` fraction trains, the rest validates (instead of, or besides, ``validate``);
-    ``effects``: effect names of :data:`kindyngen.measured.effects.EFFECTS` and
-    :data:`~kindyngen.measured.effects.SENSING_EFFECTS` (fitted to first order around the
+    ``effects``: effect names of :data:`kindyngen.measured.effect_columns.EFFECTS` and
+    :data:`~kindyngen.measured.effect_columns.SENSING_EFFECTS` (fitted to first order around the
     model, re-linearised at the identified parameters :data:`SENSING_ITERATIONS` times); ``consistent``:
     the semidefinite program instead of least squares; ``weighted``: weighted least squares."""
 
@@ -64,7 +64,7 @@ class IdentificationRequest:
     weighted: bool = False
     split: float | None = None
     preprocessing: Preprocessing = field(default_factory=Preprocessing)
-    base: str | None = None          # a URDF's chain: first and last link (kindyngen.urdf)
+    base: str | None = None          # a URDF's chain: first and last link (kindyngen.readers.urdf)
     tip: str | None = None
     snap_angles: bool = True
 

@@ -1,12 +1,12 @@
 """Logs as robots record them, read in chunks: CSV and npz (the layouts of
-:mod:`kindyngen.measured.logs`), Parquet with the CSV's column names, and ROS bags of
+:mod:`kindyngen.measured.log_preparing`), Parquet with the CSV's column names, and ROS bags of
 ``sensor_msgs/msg/JointState`` (rosbag2 directories with MCAP or SQLite storage, ROS 1 ``.bag``
 files) read with the pure-Python ``rosbags`` package, so no ROS installation is needed.
 
 ``iter_chunks(path, n, joint_names)`` yields :class:`RawChunk` objects of at most
 ``chunk_rows`` samples each, in time order, so a log of any length is read in bounded memory;
-``read_any`` returns the whole log as a :class:`kindyngen.measured.logs.RawLog`.  Every bad
-input is a :class:`kindyngen.measured.logs.LogError` naming the file, the field and the reason
+``read_any`` returns the whole log as a :class:`kindyngen.measured.log_reading.RawLog`.  Every bad
+input is a :class:`kindyngen.measured.log_reading.LogError` naming the file, the field and the reason
 (for a bag: a joint name the description lacks, or a description joint the messages lack).
 
 A JointState's ``position`` (rad or m), ``velocity`` and ``effort`` (N m) are matched to the
@@ -16,7 +16,7 @@ time when the stamp is zero).  Velocities are used when every message has them f
 Example:
 
 >>> import numpy as np, tempfile, pathlib
->>> from kindyngen.measured.logs import RawLog
+>>> from kindyngen.measured.log_preparing import RawLog
 >>> t = np.arange(100) * 0.01
 >>> raw = RawLog("demo", t, np.sin(t)[:, None], np.cos(t)[:, None])
 >>> path = pathlib.Path(tempfile.mkdtemp()) / "demo.parquet"
@@ -34,12 +34,12 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .logs import LogError, RawLog, read_log
-from .logs import _csv_layout   # the CSV's column rules, shared by Parquet (one spelling of them)
+from .log_reading import LogError, RawLog, read_log
+from .log_reading import _csv_layout   # the CSV's column rules, shared by Parquet (one spelling of them)
 
 #: Samples per chunk: the regressor of one chunk of the Panda (7 x 43 columns) is 48 MB.
 CHUNK_ROWS = 20000
-#: CSV files up to this size are read whole by :func:`kindyngen.measured.logs.read_log` (its
+#: CSV files up to this size are read whole by :func:`kindyngen.measured.log_reading.read_log` (its
 #: messages name the file line of a bad cell); larger ones stream through pyarrow's reader.
 SMALL_CSV_BYTES = 64 << 20
 
@@ -105,7 +105,7 @@ def iter_chunks(path, n: int, joint_names: Sequence[str] | None = None,
 
 
 def read_any(path, n: int, joint_names: Sequence[str] | None = None) -> RawLog:
-    """The whole log at ``path`` as a RawLog (CSV and npz by :func:`kindyngen.measured.logs.read_log`)."""
+    """The whole log at ``path`` as a RawLog (CSV and npz by :func:`kindyngen.measured.log_reading.read_log`)."""
     if log_kind(path) in ("csv", "npz") and (Path(path).suffix.lower() == ".npz"
                                              or Path(path).stat().st_size <= SMALL_CSV_BYTES):
         return read_log(path, n)

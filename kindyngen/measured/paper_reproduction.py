@@ -4,7 +4,7 @@ against a data source that behaves like the robot's control interface
 (:mod:`kindyngen.measured.fri_source`).
 
 :func:`reproduce` runs, on the pipeline's base-parameter regressors
-(:func:`kindyngen.regressors.regressor`):
+(:func:`kindyngen.algorithms.regressors.regressor`):
 
 1. static identification: N random configurations uniform within the joint limits (1000 in
    the paper), the reported g and M at each; stacked ``Y_g`` rows (joint 1's row dropped, as
@@ -35,7 +35,7 @@ entry by entry (the paper did not print it either).
 
 Example:
 
->>> from kindyngen.robot import load_robot
+>>> from kindyngen.readers.yaml_description import load_robot
 >>> from kindyngen.measured.fri_source import FriSource
 >>> robot = load_robot("robots/lwr4.yaml")                       # doctest: +SKIP
 >>> result = reproduce(FriSource(robot), robot, n_train=300)     # doctest: +SKIP
@@ -54,11 +54,11 @@ from typing import Callable
 import numpy as np
 import sympy
 
-from ..regressors import base_expressions_in_paper, base_parameters, paper_symbols
-from ..robot import RobotModel
+from ..algorithms.regressors import base_expressions_in_paper, base_parameters, paper_symbols
+from ..readers.yaml_description import RobotModel
 from .estimation import Fit, least_squares
 from .fri_source import DynamicsSource, Motion
-from .logs import zero_phase_low_pass
+from .log_preparing import zero_phase_low_pass
 from .regressor_rows import BaseRegressor, TorqueRegressor, rigid_body_model
 
 # ----------------------------------------------------------------------------- the paper's figures

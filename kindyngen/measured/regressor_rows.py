@@ -1,10 +1,10 @@
 """Numeric rows of the torque regressor along measured or planned motion: the pipeline's
-derived base regressor ``Y(q, qd, qdd)`` (:func:`kindyngen.regressors.regressor`), evaluated
+derived base regressor ``Y(q, qd, qdd)`` (:func:`kindyngen.algorithms.regressors.regressor`), evaluated
 in batches, and the map from the full barycentric parameters to the base ones.
 
 Example:
 
->>> from kindyngen.robot import load_robot
+>>> from kindyngen.readers.yaml_description import load_robot
 >>> rows = TorqueRegressor(load_robot("robots/lwr4.yaml"))            # doctest: +SKIP
 >>> rows(np.zeros((5, 7)), np.zeros((5, 7)), np.zeros((5, 7))).shape   # doctest: +SKIP
 (5, 7, 43)
@@ -17,11 +17,11 @@ from functools import lru_cache
 import numpy as np
 import symengine as se
 
-from ..inertial_parameters import parameter_vector
-from ..joint_effects import effect_parameter_values
-from ..regressors import base_parameters, regressor
-from ..robot import RobotModel
-from .effects import coulomb_eps, effect_columns
+from ..model.inertial_parameters import parameter_vector
+from ..algorithms.effect_torques import effect_parameter_values
+from ..algorithms.regressors import base_parameters, regressor
+from ..readers.yaml_description import RobotModel
+from .effect_columns import coulomb_eps, effect_columns
 
 
 def rigid_body_model(model: RobotModel) -> RobotModel:
@@ -33,16 +33,16 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
 
 class BaseRegressor:
     """A base regressor of ``model``'s rigid bodies (``kind`` "Y_g", "Y_m" or "Y", see
-    :mod:`kindyngen.regressors`) evaluated in batches: ``R(*inputs)`` -> (N, rows, columns).
+    :mod:`kindyngen.algorithms.regressors`) evaluated in batches: ``R(*inputs)`` -> (N, rows, columns).
 
     ``names``: the base parameters (columns); ``full_names``: the 10 n barycentric parameters;
-    ``base``: the :class:`kindyngen.base_parameters.BaseParameters`; ``base_map``: the matrix P
+    ``base``: the :class:`kindyngen.algorithms.base_parameters.BaseParameters`; ``base_map``: the matrix P
     (columns x 10 n) with ``base values = P @ full values``, so ``Y @ P`` is the regressor on
     the full parameters (as linear as the dynamics itself)."""
 
     def __init__(self, model: RobotModel, kind: str):
         # rigid bodies only: the effects an identification fits are chosen by the caller
-        # (kindyngen.measured.effects), whatever the description declares
+        # (kindyngen.measured.effect_columns), whatever the description declares
         model = rigid_body_model(model)
         function = regressor(model, kind)
         if function is None:
@@ -82,7 +82,7 @@ def torque_regressor(model: RobotModel) -> TorqueRegressor:
 def description_torques(model: RobotModel, q, qd, qdd, effects: bool = True) -> np.ndarray:
     """What the robot description itself predicts along motion, (N, n) in N m: the rigid bodies
     with its parameters (payload included) and, with ``effects``, its declared friction, offset
-    and armature (the formulas of :mod:`kindyngen.measured.effects`)."""
+    and armature (the formulas of :mod:`kindyngen.measured.effect_columns`)."""
     R = torque_regressor(model)
     tau = R(q, qd, qdd) @ (R.base_map @ parameter_vector(model))
     if effects and model.effects:

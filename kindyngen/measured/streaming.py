@@ -6,7 +6,7 @@ enough that the zero-phase filter's and the differences' edge effects have decay
 of the signal where the chunk's own samples begin), turned into regressor rows by a per-chunk
 callable; with a low-pass (the default) the regressor columns, the description's declared
 effect columns and the unfiltered torque then pass through the same zero-phase filter and
-decimation (parallel filtering, :func:`kindyngen.measured.logs.parallel_filter`), again chunk by
+decimation (parallel filtering, :func:`kindyngen.measured.log_preparing.parallel_filter`), again chunk by
 chunk with overlap (:class:`ChunkedParallelFilter`: chunks aligned to the decimation, so the
 kept samples are exactly the whole recording's, their values equal to rounding); the kept rows
 are folded into the triangular factor of the stacked regressor
@@ -25,7 +25,7 @@ thread inside a file's fold for that reason).
 Each file is its own experiment, as in :func:`kindyngen.measured.identify.identify`: with a
 split, the first fraction of the file's own time span trains and the rest validates, and each
 side is filtered as a recording of its own (what ``identify()`` does to the parts
-:func:`kindyngen.measured.logs.split_time` cuts).
+:func:`kindyngen.measured.log_preparing.split_time` cuts).
 
 Streaming needs a log whose chunks preprocess like the whole: one gap-free piece, no repeated
 rows, on its own clock (no ``rate_hz`` resampling).  Any other log is preprocessed whole, in
@@ -47,18 +47,19 @@ from typing import Callable, Iterator
 import numpy as np
 import yaml
 
-from ..inertial_parameters import parameter_vector
-from ..joint_effects import effect_parameter_values
-from ..robot import load_robot, parse_robot
+from ..model.inertial_parameters import parameter_vector
+from ..algorithms.effect_torques import effect_parameter_values
+from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent_factor, links_from_barycentric
-from .effects import coulomb_eps, effect_columns, effect_names
+from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, _consistency
 from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
                           time_span_of_file)
-from .logs import MIN_SAMPLES, LogError, Preprocessing, RawLog, Segment, preprocess, zero_phase_low_pass
+from .log_reading import MIN_SAMPLES, LogError, RawLog
+from .log_preparing import Preprocessing, Segment, preprocess, zero_phase_low_pass
 from .ls_factor import LSFactor, combine_in_order, condition_number, least_squares_factor
-from .model_writer import ModelWriteError, model_yaml
+from .identified_model import ModelWriteError, model_yaml
 from .regressor_rows import torque_regressor
 
 #: Validation samples the figure keeps per run (every k-th sample, k a power of two).
@@ -143,7 +144,7 @@ def _segment_pieces(path, n: int, settings: Preprocessing, joint_names, chunk_ro
                     spans: list | None = None) -> Iterator[tuple[int, Segment]]:
     """``(segment index, piece)`` of :func:`stream_segments`.  When the log is preprocessed
     whole (short, or resampled), ``spans`` (a list) receives the exact (first, last) time of its
-    segments before the first piece, as :func:`kindyngen.measured.logs.split_time` takes them."""
+    segments before the first piece, as :func:`kindyngen.measured.log_preparing.split_time` takes them."""
     source = str(path)
     notes = notes if notes is not None else []
     spans = spans if spans is not None else []
@@ -364,7 +365,7 @@ def _sub_pieces(pieces) -> Iterator[tuple[int, Segment]]:
 
 
 class ChunkedParallelFilter:
-    """:func:`kindyngen.measured.logs.parallel_filter` of one recording fed in consecutive
+    """:func:`kindyngen.measured.log_preparing.parallel_filter` of one recording fed in consecutive
     pieces of rows, the kept (decimated) rows given back chunk by chunk in bounded memory.
 
     Output chunk ``[s, e)`` (``s`` and ``e - s = chunk`` multiples of ``decimate``) is filtered
@@ -378,7 +379,7 @@ class ChunkedParallelFilter:
     filtered whole (the same bits as ``parallel_filter``).  Memory: ``chunk + 2 overlap`` rows
     plus one piece.
 
-    >>> from kindyngen.measured.logs import LowPass, parallel_filter
+    >>> from kindyngen.measured.log_preparing import LowPass, parallel_filter
     >>> rng = np.random.default_rng(0); x = rng.normal(size=(30000, 2)); lp = LowPass(1000.0, 5.0, 4, 25)
     >>> f = ChunkedParallelFilter(lp, overlap=3530, chunk=5000)
     >>> kept = [out for a in range(0, 30000, 7000) for out in f.push(x[a:a + 7000])] + f.finish()
@@ -450,7 +451,7 @@ class ChunkedParallelFilter:
 class _Folder:
     """One file's pieces -> training and validation factors.  The file's samples form parts:
     each segment, and with ``role`` 'split' its training side (before the cut) and validation
-    side, split as :func:`kindyngen.measured.logs.split_time` splits the file; each part's
+    side, split as :func:`kindyngen.measured.log_preparing.split_time` splits the file; each part's
     regressor columns, the description's declared effect columns and the unfiltered torque are
     parallel-filtered as one recording (:class:`ChunkedParallelFilter`), as
     :func:`kindyngen.measured.identify.identify` filters each segment it split, and folded."""

@@ -4,7 +4,7 @@
 
 #include "lwr4.h"
 
-/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/c_trig.py
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
  * explains the method and where its constants come from). The first loop has no branch and no
  * call, so compilers vectorise it; arguments beyond +-1.04858e+06, infinities and NaN take libm in
  * the second. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
@@ -13,7 +13,7 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
     long i;
     for (i = 0; i < n; ++i) {
         /* arguments out of range give garbage here (no undefined behaviour: all in double),
-           replaced in the second loop; c_trig.py's _steps explains each step */
+           replaced in the second loop; codegen/trig_kernel.py's _steps explains each step */
         const double xi = x[i];
         const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
         const double m = k - 4.0*((0.25*k + 6755399441055744.0) - 6755399441055744.0);

@@ -17,7 +17,7 @@
  * Cost: the generated C's (see its header) plus the wrapper's per-call overhead: argument
  * checks and one array allocation per output, a fraction of a microsecond.
  * Re-entrant: no mutable static state; the GIL is held throughout (calls are short).
- * Build: `kindyngen build-python <this robot's folder>` or kindyngen.python_c.load(folder)
+ * Build: `kindyngen build-python <this robot's folder>` or kindyngen.runtime.python_c.load(folder)
  * (C99 + the Python and numpy C APIs; compiles with -Wall -Wextra -Werror).
  */
 #define PY_SSIZE_T_CLEAN

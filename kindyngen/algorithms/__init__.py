@@ -1,0 +1,1 @@
+"""Symbolic derivations on the model (kinematics, dynamics, derivatives, regressors), one algorithm family per module."""

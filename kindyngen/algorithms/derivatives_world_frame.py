@@ -1,0 +1,348 @@
+"""Partial derivatives of a kinematic tree's inverse and forward dynamics in the world-frame
+formulation of Carpentier and Mansard (RSS 2018, "Analytical derivatives of rigid body
+dynamics algorithms"), for any tree (``parents[]``; an arm is the one-branch tree):
+
+* ``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` (``dtau_dqdd`` is ``M``);
+* ``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` and
+  ``fd_derivatives_no_minv(q, qd, tau) -> dqdd_dq, dqdd_dqd`` (the same without ``M^-1``).
+
+Everything is expressed in one frame that does not move with any joint ("world": the root
+link's frame with a fixed base, the base frame at this instant with a floating one), in
+Plücker coordinates: a motion (linear velocity of the point at the origin, angular
+velocity), a force (force, moment about the origin). Joint j's world axis ``S_j`` depends on
+the joints above it only; moving ``q_j`` turns j's whole subtree rigidly about ``S_j``, so
+every quantity attached to that subtree changes by one spatial cross product (``S_j x m``,
+``S_j x* f``, ``S_j x* I - I S_j x``) except for the parts the subtree inherits from j's
+parent ``p`` (its velocity ``v_p`` and acceleration ``a_p``, gravity included as
+``a_root = -g``). Summing the body forces ``f_l = I_l a_l + v_l x* I_l v_l`` over a subtree
+(composites ``Ic_k``, forces ``F_k``, and ``Bc_k = sum B_l`` with ``B_l x = I_l (x x v_l) + x
+x* (I_l v_l) + v_l x* (I_l x)``) gives, with ``u_j = S_j x v_p`` and ``psi_j = S_j x a_p +
+v_p x u_j``, for k in j's subtree::
+
+    dF_k/dq_j  = S_j x* F_k - Ic_k psi_j - Bc_k u_j
+    dF_k/dqd_j = Bc_k S_j - 2 Ic_k u_j
+
+and ``tau_i = S_i . F_i``. For i in j's subtree the rotation of ``S_i`` cancels the ``S_j x*
+F_i`` term, so ``dtau_i/dq_j = -(r_i . psi_j + s_i . u_j)`` with the rows ``r_i = Ic_i S_i``,
+``s_i = Bc_i^T S_i`` computed once per joint; for i above j, ``dtau_i/dq_j = S_i . Y_j`` with
+``Y_j = dF_j/dq_j`` once per column (and the same for qd). Each entry is one 6-vector dot
+product or two: O(n d) entries, O(1) each. The floating base's velocity columns differ only
+in the factor (its ``a_root`` does not depend on the base twist); its position columns are
+zero and its orientation columns (Pinocchio's local tangent ``R exp(theta)``) are ``r_i .
+(e_k x g_b, 0)``, gravity g_b in the base frame.
+
+``fd``: ``dqdd/dx = -M^-1 dtau/dx`` at ``qdd = fd(q, qd, tau)`` (differentiating ``tau(q, qd,
+fd(q, qd, tau)) = tau``), ``M`` factorised once as the tree-sparse ``L^T D L`` of
+:func:`kindyngen.algorithms.ldlt.tree_ldlt_solve`; every column is solved through the
+factor, ``M^-1`` only where the caller asks for it.
+
+Trees carry no joint effects (friction, armature): these are the rigid-body derivatives.
+
+Example: a body with two pendulums, floating (nv = 8); the pendulums hang from the body, so
+neither joint's torque depends on the other joint's angle:
+
+>>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import TWO_PENDULUMS
+>>> f = tau_derivatives_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> [(p.name, p.shape) for p in f.outputs]
+[('dtau_dq', (8, 8)), ('dtau_dqd', (8, 8))]
+>>> f.output_exprs[0][6 * 8 + 7], f.output_exprs[0][7 * 8 + 6]
+(0, 0)
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import symengine as se
+
+from .kinematics_conventions import q_port
+from .rigid_bodies import ZERO, Body, cross, qd_port, qdd_port, vadd
+from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
+from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, setup, tree_function
+from ..model.robot_model import FREE_FLYER_NV, RobotModel
+
+
+# ----------------------------------------------------------------------------- spatial algebra
+# motions (v, w) and forces (f, n) are lists of 6 expressions, linear part first
+
+def mcross(a, b):
+    """Motion cross product ``a x b``; with :func:`fcross` dual: ``(a x b) . f = -b . (a x* f)``.
+
+    >>> a, b, f = [1, 2, 3, 4, 5, 6], [0, 1, 0, 2, 0, 1], [3, 1, 4, 1, 5, 9]
+    >>> dot6(mcross(a, b), f), -dot6(b, fcross(a, f))
+    (-52, -52)
+    """
+    return vadd(cross(a[3:], b[:3]), cross(a[:3], b[3:])) + cross(a[3:], b[3:])
+
+
+def fcross(a, f):
+    """Force cross product ``a x* f`` (the motion a acting on the force f)."""
+    return cross(a[3:], f[:3]) + vadd(cross(a[3:], f[3:]), cross(a[:3], f[:3]))
+
+
+def inertia_times(body: Body, x):
+    """The momentum ``I x`` of a body (mass m, first moment h, inertia I about the origin)
+    moving with the motion x: ``(m v - h x w, h x v + I w)``."""
+    v, w = x[:3], x[3:]
+    linear = vadd([body.m * e for e in v], [-e for e in cross(body.h, w)])
+    return linear + vadd(cross(body.h, v), [se.Add(*(body.I[r][c] * w[c] for c in range(3))) for r in range(3)])
+
+
+def dot6(a, b):
+    return se.Add(*(x * y for x, y in zip(a, b)))
+
+
+def _add6(*vs):
+    return [se.Add(*(v[k] for v in vs)) for k in range(6)]
+
+
+def _scale6(s, v):
+    return [s * x for x in v]
+
+
+UNIT = [[se.Integer(1 if r == k else 0) for r in range(6)] for k in range(6)]
+
+
+# ----------------------------------------------------------------------------- the world-frame pass
+
+class WorldPass:
+    """The world-frame quantities of :mod:`the module text <kindyngen.algorithms.derivatives_world_frame>` at
+    (q, qd, qdd), each named in ``stages``: per joint its axis S, velocity v, acceleration a,
+    and per subtree the composite inertia Ic, force F and matrix Bc; the root's (index -1)
+    with a floating base."""
+
+    def __init__(self, ts: TreeSetup, qd, qdd, stages: Stages):
+        model = self.model = ts.model
+        name = self.name = naming(stages)
+        base = self.base = FREE_FLYER_NV if model.floating_base else 0
+        n = model.n
+        g = [name(e) for e in ts.gravity_in_base()]
+        self.gravity = g
+        if model.floating_base:
+            v0 = list(qd[0:6])
+            a0 = [qdd[r] - g[r] for r in range(3)] + list(qdd[3:6])
+        else:
+            v0 = [ZERO] * 6
+            a0 = [-e for e in g] + [ZERO] * 3
+        self.v0, self.a0 = v0, a0
+        eye = [[se.Integer(1 if r == c else 0) for c in range(3)] for r in range(3)]
+        R, o = [None] * n, [None] * n
+        S, v, a = [None] * n, [None] * n, [None] * n
+        bodies = [None] * n
+        for j, (joint, parent) in enumerate(zip(ts.joints, model.parents)):
+            Rp, op = (R[parent], o[parent]) if parent >= 0 else (eye, [ZERO] * 3)
+            vp, ap = (v[parent], a[parent]) if parent >= 0 else (v0, a0)
+            A = [[name(se.Add(*(Rp[r][k] * joint.C[k][c] for k in range(3) if joint.C[k][c] != 0)))
+                  for c in range(3)] for r in range(3)]
+            c, s = joint.c, joint.s
+            R[j] = [[name(c * A[r][0] + s * A[r][1]), name(c * A[r][1] - s * A[r][0]), A[r][2]] for r in range(3)]
+            o[j] = [name(op[r] + se.Add(*(Rp[r][k] * joint.t[k] for k in range(3)))) for r in range(3)]
+            z = [A[r][2] for r in range(3)]
+            S[j] = z + [ZERO] * 3 if joint.prismatic else [name(e) for e in cross(o[j], z)] + z
+            qdj, qddj = qd[base + j], qdd[base + j]
+            v[j] = [name(e) for e in _add6(vp, _scale6(qdj, S[j]))]
+            a[j] = [name(e) for e in _add6(ap, _scale6(qddj, S[j]), _scale6(qdj, mcross(v[j], S[j])))]
+            bodies[j] = ts.bodies[j].moved(R[j], o[j])
+        self.S, self.v, self.a = S, v, a
+        forces = [self._force(b, vj, aj) for b, vj, aj in zip(bodies, v, a)]
+        coriolis = [self._b_matrix(b, vj) for b, vj in zip(bodies, v)]
+        parts = [[(b, f, B)] for b, f, B in zip(bodies, forces, coriolis)]
+        root = [(ts.root, self._force(ts.root, v0, a0), self._b_matrix(ts.root, v0))] if model.floating_base else []
+        Ic, F, Bc = [None] * n, [None] * n, [None] * n
+        for j in range(n - 1, -1, -1):
+            Ic[j], F[j], Bc[j] = self._sum(parts[j])
+            (parts[model.parents[j]] if model.parents[j] >= 0 else root).append((Ic[j], F[j], Bc[j]))
+        self.Ic, self.F, self.Bc = Ic, F, Bc
+        self.root = self._sum(root) if model.floating_base else None
+
+    def _force(self, body: Body, v, a):
+        return _add6(inertia_times(body, a), fcross(v, inertia_times(body, v)))
+
+    def _b_matrix(self, body: Body, v):
+        """B's columns ``B e_k`` (6 x 6 as a list of columns)."""
+        Iv = inertia_times(body, v)
+        return [_add6(inertia_times(body, mcross(e, v)), fcross(e, Iv), fcross(v, inertia_times(body, e)))
+                for e in UNIT]
+
+    def _sum(self, parts):
+        name = self.name
+        I = [[name(se.Add(*(p[0].I[r][c] for p in parts))) for c in range(3)] for r in range(3)]
+        for r in range(3):
+            for c in range(r):
+                I[r][c] = I[c][r]
+        body = Body(name(se.Add(*(p[0].m for p in parts))), [name(e) for e in vadd(*(p[0].h for p in parts))], I)
+        force = [name(e) for e in _add6(*(p[1] for p in parts))]
+        columns = [[name(e) for e in _add6(*(p[2][k] for p in parts))] for k in range(6)]
+        return body, force, columns
+
+    def derivatives(self):
+        """(dtau_dq, dtau_dqd) as nv x nv nested lists (module text)."""
+        model, name, base = self.model, self.name, self.base
+        n, nv = model.n, model.nv
+        S, v, a, Ic, F, Bc = self.S, self.v, self.a, self.Ic, self.F, self.Bc
+        dq = [[ZERO] * nv for _ in range(nv)]
+        dqd = [[ZERO] * nv for _ in range(nv)]
+        r = [[name(e) for e in inertia_times(Ic[i], S[i])] for i in range(n)]
+        s = [[name(dot6(S[i], Bc[i][k])) for k in range(6)] for i in range(n)]
+        for j in range(n):
+            parent = model.parents[j]
+            vp, ap = (v[parent], a[parent]) if parent >= 0 else (self.v0, self.a0)
+            u = [name(e) for e in mcross(S[j], vp)]
+            psi = [name(e) for e in _add6(mcross(S[j], ap), mcross(vp, u))]
+            Bu = _matvec6(Bc[j], u)
+            Y = [name(e) for e in _add6(fcross(S[j], F[j]), [-e for e in inertia_times(Ic[j], psi)],
+                                       [-e for e in Bu])]
+            Z = [name(e) for e in _add6(_matvec6(Bc[j], S[j]), _scale6(-2, inertia_times(Ic[j], u)))]
+            for i in _subtree(model, j):
+                dq[base + i][base + j] = -(dot6(r[i], psi) + dot6(s[i], u))
+                dqd[base + i][base + j] = dot6(s[i], S[j]) - 2 * dot6(r[i], u)
+            for i in model.ancestors(j)[1:]:
+                dq[base + i][base + j] = dot6(S[i], Y)
+                dqd[base + i][base + j] = dot6(S[i], Z)
+            for k in range(base):
+                dq[k][base + j], dqd[k][base + j] = Y[k], Z[k]
+        if model.floating_base:
+            body0, _, B0 = self.root
+            v0, g = self.v0, self.gravity
+            for k in range(3):          # orientation columns: gravity turns in the base frame
+                m = cross(UNIT[k][:3], g) + [ZERO] * 3
+                col = [name(e) for e in inertia_times(body0, m)]
+                for row in range(6):
+                    dq[row][3 + k] = col[row]
+                for i in range(n):
+                    dq[base + i][3 + k] = dot6(r[i], m)
+            for k in range(6):          # base twist columns
+                w = [name(e) for e in mcross(UNIT[k], v0)]
+                col = _add6(B0[k], [-e for e in inertia_times(body0, w)])
+                for row in range(6):
+                    dqd[row][k] = col[row]
+                for i in range(n):
+                    dqd[base + i][k] = s[i][k] - dot6(r[i], w)
+        return dq, dqd
+
+
+def _matvec6(columns, x):
+    return [se.Add(*(columns[k][row] * x[k] for k in range(6))) for row in range(6)]
+
+
+def _subtree(model: RobotModel, j: int):
+    """j and the joints below it (depth-first order: a contiguous run after j)."""
+    out = [j]
+    for i in range(j + 1, model.n):
+        if model.parents[i] not in out:
+            break
+        out.append(i)
+    return out
+
+
+# ----------------------------------------------------------------------------- the tree-sparse factor
+
+def tree_ltdl_factor(M, parents, stages: Stages | None = None):
+    """``M = L^T D L`` with L as sparse as the tree (the factor of
+    :func:`kindyngen.algorithms.ldlt.tree_ldlt_solve`, kept for many right-hand sides):
+    ``(H, inv_d, ancestors)``, ``H[k][i]`` the entries of L for i above k."""
+    name = naming(stages)
+    n = len(M)
+    H = [list(row) for row in M]
+    ancestors = []
+    for k in range(n):
+        up, i = [], parents[k]
+        while i >= 0:
+            up.append(i)
+            i = parents[i]
+        ancestors.append(up)
+    inv_d = [None] * n
+    for k in range(n - 1, -1, -1):
+        inv_d[k] = name(se.Pow(H[k][k], -1))
+        for pos, i in enumerate(ancestors[k]):
+            a = name(H[k][i] * inv_d[k])
+            for j in [i] + ancestors[k][pos + 1:]:
+                H[i][j] = name(H[i][j] - a * H[k][j])
+            H[k][i] = a
+    return H, inv_d, ancestors
+
+
+def tree_ltdl_substitute(factor, b, name):
+    """``x = M^-1 b`` from :func:`tree_ltdl_factor` (exact zeros of b fold away)."""
+    H, inv_d, ancestors = factor
+    n = len(b)
+    x = [name(e) for e in b]
+    for k in range(n - 1, -1, -1):
+        for i in ancestors[k]:
+            x[i] = name(x[i] - H[k][i] * x[k])
+    x = [name(x[k] * inv_d[k]) for k in range(n)]
+    for k in range(n):
+        x[k] = name(se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k])))
+    return x
+
+
+# ----------------------------------------------------------------------------- functions
+
+NOTE = (" Matrices are row-major, row i the output of coordinate i, column j the input of coordinate j (d out_i "
+        "/ d in_j). Derivatives in q are taken in the tangent space: a joint's own coordinate, and for a floating "
+        "base the local perturbation q * exp(dx) of its pose (Pinocchio's convention), so they have nv columns.")
+
+
+def _flat(matrix):
+    return [e for row in matrix for e in row]
+
+
+def _matrix_port(model: RobotModel, name: str, what: str, unit: str) -> Port:
+    return Port(name, (model.nv, model.nv), what + " (row-major, nv x nv)", unit)
+
+
+def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives") -> SymbolicFunction:
+    """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` in the world-frame formulation."""
+    ts, stages = setup(model), Stages()
+    qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
+    dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
+    f = tree_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the world-frame "
+                      "formulation of Carpentier and Mansard (RSS 2018): a joint's motion turns its subtree rigidly, "
+                      "each entry one or two spatial dot products; dtau/dqdd is M.", ts,
+                      (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
+                      (_matrix_port(model, "dtau_dq", "dtau_i / dq_j", "N m/rad and mixed units by coordinate"),
+                       _matrix_port(model, "dtau_dqd", "dtau_i / dqd_j", "N m s/rad and mixed units by coordinate")),
+                      (_flat(dq), _flat(dqd)), stages, route="world frame")
+    return _noted(f)
+
+
+def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_minv: bool = True) -> SymbolicFunction:
+    """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd[, Minv]``: ``-M^-1 dtau/dx`` at
+    ``qdd = fd(q, qd, tau)``, every column solved through one tree-sparse factor of M."""
+    ts, stages = setup(model), Stages()
+    name_ = naming(stages)
+    nv = model.nv
+    qd, tau = port_symbols("qd", (nv,)), port_symbols("tau", (nv,))
+    M, _, _ = crba(ts, stages)
+    factor = tree_ltdl_factor(M, expanded_parents(model), stages)
+    bias = rnea(ts, qd, None, True, stages)
+    qdd = tree_ltdl_substitute(factor, [t - b for t, b in zip(tau, bias)], name_)
+    dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
+    solved = [[tree_ltdl_substitute(factor, [-B[i][j] for i in range(nv)], name_) for j in range(nv)]
+              for B in (dq, dqd)]
+    outputs = [[col[i] for i in range(nv) for col in columns] for columns in solved]
+    ports = [_matrix_port(model, "dqdd_dq", "dqdd_i / dq_j", "1/s^2 and mixed units by coordinate"),
+             _matrix_port(model, "dqdd_dqd", "dqdd_i / dqd_j", "1/s and mixed units by coordinate")]
+    what = "dqdd/dtau is M^-1"
+    if with_minv:
+        columns = [tree_ltdl_substitute(factor, _unit_column(nv, k), name_) for k in range(nv)]
+        outputs.append([columns[min(i, k)][max(i, k)] for i in range(nv) for k in range(nv)])
+        ports.append(_matrix_port(model, "Minv", "inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric)",
+                                  "1/(kg m^2) and mixed units by coordinate"))
+    else:
+        what += ", not formed here (the function fd_derivatives has it)"
+    f = tree_function(name, ROUTE + "partial derivatives of the forward dynamics qdd = fd(q, qd, tau): dqdd/dx = "
+                      "-M^-1 dtau/dx at qdd = fd(q, qd, tau), dtau/dx in the world-frame formulation of Carpentier and "
+                      "Mansard (RSS 2018), every column solved through one tree-sparse L^T D L factor of M; "
+                      + what + ".", ts,
+                      (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
+                      tuple(ports), tuple(outputs), stages, route="world frame")
+    return _noted(f)
+
+
+def _unit_column(n: int, k: int) -> list:
+    return [se.Integer(1 if i == k else 0) for i in range(n)]
+
+
+def _noted(f: SymbolicFunction) -> SymbolicFunction:
+    return replace(f, conventions=f.conventions + NOTE)

@@ -1,0 +1,1 @@
+"""The dual-quaternion route: forward kinematics and dynamics written with unit dual quaternions."""

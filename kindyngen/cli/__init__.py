@@ -1,0 +1,1 @@
+"""The command line, ``kindyngen --help`` (also ``python -m kindyngen``)."""

@@ -1,0 +1,150 @@
+"""Which functions are generated for a robot: one entry per derivation, in output order.
+
+Each builder takes the robot model and the inertial-parameter mode ("numeric": the YAML
+values baked in; "symbolic": an extra input ``p`` of 10 n barycentric parameters) and returns
+a SymbolicFunction, or None where the derivation does not apply to that arm.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Callable, Optional
+
+import symengine as se
+
+from ..algorithms.derivatives_sweeps import fd_derivatives, tau_derivatives
+from ..algorithms.dualquat.dq_dynamics import coriolis_dq, gravity_dq, inverse_dynamics_dq, mass_matrix_dq, regressor_dq
+from ..algorithms.lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
+from ..ik.lwr_dualquat import ik_dq
+from ..ik.lwr_homogeneous import ik_hom
+from ..algorithms.dualquat.dq_kinematics import fk_dq, jacobian_dq, pose_jacobian_dq
+from ..model.robot_model import RobotModel
+from ..algorithms.regressors import base_params_document as arm_base_params_document, regressor
+from ..algorithms.regressors import undecided_notes as arm_undecided_notes
+from ..algorithms.symbolic import Port, SymbolicFunction
+from ..algorithms.articulated_body import forward_dynamics_aba
+from ..algorithms.dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
+                                   inverse_dynamics_tree, mass_matrix_tree)
+from ..algorithms.kinematics import fk_hom_tree, jacobian_tree
+from ..algorithms.derivatives_world_frame import fd_derivatives_tree, tau_derivatives_tree
+from ..algorithms.tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
+
+Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
+
+
+def forward_dynamics_routes(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
+    """fd by the sparse L^T D L route, with the articulated-body route as its alternative:
+    optimisation keeps whichever has fewer operations after CSE on this robot."""
+    return replace(forward_dynamics_tree(model, params, name), alternatives=(forward_dynamics_aba(model, params, name),))
+
+
+def arm_only(build: Builder) -> Builder:
+    """A derivation written for serial arms (the Lagrange, dual-quaternion and derivative
+    routes, the closed-form IK, the gravity and inertia regressors): None for a model read
+    as a tree."""
+    def arm_build(model, params):
+        return None if model.is_tree else build(model, params)
+    arm_build.arm_only = True
+    return arm_build
+
+
+def tree_only(build: Builder) -> Builder:
+    """A function of trees only (the centre of mass): None for an arm."""
+    def tree_build(model, params):
+        return build(model, params) if model.is_tree else None
+    tree_build.tree_only = True
+    return tree_build
+
+
+# every robot's functions, in output order; one builder per function, each written over the
+# tree (an arm is the tree whose parent of joint j is j - 1) or marked arm_only / tree_only
+BUILDERS: tuple[tuple[str, Builder], ...] = (
+    ("fk_hom", lambda model, params: fk_hom_tree(model)),
+    ("fk_dq", arm_only(lambda model, params: fk_dq(model))),
+    ("jacobian", lambda model, params: jacobian_tree(model)),
+    ("pose_jacobian_dq", arm_only(lambda model, params: pose_jacobian_dq(model))),
+    ("jacobian_dq", arm_only(lambda model, params: jacobian_dq(model))),
+    # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
+    # the other route under a suffixed name (kindyngen/dynamics_*.py, tree_*.py)
+    ("M", lambda model, params: mass_matrix_tree(model, params, "M")),
+    ("g", lambda model, params: gravity_tree(model, params, "g")),
+    ("c", lambda model, params: coriolis_tree(model, params, "c")),
+    ("S", arm_only(lambda model, params: coriolis_matrix(model, params, "S"))),
+    ("tau", lambda model, params: inverse_dynamics_tree(model, params, "tau")),
+    ("fd", lambda model, params: forward_dynamics_routes(model, params, "fd")),
+    ("com", tree_only(lambda model, params: centre_of_mass_tree(model, params, "com"))),
+    # their partial derivatives, for optimal control: on a fixed base by the adjoint sweeps
+    # over the Newton-Euler pass (kindyngen/algorithms/derivatives_sweeps.py; they carry the joint
+    # effects), on a tree read as such by the world-frame formulation (algorithms/derivatives_world_frame.py,
+    # which takes a floating base; on lwr4 and panda read as trees it costs 7-9 % more
+    # operations than the sweeps, with a shorter critical path: docs/latency.md)
+    ("tau_derivatives", lambda model, params: tau_derivatives_tree(model, "tau_derivatives") if model.is_tree
+     else tau_derivatives(model, params, "tau_derivatives")),
+    ("fd_derivatives", lambda model, params: fd_derivatives_tree(model, "fd_derivatives") if model.is_tree
+     else fd_derivatives(model, params, "fd_derivatives")),
+    # the same without Minv, for callers that do not need it (each column through the factor)
+    ("fd_derivatives_no_minv", tree_only(lambda model, params: fd_derivatives_tree(
+        model, "fd_derivatives_no_minv", with_minv=False))),
+    ("M_lagrange", arm_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
+    ("g_lagrange", arm_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
+    ("c_christoffel", arm_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),
+    # the same dynamics in dual-quaternion form (kindyngen/algorithms/dualquat/dq_dynamics.py); Y_dq: the
+    # regressor of tau_dq on Y's base parameters, the same function in both params modes
+    ("M_dq", arm_only(lambda model, params: mass_matrix_dq(model, params, "M_dq"))),
+    ("g_dq", arm_only(lambda model, params: gravity_dq(model, params, "g_dq"))),
+    ("c_dq", arm_only(lambda model, params: coriolis_dq(model, params, "c_dq"))),
+    ("tau_dq", arm_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
+    ("Y_dq", arm_only(lambda model, params: regressor_dq(model, "Y_dq"))),
+    # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik_lwr_*.py
+    ("ik_hom", arm_only(lambda model, params: ik_hom(model))),
+    ("ik_dq", arm_only(lambda model, params: ik_dq(model))),
+    # regressors on base parameters (kindyngen/algorithms/regressors.py, tree_regressors.py): the same
+    # functions in both params modes
+    ("Y_g", arm_only(lambda model, params: regressor(model, "Y_g"))),
+    ("Y_m", arm_only(lambda model, params: regressor(model, "Y_m"))),
+    ("Y", lambda model, params: tree_regressor(model) if model.is_tree else regressor(model, "Y")),
+)
+
+NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
+# the functions a model read as a tree gets
+TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "arm_only", False))
+
+
+def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
+    """All applicable functions for ``model`` (optionally only the named ones)."""
+    if model.is_tree and params != "numeric":
+        raise ValueError("a kinematic tree is generated with its description's parameters only "
+                         "(--params numeric)")
+    out = []
+    for name, build in BUILDERS:
+        if only is not None and name not in only:
+            continue
+        function = build(model, params)
+        if function is not None:
+            out.append(with_lengths_port(function, model))
+    return out
+
+
+def base_params_document(model: RobotModel) -> dict | None:
+    """Content of ``base_params.json`` for either kind of model (None for an arm with symbolic
+    lengths)."""
+    return tree_base_params_document(model) if model.is_tree else arm_base_params_document(model)
+
+
+def undecided_notes(model: RobotModel, only=None) -> list[str]:
+    """One line per regressor (of ``only``, default all) left out because its base parameters
+    could not be decided."""
+    if not model.is_tree:
+        return arm_undecided_notes(model, only)
+    reason = tree_regressor_unavailable(model) if only is None or "Y" in only else None
+    return [f"{model.identifier}: regressor Y not generated: {reason}"] if reason else []
+
+
+def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:
+    """Give a function of a robot with symbolic DH lengths the extra last input ``lengths``
+    (all of the robot's length symbols, in order of appearance), so every function of that
+    robot has the same signature whether or not a particular length reaches it."""
+    symbols = tuple(se.Symbol(str(s)) for s in model.length_symbols)
+    if not symbols:
+        return function
+    port = Port("lengths", (len(symbols),), "symbolic DH lengths: " + ", ".join(map(str, symbols)), "m")
+    return replace(function, inputs=function.inputs + (port,), input_symbols=function.input_symbols + (symbols,))

@@ -1,0 +1,114 @@
+"""The operation-count table of a robot, as JSON (for tools) and Markdown (for people).
+
+For the KUKA LWR the forward- and inverse-kinematics rows stand beside the kinematics
+paper's Table II (Hartl-Nesic and Meiringer: Maple 2018, with and without optimisation).
+"""
+from __future__ import annotations
+
+from .optimize import Program
+
+# Kinematics paper, Table II: (add, mult, calls); "derived" = without code optimisation.
+PAPER_TABLE_II = {
+    "fk_hom": {"derived": (88, 238, 327), "optimised": (40, 87, 14)},
+    "fk_dq": {"derived": (312, 1576, 880), "optimised": (38, 88, 14)},
+    "ik_hom": {"optimised": (1461, 2570, 52)},
+    "ik_dq": {"optimised": (1070, 2258, 184)},
+}
+
+
+def opcounts_json(programs: list[Program], float_error: dict | None = None) -> dict:
+    """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order; a function
+    chosen among routes also has ``"route"`` (the chosen one) and ``"routes"`` (each one's
+    count after CSE); ``"critical_path"``: cycles and operations of the longest chain of
+    dependent operations (:func:`kindyngen.codegen.opcount.program_critical_path`); with ``--scalar float``
+    each measured function has ``"float_error"`` (kindyngen/runtime/float_accuracy.py)."""
+    float_error = float_error or {}
+    return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(),
+                              "critical_path": p.critical.to_json(), **_routes_json(p),
+                              **({"float_error": float_error[p.function.name].to_json()}
+                                 if p.function.name in float_error else {})}
+            for p in programs}
+
+
+def _routes_json(p: Program) -> dict:
+    if not p.routes:
+        return {}
+    return {"route": p.function.metadata.get("route"), "routes": {name: c.to_json() for name, c in p.routes}}
+
+
+def _row(values) -> str:
+    return " | ".join(str(v) for v in values)
+
+
+def _critical_markdown(programs) -> list[str]:
+    from .trig_kernel import kernel_latency
+    from .opcount import LATENCY
+    table = ", ".join(f"{k} {v}" for k, v in LATENCY.items() if k not in ("kernel", "call"))
+    lines = ["", "## Critical path", "",
+             "The longest chain of dependent operations of the generated C as printed (strict C99: no "
+             "contraction, sums and products left to right), in cycles of a stated latency table (AMD Zen 4: "
+             f"{table}; a libm call as 40; sin/cos of q from the sincos kernel {kernel_latency()}, its own "
+             "chain). A single call waits at least this long however many units the core has; "
+             "docs/latency.md compares it with measured times.", "",
+             "| function | cycles | operations on it | add + mul + call after CSE |", "|---|---|---|---|"]
+    for p in programs:
+        lines.append(f"| {p.function.name} | {p.critical.cycles} | {p.critical.operations} | {p.after.total} |")
+    return lines
+
+
+def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool,
+                      float_error: dict | None = None) -> str:
+    lines = [f"# Operation counts: {robot_name}", "",
+             "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
+             "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
+             "after = the generated straight-line code after CSE."
+             + (" Functions derived with named intermediates (a recursion's per-body quantities: "
+                "tree dynamics) count each intermediate's expression once before CSE."
+                if any(p.function.stages for p in programs) else ""), "",
+             "| function | add before | mul before | call before | add after | mul after | call after |",
+             "|---|---|---|---|---|---|---|"]
+    for p in programs:
+        b, a = p.before, p.after
+        lines.append(f"| {p.function.name} | {_row([b.add, b.mul, b.call, a.add, a.mul, a.call])} |")
+    lines += _critical_markdown(programs)
+    chosen = [p for p in programs if p.routes]
+    if chosen:
+        lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "
+                  "additions + multiplications after CSE.", "",
+                  "| function | route | add after | mul after | call after | kept |", "|---|---|---|---|---|---|"]
+        for p in chosen:
+            for name, c in p.routes:
+                kept = "yes" if name == p.function.metadata.get("route") else ""
+                lines.append(f"| {p.function.name} | {name} | {_row([c.add, c.mul, c.call])} | {kept} |")
+    if compare_with_paper:
+        lines += ["", "## Beside the kinematics paper (Table II, Maple 2018)", "",
+                  "| function | KinDynGen after CSE (add / mul / call) | paper optimised | "
+                  "KinDynGen as derived | paper without optimisation |", "|---|---|---|---|---|"]
+        by_name = {p.function.name: p for p in programs}
+        for name, paper in PAPER_TABLE_II.items():
+            if name not in by_name:
+                continue
+            p = by_name[name]
+            ours_after = f"{p.after.add} / {p.after.mul} / {p.after.call}"
+            ours_before = f"{p.before.add} / {p.before.mul} / {p.before.call}"
+            opt = " / ".join(map(str, paper["optimised"]))
+            der = " / ".join(map(str, paper["derived"])) if "derived" in paper else "-"
+            lines.append(f"| {name} | {ours_after} | {opt} | {ours_before} | {der} |")
+    if float_error:
+        from ..runtime.float_accuracy import ACCEPTABLE, NEAR_ZERO, SEED
+        lines += ["", "## Float error (--scalar float)", "",
+                  f"The float C against the double C at {next(iter(float_error.values())).states} random states "
+                  f"within the limits (seed {SEED}): |float - double| / the output's scale (its largest "
+                  f"|entry|), over all entries and states; acceptable: max <= {ACCEPTABLE:.0e}. Integer "
+                  "outputs (IK status): states where they differ. Near singular: as many states with one "
+                  f"joint (each in turn) within {NEAR_ZERO:g} rad of 0, errors relative to the same scales.", "",
+                  "| function | max | 99th percentile | acceptable | integer outputs differ | "
+                  "near singular: max | 99th percentile | acceptable | integer outputs differ |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        fmt = (lambda v: "-" if v is None else f"{v:.1e}")
+        for name, e in float_error.items():
+            n = e.near
+            lines.append(f"| {name} | {fmt(e.max)} | {fmt(e.p99)} | {'yes' if e.acceptable else 'NO'} | "
+                         f"{e.int_mismatch} of {e.states} | {fmt(n.max)} | {fmt(n.p99)} | "
+                         f"{'yes' if n.acceptable else 'NO'} | {n.int_mismatch} of {n.states} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,43 @@
+"""The interface document of a generated robot (``functions.json``): every function's name,
+ports (shape, unit, dtype), C symbol and costs. The pipeline writes it; the python_c renderer
+builds its wrappers from it (so the extension follows exactly what the C exports).
+"""
+from __future__ import annotations
+
+from ..ik.damped_least_squares import applies as dls_applies, dls_manifest_entry
+from ..model.robot_model import RobotModel
+from .optimize import Program
+
+
+def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
+             scalar: str = "double", batch: bool = True) -> dict:
+    """The interface document. A C library generated with ``--scalar float`` says so
+    ("c_scalar": "float": every C port is float; Python and CasADi stay double) and has no
+    ik_dls in C; ``--no-batch`` adds "c_batch": false. Default (double, batch) documents carry
+    neither key."""
+    dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
+    if scalar == "float":
+        for entry in dls:
+            entry["languages"] = [lang for lang in entry["languages"] if lang != "c"]
+    return {
+        "robot": model.identifier,
+        "name": model.name,
+        "n": model.n,
+        "convention": model.convention,
+        # a kinematic tree: what it is, and its configuration and velocity sizes
+        **({"structure": model.structure_text, "nq": model.nq, "nv": model.nv} if model.structure_text else {}),
+        "gravity": [float(v) for v in model.gravity],
+        "params": params,
+        "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/codegen/trig_kernel.py)
+        **({"c_scalar": scalar} if scalar != "double" else {}),
+        **({"c_batch": False} if not batch else {}),
+        "functions": [{
+            "name": p.function.name,
+            "summary": p.function.summary,
+            "conventions": p.function.conventions,
+            "c_symbol": f"{model.identifier}_{p.function.name}",
+            "inputs": [port.to_json() for port in p.function.inputs],
+            "outputs": [port.to_json() for port in p.function.outputs],
+            "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
+        } for p in programs] + dls,
+    }

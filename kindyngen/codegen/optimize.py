@@ -1,0 +1,337 @@
+"""Common-subexpression elimination: SymbolicFunction -> straight-line Program.
+
+The program is the pair SymPyBotics carries code as: (intermediates, outputs).  CSE runs on
+the DAG with symengine, which takes milliseconds where sympy's takes minutes.
+
+Example:
+
+>>> import symengine as se
+>>> from kindyngen.algorithms.symbolic import Port, SymbolicFunction, port_symbols
+>>> q = port_symbols("q", (2,))
+>>> s = se.sin(q[0] + q[1])
+>>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (2,), ""),), (q,), ((2*s, s*s),))
+>>> p = optimize(f)
+>>> len(p.assignments), p.after.call
+(1, 1)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import symengine as se
+
+from .trig_kernel import kernel_latency
+import heapq
+
+from .opcount import ChainTimer, CriticalPath, OpCount, program_count, program_critical_path, tree_count
+from ..algorithms.symbolic import SymbolicFunction
+
+
+CSE_CHUNK = 4096
+"""Expressions per symengine ``cse`` call on a function with named intermediates. cse's time
+grows about quadratically with the number of expressions even when each is small, so longer
+lists are reduced in consecutive chunks of this many, in derivation order; what later chunks
+share with earlier ones they share through the named intermediates. Measured by
+``python -m benchmarks.tree_scaling --cse-only`` (``results/tree_scaling.json``, "cse"): a
+chain's M of 40, 80 and 120 joints (4.3k, 16.4k and 36.1k expressions) optimised in 0.87,
+5.7 and 22.3 s CPU with one cse call, in 1.1, 4.9 and 10.3 s in chunks, for 0.1-0.9 % more
+operations; on the G1 (every function, both fd routes) chunks of 4096 give 62973 add + mul,
+2048 give 63301 and 1024 give 63858, none faster. Every staged function of the G1 fits one
+chunk. Functions without intermediates are one DAG whose expressions are not small: one cse
+call."""
+
+
+@dataclass(frozen=True)
+class Program:
+    """A function as straight-line code: temporaries in evaluation order, then outputs
+    (flat, row-major per port) in terms of inputs and temporaries."""
+
+    function: SymbolicFunction
+    assignments: tuple[tuple[se.Symbol, se.Basic], ...]
+    outputs: tuple[tuple[se.Basic, ...], ...]
+    before: OpCount
+    after: OpCount
+    # (route, operations after CSE) of every route that was optimised, chosen one included
+    routes: tuple[tuple[str, OpCount], ...] = ()
+    # longest chain of dependent operations of the C as printed, sin/cos of q from the kernel
+    critical: CriticalPath = CriticalPath(0, 0)
+
+
+def optimize(function: SymbolicFunction) -> Program:
+    """CSE over all outputs of ``function`` together, with temporaries named t0, t1, ...
+
+    A function with named intermediates (``function.stages``) is reduced as one list of its
+    intermediates' and outputs' expressions; the intermediates become temporaries like CSE's
+    own. Its count before CSE counts each intermediate once (the algorithm as derived).
+
+    A function with ``alternatives`` is optimised by every route, and the route with the
+    fewest additions and multiplications after CSE (the first one on a tie) is kept; its
+    summary says what the others cost."""
+    if function.alternatives:
+        return _cheapest((replace(function, alternatives=()),) + function.alternatives)
+    flat = [e for port in function.output_exprs for e in port]
+    staged = [e for _, e in function.stages]
+    replacements, reduced = _cse(staged + flat) if function.stages else se.cse(flat)
+    if function.stages:
+        replacements, reduced = _merged(replacements, function.stages, reduced)
+    rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
+    assignments = tuple((rename[sym], _renamed(expr, rename)) for sym, expr in replacements)
+    reduced = [_renamed(e, rename) for e in reduced]
+    assignments, reduced = _hoist_power_bases(assignments, reduced)
+    assignments = _live(assignments, reduced)
+    assignments, reduced = _shallower(function, assignments, reduced)
+    outputs, start = [], 0
+    for port in function.outputs:
+        outputs.append(tuple(reduced[start:start + port.size]))
+        start += port.size
+    return Program(
+        function=function,
+        assignments=assignments,
+        outputs=tuple(outputs),
+        before=tree_count(staged + flat),
+        after=program_count(assignments, reduced),
+        critical=critical_path(function, assignments, reduced),
+    )
+
+
+def _served(function: SymbolicFunction) -> set:
+    """The sin/cos the C sincos kernel serves: of entries of the ``q`` port."""
+    names = [p.name for p in function.inputs]
+    served = set()
+    if "q" in names:
+        for sym in function.input_symbols[names.index("q")]:
+            served |= {se.sin(sym), se.cos(sym)}
+    return served
+
+
+def _shallower(function: SymbolicFunction, assignments, outputs):
+    """The program with its sums and products reassociated where that shortens the critical
+    path, or the program unchanged. Every sum or product of three or more operands whose
+    operands are ready at different times is evaluated by joining the two earliest-ready
+    operands first (Huffman's rule, which minimises the time the result is ready for operands
+    of given ready times and one latency per join), the joins named as new temporaries; a node
+    is rewritten only where that makes it ready earlier than in the printed left-to-right order.
+    The number of operations is unchanged (n - 1 joins either way), so the count decides on the
+    critical path alone, and the whole rewrite is kept only when the function's critical path
+    is shorter and its add/mul/call count equal. Ready times are integers of the latency table:
+    the choice is exact, the same on every CPU."""
+    timer = ChainTimer(_served(function), {"kernel": kernel_latency()})
+    used = [int(str(sym)[1:]) for sym, _ in assignments if str(sym)[1:].isdigit()]
+    counter = [max(used, default=-1) + 1]
+    program: list = []
+
+    def temporary(expr):
+        sym = se.Symbol(f"t{counter[0]}")
+        counter[0] += 1
+        program.append((sym, expr))
+        timer.assign(sym, expr)
+        return sym
+
+    def joined(operands, join):
+        """``operands`` (exprs) joined by ``join`` (se.Add or se.Mul) earliest first; the last
+        join is returned unnamed."""
+        heap = [(timer.ready(x)[0], k, x) for k, x in enumerate(operands)]
+        heapq.heapify(heap)
+        k = len(heap)
+        while len(heap) > 2:
+            (_, _, a), (_, _, b) = heapq.heappop(heap), heapq.heappop(heap)
+            t = temporary(join(a, b))
+            heapq.heappush(heap, (timer.ready(t)[0], k, t))
+            k += 1
+        return join(heap[0][2], heap[1][2])
+
+    def rebuild(e):
+        if e.is_Symbol or e.is_Number or not e.args or timer.literal(e) or e in timer.served:
+            return e
+        if isinstance(e, se.Add):
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
+            return _earlier(se.Add(*operands), operands, se.Add)
+        if isinstance(e, se.Mul):
+            if any(isinstance(a, se.Pow) for a in e.args):    # divisors, powers printed in line
+                return se.Mul(*[rebuild(a) for a in e.args])
+            operands = [a if timer.literal(a) else rebuild(a) for a in e.args]
+            sign = 1
+            if se.Integer(-1) in operands:                     # a sign, not a factor
+                operands.remove(se.Integer(-1))
+                sign = -1
+            return _earlier(se.Mul(*operands) * sign, operands, se.Mul, sign)
+        return e
+
+    def _earlier(plain, operands, join, sign=1):
+        if len(operands) < 3:
+            return plain
+        mark = len(program)
+        before = timer.ready(plain)[0]
+        new = joined(operands, join)
+        new = -new if sign < 0 else new
+        if timer.ready(new)[0] < before:
+            return new
+        del program[mark:]                          # not earlier: the node as printed
+        return plain
+
+    for sym, expr in assignments:
+        new = rebuild(expr)
+        program.append((sym, new))
+        timer.assign(sym, new)
+    new_outputs = [rebuild(e) for e in outputs]
+    old_path = program_critical_path(assignments, outputs, timer.served, {"kernel": kernel_latency()})
+    new_path = program_critical_path(program, new_outputs, timer.served, {"kernel": kernel_latency()})
+    if new_path.cycles < old_path.cycles and program_count(program, new_outputs) == program_count(assignments, outputs):
+        return tuple(program), new_outputs
+    return assignments, outputs
+
+
+def critical_path(function: SymbolicFunction, assignments, outputs) -> CriticalPath:
+    """The program's critical path as generated with ``--trig kernel``: sin and cos of an entry
+    of the ``q`` port come from the sincos kernel (:func:`kindyngen.codegen.trig_kernel.kernel_latency`
+    cycles after the start), every other call from libm."""
+    return program_critical_path(assignments, outputs, _served(function), {"kernel": kernel_latency()})
+
+
+def _cse(exprs):
+    """symengine's cse, on at most CSE_CHUNK expressions at a time (each chunk's temporaries
+    renamed apart). Chunked, every sin/cos is first named once for all chunks, so that no call
+    is evaluated twice."""
+    work = [k for k, expr in enumerate(exprs) if not (expr.is_Symbol or expr.is_Number)]
+    if len(work) < len(exprs):          # symbols and numbers (most of M's entries) pass through
+        replacements, reduced = _cse([exprs[k] for k in work])
+        out = list(exprs)
+        for k, expr in zip(work, reduced):
+            out[k] = expr
+        return replacements, out
+    if len(exprs) <= CSE_CHUNK:
+        return se.cse(exprs)
+    calls: dict = {}
+    for expr in exprs:
+        for call in sorted(expr.atoms(se.sin, se.cos), key=str):
+            calls.setdefault(call, se.Symbol(f"_f{len(calls)}"))
+    replacements = [(symbol, call) for call, symbol in calls.items()]
+    exprs = [_renamed_calls(expr, calls) for expr in exprs]
+    reduced = []
+    for chunk, start in enumerate(range(0, len(exprs), CSE_CHUNK)):
+        part, part_reduced = se.cse(exprs[start:start + CSE_CHUNK])
+        rename = {sym: se.Symbol(f"_x{chunk}_{k}") for k, (sym, _) in enumerate(part)}
+        replacements += [(rename[sym], _renamed(expr, rename)) for sym, expr in part]
+        reduced += [_renamed(expr, rename) for expr in part_reduced]
+    return replacements, reduced
+
+
+def _renamed_calls(expr, calls):
+    """``expr`` with its sin/cos calls replaced by their symbols in ``calls``."""
+    found = expr.atoms(se.sin, se.cos)
+    return expr.xreplace({c: calls[c] for c in found}) if found else expr
+
+
+def _cheapest(routes) -> Program:
+    programs = [optimize(route) for route in routes]
+    best = min(range(len(programs)), key=lambda k: (programs[k].after.add + programs[k].after.mul, k))
+    counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)
+    text = ("Route chosen by the fewest additions + multiplications after CSE: "
+            + "; ".join(f"{name} {count.add} + {count.mul}" for name, count in counted) + ".")
+    chosen = programs[best]
+    return replace(chosen, function=replace(chosen.function, summary=f"{chosen.function.summary} {text}"),
+                   routes=counted)
+
+
+def _merged(replacements, stages, reduced):
+    """CSE's replacements and the reduced intermediates as one list of assignments in an
+    order that defines every symbol before its use (depth first, in the intermediates' order),
+    and the reduced outputs. An intermediate that CSE reduced to a symbol or a number is not
+    assigned but substituted."""
+    definitions = dict(replacements)
+    alias = {}
+    for (symbol, _), expr in zip(stages, reduced):
+        if expr.is_Symbol or expr.is_Number:
+            alias[symbol] = expr
+        else:
+            definitions[symbol] = expr
+
+    def resolve(sym):
+        while sym in alias:
+            sym = alias[sym]
+        return sym
+
+    if alias:
+        resolved = {s: resolve(s) for s in alias}
+        definitions = {s: _renamed(e, resolved) for s, e in definitions.items()}
+        reduced = [_renamed(e, resolved) for e in reduced]
+    order, placed = [], set()
+    for root in [s for s, _ in stages] + [s for s, _ in replacements]:
+        if root in placed or root not in definitions:
+            continue
+        stack = [(root, False)]
+        while stack:                 # iterative post-order: chains of intermediates are long
+            sym, expanded = stack.pop()
+            if sym in placed:
+                continue
+            if expanded:
+                placed.add(sym)
+                order.append((sym, definitions[sym]))
+                continue
+            stack.append((sym, True))
+            deps = [d for d in definitions[sym].free_symbols if d in definitions and d not in placed]
+            stack.extend((d, False) for d in sorted(deps, key=str, reverse=True))
+    return order, reduced[len(stages):]
+
+
+def _renamed(expr, rename):
+    """``expr.xreplace(rename)`` with only the symbols ``expr`` holds: xreplace converts its
+    whole mapping at every call, quadratic in the number of temporaries."""
+    return expr.xreplace({s: rename[s] for s in expr.free_symbols if s in rename})
+
+
+def _live(assignments, outputs):
+    """Drop temporaries no output depends on (symengine's cse can leave a replacement whose
+    only uses it later folded into a larger one)."""
+    needed = set()
+    for e in outputs:
+        needed |= e.free_symbols
+    kept = []
+    for sym, expr in reversed(assignments):
+        if sym in needed:
+            kept.append((sym, expr))
+            needed |= expr.free_symbols
+    return tuple(reversed(kept))
+
+
+_REBUILD = {se.StrictLessThan: se.Lt, se.LessThan: se.Le, se.Equality: se.Eq,
+            se.Unequality: se.Ne, se.And: se.And, se.Or: se.Or, se.Not: se.Not}
+
+
+def _hoist_power_bases(assignments, outputs):
+    """Give every compound base of an integer power its own temporary, so that ``b**3``
+    prints as ``t*t*t`` and ``b`` is evaluated once, as counted."""
+    counter = [len(assignments)]
+    hoisted: dict = {}
+    program: list = []
+
+    def visit(e, pending):
+        if e.is_Symbol or e.is_Number or not e.args:
+            return e
+        if isinstance(e, se.Pow) and e.args[1].is_Integer and abs(int(e.args[1])) >= 2 \
+                and not e.args[0].is_Symbol and e.args[0].free_symbols:
+            base = visit(e.args[0], pending)
+            if base not in hoisted:
+                sym = se.Symbol(f"t{counter[0]}")
+                counter[0] += 1
+                hoisted[base] = sym
+                pending.append((sym, base))
+            return se.Pow(hoisted[base], e.args[1])
+        new_args = [visit(a, pending) for a in e.args]
+        if all(a is b for a, b in zip(new_args, e.args)):
+            return e
+        if isinstance(e, se.Piecewise):
+            return se.Piecewise(*zip(new_args[0::2], new_args[1::2]))
+        return _REBUILD.get(type(e), lambda *a: e.func(*a))(*new_args)
+
+    for sym, expr in assignments:
+        pending: list = []
+        expr = visit(expr, pending)
+        program.extend(pending)
+        program.append((sym, expr))
+    new_outputs = []
+    for expr in outputs:
+        pending = []
+        new_outputs.append(visit(expr, pending))
+        program.extend(pending)
+    return tuple(program), new_outputs

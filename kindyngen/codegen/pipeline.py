@@ -1,0 +1,114 @@
+"""Robot description -> derivations -> CSE and counts -> rendered sources, written to disk.
+
+``generate(model, out_root)`` writes ``out_root/<robot>/`` with ``functions.json`` (the
+interface: names, ports, costs), ``opcounts.json``, ``opcounts.md`` and one folder per
+language. Output is deterministic: the same description gives the same bytes.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from .catalog import base_params_document, derive_all, undecided_notes
+from .interface import manifest
+from .optimize import Program, optimize
+from .render import RENDERERS
+from .count_report import opcounts_json, opcounts_markdown
+from ..model.robot_model import RobotModel
+
+LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
+
+
+class Progress:
+    """One line per step on stderr, redrawn in place on a terminal, with elapsed time."""
+
+    def __init__(self, label: str, total: int, stream=sys.stderr):
+        self.label, self.total, self.stream, self.done = label, total, stream, 0
+        self.start = time.perf_counter()
+        self.tty = stream.isatty()
+
+    def step(self, what: str) -> None:
+        self.done += 1
+        width = 20
+        filled = width * self.done // max(self.total, 1)
+        line = (f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
+                f"{what} ({time.perf_counter() - self.start:.1f} s)")
+        self.stream.write(("\r" + line.ljust(100)) if self.tty else line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
+    """Derive and optimise every applicable function of ``model``."""
+    functions = derive_all(model, params, only)
+    bar = Progress(f"{model.identifier}", len(functions)) if progress else None
+    programs = []
+    for f in functions:
+        programs.append(optimize(f))
+        if bar:
+            bar.step(f.name)
+    if bar:
+        bar.close()
+    return programs
+
+
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def save_casadi_functions(module_source: str, directory: Path) -> None:
+    """Build every Function of the rendered CasADi module and save it as <name>.casadi."""
+    namespace: dict = {}
+    exec(compile(module_source, str(directory / "module"), "exec"), namespace)
+    for name, build in namespace["BUILDERS"].items():
+        build().save(str(directory / f"{name}.casadi"))
+
+
+def measure_float_error(model, programs, document: dict, trig: str) -> dict:
+    """Float C against double C (kindyngen/runtime/float_accuracy.py): ``{name: FloatError}``, or
+    ``{}`` with a note when no host C compiler can build them."""
+    from ..runtime.evaluate import EvaluationError
+    from ..runtime.float_accuracy import measure
+    from .render import render_c
+    double = render_c(model, programs, trig, "double", batch=False)
+    single = render_c(model, programs, trig, "float", batch=False)
+    try:
+        return measure(model, double, single, document)
+    except (EvaluationError, OSError) as exc:
+        print(f"note: float error not measured (no working host C compiler): {str(exc).splitlines()[0]}",
+              file=sys.stderr)
+        return {}
+
+
+def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
+             progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
+             batch: bool = True) -> Path:
+    """Write all generated files of ``model`` (``only``: just the named functions) under
+    ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
+    (the C's type, render.SCALARS) and ``batch`` (C batch variants): see render.render_c."""
+    out = Path(out_root) / model.identifier
+    programs = build_programs(model, params, only=only, progress=progress)
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch)
+    _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
+    base_params = base_params_document(model)          # None for robots with symbolic lengths
+    for note in undecided_notes(model, only) if progress else ():
+        print(f"note: {note}", file=sys.stderr)
+    if base_params is not None:
+        _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
+    float_error = measure_float_error(model, programs, document, trig) if scalar == "float" and "c" in languages else None
+    _write(out / "opcounts.json", json.dumps(opcounts_json(programs, float_error), indent=1) + "\n")
+    _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
+                                                  float_error))
+    for lang in languages:
+        options = {"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error} if lang == "c" else {}
+        for filename, text in RENDERERS[lang](model, programs, **options).items():
+            _write(out / lang / filename, text)
+            if lang == "casadi":
+                save_casadi_functions(text, out / lang)
+    return out

@@ -1,0 +1,287 @@
+"""Render optimised programs into source text through the jinja2 templates in
+``kindyngen/codegen/templates/`` (package data: they travel with an installed package).
+
+One renderer per target language, all fed the same plain context built here: names of
+inputs, temporaries and outputs are decided once per language, the printer supplies the
+expressions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import jinja2
+import symengine as se
+
+from .. import __version__
+from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, kernel_c,
+                          kernel_c_float, kernel_latency)
+from ..ik.damped_least_squares import dls_view
+from .optimize import Program
+from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
+from .render_python_c import render_python_c
+from ..readers.yaml_description import RobotModel
+
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+BATCH_BLOCK = 64
+"""Most configurations per block of a C batch function. A block's sin/cos of the joint angles
+and its outputs live in local arrays (outputs written there, then copied out row by row: stores
+to port[k*count + i] for several k would need run-time alias checks that stop compilers from
+vectorising), so functions with large outputs get smaller blocks."""
+
+BATCH_STACK = 32768
+"""Bytes of those local arrays a batch function may use."""
+
+BATCH_MIN_BLOCK = 16
+"""Fewest configurations per block worth a local output array; functions whose outputs need
+smaller blocks (regressors, hundreds of entries, mostly zeros: their time is the stores) write
+outputs in place instead, in blocks of BATCH_BLOCK."""
+
+SCALARS = ("double", "float")
+"""C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
+
+KERNEL_LANES = 8
+"""Single calls run the sincos kernel over the angles padded with zeros to a multiple of this
+(AVX-512 lanes): the vectorised loop then covers them all, with no scalar remainder."""
+
+
+@dataclass(frozen=True)
+class PortView:
+    name: str
+    shape: tuple
+    size: int
+    dtype: str
+    unit: str
+    description: str
+    entries: tuple = ()          # outputs: (flat index, expression text)
+    used: bool = True             # inputs: read by the function at all
+
+
+@dataclass(frozen=True)
+class FunctionView:
+    name: str
+    c_symbol: str
+    summary: str
+    conventions: str
+    inputs: tuple[PortView, ...]
+    outputs: tuple[PortView, ...]
+    assignments: tuple[tuple[str, str], ...]
+    before: dict
+    after: dict
+    has_select: bool
+    critical: dict = None         # longest chain of dependent operations (cycles, operations)
+    angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
+    first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
+    lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
+    block: int = 0                # C batch: configurations per block
+    in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
+    batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
+
+
+def _index(k: int, shape) -> str:
+    """The row-major multi-index of flat entry k, as numpy subscripts.
+
+    >>> _index(7, (2, 2, 3))
+    '1, 0, 1'
+    """
+    out = []
+    for size in reversed(shape):
+        out.append(k % size)
+        k //= size
+    return ", ".join(str(i) for i in reversed(out))
+
+
+def _matlab_index(k: int, shape) -> str:
+    """The MATLAB (1-based) subscripts of row-major flat entry k: a matrix entry is addressed
+    as written, row then column, whatever the memory order.
+
+    >>> _matlab_index(5, (4, 4)), _matlab_index(2, (7,))
+    ('2, 2', '3')
+    """
+    return ", ".join(str(int(i) + 1) for i in _index(k, shape).split(", "))
+
+
+def _environment() -> jinja2.Environment:
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), keep_trailing_newline=True,
+                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+    env.filters["shape"] = lambda shape: " x ".join(str(s) for s in shape)
+    env.filters["index"] = _index
+    env.filters["mindex"] = _matlab_index
+    env.filters["mshape"] = lambda port: " x ".join(str(s) for s in port.shape)
+    return env
+
+
+def input_names(program: Program, dialect: Dialect) -> dict:
+    """How each input symbol is read: ``q[3]`` in C and CasADi, ``q_3`` (unpacked) in numpy,
+    JAX and MATLAB."""
+    names = {}
+    for port, symbols in zip(program.function.inputs, program.function.input_symbols):
+        for k, sym in enumerate(symbols):
+            if dialect in (NUMPY, JAX, MATLAB):
+                names[sym] = f"{port.name}_{k}"
+            elif dialect is CASADI and len(port.shape) == 2:
+                names[sym] = f"{port.name}[{k // port.shape[1]}, {k % port.shape[1]}]"
+            else:
+                names[sym] = f"{port.name}[{k}]"
+    return names
+
+
+def kernel_angles(program: Program) -> tuple[int, int]:
+    """Which sines/cosines the C sincos kernel computes: ``(first, count)``, the entries
+    ``q[first:]``, or (0, 0) when no sin or cos has an entry of the ``q`` port exactly as its
+    argument (others, e.g. sin(q_1/2), stay libm calls). Leading entries that are no such
+    argument (a floating base's position and quaternion) are left out where that saves a
+    group of KERNEL_LANES lanes, else the kernel starts at q[0]."""
+    f = program.function
+    if "q" not in [p.name for p in f.inputs]:
+        return 0, 0
+    q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+    index = {sym: k for k, sym in enumerate(q)}
+    used = set()
+    for e in [e for _, e in program.assignments] + [e for port in program.outputs for e in port]:
+        used |= {index[a.args[0]] for a in e.atoms(se.sin, se.cos) if a.args[0] in index}
+    if not used:
+        return 0, 0
+    first = min(used)
+    if -(-(len(q) - first) // KERNEL_LANES) == -(-len(q) // KERNEL_LANES):
+        first = 0
+    return first, len(q) - first
+
+
+def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
+    """(configurations per block, outputs in place): the largest power of two up to BATCH_BLOCK
+    whose local arrays fit BATCH_STACK bytes, or BATCH_BLOCK in place when that is below
+    BATCH_MIN_BLOCK."""
+    block = BATCH_BLOCK
+    while block >= BATCH_MIN_BLOCK and 8 * block * (2 * angles + outputs) > BATCH_STACK:
+        block //= 2
+    return (block, False) if block >= BATCH_MIN_BLOCK else (BATCH_BLOCK, True)
+
+
+def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "libm",
+                  batch: bool = False) -> FunctionView:
+    """What the templates print of one function. C: ``trig="kernel"`` reads sin/cos of joint
+    angles from the arrays sin_q/cos_q the kernel fills; ``batch`` prints inputs and outputs of
+    configuration start + j of a structure-of-arrays batch (entry k at ``port[k*count + start + j]``,
+    sin/cos at ``sin_q[k][j]``; output entry k goes to ``out_<port>[k][j]``) and always reads sin/cos
+    of joint angles from those arrays."""
+    f = program.function
+    names = input_names(program, dialect)
+    if batch:
+        names = {sym: f"{port.name}[{k}*count + start + j]"
+                 for port, symbols in zip(f.inputs, f.input_symbols) for k, sym in enumerate(symbols)}
+    first, angles = kernel_angles(program) if (trig == "kernel" or batch) else (0, 0)
+    if angles:
+        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+        for k, sym in enumerate(q[first:]):
+            where = f"[{k}][j]" if batch else f"[{k}]"
+            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
+    block, in_place = _batch_block(angles, sum(p.size for p in f.outputs)) if batch else (0, False)
+    used_symbols = set()
+    for _, e in program.assignments:
+        used_symbols |= e.free_symbols
+    for port in program.outputs:
+        for e in port:
+            used_symbols |= e.free_symbols
+    assignments = []
+    for sym, expr in program.assignments:
+        names[sym] = str(sym)
+        assignments.append((str(sym), dialect.expr(expr, names)))
+    inputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
+                            p.unit, p.description,
+                            used=any(s in used_symbols for s in syms))
+                   for p, syms in zip(f.inputs, f.input_symbols))
+    outputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
+                             p.unit, p.description,
+                             entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
+                    for p, exprs in zip(f.outputs, program.outputs))
+    text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
+    return FunctionView(
+        name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
+        inputs=inputs, outputs=outputs, assignments=tuple(assignments),
+        before=program.before.to_json(), after=program.after.to_json(),
+        has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
+        critical=program.critical.to_json(),
+        angles=angles,
+        first_angle=first,
+        lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
+        block=block,
+        in_place=in_place,
+        batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
+    )
+
+
+def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") -> dict:
+    return {
+        "robot": model.identifier,
+        "robot_name": model.name,
+        "source": Path(model.source).name,
+        "n": model.nv,                           # velocity coordinates (a floating base: 6 + joints)
+        "nq": model.nq,
+        "convention": model.convention,
+        "structure": model.structure_text,       # a tree says what it is; an arm: None
+        "gravity": [float(v) for v in model.gravity],
+        "version": __version__,
+        "functions": [function_view(p, dialect, model.identifier, trig) for p in programs],
+        "trig": trig,
+        "trig_bound": TRIG_BOUND,
+        "trig_max_ulp": TRIG_MAX_ULP,
+        "kernel_latency": kernel_latency(),
+        "batch_block": BATCH_BLOCK,
+        "batch_stack": BATCH_STACK,
+        "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None
+    }
+
+
+def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "double",
+             batch: bool = True, float_error: dict | None = None) -> dict[str, str]:
+    """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/codegen/trig_kernel.py;
+    ``scalar``: one of SCALARS (float: no ik_dls, whose tolerances are double's); ``batch``:
+    whether the <name>_batch variants are written."""
+    single = scalar == "float"
+    env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig)
+    ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
+               sincos="kdg_sincosf" if single else "kdg_sincos",
+               libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
+               float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
+               sincos_kernel=kernel_c_float() if single else kernel_c(),
+               float_error={name: e.text() for name, e in (float_error or {}).items()})
+    if single:
+        ctx["ik_dls"] = None
+    return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
+            f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
+            "CMakeLists.txt": env.get_template("c/CMakeLists.txt.j2").render(ctx)}
+
+
+def render_python(model: RobotModel, programs) -> dict[str, str]:
+    env, ctx = _environment(), _context(model, programs, NUMPY)
+    return {f"{model.identifier}.py": env.get_template("python/module.py.j2").render(ctx)}
+
+
+def render_casadi(model: RobotModel, programs) -> dict[str, str]:
+    env, ctx = _environment(), _context(model, programs, CASADI)
+    return {f"{model.identifier}_casadi.py": env.get_template("casadi/module.py.j2").render(ctx)}
+
+
+def render_jax(model: RobotModel, programs) -> dict[str, str]:
+    """A module of pure jax.numpy functions (jit, vmap, grad apply); the iterative ik_dls is
+    left out (its loop and restarts are host code in the numpy module)."""
+    env, ctx = _environment(), _context(model, programs, JAX)
+    return {f"{model.identifier}_jax.py": env.get_template("jax/module.py.j2").render(ctx)}
+
+
+def render_matlab(model: RobotModel, programs) -> dict[str, str]:
+    """One .m function per generated function, ``<robot>_<name>.m`` (vectorised over a trailing
+    batch dimension), a MEX gateway around the generated C and the .m that builds it; the
+    iterative ik_dls is left out."""
+    env, ctx = _environment(), _context(model, programs, MATLAB)
+    ctx["mex"] = f"{model.identifier}_mex"
+    files = {f"{f.c_symbol}.m": env.get_template("matlab/function.m.j2").render(ctx, f=f) for f in ctx["functions"]}
+    files[f"{ctx['mex']}.c"] = env.get_template("matlab/mex.c.j2").render(ctx)
+    files[f"{model.identifier}_build_mex.m"] = env.get_template("matlab/build_mex.m.j2").render(ctx)
+    return files
+
+
+RENDERERS = {"c": render_c, "python": render_python, "casadi": render_casadi, "python_c": render_python_c,
+             "jax": render_jax, "matlab": render_matlab}

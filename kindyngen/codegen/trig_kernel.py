@@ -1,0 +1,367 @@
+"""The sine/cosine kernel emitted into generated C (``kindyngen generate --trig kernel``).
+
+Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by arithmetic
+(seven sincos pairs took 76 ns of lwr4's fk_hom, all its arithmetic 11 ns). The sines and
+cosines of the joint angles are therefore computed together, at the start of a function,
+by one loop of plain C99 that compilers vectorise:
+
+* range reduction x = k pi/2 + d + tail, k the integer nearest x 2/pi, by Cody-Waite: pi/2
+  split into four parts, the first three with 33 significant bits so that k times each is
+  exact for |k| < 2^20; the two roundings left are recovered (Fast2Sum), so d + tail carries
+  x - k pi/2 to about 2^-140 absolute, enough even for the doubles closest to multiples of
+  pi/2 (their |r| is above 2^-62 in the kernel's range);
+* polynomials on |d| <= pi/4: sin d = d + d^3 S(d^2), cos d = 1 - d^2/2 + d^4 C(d^2), S and C
+  of degree 5, minimax (Remez, :func:`fit_coefficients`) for the relative error of sin and
+  the absolute error of cos; their own error is 2^-58 and 2^-64. Degree 4 would miss the
+  1-ulp aim (its fit error is about 2^-50); what is cut is the latency, the kernel's chain of
+  dependent operations being what a single call waits for (:func:`kernel_latency`): the
+  polynomials start from d while the tail is summed, which enters to first order
+  (sin(d + tail) = sin d + tail cos d), and are evaluated by Estrin's scheme (three dependent
+  steps after z^4 instead of Horner's ten). The chain went from 84 to 51 cycles of
+  :data:`kindyngen.codegen.opcount.LATENCY`; measured alone (``python -m benchmarks.latency``,
+  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 65 cycles (FMA build; 73
+  strict, 1.43x the bound);
+* the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
+* |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
+
+Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
+practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
+multiple of pi/2 in range, at random and at the special values.
+
+The coefficients below are written out (generation must not depend on a fit's numerics);
+``fit_coefficients()`` and ``split_pio2()`` recompute them, and a test checks they agree.
+"""
+from __future__ import annotations
+
+TRIG_MODES = ("kernel", "libm")
+"""kernel: sin/cos of joint angles by the emitted kernel (default); libm: every sin/cos by libm."""
+
+BOUND = 1048576.0
+"""Largest |x| the kernel reduces itself (2^20 rad); beyond it, libm. Keeps |k| < 2^20."""
+
+MAX_ULP = 1
+"""Largest difference from glibc's sin/cos, in units in the last place of glibc's result."""
+
+TWO_OVER_PI = 0.6366197723675814
+PIO2_PARTS = (1.5707963267341256, 6.077100506303966e-11, 2.0222662487111665e-21, 8.4784276603689e-32)
+SIN_COEFFS = (-0.16666666666666632, 0.008333333333322424, -0.0001984126982981672,
+              2.7557313695144572e-06, -2.5050758640135855e-08, 1.5896827148989416e-10)
+COS_COEFFS = (0.0416666666666666, -0.0013888888888874138, 2.4801587289491644e-05,
+              -2.755731435518579e-07, 2.0875723676428724e-09, -1.1359669434575456e-11)
+
+R_MAX = "0.7854"
+"""Fit interval |r| <= R_MAX, a little over pi/4: k from x*(2/pi) rounded may be one off
+the nearest quadrant for x within a few ulp of an odd multiple of pi/4."""
+
+SHIFTER = 6755399441055744.0
+"""1.5 * 2^52: y + SHIFTER - SHIFTER rounds y (|y| < 2^51) to an integer in IEEE double."""
+
+TINY = 1.4901161193847656e-08
+"""2^-26: below it sin x = x and cos x = 1 after rounding; returning x keeps the sign of -0."""
+
+
+def split_pio2():
+    """pi/2 as four doubles: three of 33 significant bits (k * part exact for |k| < 2^20), then
+    the rounded rest."""
+    import mpmath as mp
+    with mp.workdps(60):
+        rest, parts = mp.pi / 2, []
+        for _ in range(3):
+            scale = mp.mpf(2) ** (32 - mp.floor(mp.log(abs(rest), 2)))
+            part = mp.floor(rest * scale) / scale
+            parts.append(float(part))
+            rest -= part
+        parts.append(float(rest))
+        return tuple(parts), float(2 / mp.pi)
+
+
+def _remez(f, weight, degree, a, b, grid=1500, iterations=20):
+    """Coefficients (low order first) of the polynomial minimising max |weight (f - p)| on
+    [a, b]: Remez exchange on a grid of ``grid`` + 1 points."""
+    import mpmath as mp
+    n = degree + 2
+    reference = [(a + b) / 2 - (b - a) / 2 * mp.cos(mp.pi * i / (n - 1)) for i in range(n)]
+    xs = [a + (b - a) * i / grid for i in range(grid + 1)]
+    fs, ws = [f(x) for x in xs], [weight(x) for x in xs]
+    index = {x: i for i, x in enumerate(xs)}
+    for _ in range(iterations):
+        matrix, rhs = mp.matrix(n, n), mp.matrix(n, 1)
+        for i, x in enumerate(reference):
+            for j in range(degree + 1):
+                matrix[i, j] = x ** j
+            matrix[i, degree + 1] = (-1) ** i / weight(x)
+            rhs[i] = fs[index[x]] if x in index else f(x)
+        solution = mp.lu_solve(matrix, rhs)
+        coeffs = [solution[j] for j in range(degree + 1)]
+        level = abs(solution[degree + 1])
+        errors = [w * (fx - mp.polyval(coeffs[::-1], x)) for x, fx, w in zip(xs, fs, ws)]
+        extrema, i = [], 0
+        while i < len(xs):       # the largest error of each run of one sign
+            j, best = i, i
+            while j < len(xs) and mp.sign(errors[j]) == mp.sign(errors[i]):
+                best = j if abs(errors[j]) > abs(errors[best]) else best
+                j += 1
+            extrema.append(best)
+            i = j
+        while len(extrema) > n:  # keep n alternating extrema: drop the smaller end
+            extrema.pop(0 if abs(errors[extrema[0]]) < abs(errors[extrema[-1]]) else -1)
+        worst = max(abs(e) for e in errors)
+        if len(extrema) < n or worst <= level * (1 + mp.mpf("1e-9")):
+            break
+        reference = [xs[k] for k in extrema]
+    return coeffs, worst
+
+
+def _minimax(degree: int):
+    """(S, C, error of S, error of C) as mpmath numbers, polynomials of ``degree`` in z:
+    S(z) ~ (sin sqrt z - sqrt z) / z^1.5 weighted by z (the relative error of sin), C(z) ~
+    (cos sqrt z - 1 + z/2) / z^2 weighted by z^2 (the absolute error of cos), z in
+    [z_max/1000, z_max] (below it the weight makes any error negligible)."""
+    import mpmath as mp
+    with mp.workdps(50):
+        z_max = mp.mpf(R_MAX) ** 2
+
+        def s(z):
+            root = mp.sqrt(z)
+            return (mp.sin(root) - root) / (z * root)
+
+        def c(z):
+            return (mp.cos(mp.sqrt(z)) - 1 + z / 2) / (z * z)
+
+        sin_coeffs, sin_error = _remez(s, lambda z: z, degree, z_max / 1000, z_max)
+        cos_coeffs, cos_error = _remez(c, lambda z: z * z, degree, z_max / 1000, z_max)
+        return sin_coeffs, cos_coeffs, sin_error, cos_error
+
+
+def fit_coefficients():
+    """The double kernel's (S, C, error of S, error of C) as doubles: :func:`_minimax` of degree 5."""
+    sin_coeffs, cos_coeffs, sin_error, cos_error = _minimax(5)
+    return (tuple(float(v) for v in sin_coeffs), tuple(float(v) for v in cos_coeffs),
+            float(sin_error), float(cos_error))
+
+
+def _estrin(coeffs, z: str, z2: str, z4: str) -> str:
+    """c0 + c1 z + ... + c5 z^5 as (c0 + c1 z) + z2 (c2 + c3 z) + z4 (c4 + c5 z): three
+    dependent steps after z4 where Horner's scheme has ten."""
+    pairs = [f"({coeffs[j]!r} + {coeffs[j + 1]!r}*{z})" for j in range(0, len(coeffs), 2)]
+    return f"{pairs[0]} + {z2}*{pairs[1]} + {z4}*{pairs[2]}"
+
+
+def _steps() -> tuple[tuple[str, str], ...]:
+    """The kernel's arithmetic for one argument ``xi`` as (name, C expression) in evaluation
+    order; every expression is also valid Python (names, literals, + - *, parentheses), which
+    :func:`kernel_latency` reads. The quadrant selects follow in :func:`kernel_c`."""
+    p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
+    shifter = repr(SHIFTER)
+    return (
+        # k = xi*2/pi rounded to an integer by the shifter 1.5*2^52
+        ("k", f"(xi*{TWO_OVER_PI!r} + {shifter}) - {shifter}"),
+        # k mod 4 as m = k - 4 round(k/4) in -2..2, exact
+        ("m", f"k - 4.0*((0.25*k + {shifter}) - {shifter})"),
+        # d + tail = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
+        # two subtractions recovered exactly (Fast2Sum)
+        ("a", f"xi - k*{p1}"),
+        ("b", f"a - k*{p2}"),
+        ("b_err", f"(a - b) - k*{p2}"),
+        ("d", f"b - k*{p3}"),
+        ("d_err", f"(b - d) - k*{p3}"),
+        ("tail", f"(b_err + d_err) - k*{p4}"),
+        # the polynomials start from d while the tail is still being summed: it enters to
+        # first order, sin(d + tail) = sin d + tail cos d, cos(d + tail) = cos d - tail sin d
+        ("z", "d*d"),
+        ("z2", "z*z"),
+        ("z4", "z2*z2"),
+        ("half_z", "0.5*z"),
+        ("w", "1.0 - half_z"),
+        # sin(d + tail) = d + d^3 S(z) + tail (1 - z/2)
+        ("sin_r", f"d + (d*z*({_estrin(SIN_COEFFS, 'z', 'z2', 'z4')}) + tail*w)"),
+        # cos(d + tail) = (1 - z/2) + z^2 C(z) - d tail, the rounding of 1 - z/2 added back
+        ("cos_r", f"w + (z2*({_estrin(COS_COEFFS, 'z', 'z2', 'z4')}) + (((1.0 - w) - half_z) - d*tail))"),
+    )
+
+
+SELECTS = 3
+"""Dependent selects after the polynomials: the quadrant's (sin, cos) swap, its sign, the tiny
+argument."""
+
+
+def kernel_latency(latency=None) -> int:
+    """Cycles from the argument to sin and cos along the kernel's longest chain, with
+    :data:`kindyngen.codegen.opcount.LATENCY` (no contraction): the instruction-level latency bound
+    of one call. Read from the very expressions :func:`kernel_c` prints.
+
+    >>> kernel_latency()
+    51
+    """
+    import ast
+    from .opcount import LATENCY
+    lat = dict(LATENCY, **(latency or {}))
+    ops = {ast.Add: lat["add"], ast.Sub: lat["add"], ast.Mult: lat["mul"]}
+    ready = {"xi": 0}
+
+    def visit(node):
+        if isinstance(node, ast.BinOp):
+            return max(visit(node.left), visit(node.right)) + ops[type(node.op)]
+        if isinstance(node, ast.Name):
+            return ready[node.id]
+        if isinstance(node, ast.Constant) or (isinstance(node, ast.UnaryOp)
+                                              and isinstance(node.operand, ast.Constant)):
+            return 0            # a literal, negative ones included
+        raise TypeError(f"kernel step not in + - * of names and literals: {ast.dump(node)}")
+
+    for name, expr in _steps():
+        ready[name] = visit(ast.parse(expr, mode="eval").body)
+    quadrant = ready["m"] + lat["add"]          # fabs(m) == 1.0: a compare
+    return max(ready["sin_r"], ready["cos_r"], quadrant) + SELECTS * lat["select"]
+
+
+def kernel_c(name: str = "kdg_sincos") -> str:
+    """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
+    for i < n. The arrays must not overlap."""
+    bound = repr(BOUND)
+    body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
+    return f"""\
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from). The first loop has no branch and no
+ * call, so compilers vectorise it; arguments beyond +-{BOUND:g}, infinities and NaN take libm in
+ * the second. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
+static void {name}(long n, const double *restrict x, double *restrict s, double *restrict c)
+{{
+    long i;
+    for (i = 0; i < n; ++i) {{
+        /* arguments out of range give garbage here (no undefined behaviour: all in double),
+           replaced in the second loop; codegen/trig_kernel.py's _steps explains each step */
+        const double xi = x[i];
+{body}
+        /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s */
+        const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(m) == 1.0 ? sin_r : cos_r;
+        const int tiny = fabs(xi) < {TINY!r};
+        s[i] = tiny ? xi : ((m == 2.0 || m == -2.0 || m == -1.0) ? -sin_q : sin_q);
+        c[i] = tiny ? 1.0 : ((m == 2.0 || m == -2.0 || m == 1.0) ? -cos_q : cos_q);
+    }}
+    for (i = 0; i < n; ++i) {{
+        if (!(fabs(x[i]) <= {bound})) {{
+            s[i] = sin(x[i]);
+            c[i] = cos(x[i]);
+        }}
+    }}
+}}
+"""
+
+
+# -- single precision (``generate --scalar float``) -------------------------------------------
+# The same method in float arithmetic: the float kernel is the double one with its constants
+# rounded once to float from their exact values (pi/2 split for float, minimax polynomials of
+# degree 3 fitted for float's precision), a range of +-FLOAT_BOUND and libm's sinf/cosf beyond.
+
+FLOAT_BOUND = 1024.0
+"""Largest |x| the float kernel reduces itself (2^10 rad): |k| < 2^10, so k times each of the
+first three parts of pi/2 (14 significant bits) is exact in float."""
+
+FLOAT_MAX_ULP = 1
+"""Largest difference of the float kernel from the correctly rounded sin and cos, in ulp of the
+float result (tests/runtime/test_float_code.py checks it)."""
+
+FLOAT_TWO_OVER_PI = "0.63661975f"
+FLOAT_PIO2_PARTS = ("1.5706787f", "0.000117614865f", "9.920313e-10f", "6.223372e-14f")
+FLOAT_SIN_COEFFS = ("-0.16666667f", "0.008333329f", "-0.00019839335f", "2.7183114e-06f")
+FLOAT_COS_COEFFS = ("0.041666668f", "-0.0013888883f", "2.479952e-05f", "-2.7210237e-07f")
+
+FLOAT_SHIFTER = "12582912.0f"
+"""1.5 * 2^23: y + SHIFTER - SHIFTER rounds y (|y| < 2^22) to an integer in IEEE float."""
+
+FLOAT_TINY = "0.00024414062f"
+"""2^-12: below it sinf x = x and cosf x = 1 after rounding."""
+
+
+def split_pio2_float():
+    """pi/2 as four floats, three of 14 significant bits, then the rest rounded; and 2/pi
+    rounded; as C literals."""
+    import mpmath as mp
+    from fractions import Fraction
+    from .float32 import c_float
+    with mp.workdps(60):
+        rest, parts = mp.pi / 2, []
+        for _ in range(3):
+            scale = mp.mpf(2) ** (13 - mp.floor(mp.log(abs(rest), 2)))
+            part = mp.floor(rest * scale) / scale
+            parts.append(c_float(_fraction(part)))
+            rest -= part
+        parts.append(c_float(_fraction(rest)))
+        return tuple(parts), c_float(_fraction(2 / mp.pi))
+
+
+def _fraction(value):
+    """An mpmath number as an exact Fraction."""
+    from fractions import Fraction
+    sign, man, exp, _ = value._mpf_
+    return (-1) ** sign * Fraction(int(man)) * Fraction(2) ** int(exp)
+
+
+def fit_coefficients_float():
+    """(S, C) for float: :func:`_minimax` of degree 3, each coefficient rounded once to float
+    from its exact value, as C literals."""
+    import mpmath as mp
+    from .float32 import c_float
+    sin_coeffs, cos_coeffs, _, _ = _minimax(3)
+    with mp.workdps(50):
+        return (tuple(c_float(_fraction(mp.mpf(v))) for v in sin_coeffs),
+                tuple(c_float(_fraction(mp.mpf(v))) for v in cos_coeffs))
+
+
+def _horner_text(coeffs, z: str) -> str:
+    text = coeffs[-1]
+    for c in reversed(coeffs[:-1]):
+        text = f"{c} + {z}*({text})"
+    return text
+
+
+def kernel_c_float(name: str = "kdg_sincosf") -> str:
+    """The float kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sinf x[i],
+    c[i] = cosf x[i] for i < n; the double kernel's steps in float (see kernel_c)."""
+    p1, p2, p3, p4 = FLOAT_PIO2_PARTS
+    sh = FLOAT_SHIFTER
+    return f"""\
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n in float, within {FLOAT_MAX_ULP} ulp of the correctly
+ * rounded values (kindyngen/codegen/trig_kernel.py: the double kernel's method, its constants rounded to
+ * float). The first loop has no branch and no call; arguments beyond +-{FLOAT_BOUND:g}, infinities and
+ * NaN take libm's sinf/cosf in the second. Needs IEEE float arithmetic: no -ffast-math. */
+static void {name}(long n, const float *restrict x, float *restrict s, float *restrict c)
+{{
+    long i;
+    for (i = 0; i < n; ++i) {{
+        const float xi = x[i];
+        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^23; m = k mod 4 in -2..2 */
+        const float k = (xi*{FLOAT_TWO_OVER_PI} + {sh}) - {sh};
+        const float m = k - 4.0f*((0.25f*k + {sh}) - {sh});
+        /* r + rlo = xi - k*pi/2 (Cody-Waite, the roundings recovered by Fast2Sum) */
+        const float a = xi - k*{p1};
+        const float b = a - k*{p2};
+        const float b_err = (a - b) - k*{p2};
+        const float d = b - k*{p3};
+        const float d_err = (b - d) - k*{p3};
+        const float tail = (b_err + d_err) - k*{p4};
+        const float r = d + tail;
+        const float rlo = (d - r) + tail;
+        const float z = r*r;
+        const float sin_r = r + (r*z*({_horner_text(FLOAT_SIN_COEFFS, "z")}) + rlo*(1.0f - 0.5f*z));
+        const float half_z = 0.5f*z;
+        const float w = 1.0f - half_z;
+        const float cos_r = w + (((1.0f - w) - half_z)
+                                 + (z*z*({_horner_text(FLOAT_COS_COEFFS, "z")}) - r*rlo));
+        const float sin_q = fabsf(m) == 1.0f ? cos_r : sin_r;
+        const float cos_q = fabsf(m) == 1.0f ? sin_r : cos_r;
+        const int tiny = fabsf(xi) < {FLOAT_TINY};
+        s[i] = tiny ? xi : ((m == 2.0f || m == -2.0f || m == -1.0f) ? -sin_q : sin_q);
+        c[i] = tiny ? 1.0f : ((m == 2.0f || m == -2.0f || m == 1.0f) ? -cos_q : cos_q);
+    }}
+    for (i = 0; i < n; ++i) {{
+        if (!(fabsf(x[i]) <= {FLOAT_BOUND!r}f)) {{
+            s[i] = sinf(x[i]);
+            c[i] = cosf(x[i]);
+        }}
+    }}
+}}
+"""

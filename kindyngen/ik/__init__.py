@@ -1,0 +1,1 @@
+"""Inverse kinematics: the closed form of LWR-type arms, and damped least squares for any arm."""

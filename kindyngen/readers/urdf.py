@@ -1,0 +1,543 @@
+"""URDF -> :class:`kindyngen.model.robot_model.RobotModel`: the serial chain from a base link to a tip link.
+
+Each revolute, continuous or prismatic joint on the chain becomes a
+:class:`kindyngen.model.robot_model.Joint` whose link frame is the URDF child link frame:
+``before = F * T(xyz) Rz(yaw) Ry(pitch) Rx(roll) * A``, ``after = A^-1``, with F the fixed
+joints met since the previous moving joint and A turning z onto the joint axis. Fixed joints
+are merged: into the next moving joint's ``before``, or after the last one into the model's
+``tool``. Each moving joint's :class:`kindyngen.model.robot_model.Link` is the exact combination (mass,
+centre of mass, inertia about it, in the child link frame) of its child link and every link
+fixed to it, the same bodies Pinocchio's ``buildModelFromUrdf`` makes; a moving joint off
+the chain (a gripper's fingers) is locked at q = 0 with a note (its links join the body it
+hangs from, as in Pinocchio's ``buildReducedModel``), and links above the first moving joint
+are the base, which carries no dynamics.
+
+Numbers are read as the decimals written (exact rationals); lengths below 1e-12 are 0 and
+angles are cleaned by :func:`kindyngen.model.placement.clean_angle` (1.5708 read as pi/2, with a
+note). An inertia entry that is not rational (rotated by an angle that is not a multiple of
+pi/12) is its value to 17 significant digits, so every :class:`Link` field is rational.
+A URDF states no gravity: the model's is (0, 0, -9.81) m/s^2, the base link's z axis up.
+Every problem is a :class:`kindyngen.model.robot_model.RobotDescriptionError` naming the file and the
+element, never a traceback.
+
+Example: a 1-joint arm turning about y, its link a point mass 1 kg at 0.5 m along x:
+
+>>> model = parse_urdf('''<robot name="pendulum">
+...   <link name="base"/>
+...   <link name="arm"><inertial><mass value="1"/><origin xyz="0.5 0 0"/>
+...     <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+...   <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/>
+...     <origin xyz="0 0 1" rpy="0 0 1.5708"/><axis xyz="0 1 0"/>
+...     <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+... </robot>''')
+>>> joint = model.joints[0]
+>>> joint.name, joint.kind, joint.lower, joint.upper
+('shoulder', 'revolute', -2.0, 2.0)
+>>> joint.before.factors           # T(xyz) Rz(yaw), then Rx(-pi/2) turning z onto the axis y
+(('trans', (0, 0, 1)), ('rot', (0, 0, 1), pi/2), ('rot', (1, 0, 0), -pi/2))
+>>> joint.after.factors
+(('rot', (1, 0, 0), pi/2),)
+>>> model.links[0].mass, model.links[0].com, model.base_name, model.flange_name
+(1, (1/2, 0, 0), 'base', 'arm')
+>>> print(model.notes[0])
+<memory>: joint 'shoulder' origin rpy[2]: 1.5708 read as pi/2 (off by 3.7e-06 rad; keep the value ...)
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np     # only to check inertias as written: nothing in the model is computed with it
+import sympy
+
+from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia
+from ..model.placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
+
+GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
+MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
+UNSUPPORTED = ("floating", "planar")          # several degrees of freedom: not a serial-arm joint
+JOINT_TYPES = tuple(MOVING) + ("fixed",) + UNSUPPORTED
+TINY_RESIDUE = 1e-20    # an evaluated inertia or CoM entry below this is an exact cancellation
+SIGNIFICANT_DIGITS = 17  # a double's worth: non-rational entries are rounded to this
+# a decimal as URDF parsers read it (float() would also accept nan, inf and 1_0)
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+# a floating body with two pendulums, the example of the tree modules
+TWO_PENDULUMS = """<robot name="two_pendulums">
+  <link name="body"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial></link>
+  <link name="left"><inertial><mass value="1"/><origin xyz="0 0 -0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.001"/></inertial></link>
+  <link name="right"><inertial><mass value="1"/><origin xyz="0 0 -0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="left_joint" type="revolute"><parent link="body"/><child link="left"/>
+    <origin xyz="0 0.2 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="right_joint" type="revolute"><parent link="body"/><child link="right"/>
+    <origin xyz="0 -0.2 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def _error(reading: Reading, field: str, reason: str) -> RobotDescriptionError:
+    return RobotDescriptionError(reading.source, field, reason)
+
+
+@dataclass(frozen=True)
+class _Origin:
+    """An ``<origin>`` as written (floats), with the element path its notes name."""
+
+    xyz: tuple
+    rpy: tuple
+    field: str
+
+
+@dataclass(frozen=True)
+class _Inertial:
+    """A link's ``<inertial>`` as written: mass, origin, (ixx, ixy, ixz, iyy, iyz, izz)."""
+
+    mass: float
+    origin: _Origin
+    inertia: tuple
+
+
+@dataclass(frozen=True)
+class _UrdfJoint:
+    """A ``<joint>`` as written (numbers as floats, checked but not yet made exact)."""
+
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: _Origin
+    axis: tuple                 # as written, (1, 0, 0) when absent (the URDF default)
+    limit: tuple | None         # (lower, upper) of <limit>, None without one
+    mimic: str | None
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """The kinematic tree: links (name -> inertial or None) in document order, the joint
+    above each non-root link, the joints below each link, and the root link."""
+
+    links: dict
+    parent_joint: dict
+    child_joints: dict
+    root: str
+
+
+# ------------------------------------------------------------------ numbers and elements
+
+def _floats(text: str | None, count: int, reading: Reading, field: str) -> tuple[float, ...]:
+    """``count`` whitespace-separated finite decimals.
+
+    >>> _floats("0 0.333 -1e-3", 3, Reading("f.urdf"), "xyz")
+    (0.0, 0.333, -0.001)
+    """
+    tokens = (text or "").split()
+    if len(tokens) != count:
+        raise _error(reading, field, f"expected {count} numbers, got {text!r}")
+    for token in tokens:
+        if not _NUMBER.fullmatch(token):
+            hint = " (a xacro expression: run xacro on the file first)" if "$" in token else ""
+            raise _error(reading, field, f"cannot read {token!r} as a number{hint}")
+    values = tuple(float(token) for token in tokens)
+    if not all(math.isfinite(v) for v in values):
+        raise _error(reading, field, f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _attribute(element: ET.Element, name: str, reading: Reading, field: str, default: float | None = None) -> float:
+    """One numeric attribute (``default`` when absent, an error when there is none)."""
+    text = element.get(name)
+    if text is None:
+        if default is None:
+            raise _error(reading, f"{field} {name}", "missing")
+        return default
+    return _floats(text, 1, reading, f"{field} {name}")[0]
+
+
+def _read_origin(element: ET.Element | None, reading: Reading, field: str) -> _Origin:
+    """An optional ``<origin xyz rpy>`` (absent parts zero)."""
+    field = f"{field} origin"
+    if element is None:
+        return _Origin((0.0,) * 3, (0.0,) * 3, field)
+    return _Origin(_floats(element.get("xyz", "0 0 0"), 3, reading, f"{field} xyz"),
+                   _floats(element.get("rpy", "0 0 0"), 3, reading, f"{field} rpy"), field)
+
+
+def _placement(origin: _Origin, reading: Reading) -> Placement:
+    """An origin as an exact placement ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)``, noting every
+    snapped angle."""
+    angles = [reading.angle(value, f"{origin.field} rpy[{k}]") for k, value in enumerate(origin.rpy)]
+    return rpy_xyz([exact_length(v) for v in origin.xyz], angles)
+
+
+def _name(element: ET.Element, what: str, index: int, reading: Reading) -> str:
+    name = element.get("name")
+    if not name:
+        raise _error(reading, f"{what}[{index}] name", f"<{what}> number {index + 1} has no name")
+    return name
+
+
+def _read_inertial(element: ET.Element, link: str, reading: Reading) -> _Inertial | None:
+    """A link's ``<inertial>`` (None without one); mass, origin and all six moments as
+    urdfdom requires them."""
+    inertial = element.find("inertial")
+    if inertial is None:
+        return None
+    field = f"link '{link}' inertial"
+    mass_element, inertia_element = inertial.find("mass"), inertial.find("inertia")
+    if mass_element is None:
+        raise _error(reading, f"{field} mass", "missing")
+    if inertia_element is None:
+        raise _error(reading, f"{field} inertia", "missing")
+    mass = _attribute(mass_element, "value", reading, f"{field} mass")
+    if mass < 0:
+        raise _error(reading, f"{field} mass value", f"mass must not be negative, got {mass:g}")
+    moments = tuple(_attribute(inertia_element, key, reading, f"{field} inertia")
+                    for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
+    return _Inertial(mass, _read_origin(inertial.find("origin"), reading, field), moments)
+
+
+def _read_joint(element: ET.Element, index: int, reading: Reading) -> _UrdfJoint:
+    name = _name(element, "joint", index, reading)
+    field = f"joint '{name}'"
+    kind = element.get("type")
+    if kind not in JOINT_TYPES:
+        raise _error(reading, f"{field} type", f"expected one of {', '.join(JOINT_TYPES)}, got {kind!r}")
+    ends = []
+    for end in ("parent", "child"):
+        link = element.find(end)
+        if link is None or not link.get("link"):
+            raise _error(reading, f"{field} {end}", f"missing (<{end} link=\"...\"/>)")
+        ends.append(link.get("link"))
+    axis = element.find("axis")
+    axis = (1.0, 0.0, 0.0) if axis is None else _floats(axis.get("xyz", "1 0 0"), 3, reading, f"{field} axis xyz")
+    limit = element.find("limit")
+    if limit is not None:
+        limit = tuple(_attribute(limit, key, reading, f"{field} limit", default=0.0) for key in ("lower", "upper"))
+    mimic = element.find("mimic")
+    return _UrdfJoint(name, kind, ends[0], ends[1], _read_origin(element.find("origin"), reading, field),
+                      axis, limit, None if mimic is None else mimic.get("joint", "?"))
+
+
+def _read_xml(text: str | bytes, reading: Reading) -> ET.Element:
+    """The ``<robot>`` element of a URDF text."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        line, column = exc.position
+        raise _error(reading, "<xml>", f"malformed XML at line {line}, column {column + 1}: {exc}") from exc
+    if root.tag != "robot":
+        raise _error(reading, "<robot>", f"the top element is <{root.tag}>, expected <robot>")
+    return root
+
+
+def _closest(name: str, names) -> str:
+    close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.4)
+    return f"; closest: {', '.join(close)}" if close else ""
+
+
+def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
+    """Links and joints (direct children of ``<robot>``: a ``<transmission>`` names joints
+    too), checked to form one tree."""
+    links = {}
+    for index, element in enumerate(robot.findall("link")):
+        name = _name(element, "link", index, reading)
+        if name in links:
+            raise _error(reading, f"link '{name}'", "defined twice")
+        links[name] = _read_inertial(element, name, reading)
+    if not links:
+        raise _error(reading, "<robot>", "no <link> elements")
+    parent_joint, child_joints, joint_names = {}, {name: [] for name in links}, set()
+    for index, element in enumerate(robot.findall("joint")):
+        joint = _read_joint(element, index, reading)
+        if joint.name in joint_names:
+            raise _error(reading, f"joint '{joint.name}'", "defined twice")
+        joint_names.add(joint.name)
+        for end, link in (("parent", joint.parent), ("child", joint.child)):
+            if link not in links:
+                raise _error(reading, f"joint '{joint.name}' {end}",
+                                    f"link '{link}' is not defined{_closest(link, links)}")
+        if joint.child in parent_joint:
+            raise _error(reading, f"joint '{joint.name}' child", f"link '{joint.child}' already has a parent "
+                                f"(joint '{parent_joint[joint.child].name}'): not a tree")
+        parent_joint[joint.child] = joint
+        child_joints[joint.parent].append(joint)
+    roots = [name for name in links if name not in parent_joint]
+    if len(roots) > 1:
+        raise _error(reading, "<robot>", f"several root links, not connected by joints: {', '.join(roots)}")
+    reached = _descendants(child_joints, roots[0]) if roots else []
+    if len(reached) < len(links):
+        cycle = [name for name in links if name not in reached]
+        raise _error(reading, "<robot>", f"the joints between links {', '.join(cycle)} form a cycle")
+    return _Tree(links, parent_joint, child_joints, roots[0])
+
+
+def _read_robot(text: str | bytes, reading: Reading) -> tuple[str, _Tree]:
+    """The robot's name and its tree of links and joints."""
+    robot = _read_xml(text, reading)
+    name = (robot.get("name") or "").strip()
+    if not name:
+        raise _error(reading, "<robot> name", "missing (the model's name)")
+    return name, _read_tree(robot, reading)
+
+
+def _descendants(child_joints: dict, link: str, follow=lambda joint: True) -> list:
+    """``link`` and the links below it (through joints accepted by ``follow``), depth first."""
+    out, stack = [], [link]
+    while stack:
+        name = stack.pop()
+        out.append(name)
+        stack.extend(joint.child for joint in reversed(child_joints[name]) if follow(joint))
+    return out
+
+
+# ------------------------------------------------------------------ the chain
+
+def _link_name(tree: _Tree, name: str, option: str, reading: Reading) -> str:
+    if name not in tree.links:
+        raise _error(reading, option, f"no link named '{name}' in the URDF{_closest(name, tree.links)}")
+    return name
+
+
+def _path(tree: _Tree, base: str, tip: str, reading: Reading) -> list:
+    """The joints from ``base`` down to ``tip``."""
+    path, link = [], tip
+    while link != base:
+        if link == tree.root:
+            raise _error(reading, "--tip", f"link '{tip}' is not below the base link '{base}'")
+        path.append(tree.parent_joint[link])
+        link = path[-1].parent
+    return path[::-1]
+
+
+def _default_tip(tree: _Tree, base: str, reading: Reading) -> str:
+    """The single leaf below ``base`` reached through a moving joint (a leaf fixed to the
+    base, such as UR's ``base`` frame, belongs to the base and cannot end an arm)."""
+    static = set(_descendants(tree.child_joints, base, lambda joint: joint.kind == "fixed"))
+    leaves = [link for link in _descendants(tree.child_joints, base)
+              if not tree.child_joints[link] and link not in static]
+    if len(leaves) == 1:
+        return leaves[0]
+    if not leaves:
+        raise _error(reading, "--base", f"no moving joint below link '{base}'")
+    raise _error(reading, "--tip", f"the tree below '{base}' has {len(leaves)} leaves; name the last link "
+                        f"of the arm with --tip (one of: {', '.join(leaves)})")
+
+
+def _limits(joint: _UrdfJoint, reading: Reading) -> tuple[float, float]:
+    """The joint's range; a continuous joint (and a revolute one with limits 0, 0, which
+    some exporters write for unlimited) gets -pi..pi, for samplers, with a note."""
+    field = f"joint '{joint.name}' limit"
+    if joint.kind == "continuous":
+        reading.note(f"{reading.source}: joint '{joint.name}' is continuous: range -pi..pi assumed")
+        return -math.pi, math.pi
+    if joint.limit is None:
+        raise _error(reading, field, f"missing (URDF requires <limit lower upper> on {joint.kind} joints)")
+    lower, upper = joint.limit
+    if lower == upper == 0:
+        if joint.kind == "prismatic":
+            raise _error(reading, field, "a prismatic joint needs a range (lower and upper are 0)")
+        reading.note(f"{reading.source}: {field} is 0..0: range -pi..pi assumed")
+        return -math.pi, math.pi
+    if not lower < upper:
+        raise _error(reading, field, f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
+    return lower, upper
+
+
+def _axis(joint: _UrdfJoint, reading: Reading) -> tuple:
+    """The joint axis as an exact unit vector."""
+    if max(abs(v) for v in joint.axis) < 1e-9:
+        raise _error(reading, f"joint '{joint.name}' axis xyz",
+                            f"the axis {list(joint.axis)} has no direction (all zero)")
+    return unit_axis(joint.axis)
+
+
+def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Joint:
+    """A revolute or prismatic joint whose link frame is the URDF child link frame, placed
+    after the fixed placement ``fixed`` on the previous link frame."""
+    if joint.kind in UNSUPPORTED:
+        raise _error(reading, f"joint '{joint.name}' type",
+                            f"a {joint.kind} joint is not supported (only revolute, continuous, "
+                            f"prismatic and fixed joints; a free root body is --floating-base)")
+    if joint.mimic is not None:
+        reading.note(f"{reading.source}: joint '{joint.name}' mimics '{joint.mimic}' in the URDF; "
+                     f"here it is an independent joint")
+    align = axis_alignment(_axis(joint, reading))
+    lower, upper = _limits(joint, reading)
+    return Joint(before=fixed * _placement(joint.origin, reading) * align, after=align.inverse(),
+                 offset=sympy.Integer(0), lower=lower, upper=upper, kind=MOVING[joint.kind], name=joint.name)
+
+
+# ------------------------------------------------------------------ rigid bodies
+
+def _rigid_body(tree: _Tree, link: str, chain: set, reading: Reading) -> list:
+    """(placement in ``link``'s frame, inertial, name) of ``link`` and every link fixed to it;
+    a moving joint not in ``chain`` (a gripper's fingers) is locked at q = 0, with a note, so
+    its links count (the bodies of Pinocchio's ``buildReducedModel`` locking it at 0)."""
+    parts, stack = [], [(link, Placement())]
+    while stack:
+        name, placement = stack.pop()
+        parts.append((placement, tree.links[name], name))
+        fixed = []
+        for joint in tree.child_joints[name]:
+            if joint.kind == "fixed":
+                fixed.append((joint.child, placement * _placement(joint.origin, reading)))
+            elif joint.name not in chain:
+                # at q = 0 a joint's transform is its origin (rotation and slide are zero)
+                fixed.append((joint.child, placement * _placement(joint.origin, reading)))
+                reading.note(f"{reading.source}: joint '{joint.name}' ({joint.kind}) is not on the chain: "
+                             f"locked at 0, its links part of link '{link}'")
+        stack.extend(reversed(fixed))       # depth first, in document order
+    return parts
+
+
+def _rational(value) -> sympy.Rational:
+    """An exact constant as a rational: itself if rational, else its value to 17 significant
+    digits (a decimal, the same on every machine); a cancellation residue is 0.
+
+    >>> _rational(sympy.Rational(1, 3)), _rational(sympy.cos(sympy.Rational(3, 10)))
+    (1/3, 47766824456280301/50000000000000000)
+    """
+    value = sympy.sympify(value)
+    if value.is_Rational:
+        return value
+    approx = value.evalf(30)
+    if abs(approx) < TINY_RESIDUE:
+        return sympy.Integer(0)
+    return sympy.Rational(str(sympy.Float(approx, SIGNIFICANT_DIGITS)))
+
+
+def _combine(parts: list, reading: Reading) -> Link:
+    """One body from rigid parts (placement, inertial, name): total mass, mass-weighted CoM
+    and the inertia about it (each part's ``R I R^T`` moved by the parallel axis theorem),
+    exact, in the frame the placements refer to. A part without ``<inertial>`` is massless."""
+    masses, coms, inertias = [], [], []
+    for placement, inertial, name in parts:
+        if inertial is None:
+            reading.note(f"{reading.source}: link '{name}' has no <inertial>: massless")
+            continue
+        check_inertia(_float_tensor(inertial.inertia), reading.source, f"link '{name}' inertial inertia",
+                      point_mass_allowed=True)
+        R, p = (placement * _placement(inertial.origin, reading)).matrix()
+        ixx, ixy, ixz, iyy, iyz, izz = (sympy.Rational(repr(v)) for v in inertial.inertia)
+        tensor = sympy.Matrix([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        masses.append(sympy.Rational(repr(inertial.mass)))
+        coms.append(p)
+        inertias.append(R * tensor * R.T)
+    mass = sum(masses, sympy.Integer(0))
+    com = sympy.zeros(3, 1)
+    if mass != 0:
+        com = sum((m * c for m, c in zip(masses, coms)), sympy.zeros(3, 1)) / mass
+    total = sympy.zeros(3, 3)
+    for m, c, tensor in zip(masses, coms, inertias):
+        d = c - com
+        total += tensor + m * ((d.T * d)[0] * sympy.eye(3) - d * d.T)
+    return Link(mass=mass, com=tuple(_rational(v) for v in com),
+                inertia=tuple(_rational(total[i, j]) for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))))
+
+
+def _float_tensor(moments: tuple) -> np.ndarray:
+    """The tensor as written, in floats, for :func:`kindyngen.model.robot_model.check_inertia` only."""
+    ixx, ixy, ixz, iyy, iyz, izz = moments
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+# ------------------------------------------------------------------ entry points
+
+def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = None, tip: str | None = None,
+               snap_angles: bool = True) -> RobotModel:
+    """The serial chain from link ``base`` (default: the root) to link ``tip`` (default: the
+    only leaf reached through a moving joint) of a URDF text (see the module docstring)."""
+    reading = Reading(source, snap_angles)
+    name, tree = _read_robot(text, reading)
+    base = tree.root if base is None else _link_name(tree, base, "--base", reading)
+    tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
+    path = _path(tree, base, tip, reading)
+    chain = {joint.name for joint in path}
+    joints, links, fixed, flange = [], [], Placement(), None
+    for joint in path:
+        if joint.kind == "fixed":
+            fixed = fixed * _placement(joint.origin, reading)
+            continue
+        joints.append(_moving_joint(joint, fixed, reading))
+        links.append(_combine(_rigid_body(tree, joint.child, chain, reading), reading))
+        fixed, flange = Placement(), joint.child
+    if not joints:
+        raise _error(reading, "--tip", f"no moving joint between links '{base}' and '{tip}'")
+    return RobotModel(name=name, convention="frames", gravity=GRAVITY, joints=tuple(joints), links=tuple(links),
+                      source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
+
+
+def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None,
+              snap_angles: bool = True) -> RobotModel:
+    """Read a URDF file: :func:`parse_urdf` of its text, errors naming the file."""
+    return parse_urdf(_file_text(path), str(path), base=base, tip=tip, snap_angles=snap_angles)
+
+
+def _file_text(path: str | Path) -> bytes:
+    try:
+        return Path(path).read_bytes()       # bytes: the XML declaration names the encoding
+    except OSError as exc:
+        raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc
+
+
+# ------------------------------------------------------------------ the whole tree
+
+def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, floating_base: bool = False,
+                    snap_angles: bool = True) -> RobotModel:
+    """Every moving joint of a URDF text as a tree :class:`kindyngen.model.robot_model.RobotModel`.
+
+    Joints are numbered depth first from the root link, children in the order Pinocchio's
+    ``buildModelFromUrdf`` takes them (urdfdom's: by joint name), so that q, qd and tau line
+    up with Pinocchio's (after its free-flyer part). Links fixed to a body are lumped into
+    it; ``frames`` names the links whose poses and Jacobians are wanted (default: the link
+    of every joint without children, the tips).
+
+    >>> tree = parse_urdf_tree(TWO_PENDULUMS, frames=["right", "body"])
+    >>> [j.name for j in tree.joints], [(f.name, f.body) for f in tree.frames]
+    (['left_joint', 'right_joint'], [('right', 1), ('body', -1)])
+    """
+    reading = Reading(source, snap_angles)
+    name, tree = _read_robot(text, reading)
+    moving = {joint.name for joint in tree.parent_joint.values() if joint.kind != "fixed"}
+    joints, parents, bodies, placed = [], [], [], {}
+
+    def visit(link: str, body: int, placement: Placement) -> None:
+        """Place ``link`` (on ``body`` by ``placement``) and everything below it, depth first."""
+        placed[link] = Frame(link, body, placement)
+        for joint in sorted(tree.child_joints[link], key=lambda joint: joint.name):
+            if joint.kind == "fixed":
+                visit(joint.child, body, placement * _placement(joint.origin, reading))
+                continue
+            joints.append(_moving_joint(joint, placement, reading))
+            parents.append(body)
+            bodies.append(joint.child)
+            visit(joint.child, len(joints) - 1, Placement())
+
+    visit(tree.root, -1, Placement())
+    if not joints:
+        raise _error(reading, "<robot>", "no moving joint (revolute, continuous or prismatic)")
+    links = tuple(_combine(_rigid_body(tree, child, moving, reading), reading) for child in bodies)
+    root = _combine(_rigid_body(tree, tree.root, moving, reading), reading)
+    if frames is None:
+        leaves = [j for j in range(len(joints)) if j not in parents]
+        frames = [bodies[j] for j in leaves]
+    chosen = []
+    for frame in frames:
+        if frame not in placed:
+            raise _error(reading, "--frames", f"no link named '{frame}' in the URDF{_closest(frame, placed)}")
+        chosen.append(placed[frame])
+    return RobotModel(name=name, convention="tree", joints=tuple(joints), parents=tuple(parents), links=links,
+                      root=root, frames=tuple(chosen), floating_base=floating_base, gravity=GRAVITY, source=source,
+                      base_name=tree.root, notes=tuple(reading.notes))
+
+
+def load_urdf_tree(path: str | Path, frames=None, floating_base: bool = False,
+                   snap_angles: bool = True) -> RobotModel:
+    """Read a URDF file as a tree: :func:`parse_urdf_tree` of its text, errors naming the file."""
+    return parse_urdf_tree(_file_text(path), str(path), frames=frames, floating_base=floating_base,
+                           snap_angles=snap_angles)

@@ -1,0 +1,1 @@
+"""Tests of kindyngen.algorithms.dualquat: the dual-quaternion route."""

@@ -1,0 +1,1 @@
+"""Tests of kindyngen.codegen: symbolic functions to source text."""

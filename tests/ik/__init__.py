@@ -1,0 +1,1 @@
+"""Tests of kindyngen.ik: inverse kinematics."""

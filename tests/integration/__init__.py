@@ -1,0 +1,1 @@
+"""End-to-end tests: documents, installation, reproducibility, examples and benchmark peers."""

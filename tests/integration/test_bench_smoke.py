@@ -1,0 +1,49 @@
+"""End-to-end smoke test of the benchmark pipeline in its --quick setting: it runs, writes
+timings.json in the documented schema, and the report renders. No assertion on any time:
+benchmarks are measurements, not tests."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+STATS = {"median_ns", "min_ns", "max_ns"}
+
+
+def _run(*args: str, timeout: float) -> subprocess.CompletedProcess:
+    done = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, f"{' '.join(args)} failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+    return done
+
+
+@pytest.mark.skipif(not (ROOT / "generated" / "lwr4" / "functions.json").exists(),
+                    reason="generated/lwr4 missing: run `make generate`")
+def test_bench_quick_and_report(tmp_path):
+    run = _run("benchmarks.run", "--quick", "--out", str(tmp_path), timeout=45)
+    assert "Pinocchio C++ skipped" in run.stdout  # quick mode says so
+
+    timings = json.loads((tmp_path / "timings.json").read_text())
+    assert {"machine", "date", "functions", "ratios"} <= timings.keys()
+    assert {"cpu", "cores", "gcc"} <= timings["machine"].keys()
+    manifest = json.loads((ROOT / "generated" / "lwr4" / "functions.json").read_text())
+    assert {f["name"] for f in manifest["functions"]} == set(timings["functions"])
+    for name, per_impl in timings["functions"].items():
+        assert {"c", "python", "python_batch", "casadi", "casadi_codegen"} <= per_impl.keys(), name
+        for impl, stats in per_impl.items():
+            assert STATS <= stats.keys(), (name, impl)
+            assert 0 < stats["min_ns"] <= stats["median_ns"] <= stats["max_ns"], (name, impl)
+    for name, ratios in timings["ratios"].items():
+        assert all(key.startswith("pinocchio_cpp/") for key in ratios), name
+    # Each implementation was checked against the generated numpy code on one input.
+    for impl, per_function in timings["checks"].items():
+        assert all(error is not None and error <= 1e-6 for error in per_function.values()), (impl, per_function)
+
+    _run("benchmarks.report", "--results", str(tmp_path), "--out", str(tmp_path), timeout=15)
+    for name in ("report.md", "report.json", "fig1_times.png", "peers.png", "scaling.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    report = (tmp_path / "report.md").read_text()
+    assert "Table II" in report and "40 / 87 / 14" in report

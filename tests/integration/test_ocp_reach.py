@@ -1,0 +1,113 @@
+"""The LWR reach of examples/ocp_reach.py and the MPC loop of examples/mpc.py, checked by
+Pinocchio (tests/reference.py's model), not by the generated code.
+
+- id_rk4 (implicit RK4 with the generated inverse dynamics) must be the explicit RK4 step of
+  the forward dynamics at a solution: from every planned node, Pinocchio's ABA integrated by
+  the same RK4 step must land on the next planned node (1e-6, IPOPT tol 1e-8).
+- the flange (Pinocchio's forward kinematics of the planned last node) at the goal within
+  1e-6 m, at rest; torques within their bounds exactly; q and qd at the nodes within 1e-6.
+- examples/ocp_stages.py (the per-interval functions compiled to C, IPOPT given the assembled
+  derivatives) solves the same discrete problem: the same Pinocchio checks, and its optimum
+  equals that of IPOPT on the whole SX graph (1e-6 relative).
+- a short MPC run writes the documented fields; no torque or joint-position violation and no
+  failed solve (speed limits hold at the nodes only, so the 1 kHz plant samples may pass them:
+  counted, not asserted; see docs/optimal_control.md).
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pinocchio")
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "examples"))
+import ocp_reach  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def reach():
+    funcs = ocp_reach.load()
+    nlp = ocp_reach.reach_problem("id_rk4", "ipopt", 20, funcs)
+    res = nlp.solve()
+    return nlp.setup, res, ocp_reach.check(nlp.setup, res, funcs), funcs
+
+
+def test_reach_converged_and_rk4_consistent(reach):
+    setup, res, sim, _ = reach
+    assert res["success"], res["status"]
+    assert sim["plan_step_error"] < 1e-6
+
+
+def test_reach_goal_by_pinocchio(reach):
+    import pinocchio as pin
+    from tests.reference import pinocchio_model
+    setup, res, sim, _ = reach
+    model, data, flange = pinocchio_model(setup["robot"])
+    pin.framesForwardKinematics(model, data, res["q"][-1])
+    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
+    assert np.abs(res["qd"][-1]).max() < 1e-6
+    assert np.abs(res["q"][0] - setup["q0"]).max() < 1e-9 and np.abs(res["qd"][0]).max() < 1e-9
+
+
+def test_reach_limits(reach):
+    setup, res, sim, _ = reach
+    lim = sim["limit_excess"]
+    assert lim["tau"] == 0.0
+    assert lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+
+
+@pytest.fixture(scope="module")
+def stages(reach):
+    import ocp_stages
+    funcs = reach[3]
+    s = ocp_stages.StageReach(20, funcs)
+    res = s.solve_ipopt()
+    return s.setup, res, ocp_reach.check(s.setup, res, funcs)
+
+
+def test_compiled_stages_reach(stages, reach):
+    import pinocchio as pin
+    from tests.reference import pinocchio_model
+    setup, res, sim = stages
+    assert res["success"], res["status"]
+    assert sim["plan_step_error"] < 1e-6
+    model, data, flange = pinocchio_model(setup["robot"])
+    pin.framesForwardKinematics(model, data, res["q"][-1])
+    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
+    assert np.abs(res["qd"][-1]).max() < 1e-6
+    lim = sim["limit_excess"]
+    assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+    assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
+
+
+def test_mpc_short_run(tmp_path, stages):
+    """Two steps with the compiled per-interval functions (the fastest solver; N = 20 reuses
+    the library the `stages` fixture built, another N would compile another)."""
+    out = tmp_path / "mpc"
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "mpc.py"), "--problem", "lwr4", "--out", str(out),
+                        "--steps", "2", "--N", "20", "--solver", "stages"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((out / "mpc.json").read_text())
+    assert len(doc["solve_ms"]) == 2 and doc["steps"] == 2
+    for key in ("tracking_rms", "violations", "solve_ms_median", "solve_ms_p95", "solve_ms_worst"):
+        assert key in doc
+    kinds = doc["violations_by_kind"]
+    assert kinds["tau"] == 0 and kinds["q"] == 0 and kinds["failed_solves"] == 0
+    assert np.isfinite(doc["tracking_rms"]) and doc["tracking_rms"] < 1e-1
+    assert (out / "mpc.png").exists()
+
+
+@pytest.mark.parametrize("script,args", [("ocp.py", ["--problem", "lwr4_reach", "--N", "0", "--out", "x"]),
+                                         ("mpc.py", ["--problem", "panda", "--out", "x"]),
+                                         ("mpc.py", ["--problem", "lwr4", "--steps", "0", "--out", "x"])])
+def test_bad_arguments(script, args, tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / script), *args], capture_output=True, text=True,
+                       cwd=tmp_path)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:")

@@ -1,0 +1,1 @@
+"""Tests of kindyngen.measured: logs, identification, excitation and discovery."""

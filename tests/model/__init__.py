@@ -1,0 +1,1 @@
+"""Tests of kindyngen.model.robot_model: the robot model every stage reads."""

@@ -1,0 +1,1 @@
+"""Tests of kindyngen.readers: robot descriptions in and out."""

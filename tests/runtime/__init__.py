@@ -1,0 +1,1 @@
+"""Tests of kindyngen.runtime: generated code run from python."""
