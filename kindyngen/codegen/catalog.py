@@ -64,7 +64,7 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("pose_jacobian_dq", arm_only(lambda model, params: pose_jacobian_dq(model))),
     ("jacobian_dq", arm_only(lambda model, params: jacobian_dq(model))),
     # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
-    # the other route under a suffixed name (kindyngen/dynamics_*.py, tree_*.py)
+    # the other route under a suffixed name (kindyngen/algorithms/)
     ("M", lambda model, params: mass_matrix_tree(model, params, "M")),
     ("g", lambda model, params: gravity_tree(model, params, "g")),
     ("c", lambda model, params: coriolis_tree(model, params, "c")),
@@ -94,10 +94,10 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("c_dq", arm_only(lambda model, params: coriolis_dq(model, params, "c_dq"))),
     ("tau_dq", arm_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
     ("Y_dq", arm_only(lambda model, params: regressor_dq(model, "Y_dq"))),
-    # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik_lwr_*.py
+    # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
     ("ik_hom", arm_only(lambda model, params: ik_hom(model))),
     ("ik_dq", arm_only(lambda model, params: ik_dq(model))),
-    # regressors on base parameters (kindyngen/algorithms/regressors.py, tree_regressors.py): the same
+    # regressors on base parameters (kindyngen/algorithms/regressors.py, algorithms/tree_regressors.py): the same
     # functions in both params modes
     ("Y_g", arm_only(lambda model, params: regressor(model, "Y_g"))),
     ("Y_m", arm_only(lambda model, params: regressor(model, "Y_m"))),
