@@ -55,17 +55,18 @@ def p_port(model: RobotModel) -> Port:
 
 
 def _velocity_text(model: RobotModel, what: str, base: str) -> str:
-    joints = f"joint {what}s, {model.order_text}"
+    """``what``: the plural noun ("velocities")."""
+    joints = f"joint {what}, {model.order_text}"
     return f"base {base} in the base frame, then {joints}" if model.floating_base else joints
 
 
 def qd_port(model: RobotModel) -> Port:
-    return Port("qd", (model.nv,), _velocity_text(model, "velocity", "linear and angular velocity"),
+    return Port("qd", (model.nv,), _velocity_text(model, "velocities", "linear and angular velocity"),
                 ("m/s, rad/s, " if model.floating_base else "") + joint_units(model, "rad/s", "m/s"))
 
 
 def qdd_port(model: RobotModel, name: str = "qdd") -> Port:
-    return Port(name, (model.nv,), _velocity_text(model, "acceleration", "linear and angular acceleration "
+    return Port(name, (model.nv,), _velocity_text(model, "accelerations", "linear and angular acceleration "
                                                   "(the derivative of its twist)"),
                 ("m/s^2, rad/s^2, " if model.floating_base else "") + joint_units(model, "rad/s^2", "m/s^2"))
 

@@ -1000,7 +1000,7 @@ def c():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, joint Coriolis and centrifugal torques [N m]
     Cost: 241 add, 311 mul, 12 call.
     """
@@ -1282,7 +1282,7 @@ def S():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out S: 7 x 7, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
     Cost: 766 add, 862 mul, 12 call.
     """
@@ -2118,7 +2118,7 @@ def tau():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out tau: 7, joint torques [N m]
     Cost: 263 add, 329 mul, 12 call.
@@ -2414,7 +2414,7 @@ def fd():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  tau: 7, joint applied torques [N m]
     out qdd: 7, joint accelerations, DH order [rad/s^2]
     Cost: 492 add, 620 mul, 12 call.
@@ -2993,7 +2993,7 @@ def tau_derivatives():
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out dtau_dq: 7 x 7, dtau_i / dq_j (row-major) [N m/rad]
     out dtau_dqd: 7 x 7, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -4681,7 +4681,7 @@ def fd_derivatives():
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  tau: 7, applied joint torques [N m]
     out dqdd_dq: 7 x 7, dqdd_i / dq_j (row-major) [1/s^2]
     out dqdd_dqd: 7 x 7, dqdd_i / dqd_j (row-major) [1/s]
@@ -8611,7 +8611,7 @@ def c_christoffel():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, Coriolis and centrifugal torques [N m]
     Cost: 807 add, 916 mul, 12 call.
     """
@@ -9750,7 +9750,7 @@ def c_dq():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, Coriolis and centrifugal torques [N m]
     Cost: 290 add, 420 mul, 12 call.
     """
@@ -10075,7 +10075,7 @@ def tau_dq():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out tau: 7, joint torques [N m]
     Cost: 313 add, 440 mul, 12 call.
@@ -10428,7 +10428,7 @@ def Y_dq():
     values equals the modelled quantity.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out Y: 7 x 43, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost: 611 add, 853 mul, 12 call.
@@ -12005,7 +12005,7 @@ def Y():
     values equals the modelled quantity.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out Y: 7 x 43, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost: 442 add, 695 mul, 12 call.

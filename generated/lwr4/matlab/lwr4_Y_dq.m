@@ -19,7 +19,7 @@ function [Y] = lwr4_Y_dq(q, qd, qdd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     qdd: 7 x N, joint accelerations, DH order [rad/s^2]
 %   Outputs:
 %     Y: 7 x 43 x N double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]

@@ -17,7 +17,7 @@ function [c] = lwr4_c(q, qd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %   Outputs:
 %     c: 7 x N double, joint Coriolis and centrifugal torques [N m]
 %

@@ -17,7 +17,7 @@ function [tau] = lwr4_tau_dq(q, qd, qdd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     qdd: 7 x N, joint accelerations, DH order [rad/s^2]
 %   Outputs:
 %     tau: 7 x N double, joint torques [N m]

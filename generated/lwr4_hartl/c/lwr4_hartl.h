@@ -179,7 +179,7 @@ void lwr4_hartl_g_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, joint Coriolis and centrifugal torques [N m]
  *
  * Cost: 241 add, 311 mul, 12 call
@@ -199,7 +199,7 @@ void lwr4_hartl_c_batch(long count, const double *q, const double *qd, double *c
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
  * Cost: 786 add, 868 mul, 12 call
@@ -219,7 +219,7 @@ void lwr4_hartl_S_batch(long count, const double *q, const double *qd, double *S
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -240,7 +240,7 @@ void lwr4_hartl_tau_batch(long count, const double *q, const double *qd, const d
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  tau[7]: 7 double, joint applied torques [N m]
  * out qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  *
@@ -262,7 +262,7 @@ void lwr4_hartl_fd_batch(long count, const double *q, const double *qd, const do
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out dtau_dq[49]: 7 x 7 double, dtau_i / dq_j (row-major) [N m/rad]
  * out dtau_dqd[49]: 7 x 7 double, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -285,7 +285,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  tau[7]: 7 double, applied joint torques [N m]
  * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
  * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
@@ -346,7 +346,7 @@ void lwr4_hartl_g_lagrange_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 827 add, 918 mul, 12 call
@@ -402,7 +402,7 @@ void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 290 add, 420 mul, 12 call
@@ -421,7 +421,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -443,7 +443,7 @@ void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, cons
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
@@ -574,7 +574,7 @@ void lwr4_hartl_Y_m_batch(long count, const double *q, double *Y);
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *

@@ -17,7 +17,7 @@ function [qdd] = lwr4_hartl_fd(q, qd, tau)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     tau: 7 x N, joint applied torques [N m]
 %   Outputs:
 %     qdd: 7 x N double, joint accelerations, DH order [rad/s^2]

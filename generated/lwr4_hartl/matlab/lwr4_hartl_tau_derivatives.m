@@ -18,7 +18,7 @@ function [dtau_dq, dtau_dqd] = lwr4_hartl_tau_derivatives(q, qd, qdd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     qdd: 7 x N, joint accelerations, DH order [rad/s^2]
 %   Outputs:
 %     dtau_dq: 7 x 7 x N double, dtau_i / dq_j (row-major) [N m/rad]

@@ -1245,7 +1245,7 @@ def c(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, joint Coriolis and centrifugal torques [N m]
     Cost per configuration: 241 add, 311 mul, 12 call.
     """
@@ -1551,7 +1551,7 @@ def S(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns S: (..., 7, 7) double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
     Cost per configuration: 786 add, 868 mul, 12 call.
     """
@@ -2455,7 +2455,7 @@ def tau(q, qd, qdd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns tau: (..., 7,) double, joint torques [N m]
     Cost per configuration: 263 add, 329 mul, 12 call.
@@ -2781,7 +2781,7 @@ def fd(q, qd, tau):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     tau: (..., 7,) joint applied torques [N m]
     Returns qdd: (..., 7,) double, joint accelerations, DH order [rad/s^2]
     Cost per configuration: 492 add, 620 mul, 12 call.
@@ -3406,7 +3406,7 @@ def tau_derivatives(q, qd, qdd):
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns dtau_dq: (..., 7, 7) double, dtau_i / dq_j (row-major) [N m/rad]; dtau_dqd: (..., 7, 7) double, dtau_i / dqd_j (row-major) [N m s/rad]
     Cost per configuration: 1806 add, 2309 mul, 12 call.
@@ -5145,7 +5145,7 @@ def fd_derivatives(q, qd, tau):
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     tau: (..., 7,) applied joint torques [N m]
     Returns dqdd_dq: (..., 7, 7) double, dqdd_i / dq_j (row-major) [1/s^2]; dqdd_dqd: (..., 7, 7) double, dqdd_i / dqd_j (row-major) [1/s]; Minv: (..., 7, 7) double, inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major) [1/(kg m^2)]
     Cost per configuration: 3050 add, 3584 mul, 12 call.
@@ -9376,7 +9376,7 @@ def c_christoffel(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, Coriolis and centrifugal torques [N m]
     Cost per configuration: 827 add, 918 mul, 12 call.
     """
@@ -10654,7 +10654,7 @@ def c_dq(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, Coriolis and centrifugal torques [N m]
     Cost per configuration: 290 add, 420 mul, 12 call.
     """
@@ -11007,7 +11007,7 @@ def tau_dq(q, qd, qdd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns tau: (..., 7,) double, joint torques [N m]
     Cost per configuration: 313 add, 440 mul, 12 call.
@@ -11393,7 +11393,7 @@ def Y_dq(q, qd, qdd):
     values equals the modelled quantity.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns Y: (..., 7, 43) double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost per configuration: 691 add, 858 mul, 12 call.
@@ -14791,7 +14791,7 @@ def Y(q, qd, qdd):
     values equals the modelled quantity.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns Y: (..., 7, 43) double, regressor of the joint torques tau on the base parameters (row-major; columns: Iyy1R, mx2, mz2R, Ixx2R, Ixy2, Iyy2R, Ixz2, Iyz2, mx3, mz3R, Ixx3R, Ixy3, Iyy3R, Ixz3, Iyz3, mx4, mz4R, Ixx4R, Ixy4, Iyy4R, Ixz4, Iyz4, mx5, mz5R, Ixx5R, Ixy5, Iyy5R, Ixz5, Iyz5, mx6, mz6R, Ixx6R, Ixy6, Iyy6R, Ixz6, Iyz6, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost per configuration: 441 add, 695 mul, 12 call.

@@ -179,7 +179,7 @@ void panda_g_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, joint Coriolis and centrifugal torques [N m]
  *
  * Cost: 270 add, 349 mul, 12 call
@@ -199,7 +199,7 @@ void panda_c_batch(long count, const double *q, const double *qd, double *c);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out S[49]: 7 x 7 double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
  *
  * Cost: 1018 add, 1004 mul, 12 call
@@ -219,7 +219,7 @@ void panda_S_batch(long count, const double *q, const double *qd, double *S);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -240,7 +240,7 @@ void panda_tau_batch(long count, const double *q, const double *qd, const double
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  tau[7]: 7 double, joint applied torques [N m]
  * out qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  *
@@ -262,7 +262,7 @@ void panda_fd_batch(long count, const double *q, const double *qd, const double 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out dtau_dq[49]: 7 x 7 double, dtau_i / dq_j (row-major) [N m/rad]
  * out dtau_dqd[49]: 7 x 7 double, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -285,7 +285,7 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  * output of joint i, column j the input of joint j (d out_i / d in_j).
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  tau[7]: 7 double, applied joint torques [N m]
  * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
  * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
@@ -346,7 +346,7 @@ void panda_g_lagrange_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 1058 add, 1047 mul, 12 call
@@ -402,7 +402,7 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * out c[7]: 7 double, Coriolis and centrifugal torques [N m]
  *
  * Cost: 332 add, 468 mul, 12 call
@@ -421,7 +421,7 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  * parameters: the robot description's values, baked in.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out tau[7]: 7 double, joint torques [N m]
  *
@@ -443,7 +443,7 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *
@@ -508,7 +508,7 @@ void panda_Y_m_batch(long count, const double *q, double *Y);
  * values equals the modelled quantity.
  *
  * in  q[7]: 7 double, joint angles, DH order [rad]
- * in  qd[7]: 7 double, joint velocitys, DH order [rad/s]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
  * in  qdd[7]: 7 double, joint accelerations, DH order [rad/s^2]
  * out Y[301]: 7 x 43 double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
  *

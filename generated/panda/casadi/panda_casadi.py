@@ -1180,7 +1180,7 @@ def c():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, joint Coriolis and centrifugal torques [N m]
     Cost: 270 add, 349 mul, 12 call.
     """
@@ -1489,7 +1489,7 @@ def S():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out S: 7 x 7, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
     Cost: 1018 add, 1004 mul, 12 call.
     """
@@ -2655,7 +2655,7 @@ def tau():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out tau: 7, joint torques [N m]
     Cost: 288 add, 361 mul, 12 call.
@@ -2984,7 +2984,7 @@ def fd():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  tau: 7, joint applied torques [N m]
     out qdd: 7, joint accelerations, DH order [rad/s^2]
     Cost: 559 add, 700 mul, 12 call.
@@ -3640,7 +3640,7 @@ def tau_derivatives():
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out dtau_dq: 7 x 7, dtau_i / dq_j (row-major) [N m/rad]
     out dtau_dqd: 7 x 7, dtau_i / dqd_j (row-major) [N m s/rad]
@@ -5574,7 +5574,7 @@ def fd_derivatives():
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  tau: 7, applied joint torques [N m]
     out dqdd_dq: 7 x 7, dqdd_i / dq_j (row-major) [1/s^2]
     out dqdd_dqd: 7 x 7, dqdd_i / dqd_j (row-major) [1/s]
@@ -10112,7 +10112,7 @@ def c_christoffel():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, Coriolis and centrifugal torques [N m]
     Cost: 1058 add, 1047 mul, 12 call.
     """
@@ -11640,7 +11640,7 @@ def c_dq():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     out c: 7, Coriolis and centrifugal torques [N m]
     Cost: 332 add, 468 mul, 12 call.
     """
@@ -12022,7 +12022,7 @@ def tau_dq():
     parameters: the robot description's values, baked in.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out tau: 7, joint torques [N m]
     Cost: 353 add, 484 mul, 12 call.
@@ -12416,7 +12416,7 @@ def Y_dq():
     values equals the modelled quantity.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out Y: 7 x 43, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost: 842 add, 963 mul, 12 call.
@@ -13860,7 +13860,7 @@ def Y():
     values equals the modelled quantity.
 
     in  q: 7, joint angles, DH order [rad]
-    in  qd: 7, joint velocitys, DH order [rad/s]
+    in  qd: 7, joint velocities, DH order [rad/s]
     in  qdd: 7, joint accelerations, DH order [rad/s^2]
     out Y: 7 x 43, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost: 496 add, 771 mul, 12 call.

@@ -17,7 +17,7 @@ function [S] = panda_S(q, qd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %   Outputs:
 %     S: 7 x 7 x N double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
 %

@@ -19,7 +19,7 @@ function [Y] = panda_Y(q, qd, qdd)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     qdd: 7 x N, joint accelerations, DH order [rad/s^2]
 %   Outputs:
 %     Y: 7 x 43 x N double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]

@@ -18,7 +18,7 @@ function [dqdd_dq, dqdd_dqd, Minv] = panda_fd_derivatives(q, qd, tau)
 %
 %   Inputs:
 %     q: 7 x N, joint angles, DH order [rad]
-%     qd: 7 x N, joint velocitys, DH order [rad/s]
+%     qd: 7 x N, joint velocities, DH order [rad/s]
 %     tau: 7 x N, applied joint torques [N m]
 %   Outputs:
 %     dqdd_dq: 7 x 7 x N double, dqdd_i / dq_j (row-major) [1/s^2]

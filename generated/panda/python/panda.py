@@ -1430,7 +1430,7 @@ def c(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, joint Coriolis and centrifugal torques [N m]
     Cost per configuration: 270 add, 349 mul, 12 call.
     """
@@ -1760,7 +1760,7 @@ def S(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns S: (..., 7, 7) double, Christoffel Coriolis/centrifugal matrix, c = S qd (row-major) [N m s]
     Cost per configuration: 1018 add, 1004 mul, 12 call.
     """
@@ -2989,7 +2989,7 @@ def tau(q, qd, qdd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns tau: (..., 7,) double, joint torques [N m]
     Cost per configuration: 288 add, 361 mul, 12 call.
@@ -3346,7 +3346,7 @@ def fd(q, qd, tau):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     tau: (..., 7,) joint applied torques [N m]
     Returns qdd: (..., 7,) double, joint accelerations, DH order [rad/s^2]
     Cost per configuration: 559 add, 700 mul, 12 call.
@@ -4030,7 +4030,7 @@ def tau_derivatives(q, qd, qdd):
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns dtau_dq: (..., 7, 7) double, dtau_i / dq_j (row-major) [N m/rad]; dtau_dqd: (..., 7, 7) double, dtau_i / dqd_j (row-major) [N m s/rad]
     Cost per configuration: 2094 add, 2627 mul, 12 call.
@@ -6082,7 +6082,7 @@ def fd_derivatives(q, qd, tau):
     output of joint i, column j the input of joint j (d out_i / d in_j).
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     tau: (..., 7,) applied joint torques [N m]
     Returns dqdd_dq: (..., 7, 7) double, dqdd_i / dq_j (row-major) [1/s^2]; dqdd_dqd: (..., 7, 7) double, dqdd_i / dqd_j (row-major) [1/s]; Minv: (..., 7, 7) double, inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major) [1/(kg m^2)]
     Cost per configuration: 3398 add, 3875 mul, 12 call.
@@ -10856,7 +10856,7 @@ def c_christoffel(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, Coriolis and centrifugal torques [N m]
     Cost per configuration: 1058 add, 1047 mul, 12 call.
     """
@@ -12475,7 +12475,7 @@ def c_dq(q, qd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     Returns c: (..., 7,) double, Coriolis and centrifugal torques [N m]
     Cost per configuration: 332 add, 468 mul, 12 call.
     """
@@ -12878,7 +12878,7 @@ def tau_dq(q, qd, qdd):
     parameters: the robot description's values, baked in.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns tau: (..., 7,) double, joint torques [N m]
     Cost per configuration: 353 add, 484 mul, 12 call.
@@ -13300,7 +13300,7 @@ def Y_dq(q, qd, qdd):
     values equals the modelled quantity.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns Y: (..., 7, 43) double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost per configuration: 842 add, 963 mul, 12 call.
@@ -16256,7 +16256,7 @@ def Y(q, qd, qdd):
     values equals the modelled quantity.
 
     q: (..., 7,) joint angles, DH order [rad]
-    qd: (..., 7,) joint velocitys, DH order [rad/s]
+    qd: (..., 7,) joint velocities, DH order [rad/s]
     qdd: (..., 7,) joint accelerations, DH order [rad/s^2]
     Returns Y: (..., 7, 43) double, regressor of the joint torques tau on the base parameters (row-major; columns: Izz1R, mx2, my2R, Ixx2R, Ixy2, Ixz2, Iyz2, Izz2R, mx3R, my3R, Ixx3R, Ixy3R, Ixz3, Iyz3, Izz3R, mx4R, my4R, Ixx4R, Ixy4R, Ixz4, Iyz4, Izz4R, mx5, my5R, Ixx5R, Ixy5, Ixz5, Iyz5, Izz5R, mx6R, my6R, Ixx6R, Ixy6R, Ixz6, Iyz6, Izz6R, mx7, my7, Ixx7R, Ixy7, Ixz7, Iyz7, Izz7) [N m per base parameter]
     Cost per configuration: 496 add, 771 mul, 12 call.
