@@ -8,9 +8,11 @@ model, RK4 at 1 kHz) moves the arm.
 Each control step (one shooting interval, h = T / N = 50 ms at N = 20): the planner gets the
 measured plant state, re-solves the reach (goal at rest at the end of the horizon, which moves
 with time; id_rk4 + IPOPT, warm start from the previous solution shifted by one interval; with
---solver stages on examples/ocp_stages.py's compiled per-interval functions and IPOPT's adaptive
-barrier), and the plant integrates the first torque, held constant, for h at 1 kHz. The first step is the
-cold solve from rest. A failed solve applies the previous plan's next torque.
+--solver stages on examples/ocp_stages.py's compiled per-interval functions, IPOPT's adaptive
+barrier and the shifted constraint and bound multipliers), and the plant integrates the first
+torque, held constant, for h at 1 kHz. The first step is the cold solve from rest. A failed
+solve applies the previous plan's next torque; with --max-iter K a re-solve stopped after K
+IPOPT iterations applies its iterate (examples/mpc_warm_start.py measures what that costs).
 
 Output in --out: mpc.json (solve_ms per step, its median, 95th percentile and worst,
 iterations, tracking_rms = RMS over steps of |plant state - the plan's predicted next node|
@@ -37,7 +39,11 @@ WARM = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4, "ipopt.warm
         "ipopt.warm_start_mult_bound_push": 1e-6}
 # the compiled stages' warm re-solve, chosen by measurement (one shifted re-solve, AMD EPYC):
 # the adaptive barrier takes 17 iterations (115 ms CPU) where the monotone one at mu_init 1e-4
-# takes 28 (186 ms), at 1e-6 46 and at 1e-8 53; adaptive with mu_init 1e-4, 1e-6 or 1e-8 alike
+# takes 28 (186 ms), at 1e-6 46 and at 1e-8 53; adaptive with mu_init 1e-4, 1e-6 or 1e-8 alike.
+# With the bound multipliers shifted too (examples/mpc_warm_start.py) 13-20 iterations; on one
+# shifted re-solve the monotone barrier (mu_init 1e-6: 17 iterations, 1e-8: 20), the probing or
+# LOQO oracles (13 / 17) and tol 1e-4 with acceptable_tol 1e-3 (12-16 in the loop) were no faster
+# in CPU time; ma27 is not in this IPOPT build (Invalid_Option: no HSL library)
 WARM_STAGES = dict(WARM, **{"ipopt.mu_strategy": "adaptive", "ipopt.mu_init": 1e-6})
 
 
@@ -75,19 +81,25 @@ def plant(robot):
     return step, tip
 
 
-def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipopt") -> dict:
+def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipopt",
+        options: dict | None = None) -> dict:
+    """The closed loop; `options` override the warm re-solve's IPOPT options (WARM / WARM_STAGES)."""
     import ocp_reach
     funcs = ocp_reach.load()
     if solver == "stages":
         import ocp_stages
         nlp = ocp_stages.StageReach(N, funcs)
-        built = nlp.ipopt(WARM_STAGES)
+        opts = dict(WARM_STAGES, **(options or {}))
+        built = nlp.ipopt(opts)
+        # the cold first solve (from rest) is never capped
+        built_cold = nlp.ipopt({k: v for k, v in opts.items() if k != "ipopt.max_iter"})
 
-        def solve(x_init, z, lam):
-            return nlp.solve_ipopt(built, x_init=x_init, z0=None if z is None else nlp.shifted(z),
-                                   lam_g0=None if lam is None else nlp.shifted_lam(lam))
+        def solve(x_init, z, lam):   # lam = (constraint, bound) multipliers, both shifted
+            return nlp.solve_ipopt(built_cold if z is None else built, x_init=x_init, z0=None if z is None else nlp.shifted(z),
+                                   lam_g0=None if lam is None else nlp.shifted_lam(lam[0]),
+                                   lam_x0=None if lam is None else nlp.shifted_lam_x(lam[1]))
     else:
-        nlp = ocp_reach.reach_problem("id_rk4", "ipopt", N, funcs, options=WARM)
+        nlp = ocp_reach.reach_problem("id_rk4", "ipopt", N, funcs, options=dict(WARM, **(options or {})))
 
         def solve(x_init, z, lam):
             return nlp.solve(x_init=x_init, z0=None if z is None else nlp.shifted(z), lam_g0=lam)
@@ -106,8 +118,12 @@ def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipop
         log["solve_cpu_ms"].append(1e3 * res["solve_cpu_s"])
         log["iterations"].append(res["iterations"])
         log["status"].append(res["status"])
-        if res["success"]:
-            z, lam = res["z"], res["lam_g"]
+        # a re-solve stopped by a max_iter cap still hands over its iterate (the cap's cost
+        # shows in tracking_rms and violations); a first cold solve must converge
+        capped = res["status"] == "Maximum_Iterations_Exceeded" and z is not None
+        if res["success"] or capped:
+            z = res["z"]
+            lam = (res["lam_g"], res["lam_x"]) if solver == "stages" else res["lam_g"]
             u = res["tau"][0]
             pred = np.concatenate([res["q"][1], res["qd"][1]])
             u_next = res["tau"][1] if N > 1 else u
@@ -180,15 +196,22 @@ def main(argv=None) -> int:
                     help="ipopt: IPOPT on the SX graph (examples/ocp_reach.py); stages: IPOPT with the "
                          "per-interval functions compiled to C (examples/ocp_stages.py; the first run "
                          "compiles for minutes, later runs load the cache)")
+    ap.add_argument("--max-iter", type=int, default=None,
+                    help="cap on IPOPT's iterations per warm re-solve (the capped iterate is applied; "
+                         "default: none, every re-solve converges to tol 1e-8)")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: must be at least 1")
     if args.N < 2:
         ap.error(f"--N {args.N}: must be at least 2")
+    if args.max_iter is not None and args.max_iter < 1:
+        ap.error(f"--max-iter {args.max_iter}: must be at least 1")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    doc = run(args.steps, args.N, args.verbose, args.solver)
+    doc = run(args.steps, args.N, args.verbose, args.solver,
+              None if args.max_iter is None else {"ipopt.max_iter": args.max_iter})
+    doc["max_iter"] = args.max_iter
     doc["plots"] = [plot(doc, out)]
     (out / "mpc.json").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"lwr4 MPC: {args.steps} steps, re-solve median {doc['solve_ms_median']:.1f} ms, p95 "

@@ -175,18 +175,30 @@ class StageReach:
         g = np.array(self.funcs["tau"](xN[:n], np.zeros(n), np.zeros(n))).ravel()
         return np.concatenate([z[st:N * st], xN, g, np.zeros(4 * n), xN])
 
+    def shifted_lam_x(self, lam_x):
+        """The bound multipliers moved with shifted(): the appended interval gets the last
+        stage's (without them the warm start's dual infeasibility is that of every active
+        speed or torque bound: IPOPT then re-raises its barrier and needs ~20 iterations)."""
+        st, N = self.st, self.N
+        return np.concatenate([lam_x[st:N * st], lam_x[(N - 1) * st:N * st], lam_x[N * st:]])
+
     def shifted_lam(self, lam):
-        """The constraint multipliers moved with shifted(): stage rows one interval earlier."""
+        """The constraint multipliers moved with shifted(): stage rows one interval earlier; the
+        row x_0 = p takes the multiplier of the old first gap x_1 - F(x_0, u_0), which is what
+        carried x_1's stationarity (so the shifted point is stationary but for the appended
+        interval and the terminal rows)."""
         nc, nx, N = self.nc, self.nx, self.N
         stages = np.concatenate([lam[:nc], lam[nc + nx:nc + nx + (N - 1) * nc]]).reshape(N, nc)
+        first_gap = stages[0, :nx]
         stages = np.vstack([stages[1:], stages[-1:]])
-        return np.concatenate([stages[0], lam[nc:nc + nx], stages[1:].ravel(), lam[-(3 + self.n):]])
+        return np.concatenate([stages[0], first_gap, stages[1:].ravel(), lam[-(3 + self.n):]])
 
     def p(self, x_init=None, goal=None):
         x_init = np.concatenate([self.setup["q0"], np.zeros(self.n)]) if x_init is None else np.asarray(x_init)
         return np.concatenate([x_init, self.setup["goal"] if goal is None else np.asarray(goal)])
 
-    def _result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None):
+    def _result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None,
+                lam_x=None):
         X, U = self.unpack(z)
         n, N, T = self.n, self.N, self.setup["T"]
         g = np.array(self.f_g(z, self.p() if p is None else p)).ravel()
@@ -195,7 +207,7 @@ class StageReach:
                 "formulation": "id_rk4", "solver": solver, "substeps": 1, "N": N, "T": T,
                 "t": np.linspace(0, T, N + 1), "q": X[:, :n], "qd": X[:, n:], "tau": U[:, :n],
                 "objective": float(self.h * np.sum(U[:, :n] ** 2)), "max_constraint_violation": float(np.abs(g).max()),
-                "z": z, "lam_g": lam_g}
+                "z": z, "lam_g": lam_g, "lam_x": lam_x}
 
     # ---- IPOPT with the assembled derivatives --------------------------------------------
     def ipopt(self, options: dict | None = None) -> ca.Function:
@@ -204,16 +216,20 @@ class StageReach:
         opts.update(options or {})
         return ca.nlpsol("reach_stages_ipopt", "ipopt", self.nlp, opts)
 
-    def solve_ipopt(self, solver: ca.Function | None = None, x_init=None, goal=None, z0=None, lam_g0=None) -> dict:
+    def solve_ipopt(self, solver: ca.Function | None = None, x_init=None, goal=None, z0=None, lam_g0=None,
+                    lam_x0=None) -> dict:
         solver = solver or self.ipopt()
         p = self.p(x_init, goal)
         args = {"x0": self.guess() if z0 is None else z0, "lbx": self.lbx, "ubx": self.ubx, "lbg": self.lbg,
                 "ubg": self.lbg, "p": p}
         if lam_g0 is not None:
             args["lam_g0"] = lam_g0
+        if lam_x0 is not None:
+            args["lam_x0"] = lam_x0
         t0, c0 = time.perf_counter(), time.process_time()
         sol = solver(**args)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         st = solver.stats()
         return self._result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["return_status"],
-                            bool(st["success"]), "ipopt (compiled stages)", np.array(sol["lam_g"]).ravel(), p)
+                            bool(st["success"]), "ipopt (compiled stages)", np.array(sol["lam_g"]).ravel(), p,
+                            np.array(sol["lam_x"]).ravel())

@@ -85,6 +85,34 @@ def test_compiled_stages_reach(stages, reach):
     assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
 
 
+def test_shifted_warm_start_is_stationary(stages):
+    """The MPC's warm start (examples/ocp_stages.py shifted, shifted_lam, shifted_lam_x): the
+    converged plan and its constraint and bound multipliers moved one interval earlier, with the
+    initial state moved to the plan's node 1, satisfy the Lagrangian's stationarity
+    grad f + J' lam_g + lam_x = 0 on every variable but the appended interval's; the gradient
+    of f = h sum |tau_k|^2 is written here in numpy, J is finite differences of the constraints."""
+    import ocp_stages
+    setup, res, _ = stages
+    s = ocp_stages.StageReach(20)          # the cached library
+    z, p = s.shifted(res["z"]), s.p(np.concatenate([res["q"][1], res["qd"][1]]))
+    lam_g, lam_x = s.shifted_lam(res["lam_g"]), s.shifted_lam_x(res["lam_x"])
+    grad = np.zeros(s.nz)
+    for k in range(s.N):
+        i = k * s.st + s.nx
+        grad[i:i + s.n] = 2 * s.h * z[i:i + s.n]
+    g = lambda zz: np.array(s.f_g(zz, p)).ravel()
+    eps, jt_lam = 1e-6, np.zeros(s.nz)
+    for i in range((s.N - 1) * s.st):   # J' lam by central differences, the kept variables only
+        e = np.zeros(s.nz)
+        e[i] = eps
+        jt_lam[i] = lam_g @ (g(z + e) - g(z - e)) / (2 * eps)
+    kept = slice(0, (s.N - 1) * s.st)
+    resid = grad[kept] + jt_lam[kept] + lam_x[kept]
+    assert np.abs(resid).max() < 1e-4 * max(1.0, np.abs(grad).max())
+    # the shifted point satisfies the constraints (the appended interval holds the goal at rest)
+    assert np.abs(g(z)).max() < 1e-6
+
+
 def test_mpc_short_run(tmp_path, stages):
     """Two steps with the compiled per-interval functions (the fastest solver; N = 20 reuses
     the library the `stages` fixture built, another N would compile another)."""
@@ -104,7 +132,8 @@ def test_mpc_short_run(tmp_path, stages):
 
 @pytest.mark.parametrize("script,args", [("ocp.py", ["--problem", "lwr4_reach", "--N", "0", "--out", "x"]),
                                          ("mpc.py", ["--problem", "panda", "--out", "x"]),
-                                         ("mpc.py", ["--problem", "lwr4", "--steps", "0", "--out", "x"])])
+                                         ("mpc.py", ["--problem", "lwr4", "--steps", "0", "--out", "x"]),
+                                         ("mpc.py", ["--problem", "lwr4", "--max-iter", "0", "--out", "x"])])
 def test_bad_arguments(script, args, tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "examples" / script), *args], capture_output=True, text=True,
                        cwd=tmp_path)
