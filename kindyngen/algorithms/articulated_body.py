@@ -27,9 +27,9 @@ R^T gamma)``, the derivative of its twist in the base frame (Pinocchio's ``aba``
 
 Example:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> f = forward_dynamics_aba(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> f = forward_dynamics_aba(parse_urdf(TWO_PENDULUMS, floating_base=True))
 >>> [(p.name, p.shape) for p in f.outputs]
 [('qdd', (8,))]
 """

@@ -41,9 +41,9 @@ Trees carry no joint effects (friction, armature): these are the rigid-body deri
 Example: a body with two pendulums, floating (nv = 8); the pendulums hang from the body, so
 neither joint's torque depends on the other joint's angle:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> f = tau_derivatives_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> f = tau_derivatives_tree(parse_urdf(TWO_PENDULUMS, floating_base=True))
 >>> [(p.name, p.shape) for p in f.outputs]
 [('dtau_dq', (8, 8)), ('dtau_dqd', (8, 8))]
 >>> f.output_exprs[0][6 * 8 + 7], f.output_exprs[0][7 * 8 + 6]

@@ -40,9 +40,9 @@ effects (friction and offset in tau and fd's bias, the armature on M's diagonal)
 
 Example: the two pendulums on a floating body of :mod:`kindyngen.readers.urdf`:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> tree = parse_urdf_tree(TWO_PENDULUMS, floating_base=True)
+>>> tree = parse_urdf(TWO_PENDULUMS, floating_base=True)
 >>> f = inverse_dynamics_tree(tree)
 >>> [(p.name, p.shape) for p in f.inputs], f.outputs[0].shape
 ([('q', (9,)), ('qd', (8,)), ('qdd', (8,))], (8,))
@@ -411,9 +411,9 @@ def expanded_parents(model: RobotModel) -> tuple[int, ...]:
     """The parent of each velocity coordinate: the floating base's six form a chain, its
     children hang from the last of them.
 
-    >>> from kindyngen.readers.urdf import parse_urdf_tree
+    >>> from kindyngen.readers.urdf import parse_urdf
     >>> from kindyngen.readers.urdf import TWO_PENDULUMS
-    >>> expanded_parents(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+    >>> expanded_parents(parse_urdf(TWO_PENDULUMS, floating_base=True))
     (-1, 0, 1, 2, 3, 4, 5, 5)
     """
     if not model.floating_base:
