@@ -3,7 +3,7 @@ against the operation counts of Featherstone's algorithms (``python -m benchmark
 [--quick] [--out DIR]``, writes ``results/tree_scaling.json`` and ``tree_scaling.png``).
 
 Synthetic humanoid-like trees (a torso and ``limbs`` branches of ``per_limb`` revolute joints,
-floating base) are written as URDF text and read by :func:`kindyngen.readers.urdf.parse_urdf_tree`;
+floating base) are written as URDF text and read by :func:`kindyngen.readers.urdf.parse_urdf`;
 single-branch fixed-base chains of the same style are the like-for-like case of Featherstone's
 formulas, which are stated for unbranched chains. Every function of
 :data:`kindyngen.codegen.catalog.TREE_NAMES` is derived and optimised (CSE) separately, each size in
@@ -108,7 +108,7 @@ def synthetic_urdf(limbs: int, per_limb: int) -> str:
                 xyz = (0.01 * (i % 2), 0.0, -0.3 * 0.9 ** (i - 1))
                 rpy = (0.1, 0, 0) if i % 3 == 0 else (0, 0, 0)
             parts.append(_link(child, 4.0 * 0.8 ** i, length))
-            # names sort in chain order: parse_urdf_tree numbers the joints depth first by name
+            # names sort in chain order: parse_urdf numbers the joints depth first by name
             parts.append(_joint(f"limb{k}_joint{i:02d}", parent, child, xyz, rpy, _AXES[(i + k) % 3]))
             parent = child
     parts.append("</robot>")
@@ -117,8 +117,8 @@ def synthetic_urdf(limbs: int, per_limb: int) -> str:
 
 def synthetic_tree(limbs: int, per_limb: int, floating: bool = True):
     """A humanoid-like :class:`kindyngen.model.robot_model.RobotModel` tree (:func:`synthetic_urdf`)."""
-    from kindyngen.readers.urdf import parse_urdf_tree
-    return parse_urdf_tree(synthetic_urdf(limbs, per_limb), source=f"<synthetic tree {limbs}x{per_limb}>",
+    from kindyngen.readers.urdf import parse_urdf
+    return parse_urdf(synthetic_urdf(limbs, per_limb), tree=True, source=f"<synthetic tree {limbs}x{per_limb}>",
                            floating_base=floating)
 
 
@@ -391,7 +391,7 @@ def g1_generate(repeats: int, log) -> dict:
     """Wall time of ``kindyngen generate G1 --floating-base`` (all languages) as a command,
     each run into a fresh folder, with its CPU time and the load average (the machine may be
     shared); plus M+c under one CSE (for Robotran's figure)."""
-    from kindyngen.readers.urdf import load_urdf_tree
+    from kindyngen.readers.urdf import load_urdf
     seconds, cpu, load = [], [], []
     for k in range(repeats):
         with tempfile.TemporaryDirectory() as folder:
@@ -406,7 +406,7 @@ def g1_generate(repeats: int, log) -> dict:
             counts = json.loads(next(Path(folder).glob("*/opcounts.json")).read_text())
         log(f"tree_scaling: G1 generate run {k + 1}/{repeats}: {seconds[-1]:.2f} s wall, {cpu[-1]:.2f} s CPU "
             f"(load average {load[-1]:.1f} before it)")
-    model = load_urdf_tree(g1_urdf(), floating_base=True)
+    model = load_urdf(g1_urdf(), floating_base=True)
     functions = g1_functions(model, log)
     return {"functions": functions, "joints": model.n, "nv": model.nv, "seconds": seconds, "median_s": statistics.median(seconds),
             "cpu_seconds": cpu, "median_cpu_s": statistics.median(cpu), "load_average_before": load,
@@ -566,7 +566,7 @@ def cse_study(log) -> dict:
     from kindyngen.codegen.catalog import BUILDERS, TREE_NAMES
     from kindyngen.algorithms.articulated_body import forward_dynamics_aba
     from kindyngen.algorithms.dynamics import forward_dynamics_tree, mass_matrix_tree
-    from kindyngen.readers.urdf import load_urdf_tree
+    from kindyngen.readers.urdf import load_urdf
     default = optimize_module.CSE_CHUNK
 
     def timed(function, chunk):
@@ -589,7 +589,7 @@ def cse_study(log) -> dict:
         log(f"tree_scaling: cse, chain M of {n}: {row['expressions']} expressions, one cse "
             f"{row['one_cse']['cpu_s']:.2f} s, chunks of {default} {row['chunked']['cpu_s']:.2f} s")
         chains.append(row)
-    model = load_urdf_tree(g1_urdf(), floating_base=True)
+    model = load_urdf(g1_urdf(), floating_base=True)
     functions = [build(model, "numeric") for name, build in BUILDERS if name in TREE_NAMES and name != "fd"]
     functions += [forward_dynamics_tree(model), forward_dynamics_aba(model)]
     g1 = []

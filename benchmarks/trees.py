@@ -33,7 +33,7 @@ import casadi
 import numpy as np
 
 from kindyngen.codegen.pipeline import generate
-from kindyngen.readers.urdf import load_urdf_tree
+from kindyngen.readers.urdf import load_urdf
 
 from . import c_harness, casadi_codegen, compiled, pinocchio_casadi, pinocchio_cpp, python_timing
 from .build import BUILD, build, compiler_version, target
@@ -267,7 +267,7 @@ def pinocchio_model(path: Path, model, model_file: Path):
 def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
     """Generate, build, check and time every implementation for one robot."""
     path = urdf_path(key)
-    model = load_urdf_tree(path, frames=ROBOTS[key][1], floating_base=True)
+    model = load_urdf(path, frames=ROBOTS[key][1], floating_base=True)
     started = time.perf_counter()
     # only the timed functions: the regressor Y would double the C file's compile time
     folder = generate(model, WORK, languages=("c", "python"), progress=False, only=set(FUNCTIONS))

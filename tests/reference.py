@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from kindyngen.readers.yaml_description import RobotModel
+from kindyngen.model.robot_model import RobotModel
 
 
 def _rz(t):

@@ -27,9 +27,9 @@ R^T gamma)``, the derivative of its twist in the base frame (Pinocchio's ``aba``
 
 Example:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> f = forward_dynamics_aba(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> f = forward_dynamics_aba(parse_urdf(TWO_PENDULUMS, floating_base=True))
 >>> [(p.name, p.shape) for p in f.outputs]
 [('qdd', (8,))]
 """
@@ -42,7 +42,7 @@ from .kinematics_conventions import q_port
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
 from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, qd_port, qdd_port, vadd, vscale
 from .symbolic import Stages, SymbolicFunction, port_symbols
-from .dynamics import ROUTE, TreeSetup, carry, force_port, joint_effects, setup, tree_function
+from .dynamics import ROUTE, TreeSetup, carry, force_port, joint_effects, dynamics_function, setup
 
 
 def _skew(v):
@@ -222,7 +222,7 @@ def forward_dynamics_aba(model: RobotModel, params: str = "numeric", name: str =
     applied = [t - e for t, e in zip(tau, joint_effects(model, qd, None))]
     armature = [se.sympify(model.armature(j)) for j in range(model.n)] if "armature" in model.effects else None
     qdd = aba(ts, qd, applied, stages, armature)
-    return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g) by the articulated-body algorithm "
-                         "(O(n), no inertia matrix).", ts,
-                         (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")),
-                         (ts.q, qd, tau), (qdd_port(model),), (qdd,), stages, route="articulated-body")
+    return dynamics_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g) by the articulated-body algorithm "
+                             "(O(n), no inertia matrix).", ts,
+                             (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")),
+                             (ts.q, qd, tau), (qdd_port(model),), (qdd,), stages, route="articulated-body")

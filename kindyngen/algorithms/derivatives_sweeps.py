@@ -69,10 +69,10 @@ from .joint_frame_steps import mat3, u_matrix
 from .ldlt import ldlt_factor, ldlt_substitute
 from .effect_torques import coulomb_shape, effect_torques, with_armature
 from .kinematics_conventions import q_port
-from .rigid_bodies import (ZERO, cross, dot, dynamics_function, flat, matvec, qd_port, qdd_port,
+from .rigid_bodies import (ZERO, cross, dot, flat, matvec, qd_port, qdd_port,
                            tau_port, vadd, vscale)
 from ..model.robot_model import RobotModel
-from .dynamics import NewtonEulerPass, crba, setup
+from .dynamics import NewtonEulerPass, crba, dynamics_function, setup
 from .symbolic import Port, SymbolicFunction, port_symbols
 
 
@@ -349,7 +349,7 @@ def _fixed_base_setup(model: RobotModel, params: str):
 def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau_derivatives") -> SymbolicFunction:
     """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` of ``tau`` with its joint effects."""
     ts = _fixed_base_setup(model, params)
-    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
+    q = ts.q
     n = model.n
     qd, qdd = port_symbols("qd", (n,)), port_symbols("qdd", (n,))
     ne = _NewtonEuler(ts, qd, qdd)
@@ -360,17 +360,17 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
         name, "Partial derivatives of the inverse dynamics tau(q, qd, qdd) (the function tau, effects included): "
         "dtau/dq and dtau/dqd by one adjoint (reverse) sweep per joint over the Newton-Euler pass (plus the "
         "friction derivative on the diagonal of dtau/dqd); dtau/dqdd is M.",
-        model, params, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
+        ts, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
         (Port("dtau_dq", (n, n), "dtau_i / dq_j (row-major)", _matrix_unit(model, TORQUE, ANGLE, "N m/rad")),
          Port("dtau_dqd", (n, n), "dtau_i / dqd_j (row-major)", _matrix_unit(model, TORQUE, RATE, "N m s/rad"))),
-        (flat(dq), flat(dqd)), ports, syms)
+        (flat(dq), flat(dqd)))
     return _with_note(f, model)
 
 
 def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives") -> SymbolicFunction:
     """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` of ``fd`` with its joint effects."""
     ts = _fixed_base_setup(model, params)
-    q, ports, syms = ts.q, ts.param_ports, ts.param_symbols
+    q = ts.q
     n = model.n
     qd, tau = port_symbols("qd", (n,)), port_symbols("tau", (n,))
     M = crba(ts)[0]
@@ -391,12 +391,12 @@ def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_d
         "sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2 S(q, qd) (Christoffel symbols) "
         "plus the friction derivative, and M^-1 and the products from one unrolled LDL^T factorisation of M (no "
         "square roots); dqdd/dtau is Minv.",
-        model, params, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),
+        ts, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),
         (Port("dqdd_dq", (n, n), "dqdd_i / dq_j (row-major)", _matrix_unit(model, ACCEL, ANGLE, "1/s^2")),
          Port("dqdd_dqd", (n, n), "dqdd_i / dqd_j (row-major)", _matrix_unit(model, ACCEL, RATE, "1/s")),
          Port("Minv", (n, n), "inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major)",
               _matrix_unit(model, ACCEL, TORQUE, "1/(kg m^2)"))),
-        (flat(ddq), flat(ddqd), flat(Minv)), ports, syms)
+        (flat(ddq), flat(ddqd), flat(Minv)))
     return _with_note(f, model)
 
 

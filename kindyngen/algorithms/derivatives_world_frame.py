@@ -41,9 +41,9 @@ Trees carry no joint effects (friction, armature): these are the rigid-body deri
 Example: a body with two pendulums, floating (nv = 8); the pendulums hang from the body, so
 neither joint's torque depends on the other joint's angle:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> f = tau_derivatives_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> f = tau_derivatives_tree(parse_urdf(TWO_PENDULUMS, floating_base=True))
 >>> [(p.name, p.shape) for p in f.outputs]
 [('dtau_dq', (8, 8)), ('dtau_dqd', (8, 8))]
 >>> f.output_exprs[0][6 * 8 + 7], f.output_exprs[0][7 * 8 + 6]
@@ -58,7 +58,7 @@ import symengine as se
 from .kinematics_conventions import q_port
 from .rigid_bodies import ZERO, Body, cross, qd_port, qdd_port, vadd
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
-from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, setup, tree_function
+from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, dynamics_function, setup
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
 
 
@@ -296,11 +296,11 @@ def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives") -> Sy
     ts, stages = setup(model), Stages()
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
-    f = tree_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the world-frame "
-                      "formulation of Carpentier and Mansard (RSS 2018): a joint's motion turns its subtree rigidly, "
-                      "each entry one or two spatial dot products; dtau/dqdd is M.", ts,
-                      (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
-                      (_matrix_port(model, "dtau_dq", "dtau_i / dq_j", "N m/rad and mixed units by coordinate"),
+    f = dynamics_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the world-frame "
+                          "formulation of Carpentier and Mansard (RSS 2018): a joint's motion turns its subtree rigidly, "
+                          "each entry one or two spatial dot products; dtau/dqdd is M.", ts,
+                          (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
+                          (_matrix_port(model, "dtau_dq", "dtau_i / dq_j", "N m/rad and mixed units by coordinate"),
                        _matrix_port(model, "dtau_dqd", "dtau_i / dqd_j", "N m s/rad and mixed units by coordinate")),
                       (_flat(dq), _flat(dqd)), stages, route="world frame")
     return _noted(f)
@@ -331,12 +331,12 @@ def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_mi
                                   "1/(kg m^2) and mixed units by coordinate"))
     else:
         what += ", not formed here (the function fd_derivatives has it)"
-    f = tree_function(name, ROUTE + "partial derivatives of the forward dynamics qdd = fd(q, qd, tau): dqdd/dx = "
-                      "-M^-1 dtau/dx at qdd = fd(q, qd, tau), dtau/dx in the world-frame formulation of Carpentier and "
-                      "Mansard (RSS 2018), every column solved through one tree-sparse L^T D L factor of M; "
-                      + what + ".", ts,
-                      (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
-                      tuple(ports), tuple(outputs), stages, route="world frame")
+    f = dynamics_function(name, ROUTE + "partial derivatives of the forward dynamics qdd = fd(q, qd, tau): dqdd/dx = "
+                          "-M^-1 dtau/dx at qdd = fd(q, qd, tau), dtau/dx in the world-frame formulation of Carpentier and "
+                          "Mansard (RSS 2018), every column solved through one tree-sparse L^T D L factor of M; "
+                          + what + ".", ts,
+                          (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
+                          tuple(ports), tuple(outputs), stages, route="world frame")
     return _noted(f)
 
 

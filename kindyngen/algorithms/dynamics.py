@@ -40,9 +40,9 @@ effects (friction and offset in tau and fd's bias, the armature on M's diagonal)
 
 Example: the two pendulums on a floating body of :mod:`kindyngen.readers.urdf`:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> tree = parse_urdf_tree(TWO_PENDULUMS, floating_base=True)
+>>> tree = parse_urdf(TWO_PENDULUMS, floating_base=True)
 >>> f = inverse_dynamics_tree(tree)
 >>> [(p.name, p.shape) for p in f.inputs], f.outputs[0].shape
 ([('q', (9,)), ('qd', (8,)), ('qdd', (8,))], (8,))
@@ -411,9 +411,9 @@ def expanded_parents(model: RobotModel) -> tuple[int, ...]:
     """The parent of each velocity coordinate: the floating base's six form a chain, its
     children hang from the last of them.
 
-    >>> from kindyngen.readers.urdf import parse_urdf_tree
+    >>> from kindyngen.readers.urdf import parse_urdf
     >>> from kindyngen.readers.urdf import TWO_PENDULUMS
-    >>> expanded_parents(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+    >>> expanded_parents(parse_urdf(TWO_PENDULUMS, floating_base=True))
     (-1, 0, 1, 2, 3, 4, 5, 5)
     """
     if not model.floating_base:
@@ -449,11 +449,11 @@ def centroidal(ts: TreeSetup, root_columns, whole: Body, M):
 
 # ----------------------------------------------------------------------------- functions
 
-def tree_function(name, summary, ts: TreeSetup, inputs, input_symbols, outputs, output_exprs,
-                  stages: Stages | None = None, route: str | None = None) -> SymbolicFunction:
-    """A dynamics SymbolicFunction: the inputs followed by the parameter port of the params
-    mode, the shared conventions text, the named intermediates of ``stages`` (``route``
-    names the algorithm where a function has several)."""
+def dynamics_function(name, summary, ts: TreeSetup, inputs, input_symbols, outputs, output_exprs,
+                      stages: Stages | None = None, route: str | None = None) -> SymbolicFunction:
+    """A dynamics SymbolicFunction of every route (tree, Lagrange, dual quaternion, sweeps): the
+    inputs followed by the parameter port of the params mode, the shared conventions text, the
+    named intermediates of ``stages`` (``route`` names the algorithm where a function has several)."""
     return SymbolicFunction(
         name=name, summary=summary, inputs=tuple(inputs) + ts.param_ports, outputs=tuple(outputs),
         input_symbols=tuple(input_symbols) + ts.param_symbols,
@@ -499,27 +499,27 @@ def inverse_dynamics_tree(model: RobotModel, params: str = "numeric", name: str 
     tau = rnea(ts, qd, qdd, True, stages)
     if effects:
         tau = [t + e for t, e in zip(tau, joint_effects(model, qd, qdd))]
-    return tree_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
-                         ts, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
-                         (force_port(model, "tau", "torque"),), (tau,), stages)
+    return dynamics_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
+                             ts, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
+                             (force_port(model, "tau", "torque"),), (tau,), stages)
 
 
 def coriolis_tree(model: RobotModel, params: str = "numeric", name: str = "c") -> SymbolicFunction:
     """``c(q, qd) -> tau(q, qd, 0)`` without gravity."""
     ts, stages = setup(model, params), Stages()
     qd = port_symbols("qd", (model.nv,))
-    return tree_function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
-                         "recursive Newton-Euler.", ts, (q_port(model), qd_port(model)), (ts.q, qd),
-                         (force_port(model, "c", "Coriolis and centrifugal torque"),),
-                         (rnea(ts, qd, None, False, stages),), stages)
+    return dynamics_function(name, ROUTE + "Coriolis and centrifugal forces c = tau(q, qd, 0) without gravity, by "
+                             "recursive Newton-Euler.", ts, (q_port(model), qd_port(model)), (ts.q, qd),
+                             (force_port(model, "c", "Coriolis and centrifugal torque"),),
+                             (rnea(ts, qd, None, False, stages),), stages)
 
 
 def gravity_tree(model: RobotModel, params: str = "numeric", name: str = "g") -> SymbolicFunction:
     """``g(q) -> tau(q, 0, 0)`` by composite first moments."""
     ts = setup(model, params)
-    return tree_function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", ts,
-                         (q_port(model),), (ts.q,), (force_port(model, "g", "gravity torque"),),
-                         (gravity_composite(ts),))
+    return dynamics_function(name, ROUTE + "gravity forces g = tau(q, 0, 0), by composite first moments.", ts,
+                             (q_port(model),), (ts.q,), (force_port(model, "g", "gravity torque"),),
+                             (gravity_composite(ts),))
 
 
 def mass_matrix_tree(model: RobotModel, params: str = "numeric", name: str = "M",
@@ -529,9 +529,9 @@ def mass_matrix_tree(model: RobotModel, params: str = "numeric", name: str = "M"
     M, _, _ = crba(ts, stages)
     if effects:
         M = mass_matrix_with_armature(model, M)
-    return tree_function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
-                         "branch (entries between branches are exact zeros).", ts, (q_port(model),), (ts.q,),
-                         (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
+    return dynamics_function(name, ROUTE + "inertia matrix M(q) by composite rigid bodies, each column carried up its "
+                             "branch (entries between branches are exact zeros).", ts, (q_port(model),), (ts.q,),
+                             (Port("M", (model.nv, model.nv), "joint-space inertia matrix (symmetric, row-major)",
                                _mass_unit(model)),), (_flat(M),), stages)
 
 
@@ -545,11 +545,11 @@ def forward_dynamics_tree(model: RobotModel, params: str = "numeric", name: str 
     M = mass_matrix_with_armature(model, M)
     bias = [b + e for b, e in zip(rnea(ts, qd, None, True, stages), joint_effects(model, qd, None))]
     qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)], stages)
-    return tree_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
-                         "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
-                         "and the two sparse triangular solves.", ts,
-                         (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
-                         (qdd_port(model),), (qdd,), stages, route="sparse L^T D L")
+    return dynamics_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
+                             "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
+                             "and the two sparse triangular solves.", ts,
+                             (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
+                             (qdd_port(model),), (qdd,), stages, route="sparse L^T D L")
 
 
 def centre_of_mass_tree(model: RobotModel, params: str = "numeric", name: str = "com") -> SymbolicFunction:
@@ -559,9 +559,9 @@ def centre_of_mass_tree(model: RobotModel, params: str = "numeric", name: str = 
     com, jac, ag = centroidal(ts, root_columns, whole, M)
     frame = "world" if model.floating_base else f"root link '{model.base_name}'"
     counted = "" if model.floating_base else " (the fixed root link not counted, as in Pinocchio)"
-    return tree_function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
-                         "(from the base rows of composite rigid bodies).", ts, (q_port(model),), (ts.q,),
-                         (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
+    return dynamics_function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
+                             "(from the base rows of composite rigid bodies).", ts, (q_port(model),), (ts.q,),
+                             (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
                           Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),
                           Port("A_g", (6, model.nv), "centroidal momentum matrix: h_G = A_g qd, linear then angular "
                                f"momentum about the CoM, {frame} axes (Pinocchio's ccrba)", "kg m, kg m^2 per unit of qd")),

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import symengine as se
 
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 
 EFFECT_PARAMETERS = {"viscous_friction": "fv", "coulomb_friction": "fc", "torque_offset": "f0", "armature": "Ia"}
 

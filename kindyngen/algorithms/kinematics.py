@@ -12,9 +12,9 @@ the base frame: ``[R, -[p_f - p_b]x R]`` (linear), ``[0, R]`` (angular).
 
 Example:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> f = jacobian_tree(parse_urdf_tree(TWO_PENDULUMS, floating_base=True))
+>>> f = jacobian_tree(parse_urdf(TWO_PENDULUMS, floating_base=True))
 >>> f.outputs[0].shape
 (2, 6, 8)
 """

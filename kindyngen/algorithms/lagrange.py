@@ -2,8 +2,9 @@
 kinetic energy by Koenig's theorem, ``M = Hessian of T in qd``, ``g = gradient of U``,
 ``S`` from the Christoffel symbols of ``M`` (paper eqs. 10-16), all on symengine DAGs.
 
-The joint frames, grouped link bodies, gravity, ports and function assembly it runs on are
-shared with the other dynamics routes and live in :mod:`kindyngen.algorithms.rigid_bodies`.
+The joint frames, grouped link bodies, gravity and ports it runs on are shared with the other
+dynamics routes and live in :mod:`kindyngen.algorithms.rigid_bodies`; the function assembly is
+:func:`kindyngen.algorithms.dynamics.dynamics_function`.
 
 Example:
 
@@ -20,8 +21,8 @@ import symengine as se
 
 from .effect_torques import with_armature
 from .kinematics_conventions import q_port
-from .rigid_bodies import ZERO, cross, dot, dynamics_function, flat, gravity, qd_port, vadd, vscale
-from .dynamics import crba, setup
+from .rigid_bodies import ZERO, cross, dot, flat, gravity, qd_port, vadd, vscale
+from .dynamics import TreeSetup, crba, dynamics_function, setup
 from ..model.robot_model import RobotModel
 from .symbolic import Port, SymbolicFunction, port_symbols
 
@@ -95,14 +96,12 @@ class LagrangeModel:
     g: list
     T: se.Basic
     U: se.Basic
-    ports: tuple
-    syms: tuple
+    ts: TreeSetup     # what it was derived from (the parameter ports)
 
 
 def lagrange_model(model: RobotModel, params: str = "numeric") -> LagrangeModel:
     ts = setup(model, params)
     q, qd, joints, bodies = ts.q, port_symbols("qd", (model.n,)), ts.joints, ts.bodies
-    ports, syms = ts.param_ports, ts.param_symbols
     T = kinetic_energy(bodies, moving_frames(joints, qd))
     U = potential_energy(model, bodies, joints)
     n = model.n
@@ -112,7 +111,7 @@ def lagrange_model(model: RobotModel, params: str = "numeric") -> LagrangeModel:
         for j in range(i, n):
             M[i][j] = M[j][i] = se.diff(dT[i], qd[j])
     g = [se.diff(U, qi) for qi in q]
-    return LagrangeModel(q, qd, M, g, T, U, ports, syms)
+    return LagrangeModel(q, qd, M, g, T, U, ts)
 
 
 LAGRANGE = ("Lagrange route (the identification paper's method): velocities by moving frames, "
@@ -124,44 +123,44 @@ def mass_matrix_lagrange(model: RobotModel, params: str = "numeric", name: str =
     """``M(q) -> M`` as the Hessian of the kinetic energy in qd (plus the armature)."""
     L = lagrange_model(model, params)
     M = with_armature(model, L.M) if effects else L.M
-    return dynamics_function(name, LAGRANGE + "M = Hessian of T in qd.", model, params,
+    return dynamics_function(name, LAGRANGE + "M = Hessian of T in qd.", L.ts,
                              (q_port(model),), (L.q,),
                              (Port("M", (model.n, model.n), "joint-space inertia matrix (symmetric, row-major)",
                                    "kg m^2"),),
-                             (flat(M),), L.ports, L.syms)
+                             (flat(M),))
 
 
 def gravity_lagrange(model: RobotModel, params: str = "numeric", name: str = "g_lagrange") -> SymbolicFunction:
     """``g(q) -> g`` as the gradient of the potential energy."""
     L = lagrange_model(model, params)
-    return dynamics_function(name, LAGRANGE + "g = gradient of the potential energy U.", model, params,
+    return dynamics_function(name, LAGRANGE + "g = gradient of the potential energy U.", L.ts,
                              (q_port(model),), (L.q,),
-                             (Port("g", (model.n,), "gravity torques", "N m"),), (L.g,), L.ports, L.syms)
+                             (Port("g", (model.n,), "gravity torques", "N m"),), (L.g,))
 
 
 def _christoffel_setup(model: RobotModel, params: str, route: str):
-    """(M nested lists, q, extra ports, extra symbols) of the M whose Christoffel symbols
+    """(M nested lists, q, tree setup) of the M whose Christoffel symbols
     give S: "crba" (composite rigid bodies, the cheaper DAG) or "lagrange" (energy Hessian)."""
     if route == "lagrange":
         L = lagrange_model(model, params)
-        return L.M, L.q, L.ports, L.syms
+        return L.M, L.q, L.ts
     ts = setup(model, params)
-    return crba(ts)[0], ts.q, ts.param_ports, ts.param_symbols
+    return crba(ts)[0], ts.q, ts
 
 
 def coriolis_matrix(model: RobotModel, params: str = "numeric", name: str = "S", route: str = "crba") -> SymbolicFunction:
     """``S(q, qd) -> S`` from the Christoffel symbols of M."""
-    M, q, ports, syms = _christoffel_setup(model, params, route)
+    M, q, ts = _christoffel_setup(model, params, route)
     qd = port_symbols("qd", (model.n,))
     S = christoffel_S(M, q, qd)
     which = "the composite-rigid-body M" if route == "crba" else "the energy-Hessian M"
     return dynamics_function(name, f"Christoffel route: Coriolis/centrifugal matrix S from the Christoffel symbols "
                              f"(paper eq. 16) of {which}, differentiated on the DAG; c = S qd, Mdot - 2 S is "
-                             f"skew-symmetric.", model, params,
+                             f"skew-symmetric.", ts,
                              (q_port(model), qd_port(model)), (q, qd),
                              (Port("S", (model.n, model.n),
                                    "Christoffel Coriolis/centrifugal matrix, c = S qd (row-major)", "N m s"),),
-                             (flat(S),), ports, syms)
+                             (flat(S),))
 
 
 def coriolis_christoffel(model: RobotModel, params: str = "numeric", name: str = "c_christoffel",
@@ -174,7 +173,6 @@ def coriolis_christoffel(model: RobotModel, params: str = "numeric", name: str =
     c = [se.Add(*(S[i * n + j] * qd[j] for j in range(n))) for i in range(n)]
     which = "the composite-rigid-body M" if route == "crba" else "the energy-Hessian M"
     return dynamics_function(name, f"Christoffel route: Coriolis and centrifugal torques c = S qd (paper eq. 15), "
-                             f"S from the Christoffel symbols (eq. 16) of {which}.", model, params,
+                             f"S from the Christoffel symbols (eq. 16) of {which}.", setup(model, params),
                              f.inputs[:2], f.input_symbols[:2],
-                             (Port("c", (n,), "Coriolis and centrifugal torques", "N m"),), (c,),
-                             f.inputs[2:], f.input_symbols[2:])
+                             (Port("c", (n,), "Coriolis and centrifugal torques", "N m"),), (c,))

@@ -45,7 +45,7 @@ from .lagrange import gravity_lagrange, mass_matrix_lagrange
 from .dynamics import inverse_dynamics_tree
 from ..model.inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
 from .effect_torques import effect_columns, effect_parameter_names, effect_parameter_values
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from .symbolic import Port, Stages, SymbolicFunction
 from .tree_regressors import link_parameter_columns
 

@@ -1,6 +1,7 @@
-"""Joint frames, link bodies, gravity, ports and the function assembly every dynamics
-route shares; :func:`kindyngen.algorithms.dynamics.setup` builds the frames and the grouped
-bodies of a model (an arm being the tree whose parent of joint j is j - 1).
+"""Joint frames, link bodies, gravity and ports every dynamics route shares (the function
+assembly is :func:`kindyngen.algorithms.dynamics.dynamics_function`);
+:func:`kindyngen.algorithms.dynamics.setup` builds the frames and the grouped bodies of a
+model (an arm being the tree whose parent of joint j is j - 1).
 
 * **Joint frames.** Frame j is attached to link j with its z axis on joint j, so that every
   revolute joint is ``R_{j-1,j} = C_j Rz(q_j)``, ``p_{j-1,j} = t_j`` and every prismatic one
@@ -39,7 +40,7 @@ from ..model.inertial_parameters import LinkInertials, numeric_inertials, parame
 from .effect_torques import description_text
 from .kinematics_conventions import joint_units
 from ..model.robot_model import RobotModel
-from .symbolic import Port, SymbolicFunction
+from .symbolic import Port
 
 ZERO = se.Integer(0)
 
@@ -233,23 +234,6 @@ def _collect(e: se.Basic) -> se.Basic:
 def gravity(model: RobotModel):
     """Gravity acceleration in the base frame (exact zeros kept)."""
     return [se.sympify(v) for v in model.gravity]
-
-
-# ----------------------------------------------------------------------------- function assembly
-
-def dynamics_function(name, summary, model, params, inputs, input_symbols, outputs, output_exprs,
-                      extra_ports, extra_syms) -> SymbolicFunction:
-    """A dynamics SymbolicFunction: the route's inputs followed by the parameter ports of
-    ``params`` (``extra_ports``/``extra_syms``: ``param_ports``/``param_symbols`` of
-    :func:`kindyngen.algorithms.dynamics.setup`), the shared conventions text and ``metadata =
-    {"params": params}``."""
-    return SymbolicFunction(
-        name=name, summary=summary,
-        inputs=tuple(inputs) + tuple(extra_ports), outputs=tuple(outputs),
-        input_symbols=tuple(input_symbols) + tuple(extra_syms),
-        output_exprs=tuple(tuple(se.sympify(e) for e in exprs) for exprs in output_exprs),
-        conventions=conventions(model, params),
-        metadata={"params": params})
 
 
 def flat(matrix):

@@ -14,9 +14,9 @@ the base columns.
 
 Example:
 
->>> from kindyngen.readers.urdf import parse_urdf_tree
+>>> from kindyngen.readers.urdf import parse_urdf
 >>> from kindyngen.readers.urdf import TWO_PENDULUMS
->>> b = tree_base_parameters(parse_urdf_tree(TWO_PENDULUMS))
+>>> b = tree_base_parameters(parse_urdf(TWO_PENDULUMS, tree=True))
 >>> b.rank, b.names      # left turns about y: mx, mz, Iyy act; right about x: my, mz, Ixx
 (6, ('mx1', 'mz1', 'Iyy1', 'my2', 'mz2', 'Ixx2'))
 """

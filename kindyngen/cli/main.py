@@ -18,7 +18,8 @@ from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
 from ..runtime.evaluate import EvaluationError
 from ..measured import MeasuredDataError
-from ..readers.yaml_description import RobotDescriptionError, load_robot
+from ..model.robot_model import RobotDescriptionError
+from ..readers.yaml_description import load_robot
 
 
 LANGS = ("c", "python", "casadi", "jax", "matlab")

@@ -20,7 +20,7 @@ from ..ik.damped_least_squares import dls_view
 from .optimize import Program
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 

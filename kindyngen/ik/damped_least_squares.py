@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 from ..algorithms.kinematics_conventions import joint_units
 from ..codegen.opcount import OpCount
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 
 NAME = "ik_dls"
 LANGUAGES = ("c", "python", "casadi")

@@ -85,7 +85,7 @@ import sympy
 import symengine as se
 
 from ..algorithms.geometry import constant, exact
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 
 # --- status codes ------------------------------------------------------------------------
 VALID, LIMITS, UNREACHABLE, WRIST_SINGULAR, ELBOW_SINGULAR, SHOULDER_SINGULAR = 0, 1, 2, 3, 4, 5

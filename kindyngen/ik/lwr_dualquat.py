@@ -38,7 +38,7 @@ from ..algorithms.geometry import constant, joint_cos_sin
 from .lwr_common import (CONVENTIONS, TINY, WRIST_S6, LwrGeometry, Wrist, assemble, elbow_cosine,
                          half_angle, indicator, input_bound, lwr_geometry, quaternion, sanitize, solve_position)
 from ..algorithms.dualquat.dq_kinematics import quat_add, quat_mul
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from ..algorithms.symbolic import Port, SymbolicFunction, port_symbols
 
 # sum of squares of x: entries below ~3e74, so t/2 = vec(d r*) stays below 1e150 and its

@@ -34,7 +34,7 @@ import symengine as se
 from ..algorithms.geometry import joint_cos_sin
 from .lwr_common import (CONVENTIONS, WRIST_S6, Wrist, assemble, canonical_pose, elbow_cosine, half_angle,
                          indicator, input_bound, lwr_geometry, sanitize, solve_position)
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from ..algorithms.symbolic import Port, SymbolicFunction, port_symbols
 
 INPUT_BOUND = 1e300   # sum of squares of the 12 used entries of T: every entry below 1e150

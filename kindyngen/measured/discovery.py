@@ -119,7 +119,7 @@ from scipy.stats import chi2
 
 from ..model.inertial_parameters import NAMES as BARYCENTRIC_NAMES
 from ..model.inertial_parameters import parameter_vector
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from .effect_columns import effect_columns, effect_names
 from .log_preparing import Segment, filtered_rows, noise_gain, zero_phase_low_pass
 from .regressor_rows import description_torques, torque_regressor

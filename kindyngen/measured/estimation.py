@@ -285,7 +285,7 @@ def rms_per_joint(tau, predicted) -> np.ndarray:
     return np.sqrt(np.mean((tau - predicted) ** 2, axis=0))
 
 
-def _effect_hint(error: RankDeficientError) -> str:
+def effect_hint(error: RankDeficientError) -> str:
     """A hint when effect coefficients are among the unidentifiable directions."""
     from .effect_columns import effect_of
     involved = []
@@ -365,7 +365,7 @@ def least_squares(Y, tau, names=None, weighted: bool = False) -> Fit:
     try:
         _, _, names = check_identifiable(Y, tau, names)
     except RankDeficientError as error:
-        hint = _effect_hint(error)
+        hint = effect_hint(error)
         if not hint:
             raise
         raise RankDeficientError(error.rank, error.names, error.null_space, hint) from None

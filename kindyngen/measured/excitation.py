@@ -44,7 +44,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize
 
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .regressor_rows import TorqueRegressor, torque_regressor
 from . import MeasuredDataError

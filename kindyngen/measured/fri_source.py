@@ -36,7 +36,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 
 
 class MissingPinocchioError(ImportError):

@@ -169,7 +169,7 @@ def _segments(paths, n, settings, progress, what, split=None):
     return (tuple(train), tuple(held)) if split is not None else tuple(train)
 
 
-def _consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[str, ...]]:
+def check_consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tuple[str, ...]]:
     """Whether a full parameter vector and effect coefficients are physical: every link's
     pseudo-inertia positive definite, non-negative friction and armature."""
     notes = []
@@ -284,7 +284,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
         return Y @ base + (E_ @ evalues if len(enames) else 0.0)
 
     rms_train = rms_per_joint(tau, predicted(Yb, E))
-    consistent, consistency_notes = _consistency(full, n, enames, evalues)
+    consistent, consistency_notes = check_consistency(full, n, enames, evalues)
     consistency_notes = sensing_notes + consistency_notes
     bias = None
     if "motor_side_elasticity" in sensing:

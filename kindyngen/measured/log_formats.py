@@ -34,16 +34,14 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .log_reading import LogError, RawLog, read_log
-from .log_reading import _csv_layout   # the CSV's column rules, shared by Parquet (one spelling of them)
+from .log_reading import CHANNELS, LogError, RawLog, read_log
+from .log_reading import csv_layout   # the CSV's column rules, shared by Parquet (one spelling of them)
 
 #: Samples per chunk: the regressor of one chunk of the Panda (7 x 43 columns) is 48 MB.
 CHUNK_ROWS = 20000
 #: CSV files up to this size are read whole by :func:`kindyngen.measured.log_reading.read_log` (its
 #: messages name the file line of a bad cell); larger ones stream through pyarrow's reader.
 SMALL_CSV_BYTES = 64 << 20
-
-_CHANNELS = ("q", "qd", "qdd", "tau")
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,7 +108,7 @@ def read_any(path, n: int, joint_names: Sequence[str] | None = None) -> RawLog:
                                              or Path(path).stat().st_size <= SMALL_CSV_BYTES):
         return read_log(path, n)
     chunks = list(iter_chunks(path, n, joint_names, chunk_rows=1 << 62))
-    parts = {ch: [getattr(c, ch) for c in chunks] for ch in ("t",) + _CHANNELS}
+    parts = {ch: [getattr(c, ch) for c in chunks] for ch in ("t",) + CHANNELS}
     whole = {ch: (None if any(p is None for p in v) else np.concatenate(v)) for ch, v in parts.items()}
     return RawLog(str(path), whole["t"], whole["q"], whole["tau"], whole["qd"], whole["qdd"])
 
@@ -147,7 +145,7 @@ def time_span_of_file(path) -> tuple[float, float] | None:
 
 def _check_chunk(source: str, chunk: RawChunk, last_t, kind: str) -> None:
     row = "sample" if kind.startswith("rosbag") else "data row"
-    for name, a in (("t", chunk.t),) + tuple((ch, getattr(chunk, ch)) for ch in _CHANNELS):
+    for name, a in (("t", chunk.t),) + tuple((ch, getattr(chunk, ch)) for ch in CHANNELS):
         if a is None:
             continue
         bad = ~np.isfinite(a)
@@ -196,7 +194,7 @@ def _csv_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterator[Ra
     import pyarrow as pa
     import pyarrow.csv as pacsv
     names = _header_names(path, source)
-    layout = _csv_layout(names, n, source)
+    layout = csv_layout(names, n, source)
     convert = pacsv.ConvertOptions(column_types={name: pa.float64() for name in names})
     try:
         reader = pacsv.open_csv(path, read_options=pacsv.ReadOptions(block_size=8 << 20), convert_options=convert)
@@ -270,7 +268,7 @@ def _parquet_chunks(path: Path, n: int, chunk_rows: int, joint_names) -> Iterato
     except (pa.ArrowInvalid, OSError) as exc:
         raise LogError(source, "<file>", f"cannot read as Parquet: {str(exc).splitlines()[0]}") from None
     names = list(handle.schema_arrow.names)
-    layout = _csv_layout(names, n, source)
+    layout = csv_layout(names, n, source)
     for name, kind in zip(names, handle.schema_arrow.types):
         if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
             raise LogError(source, name, f"expected real numbers, got the Parquet type {kind}")
@@ -293,7 +291,7 @@ def write_parquet(path, raw: RawLog) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
     columns = {"t": raw.t}
-    for ch in _CHANNELS:
+    for ch in CHANNELS:
         a = getattr(raw, ch)
         if a is not None:
             columns.update({f"{ch}{j + 1}": a[:, j] for j in range(raw.n)})

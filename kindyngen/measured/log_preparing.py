@@ -52,7 +52,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
-from .log_reading import LogError, MIN_SAMPLES, RawLog, _CHANNELS, _as_float, _g, _num, read_log, repeated_rows
+from .log_reading import (CHANNELS, MIN_SAMPLES, LogError, RawLog, as_float_array, number_text, read_log, repeated_rows,
+                          rounded_text)
 
 __all__ = [
     "Preprocessing", "Segment", "LowPass", "preprocess", "load_segments", "split_time",
@@ -172,8 +173,9 @@ class LowPass:
         return self.rate_hz / self.decimate
 
     def describe(self) -> str:
-        return (f"{_g(self.cutoff_hz)} Hz {_ordinal(self.order)}-order Butterworth, zero phase, at "
-                f"{_g(self.rate_hz)} Hz, then every {self.decimate}th sample ({_g(self.rate_after_hz)} Hz)")
+        return (f"{rounded_text(self.cutoff_hz)} Hz {_ordinal(self.order)}-order Butterworth, zero phase, at "
+                f"{rounded_text(self.rate_hz)} Hz, then every {self.decimate}th sample "
+                f"({rounded_text(self.rate_after_hz)} Hz)")
 
 
 @dataclass(frozen=True, eq=False)   # eq=False: arrays have no single truth value
@@ -205,9 +207,9 @@ class Segment:
 
     def __post_init__(self):
         for name in ("t", "q", "qd", "qdd", "tau"):
-            object.__setattr__(self, name, _as_float(self.source, name, getattr(self, name)))
+            object.__setattr__(self, name, as_float_array(self.source, name, getattr(self, name)))
         if self.tau_unfiltered is not None:
-            object.__setattr__(self, "tau_unfiltered", _as_float(self.source, "tau", self.tau_unfiltered))
+            object.__setattr__(self, "tau_unfiltered", as_float_array(self.source, "tau", self.tau_unfiltered))
             if self.tau_unfiltered.shape != self.tau.shape:
                 raise LogError(self.source, "tau", f"unfiltered torque of shape {self.tau_unfiltered.shape} "
                                                    f"beside {self.tau.shape}")
@@ -233,9 +235,9 @@ class Segment:
         return float(self.t[-1] - self.t[0])
 
     def __repr__(self) -> str:
-        rate = f"{_g(1 / self.dt)} Hz" if self.dt > 0 else "one sample"
+        rate = f"{rounded_text(1 / self.dt)} Hz" if self.dt > 0 else "one sample"
         return (f"Segment({self.source!r}, {len(self.t)} samples at {rate}, {self.n} joints, "
-                f"{_g(self.duration)} s from t = {_num(self.t[0])} s)")
+                f"{rounded_text(self.duration)} s from t = {number_text(self.t[0])} s)")
 
     def _part(self, rows: slice, note: str) -> "Segment":
         return Segment(self.source, self.t[rows], self.dt, self.q[rows], self.qd[rows],
@@ -348,11 +350,12 @@ def preprocess(raw: RawLog, settings: Preprocessing = Preprocessing()) -> tuple[
     limit = settings.gap_factor * median
     gaps = np.flatnonzero(steps > limit)
     if gaps.size:
-        listed = ", ".join(f"t = {_g(raw.t[i] - raw.t[0])} s ({_g(1000 * steps[i])} ms)" for i in gaps[:8])
+        listed = ", ".join(f"t = {rounded_text(raw.t[i] - raw.t[0])} s ({rounded_text(1000 * steps[i])} ms)"
+                           for i in gaps[:8])
         more = f" and {gaps.size - 8} more" if gaps.size > 8 else ""
-        log_notes.append(f"split at {gaps.size} gaps longer than {_g(1000 * limit)} ms "
-                         f"({_g(settings.gap_factor)} x median step {_g(1000 * median)} ms; times from "
-                         f"the first sample): {listed}{more}")
+        log_notes.append(f"split at {gaps.size} gaps longer than {rounded_text(1000 * limit)} ms "
+                         f"({rounded_text(settings.gap_factor)} x median step {rounded_text(1000 * median)} ms; "
+                         f"times from the first sample): {listed}{more}")
     pieces = np.split(np.arange(total), gaps + 1)
 
     trim = settings.effective_trim_s
@@ -362,10 +365,10 @@ def preprocess(raw: RawLog, settings: Preprocessing = Preprocessing()) -> tuple[
         keep = idx[~repeated[idx]]
         span = float(raw.t[keep[-1]] - raw.t[keep[0]]) if keep.size else 0.0
         needed = 2 * trim + (MIN_SAMPLES - 1) * median
-        where = f"t = {_g(raw.t[idx[0]] - raw.t[0])} .. {_g(raw.t[idx[-1]] - raw.t[0])} s"
+        where = f"t = {rounded_text(raw.t[idx[0]] - raw.t[0])} .. {rounded_text(raw.t[idx[-1]] - raw.t[0])} s"
         if keep.size < MIN_SAMPLES or span <= needed:
-            dropped.append(f"dropped the piece {where} ({keep.size} samples, {_g(span)} s): too short "
-                           f"to filter and trim (needs more than {_g(needed)} s and "
+            dropped.append(f"dropped the piece {where} ({keep.size} samples, {rounded_text(span)} s): too short "
+                           f"to filter and trim (needs more than {rounded_text(needed)} s and "
                            f"{MIN_SAMPLES} samples)")
             continue
         result = _process_piece(raw, keep, settings, median, trim)
@@ -400,7 +403,7 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
     source = raw.source
     notes: list[str] = []
     t = raw.t[keep]
-    given = {ch: getattr(raw, ch)[keep] for ch in _CHANNELS if getattr(raw, ch) is not None}
+    given = {ch: getattr(raw, ch)[keep] for ch in CHANNELS if getattr(raw, ch) is not None}
 
     # --- onto a uniform grid
     clock = _uniform_clock(t, settings.jitter_tolerance)
@@ -409,8 +412,8 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
         x = t[0] + step * np.arange(len(t))          # the clock the stamps jitter around
         # stamps uniform up to floating-point rounding (Unix times: ~1e-7 s) need no note
         if deviation > max(1e-6 * step, 8 * np.spacing(np.abs(t).max())):
-            notes.append(f"time stamps within {_g(1000 * deviation)} ms ({deviation / step:.2f} of a "
-                         f"step) of a uniform {_g(1 / step)} Hz clock: samples placed on that clock")
+            notes.append(f"time stamps within {rounded_text(1000 * deviation)} ms ({deviation / step:.2f} of a "
+                         f"step) of a uniform {rounded_text(1 / step)} Hz clock: samples placed on that clock")
     else:
         step, x = None, t
     resampled = not (clock is not None and settings.rate_hz is None)
@@ -428,27 +431,27 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
                 values[ch] = _linear(rel, given[ch], grid_rel)
         grid = x[0] + grid_rel
         others = [ch for ch in ("tau", "qd", "qdd") if ch in given]
-        notes.append(f"resampled {len(t)} -> {count} samples at {_g(rate)} Hz (cubic spline for q, "
+        notes.append(f"resampled {len(t)} -> {count} samples at {rounded_text(rate)} Hz (cubic spline for q, "
                      f"linear for {_describe(others)})")
         native = 1.0 / (step if step is not None else median)
         if rate < 0.9 * native:
             # interpolation comes before the low-pass (which needs a uniform grid), so a
             # coarser grid than the log's folds everything above its Nyquist frequency in
-            notes.append(f"warning: interpolated below the log's own rate ({_g(native)} Hz) "
-                         f"before any low-pass: content above {_g(rate / 2)} Hz aliases")
+            notes.append(f"warning: interpolated below the log's own rate ({rounded_text(native)} Hz) "
+                         f"before any low-pass: content above {rounded_text(rate / 2)} Hz aliases")
     rate = 1.0 / dt
 
     # --- zero-phase low-pass
     if settings.cutoff_hz is not None:
         if settings.cutoff_hz >= rate / 2:
-            raise LogError(source, "cutoff_hz", f"{_g(settings.cutoff_hz)} Hz is not below the "
-                                                f"Nyquist frequency {_g(rate / 2)} Hz of the "
-                                                f"{_g(rate)} Hz grid")
+            raise LogError(source, "cutoff_hz", f"{rounded_text(settings.cutoff_hz)} Hz is not below the "
+                                                f"Nyquist frequency {rounded_text(rate / 2)} Hz of the "
+                                                f"{rounded_text(rate)} Hz grid")
         filtered = ["q"] + [ch for ch in ("qd", "qdd") if ch in values and settings.filter_given] + ["tau"]
         values["tau_unfiltered"] = values["tau"]
         for ch in filtered:
             values[ch] = zero_phase_low_pass(values[ch], rate, settings.cutoff_hz, settings.order)
-        notes.append(f"{_describe(filtered)} low-pass {_g(settings.cutoff_hz)} Hz "
+        notes.append(f"{_describe(filtered)} low-pass {rounded_text(settings.cutoff_hz)} Hz "
                      f"({_ordinal(settings.order)}-order Butterworth, zero phase)")
         unfiltered = [ch for ch in ("qd", "qdd") if ch in values and ch not in filtered]
         if unfiltered:
@@ -479,12 +482,12 @@ def _process_piece(raw: RawLog, keep: np.ndarray, settings: Preprocessing, media
     # --- trim the filter's edge transients
     cut = int(round(trim / dt))
     if len(grid) - 2 * cut < MIN_SAMPLES:
-        return (f"{len(grid)} samples at {_g(rate)} Hz leave fewer than MIN_SAMPLES = {MIN_SAMPLES} "
+        return (f"{len(grid)} samples at {rounded_text(rate)} Hz leave fewer than MIN_SAMPLES = {MIN_SAMPLES} "
                 f"after trimming {cut} at each end")
     if cut:
         grid = grid[cut:len(grid) - cut]
         values = {ch: v[cut:len(v) - cut] for ch, v in values.items()}
-        notes.append(f"trimmed {_g(trim)} s ({cut} samples) at each end")
+        notes.append(f"trimmed {rounded_text(trim)} s ({cut} samples) at each end")
     return grid, dt, values, notes
 
 
@@ -531,8 +534,8 @@ def split_time(segments: Sequence[Segment], fraction: float) -> tuple[tuple[Segm
     for before, after in zip(segments, segments[1:]):
         if after.t[0] <= before.t[-1]:
             raise LogError(after.source, "t", f"segments overlap or are out of time order "
-                                              f"({_g(after.t[0])} s starts before {_g(before.t[-1])} s "
-                                              f"ends); split each log separately")
+                                              f"({rounded_text(after.t[0])} s starts before "
+                                              f"{rounded_text(before.t[-1])} s ends); split each log separately")
     start, end = float(segments[0].t[0]), float(segments[-1].t[-1])
     cut_time = start + fraction * (end - start)
     train: list[Segment] = []
@@ -544,8 +547,8 @@ def split_time(segments: Sequence[Segment], fraction: float) -> tuple[tuple[Segm
             valid.append(s)
         else:
             k = int(np.searchsorted(s.t, cut_time, side="left"))
-            where = (f"cut at t = {_g(cut_time)} s: after the first {_g(100 * fraction)} % of the "
-                     f"span {_g(start)} .. {_g(end)} s")
+            where = (f"cut at t = {rounded_text(cut_time)} s: after the first {rounded_text(100 * fraction)} % of the "
+                     f"span {rounded_text(start)} .. {rounded_text(end)} s")
             train.append(s._part(slice(0, k), where + " (training part)"))
             valid.append(s._part(slice(k, None), where + " (validation part)"))
     return tuple(train), tuple(valid)

@@ -37,12 +37,13 @@ _NPZ_KEYS = {"times": "t", "positions": "q", "velocities": "qd", "accelerations"
 #: Identification must use what the robot did, not what it was asked to do.
 _NPZ_IGNORED = ("target_positions", "target_velocities", "target_accelerations")
 
-_CHANNELS = ("q", "qd", "qdd", "tau")
+#: the measured channels of a log, besides the time stamps
+CHANNELS = ("q", "qd", "qdd", "tau")
 
 
 class LogError(MeasuredDataError):
     """A log that cannot be used, with the file, the field (column, key or row) and the
-    reason; the same shape as :class:`kindyngen.readers.yaml_description.RobotDescriptionError`.
+    reason; the same shape as :class:`kindyngen.model.robot_model.RobotDescriptionError`.
 
     >>> raise LogError("run1.csv", "q3", "not finite (nan) at data row 17 (file line 18)")
     Traceback (most recent call last):
@@ -55,13 +56,14 @@ class LogError(MeasuredDataError):
         super().__init__(f"{source}: field '{field}': {reason}")
 
 
-def _num(x) -> str:
+def number_text(x) -> str:
     """A plain number for messages: ``1.5``, never ``np.float64(1.5)``; time stamps keep
     all their digits (Unix times have ten before the point)."""
     return repr(float(x))
 
 
-def _g(x) -> str:
+def rounded_text(x) -> str:
+    """A number for messages to six significant digits: ``rounded_text(0.0012345678)`` is ``0.00123457``."""
     return f"{float(x):g}"
 
 
@@ -104,7 +106,7 @@ class RawLog:
             if value is None and name in ("t", "q", "tau"):
                 raise LogError(self.source, name, "required (only qd and qdd may be None)")
             if value is not None:
-                object.__setattr__(self, name, _as_float(self.source, name, value))
+                object.__setattr__(self, name, as_float_array(self.source, name, value))
         object.__setattr__(self, "notes", tuple(self.notes))
         _check_shapes(self.source, self.t, self._channels(), _canonical_names)
         _check_values(self.source, self.t, self._channels(), _canonical_names)
@@ -120,7 +122,7 @@ class RawLog:
     def __repr__(self) -> str:
         given = [c for c in ("qd", "qdd") if getattr(self, c) is not None]
         return (f"RawLog({self.source!r}, {len(self.t)} samples, {self.n} joints, "
-                f"{_g(self.t[-1] - self.t[0])} s from t = {_num(self.t[0])} s, given: q, tau"
+                f"{rounded_text(self.t[-1] - self.t[0])} s from t = {number_text(self.t[0])} s, given: q, tau"
                 f"{''.join(', ' + c for c in given)})")
 
 
@@ -145,7 +147,8 @@ _npz_names = _Names("times", lambda ch: _NPZ_KEY_OF[ch],
                     lambda ch, j: (_NPZ_KEY_OF[ch], f" (joint {j + 1})"), "sample")
 
 
-def _as_float(source: str, name: str, value) -> np.ndarray:
+def as_float_array(source: str, name: str, value) -> np.ndarray:
+    """``value`` as a read-only float array, or a :class:`LogError` naming ``name`` if it holds no real numbers."""
     try:
         a = np.asarray(value)
     except Exception as exc:   # e.g. ragged nested lists
@@ -180,7 +183,7 @@ def _check_values(source: str, t: np.ndarray, channels: dict, names: _Names) -> 
     bad = ~np.isfinite(t)
     if bad.any():
         i = int(np.argmax(bad))
-        raise LogError(source, names.time, f"not finite ({_num(t[i])}) at {names.row} {i + 1} "
+        raise LogError(source, names.time, f"not finite ({number_text(t[i])}) at {names.row} {i + 1} "
                                            f"(first bad {names.row})")
     for ch, a in channels.items():
         if a is None:
@@ -191,14 +194,14 @@ def _check_values(source: str, t: np.ndarray, channels: dict, names: _Names) -> 
             i = int(np.argmax(bad.any(axis=1)))
             j = int(np.argmax(bad[i]))
             field_name, extra = names.column(ch, j)
-            raise LogError(source, field_name, f"not finite ({_num(a[i, j])}) at {names.row} "
+            raise LogError(source, field_name, f"not finite ({number_text(a[i, j])}) at {names.row} "
                                                f"{i + 1}{extra} (first bad {names.row})")
     step = np.diff(t)
     back = np.flatnonzero(step < 0)
     if back.size:
         i = int(back[0]) + 1
         raise LogError(source, names.time, f"time goes backwards at {names.row} {i + 1}: "
-                                           f"{_num(t[i])} s after {_num(t[i - 1])} s")
+                                           f"{number_text(t[i])} s after {number_text(t[i - 1])} s")
     same_time = np.flatnonzero(step == 0)
     if same_time.size:
         # an equal time stamp is allowed only for an exact repeat of the previous row (a
@@ -211,7 +214,7 @@ def _check_values(source: str, t: np.ndarray, channels: dict, names: _Names) -> 
                 i = int(k) + 1
                 raise LogError(source, names.time,
                                f"{names.row}s {i} and {i + 1} have the same time stamp "
-                               f"{_num(t[i])} s but different values; only an exact repeat "
+                               f"{number_text(t[i])} s but different values; only an exact repeat "
                                f"of the previous {names.row} may share its time stamp")
 
 
@@ -284,11 +287,11 @@ def _read_csv(path: Path, n: int, source: str) -> RawLog:
     if all(_is_number(name) for name in names):
         raise LogError(source, "<file>", f"the first row holds numbers, not column names; a "
                                          f"header row is required ({_expected_columns(n)})")
-    columns = _csv_layout(names, n, source)
+    columns = csv_layout(names, n, source)
 
     data = _csv_numbers(rows, lines, names, source)
     t = data[:, columns["t"]]
-    channels = {ch: (data[:, columns[ch]] if ch in columns else None) for ch in _CHANNELS}
+    channels = {ch: (data[:, columns[ch]] if ch in columns else None) for ch in CHANNELS}
     _check_shapes(source, t, channels, _csv_names)
     # rows named as the user counts them: data rows from 1, plus the file line
     line_of = np.asarray(lines)
@@ -316,7 +319,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _csv_layout(names: list[str], n: int, source: str) -> dict[str, object]:
+def csv_layout(names: list[str], n: int, source: str) -> dict[str, object]:
     """Column index of ``t`` and index arrays of each channel, from the header."""
     known = ["t"] + [f"{ch}{j}" for ch in _CSV_GROUPS for j in range(1, n + 1)]
     seen: dict[str, int] = {}
@@ -441,7 +444,7 @@ def _read_npz(path: Path, n: int, source: str) -> RawLog:
     for key in ("times", "positions", "torques"):
         if key not in arrays:
             raise LogError(source, key, "missing key")
-    values = {key: _as_float(source, key, arrays[key]) for key in arrays}
+    values = {key: as_float_array(source, key, arrays[key]) for key in arrays}
     t = values["times"]
     if t.ndim != 1:
         raise LogError(source, "times", f"expected shape (N,), got {t.shape}")

@@ -39,7 +39,7 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg.lapack import dgeqrf as _geqrf
 
-from .estimation import Fit, IdentificationDataError, RankDeficientError, check_identifiable, _effect_hint
+from .estimation import Fit, IdentificationDataError, RankDeficientError, check_identifiable, effect_hint
 
 
 def _triangle(stacked: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -187,7 +187,7 @@ def least_squares_factor(factor: LSFactor, names=None, weighted: bool = False) -
     try:
         check_identifiable(R, c, names)     # R has the stacked regressor's rank and null space
     except RankDeficientError as error:
-        hint = _effect_hint(error)
+        hint = effect_hint(error)
         if not hint:
             raise
         raise RankDeficientError(error.rank, error.names, error.null_space, hint) from None

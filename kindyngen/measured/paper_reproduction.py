@@ -55,7 +55,7 @@ import numpy as np
 import sympy
 
 from ..algorithms.regressors import base_expressions_in_paper, base_parameters, paper_symbols
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from .estimation import Fit, least_squares
 from .fri_source import DynamicsSource, Motion
 from .log_preparing import zero_phase_low_pass

@@ -20,7 +20,7 @@ import symengine as se
 from ..model.inertial_parameters import parameter_vector
 from ..algorithms.effect_torques import effect_parameter_values
 from ..algorithms.regressors import base_parameters, regressor
-from ..readers.yaml_description import RobotModel
+from ..model.robot_model import RobotModel
 from .effect_columns import coulomb_eps, effect_columns
 
 

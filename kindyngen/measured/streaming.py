@@ -53,7 +53,7 @@ from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent_factor, links_from_barycentric
 from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .estimation import IdentificationDataError
-from .identify import Identification, IdentificationRequest, _consistency
+from .identify import Identification, IdentificationRequest, check_consistency
 from .log_formats import (CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, joint_names_of, log_kind, read_any,
                           time_span_of_file)
 from .log_reading import MIN_SAMPLES, LogError, RawLog
@@ -708,7 +708,7 @@ def solve_folds(request, model, train: LSFactor, valid: LSFactor, folds, progres
         method = "weighted least squares" if request.weighted else "ordinary least squares"
     values = np.concatenate([base, evalues])
     rms_train = train.rms(values)
-    consistent, consistency_notes = _consistency(full, n, enames, evalues)
+    consistent, consistency_notes = check_consistency(full, n, enames, evalues)
     consistency_notes = overridden + consistency_notes
     text = None
     if consistent:

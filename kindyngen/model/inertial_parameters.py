@@ -13,7 +13,7 @@ are baked into generated code, which must not depend on the processor's rounding
 Example:
 
 >>> from sympy import Rational as R
->>> from kindyngen.readers.yaml_description import Link
+>>> from kindyngen.model.robot_model import Link
 >>> barycentric(Link(mass=R(2), com=(R(0), R(0), R(1, 2)), inertia=(R(1), R(1), R(1), 0, 0, 0)))
 (2, 0, 0, 1, 3/2, 0, 3/2, 0, 0, 1)
 """
@@ -25,7 +25,7 @@ import numpy as np
 import symengine as se
 import sympy
 
-from ..readers.yaml_description import Link, RobotModel
+from .robot_model import Link, RobotModel
 
 NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 

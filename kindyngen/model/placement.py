@@ -9,7 +9,7 @@ half-angle rotations, in :mod:`kindyngen.algorithms.dualquat.dq_kinematics`). Fa
 * ``("trans", (x, y, z))``: a translation;
 * ``("rot", (ux, uy, uz), angle)``: a rotation by ``angle`` about the unit axis u.
 
-Every joint of a :class:`kindyngen.readers.yaml_description.RobotModel` is ``before * motion(q) * after``:
+Every joint of a :class:`kindyngen.model.robot_model.RobotModel` is ``before * motion(q) * after``:
 ``before`` places the joint frame (its z axis is the joint axis) on the parent link frame,
 ``motion`` is ``Rz(q + offset)`` (revolute) or ``Tz(q + offset)`` (prismatic), and ``after``
 places the joint's link frame on the moved joint frame. A standard DH row is

@@ -449,11 +449,22 @@ def _float_tensor(moments: tuple) -> np.ndarray:
 # ------------------------------------------------------------------ entry points
 
 def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = None, tip: str | None = None,
-               snap_angles: bool = True) -> RobotModel:
+               snap_angles: bool = True, *, tree: bool = False, frames=None, floating_base: bool = False) -> RobotModel:
     """The serial chain from link ``base`` (default: the root) to link ``tip`` (default: the
-    only leaf reached through a moving joint) of a URDF text (see the module docstring)."""
+    only leaf reached through a moving joint) of a URDF text (see the module docstring); with
+    ``tree`` (implied by ``frames`` or ``floating_base``) every moving joint, as a tree
+    (:func:`_whole_tree`; ``base`` and ``tip`` do not apply)."""
     reading = Reading(source, snap_angles)
-    name, tree = _read_robot(text, reading)
+    name, graph = _read_robot(text, reading)
+    if tree or frames is not None or floating_base:
+        return _whole_tree(name, graph, frames, floating_base, reading)
+    return _chain(name, graph, base, tip, reading)
+
+
+def _chain(name: str, tree: _Tree, base: str | None, tip: str | None, reading: Reading) -> RobotModel:
+    """The serial chain from ``base`` to ``tip``: fixed joints merged into the next moving
+    joint or, after the last one, into the tool; moving joints off the chain locked at 0."""
+    source = reading.source
     base = tree.root if base is None else _link_name(tree, base, "--base", reading)
     tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
     path = _path(tree, base, tip, reading)
@@ -472,23 +483,7 @@ def parse_urdf(text: str | bytes, source: str = "<memory>", base: str | None = N
                       source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
 
 
-def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None,
-              snap_angles: bool = True) -> RobotModel:
-    """Read a URDF file: :func:`parse_urdf` of its text, errors naming the file."""
-    return parse_urdf(_file_text(path), str(path), base=base, tip=tip, snap_angles=snap_angles)
-
-
-def _file_text(path: str | Path) -> bytes:
-    try:
-        return Path(path).read_bytes()       # bytes: the XML declaration names the encoding
-    except OSError as exc:
-        raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc
-
-
-# ------------------------------------------------------------------ the whole tree
-
-def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, floating_base: bool = False,
-                    snap_angles: bool = True) -> RobotModel:
+def _whole_tree(name: str, tree: _Tree, frames, floating_base: bool, reading: Reading) -> RobotModel:
     """Every moving joint of a URDF text as a tree :class:`kindyngen.model.robot_model.RobotModel`.
 
     Joints are numbered depth first from the root link, children in the order Pinocchio's
@@ -497,12 +492,11 @@ def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, fl
     it; ``frames`` names the links whose poses and Jacobians are wanted (default: the link
     of every joint without children, the tips).
 
-    >>> tree = parse_urdf_tree(TWO_PENDULUMS, frames=["right", "body"])
+    >>> tree = parse_urdf(TWO_PENDULUMS, frames=["right", "body"])
     >>> [j.name for j in tree.joints], [(f.name, f.body) for f in tree.frames]
     (['left_joint', 'right_joint'], [('right', 1), ('body', -1)])
     """
-    reading = Reading(source, snap_angles)
-    name, tree = _read_robot(text, reading)
+    source = reading.source
     moving = {joint.name for joint in tree.parent_joint.values() if joint.kind != "fixed"}
     joints, parents, bodies, placed = [], [], [], {}
 
@@ -536,8 +530,15 @@ def parse_urdf_tree(text: str | bytes, source: str = "<memory>", frames=None, fl
                       base_name=tree.root, notes=tuple(reading.notes))
 
 
-def load_urdf_tree(path: str | Path, frames=None, floating_base: bool = False,
-                   snap_angles: bool = True) -> RobotModel:
-    """Read a URDF file as a tree: :func:`parse_urdf_tree` of its text, errors naming the file."""
-    return parse_urdf_tree(_file_text(path), str(path), frames=frames, floating_base=floating_base,
-                           snap_angles=snap_angles)
+def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None, snap_angles: bool = True, *,
+              tree: bool = False, frames=None, floating_base: bool = False) -> RobotModel:
+    """Read a URDF file: :func:`parse_urdf` of its text, errors naming the file."""
+    return parse_urdf(_file_text(path), str(path), base=base, tip=tip, snap_angles=snap_angles, tree=tree,
+                      frames=frames, floating_base=floating_base)
+
+
+def _file_text(path: str | Path) -> bytes:
+    try:
+        return Path(path).read_bytes()       # bytes: the XML declaration names the encoding
+    except OSError as exc:
+        raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc

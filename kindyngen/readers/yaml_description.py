@@ -24,11 +24,11 @@ from pathlib import Path
 import sympy
 import yaml
 
-from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,  # noqa: F401
+from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
                                  check_inertia)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
-from .urdf import load_urdf, load_urdf_tree
+from .urdf import load_urdf
 
 _SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
                     "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan,
@@ -317,25 +317,55 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
     return name
 
 
-def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> RobotModel:
+TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
+TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent")
+BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
+
+
+def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tree: bool = False,
+                frames=None, floating_base: bool = False) -> RobotModel:
     """Build a :class:`RobotModel` from already-parsed YAML data (``snap_angles``: see
-    :func:`kindyngen.model.placement.clean_angle`; what was snapped is in ``model.notes``)."""
+    :func:`kindyngen.model.placement.clean_angle`; what was snapped is in ``model.notes``).
+
+    An arm is the tree whose parent of joint j is j - 1. With ``tree`` (implied by ``frames``
+    or ``floating_base``) the description is read as a kinematic tree: joints by origin and
+    axis (``dh: none``), each with a unique ``name`` and an optional ``parent`` (an earlier
+    joint's name; absent: the base), and an optional ``base`` body (mass, com, inertia; the
+    root body of a floating base, massless if absent). A link's frame is named after its
+    joint; ``frames`` names joints (or ``base``), default the joints without children. Joint
+    effects, payload and tool are arm features and refused in a tree.
+
+    >>> tree = parse_robot({"name": "two", "dh": "none", "gravity": [0, 0, -9.81],
+    ...     "joints": [{"name": "a", "lower": -1, "upper": 1},
+    ...                {"name": "b", "parent": "a", "origin": {"xyz": [0, 0, 0.5]}, "lower": -1, "upper": 1}],
+    ...     "links": [{"mass": 1, "com": [0, 0, 0.2], "inertia": [0.01, 0.01, 0.001, 0, 0, 0]}] * 2}, tree=True)
+    >>> tree.parents, [f.name for f in tree.frames]
+    ((-1, 0), ['b'])
+    """
+    tree = tree or frames is not None or floating_base
     reading = Reading(source, snap_angles)
-    name = _named_mapping(data, TOP_KEYS, source)
+    name = _named_mapping(data, TREE_TOP_KEYS if tree else TOP_KEYS, source)
     convention = _require(data, "dh", source, "")
+    if tree and convention != FRAMES:
+        raise RobotDescriptionError(source, "dh", "a tree gives its joints by origin and axis: dh: none")
     if convention not in CONVENTIONS + (FRAMES,):
         raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS + (FRAMES,)}, got {convention!r}")
     gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
     rows = _require(data, "joints", source, "")
     if not isinstance(rows, list) or not rows:
         raise RobotDescriptionError(source, "joints", "expected a non-empty list of joints")
-    joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
+    if tree:
+        joints, parents, index = _tree_joints(rows, reading)
+    else:
+        joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
     if len(links_data) != len(joints):
         raise RobotDescriptionError(source, "links", f"expected {len(joints)} entries (one per joint), got {len(links_data)}")
     links = tuple(_parse_link(row, source, f"links[{k}]") for k, row in enumerate(links_data))
+    if tree:
+        return _tree_model(data, name, gravity, joints, parents, index, links, frames, floating_base, reading)
     # a payload may be a point mass (zero inertia about its CoM), unlike a link
     payload = _parse_link(data["payload"], source, "payload", point_mass_allowed=True) if "payload" in data else None
     smoothing = None
@@ -350,23 +380,64 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True) -> Rob
                       coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes))
 
 
+def _tree_joints(rows: list, reading: Reading) -> tuple[tuple, tuple, dict]:
+    """A tree's joints, their parents (-1: the base) and the index of each joint's name."""
+    source = reading.source
+    joints, parents, index = [], [], {}
+    for k, row in enumerate(rows):
+        field = f"joints[{k}]"
+        if not isinstance(row, dict):
+            raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+        _check_keys(row, TREE_JOINT_KEYS, source, field + ".")
+        joint = _parse_joint({key: v for key, v in row.items() if key != "parent"}, FRAMES, reading, field)
+        if not joint.name or joint.name in index or joint.name == BASE_NAME:
+            raise RobotDescriptionError(source, f"{field}.name", "a tree's joints need unique names (not "
+                                        f"'{BASE_NAME}'), got {joint.name!r}")
+        parent = row.get("parent", BASE_NAME)
+        if parent != BASE_NAME and parent not in index:
+            close = difflib.get_close_matches(str(parent), list(index), n=1)
+            hint = f"; closest: {close[0]}" if close else ""
+            raise RobotDescriptionError(source, f"{field}.parent", f"{parent!r} is not an earlier joint{hint}")
+        index[joint.name] = k
+        joints.append(joint)
+        parents.append(-1 if parent == BASE_NAME else index[parent])
+    return tuple(joints), tuple(parents), index
+
+
+def _tree_model(data, name, gravity, joints, parents, index, links, frames, floating_base, reading) -> RobotModel:
+    """The tree's model: its root body and the frames asked for, checked by name."""
+    source = reading.source
+    zero = sympy.Integer(0)
+    root = (_parse_link(data["base"], source, "base") if "base" in data
+            else Link(mass=zero, com=(zero,) * 3, inertia=(zero,) * 6))
+    named = {BASE_NAME: -1, **index}
+    wanted = frames if frames is not None else [j.name for k, j in enumerate(joints) if k not in parents]
+    for frame in wanted:
+        if frame not in named:
+            close = difflib.get_close_matches(str(frame), list(named), n=1)
+            raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
+                                        + (f"; closest: {close[0]}" if close else ""))
+    return RobotModel(name=name.strip(), convention="tree", joints=joints, parents=parents,
+                      links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
+                      floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
+                      notes=tuple(reading.notes))
+
+
 def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = None,
                tip: str | None = None, tree: bool = False, frames=None, floating_base: bool = False) -> RobotModel:
     """Read and validate a robot description file, the one entry point of both formats: YAML,
     or URDF (``.urdf``; ``base`` and ``tip`` name the chain's first and last link, see
     :mod:`kindyngen.readers.urdf`). With ``tree`` (implied by ``frames`` or ``floating_base``) every
-    branch is read (:func:`parse_robot_tree`, :func:`kindyngen.readers.urdf.parse_urdf_tree`)."""
+    branch is read (:func:`parse_robot`, :func:`kindyngen.readers.urdf.parse_urdf` with ``tree``)."""
     path = Path(path)
     source = str(path)
-    if tree or frames is not None or floating_base:
-        if path.suffix.lower() == ".urdf":
-            return load_urdf_tree(path, frames=frames, floating_base=floating_base, snap_angles=snap_angles)
-        return parse_robot_tree(_read_yaml(path), source, frames, floating_base, snap_angles)
+    tree = tree or frames is not None or floating_base
     if path.suffix.lower() == ".urdf":
-        return load_urdf(path, base=base, tip=tip, snap_angles=snap_angles)
-    if base is not None or tip is not None:
+        return load_urdf(path, base=base, tip=tip, snap_angles=snap_angles, tree=tree, frames=frames,
+                         floating_base=floating_base)
+    if not tree and (base is not None or tip is not None):
         raise RobotDescriptionError(source, "<file>", "--base and --tip apply to URDF files only")
-    return parse_robot(_read_yaml(path), source, snap_angles)
+    return parse_robot(_read_yaml(path), source, snap_angles, tree=tree, frames=frames, floating_base=floating_base)
 
 
 def _read_yaml(path: Path):
@@ -387,72 +458,3 @@ def _read_yaml(path: Path):
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
         raise RobotDescriptionError(source, "<yaml>", f"malformed YAML{where}: {problem}") from exc
-
-
-# ----------------------------------------------------------------------------- trees
-
-TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
-TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent")
-BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
-
-
-def parse_robot_tree(data, source: str = "<memory>", frames=None, floating_base: bool = False,
-                     snap_angles: bool = True) -> RobotModel:
-    """A kinematic tree from already-parsed YAML data: joints by origin and axis (``dh:
-    none``), each with a unique ``name`` and an optional ``parent`` (an earlier joint's name;
-    absent: the base), and an optional ``base`` body (mass, com, inertia; the root body of a
-    floating base, massless if absent). A link's frame is named after its joint; ``frames``
-    names joints (or ``base``), default the joints without children. Joint effects, payload
-    and tool are arm features and refused here.
-
-    >>> tree = parse_robot_tree({"name": "two", "dh": "none", "gravity": [0, 0, -9.81],
-    ...     "joints": [{"name": "a", "lower": -1, "upper": 1},
-    ...                {"name": "b", "parent": "a", "origin": {"xyz": [0, 0, 0.5]}, "lower": -1, "upper": 1}],
-    ...     "links": [{"mass": 1, "com": [0, 0, 0.2], "inertia": [0.01, 0.01, 0.001, 0, 0, 0]}] * 2})
-    >>> tree.parents, [f.name for f in tree.frames]
-    ((-1, 0), ['b'])
-    """
-    reading = Reading(source, snap_angles)
-    name = _named_mapping(data, TREE_TOP_KEYS, source)
-    if _require(data, "dh", source, "") != FRAMES:
-        raise RobotDescriptionError(source, "dh", "a tree gives its joints by origin and axis: dh: none")
-    gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
-    rows = _require(data, "joints", source, "")
-    if not isinstance(rows, list) or not rows:
-        raise RobotDescriptionError(source, "joints", "expected a non-empty list of joints")
-    joints, parents, index = [], [], {}
-    for k, row in enumerate(rows):
-        field = f"joints[{k}]"
-        if not isinstance(row, dict):
-            raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
-        _check_keys(row, TREE_JOINT_KEYS, source, field + ".")
-        joint = _parse_joint({key: v for key, v in row.items() if key != "parent"}, FRAMES, reading, field)
-        if not joint.name or joint.name in index or joint.name == BASE_NAME:
-            raise RobotDescriptionError(source, f"{field}.name", "a tree's joints need unique names (not "
-                                        f"'{BASE_NAME}'), got {joint.name!r}")
-        parent = row.get("parent", BASE_NAME)
-        if parent != BASE_NAME and parent not in index:
-            close = difflib.get_close_matches(str(parent), list(index), n=1)
-            hint = f"; closest: {close[0]}" if close else ""
-            raise RobotDescriptionError(source, f"{field}.parent", f"{parent!r} is not an earlier joint{hint}")
-        index[joint.name] = k
-        joints.append(joint)
-        parents.append(-1 if parent == BASE_NAME else index[parent])
-    links_data = _require(data, "links", source, "")
-    if not isinstance(links_data, list) or len(links_data) != len(joints):
-        raise RobotDescriptionError(source, "links", f"expected {len(joints)} entries (one per joint)")
-    links = tuple(_parse_link(row, source, f"links[{k}]") for k, row in enumerate(links_data))
-    zero = sympy.Integer(0)
-    root = (_parse_link(data["base"], source, "base") if "base" in data
-            else Link(mass=zero, com=(zero,) * 3, inertia=(zero,) * 6))
-    named = {BASE_NAME: -1, **index}
-    wanted = frames if frames is not None else [j.name for k, j in enumerate(joints) if k not in parents]
-    for frame in wanted:
-        if frame not in named:
-            close = difflib.get_close_matches(str(frame), list(named), n=1)
-            raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
-                                        + (f"; closest: {close[0]}" if close else ""))
-    return RobotModel(name=name.strip(), convention="tree", joints=tuple(joints), parents=tuple(parents),
-                      links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
-                      floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
-                      notes=tuple(reading.notes))

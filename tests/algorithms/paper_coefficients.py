@@ -41,7 +41,7 @@ import symengine as se
 import sympy
 
 from kindyngen.algorithms.base_parameters import numeric_rank
-from kindyngen.readers.yaml_description import RobotModel
+from kindyngen.model.robot_model import RobotModel
 
 ZERO = se.Integer(0)
 

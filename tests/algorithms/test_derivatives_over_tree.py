@@ -8,7 +8,7 @@ import pytest
 import symengine as se
 
 from kindyngen.algorithms.derivatives_sweeps import fd_derivatives, tau_derivatives
-from kindyngen.readers.urdf import parse_urdf_tree
+from kindyngen.readers.urdf import parse_urdf
 
 BRANCHED = """<robot name="branched">
   <link name="body"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial></link>
@@ -44,7 +44,7 @@ def _evaluate(f, *inputs):
 
 @pytest.fixture(scope="module")
 def models():
-    tree = parse_urdf_tree(BRANCHED)
+    tree = parse_urdf(BRANCHED, tree=True)
     assert tree.parents == (-1, 0, -1, 2)          # two branches from the fixed root
     model = pin.buildModelFromXML(BRANCHED)
     assert [model.names[k] for k in range(1, model.njoints)] == [j.name for j in tree.joints]

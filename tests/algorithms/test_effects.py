@@ -15,7 +15,8 @@ from tests.harness import ROOT
 from kindyngen.runtime.evaluate import load_generated
 from kindyngen.model.inertial_parameters import parameter_vector
 from kindyngen.codegen.pipeline import generate
-from kindyngen.readers.yaml_description import RobotDescriptionError, load_robot
+from kindyngen.model.robot_model import RobotDescriptionError
+from kindyngen.readers.yaml_description import load_robot
 from tests.reference import pinocchio_model
 
 FRICTION = [(0.8, 1.2, 0.1), (0.7, 1.1, -0.2), (0.5, 0.9, 0.0), (0.5, 0.8, 0.05), (0.3, 0.5, 0.0), (0.0, 0.4, 0.0),

@@ -223,7 +223,7 @@ def test_generated_languages_agree(name, lang):
 
 def random_links(rob, seed):
     """Random physical links (mass, CoM, inertia about the CoM)."""
-    from kindyngen.readers.yaml_description import Link
+    from kindyngen.model.robot_model import Link
     rng = np.random.default_rng(seed)
     links = []
     for _ in rob.links:

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sympy
 
 from kindyngen.codegen.optimize import optimize
 from kindyngen.codegen.render import RENDERERS
@@ -26,8 +25,7 @@ from kindyngen.runtime.evaluate import load_generated
 from kindyngen.readers.yaml_description import load_robot
 from kindyngen.algorithms.derivatives_world_frame import fd_derivatives_tree, tau_derivatives_tree
 from kindyngen.model.robot_model import Frame, RobotModel
-from kindyngen.model.robot_model import Link
-from kindyngen.readers.urdf import load_urdf_tree
+from kindyngen.readers.urdf import load_urdf
 
 pin = pytest.importorskip("pinocchio")
 
@@ -107,9 +105,9 @@ def test_tree_derivatives_equal_pinocchio(key, floating, lang, tmp_path):
         except importlib.metadata.PackageNotFoundError:
             pytest.skip("example-robot-data is not installed")
         path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/solo_description/robots/solo12.urdf"))
-        tree = load_urdf_tree(path, floating_base=floating)
+        tree = load_urdf(path, tree=True, floating_base=floating)
     else:
-        tree = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / f"{key}.urdf", floating_base=floating)
+        tree = load_urdf(ROOT / "tests" / "data" / "urdf" / f"{key}.urdf", tree=True, floating_base=floating)
     functions = [tau_derivatives_tree(tree), fd_derivatives_tree(tree), fd_derivatives_tree(tree, "fd_der_no_minv", False)]
     library = _library(tmp_path, tree, functions, lang)
     model = pinocchio_tree(tree)

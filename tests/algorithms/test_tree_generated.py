@@ -30,7 +30,7 @@ from kindyngen.codegen.pipeline import generate
 from kindyngen.codegen.render import RENDERERS
 from kindyngen.algorithms.articulated_body import forward_dynamics_aba
 from kindyngen.algorithms.dynamics import forward_dynamics_tree
-from kindyngen.readers.urdf import load_urdf_tree
+from kindyngen.readers.urdf import load_urdf
 
 pin = pytest.importorskip("pinocchio")
 
@@ -123,7 +123,7 @@ def pinocchio_references(path, model, Q, QD, QDD, TAU):
 def case(request, tmp_path_factory):
     (key, file, frames), floating = request.param
     path = _path(file)
-    model = load_urdf_tree(path, frames=frames, floating_base=floating)
+    model = load_urdf(path, tree=True, frames=frames, floating_base=floating)
     # the derivatives of these trees are checked in test_tree_derivatives.py (a humanoid's take minutes)
     folder = generate(model, tmp_path_factory.mktemp(f"tree_{key}"), languages=LANGS, progress=False,
                       only={"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "Y"})

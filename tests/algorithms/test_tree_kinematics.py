@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from tests.harness import ROOT
 from kindyngen.algorithms.kinematics import fk_hom_tree, jacobian_tree
-from kindyngen.readers.urdf import load_urdf_tree
+from kindyngen.readers.urdf import load_urdf
 
 URDF = ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf"
 STEP = 1e-6
@@ -57,7 +57,7 @@ def _moved(model, q, k, h):
 
 @pytest.mark.parametrize("floating", (False, True), ids=("fixed", "floating"))
 def test_jacobian_is_the_derivative_of_the_poses(floating):
-    model = load_urdf_tree(URDF, frames=("gripper_frame", "foot"), floating_base=floating)
+    model = load_urdf(URDF, frames=("gripper_frame", "foot"), floating_base=floating)
     fk, jac = _numeric(fk_hom_tree(model)), _numeric(jacobian_tree(model))
     assert model.nv == model.nq - (1 if floating else 0) == (11 if floating else 5)
     rng = np.random.default_rng(4)
@@ -78,7 +78,7 @@ def test_jacobian_is_the_derivative_of_the_poses(floating):
 
 
 def test_a_joint_off_the_branch_has_a_zero_column():
-    model = load_urdf_tree(URDF, frames=("gripper_frame", "foot"))
+    model = load_urdf(URDF, frames=("gripper_frame", "foot"))
     J = _numeric(jacobian_tree(model))(np.random.default_rng(1).uniform(-1, 1, model.nq))
     on_gripper = set(model.ancestors(model.frames[0].body))
     on_foot = set(model.ancestors(model.frames[1].body))

@@ -169,9 +169,9 @@ def test_yaml_tree_equals_pinocchio(floating, tmp_path):
     pin = pytest.importorskip("pinocchio")
     from kindyngen.runtime.evaluate import load_generated
     from kindyngen.codegen.pipeline import generate
-    from kindyngen.readers.yaml_description import parse_robot_tree
+    from kindyngen.readers.yaml_description import parse_robot
     data = yaml.safe_load(YAML_TREE)
-    model = parse_robot_tree(data, "tree.yaml", frames=["knee", "slide"], floating_base=floating)
+    model = parse_robot(data, "tree.yaml", frames=["knee", "slide"], floating_base=floating)
     assert [j.name for j in model.joints] == ["hip", "knee", "arm", "slide"] and model.parents == (-1, 0, -1, 2)
     urdf = tmp_path / "tree.urdf"
     urdf.write_text(_urdf_of(data))
@@ -208,9 +208,9 @@ def test_readme_tree_example_loads():
     """The handbook's YAML tree (docs/reference/trees.md) is a working description (a hip and
     its knee below the base)."""
     import re
-    from kindyngen.readers.yaml_description import parse_robot_tree
+    from kindyngen.readers.yaml_description import parse_robot
     text = (Path(__file__).resolve().parents[2] / "docs" / "reference" / "trees.md").read_text()
     section = text[text.index("## Kinematic trees and floating bases"):]
     block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
-    model = parse_robot_tree(yaml.safe_load(block), "trees.md", floating_base=True)
+    model = parse_robot(yaml.safe_load(block), "trees.md", floating_base=True)
     assert model.parents == (-1, 0) and model.nv == 8 and float(model.root.mass) == 4.0

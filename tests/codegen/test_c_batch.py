@@ -145,8 +145,8 @@ def test_floating_tree_kernel_skips_the_base(tmp_path):
     group of lanes. Single calls and batches (both trig modes) equal the numpy module, which
     calls numpy's sin/cos on every entry."""
     from kindyngen.runtime.evaluate import load_generated
-    from kindyngen.readers.urdf import load_urdf_tree
-    model = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    from kindyngen.readers.urdf import load_urdf
+    model = load_urdf(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
     assert model.nq == 12
     rng = np.random.default_rng(3)
     count = 37

@@ -22,7 +22,8 @@ from kindyngen.measured.consistent import (ConsistentIdentificationError, identi
 from kindyngen.measured.effect_columns import effect_columns, effect_names
 from kindyngen.measured.estimation import IdentificationDataError, least_squares
 from kindyngen.measured.regressor_rows import TorqueRegressor
-from kindyngen.readers.yaml_description import Link, RobotDescriptionError, parse_robot
+from kindyngen.model.robot_model import Link, RobotDescriptionError
+from kindyngen.readers.yaml_description import parse_robot
 
 N_JOINTS = 7
 FRICTION = ("viscous_friction", "coulomb_friction", "torque_offset")

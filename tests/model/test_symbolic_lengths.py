@@ -9,7 +9,8 @@ import pytest
 
 from tests.harness import GENERATED, ROOT
 from kindyngen.runtime.evaluate import load_generated
-from kindyngen.readers.yaml_description import RobotDescriptionError, load_robot
+from kindyngen.model.robot_model import RobotDescriptionError
+from kindyngen.readers.yaml_description import load_robot
 
 
 @pytest.fixture(scope="module")

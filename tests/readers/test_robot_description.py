@@ -12,7 +12,8 @@ import pytest
 import sympy
 import yaml
 
-from kindyngen.readers.yaml_description import RobotDescriptionError, load_robot
+from kindyngen.model.robot_model import RobotDescriptionError
+from kindyngen.readers.yaml_description import load_robot
 
 ROBOTS = Path(__file__).resolve().parents[2] / "robots"
 

@@ -286,8 +286,8 @@ def test_floating_tree(tmp_path_factory):
     """A floating-base tree through the pipeline with python_c: every function equals the numpy
     module, and the module says what the robot is and that gravity is in the world frame."""
     from kindyngen.codegen.pipeline import generate
-    from kindyngen.readers.urdf import load_urdf_tree
-    model = load_urdf_tree(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    from kindyngen.readers.urdf import load_urdf
+    model = load_urdf(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
     # the derivatives left out: compiling them took minutes (checked in C in test_tree_derivatives.py)
     folder = generate(model, tmp_path_factory.mktemp("tree"), languages=("c", "python", "python_c"),
                       progress=False, only={"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "Y"})

@@ -61,9 +61,9 @@ from .dq_kinematics import dq_conjugate, dq_mul, joint_factors
 from ..kinematics_conventions import q_port
 from ...model.robot_model import RobotModel
 from ..regressors import base_parameters, full_regressor, regressor
-from ..rigid_bodies import ZERO, Body, dynamics_function, flat, gravity, qd_port, qdd_port, tau_port
+from ..rigid_bodies import ZERO, Body, flat, gravity, qd_port, qdd_port, tau_port
 from ..symbolic import Port, SymbolicFunction, port_symbols
-from ..dynamics import setup as tree_setup
+from ..dynamics import dynamics_function, setup as tree_setup
 
 DQ = "Dual-quaternion route (twists and wrenches as dual quaternions, grouped parameters): "
 
@@ -276,41 +276,40 @@ def setup(model: RobotModel, params: str):
     """Joint symbols, poses and the grouped bodies (the grouping uses the joint frames'
     constants only)."""
     ts = tree_setup(model, params)
-    return ts.q, joint_poses(model, ts.q), list(ts.bodies), ts.param_ports, ts.param_symbols
+    return ts.q, joint_poses(model, ts.q), list(ts.bodies), ts
 
 
 def inverse_dynamics_dq(model: RobotModel, params: str = "numeric", name: str = "tau_dq",
                         effects: bool = True) -> SymbolicFunction:
     """``tau_dq(q, qd, qdd) -> tau`` plus the description's friction, offset and armature
     torques (``effects=False``: rigid bodies only, for the regressor)."""
-    q, poses, bodies, ports, syms = setup(model, params)
+    q, poses, bodies, ts = setup(model, params)
     qd, qdd = port_symbols("qd", (model.n,)), port_symbols("qdd", (model.n,))
     tau = rnea_dq(poses, bodies, qd, qdd, gravity(model))
     if effects:
         tau = [t + e for t, e in zip(tau, effect_torques(model, qd, qdd))]
     return dynamics_function(name, DQ + "inverse dynamics tau = M qdd + c + g by dual-quaternion Newton-Euler.",
-                             model, params, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
-                             (tau_port(model, "joint torques"),), (tau,), ports, syms)
+                             ts, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
+                             (tau_port(model, "joint torques"),), (tau,))
 
 
 def coriolis_dq(model: RobotModel, params: str = "numeric", name: str = "c_dq") -> SymbolicFunction:
     """``c_dq(q, qd) -> c = tau(q, qd, 0)`` without gravity."""
-    q, poses, bodies, ports, syms = setup(model, params)
+    q, poses, bodies, ts = setup(model, params)
     qd = port_symbols("qd", (model.n,))
     c = rnea_dq(poses, bodies, qd, None, None)
     return dynamics_function(name, DQ + "Coriolis and centrifugal torques c = tau(q, qd, 0) without gravity, "
-                             "by dual-quaternion Newton-Euler.", model, params, (q_port(model), qd_port(model)),
-                             (q, qd), (Port("c", (model.n,), "Coriolis and centrifugal torques", "N m"),), (c,),
-                             ports, syms)
+                             "by dual-quaternion Newton-Euler.", ts, (q_port(model), qd_port(model)),
+                             (q, qd), (Port("c", (model.n,), "Coriolis and centrifugal torques", "N m"),), (c,))
 
 
 def gravity_dq(model: RobotModel, params: str = "numeric", name: str = "g_dq") -> SymbolicFunction:
     """``g_dq(q) -> g = tau(q, 0, 0)``."""
-    q, poses, bodies, ports, syms = setup(model, params)
+    q, poses, bodies, ts = setup(model, params)
     g = rnea_dq(poses, bodies, None, None, gravity(model))
     return dynamics_function(name, DQ + "gravity torques g = tau(q, 0, 0) by dual-quaternion Newton-Euler.",
-                             model, params, (q_port(model),), (q,),
-                             (Port("g", (model.n,), "gravity torques", "N m"),), (g,), ports, syms)
+                             ts, (q_port(model),), (q,),
+                             (Port("g", (model.n,), "gravity torques", "N m"),), (g,))
 
 
 def mass_matrix_dq(model: RobotModel, params: str = "numeric", name: str = "M_dq",
@@ -318,7 +317,7 @@ def mass_matrix_dq(model: RobotModel, params: str = "numeric", name: str = "M_dq
     """``M_dq(q) -> M`` by dual-quaternion composite rigid bodies (``composite=False``: column
     j from the Newton-Euler pass with qd = 0, no gravity and qdd = e_j, down to joint j), plus
     the armature."""
-    q, poses, bodies, ports, syms = setup(model, params)
+    q, poses, bodies, ts = setup(model, params)
     n = model.n
     if composite:
         M = crba_dq(poses, bodies)
@@ -333,9 +332,9 @@ def mass_matrix_dq(model: RobotModel, params: str = "numeric", name: str = "M_dq
         M = with_armature(model, M)
     how = ("composite inertia operators carried by the joint adjoints" if composite else
            "column j = tau(q, 0, e_j) without gravity by dual-quaternion Newton-Euler")
-    return dynamics_function(name, DQ + f"inertia matrix M(q), {how}.", model, params, (q_port(model),), (q,),
+    return dynamics_function(name, DQ + f"inertia matrix M(q), {how}.", ts, (q_port(model),), (q,),
                              (Port("M", (n, n), "joint-space inertia matrix (symmetric, row-major)", "kg m^2"),),
-                             (flat(M),), ports, syms)
+                             (flat(M),))
 
 
 def regressor_dq(model: RobotModel, name: str = "Y_dq") -> SymbolicFunction | None:
