@@ -21,7 +21,7 @@ generate: $(VENV)/.installed
 # hyperthreads; PYTEST_XDIST_AUTO_NUM_WORKERS=N overrides); --dist loadfile keeps each test
 # file on one worker, so its module fixtures (derivations, compiled libraries) are built once
 test: $(VENV)/.installed
-	$(PY) -m pytest -n logical --dist loadfile
+	$(PY) -m pytest -n logical --dist loadfile --durations=20
 
 bench: $(VENV)/.installed
 	$(PY) -m benchmarks.run
