@@ -352,13 +352,13 @@ def collect_inertia(model: RobotModel, reduce_squares: bool = False, use_eq27: b
     return collect("m", rows, exprs, n, lengths, reduce_squares, eq27(n) if use_eq27 else None, merge)
 
 
-def inertia_column_counts(model: RobotModel, samples: int = 60) -> list[dict]:
-    """Columns and numeric rank of the paper's Y_m under every collection choice (merge rule,
-    ``S^2 -> 1 - C^2`` or not, DH lengths symbolic or numeric, eq. 27 or not): the paper's
-    108 -> 74 depends on which form its expressions had."""
+def inertia_column_counts(model: RobotModel, samples: int = 60, merges: tuple[str, ...] = MERGES) -> list[dict]:
+    """Columns and numeric rank of the paper's Y_m under every collection choice (merge rule of
+    ``merges``, ``S^2 -> 1 - C^2`` or not, DH lengths symbolic or numeric, eq. 27 or not): the
+    paper's 108 -> 74 depends on which form its expressions had."""
     out = []
     for numeric_lengths in (False, True):
-        for merge in MERGES:
+        for merge in merges:
             for reduce_squares in (False, True):
                 for use_eq27 in (False, True):
                     c = collect_inertia(model, reduce_squares, use_eq27, merge, numeric_lengths)
