@@ -131,7 +131,8 @@ def input_names(program: Program, dialect: Dialect) -> dict:
 def kernel_angles(program: Program) -> tuple[int, int]:
     """Which sines/cosines the C sincos kernel computes: ``(first, count)``, the entries
     ``q[first:]``, or (0, 0) when no sin or cos has an entry of the ``q`` port exactly as its
-    argument (others, e.g. sin(q_1/2), stay libm calls). Leading entries that are no such
+    argument (arguments affine in q, e.g. sin(q_1/2), take the lanes after these:
+    :func:`kindyngen.codegen.optimize.kernel_arguments`). Leading entries that are no such
     argument (a floating base's position and quaternion) are left out where that saves a
     group of KERNEL_LANES lanes, else the kernel starts at q[0]."""
     f = program.function
