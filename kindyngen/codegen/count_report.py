@@ -47,8 +47,8 @@ def _critical_markdown(programs) -> list[str]:
     lines = ["", "## Critical path", "",
              "The longest chain of dependent operations of the generated C as printed (strict C99: no "
              "contraction, sums and products left to right), in cycles of a stated latency table (AMD Zen 4: "
-             f"{table}; a libm call as 40; sin/cos of q from the sincos kernel {kernel_latency()}, its own "
-             "chain). A single call waits at least this long however many units the core has; "
+             f"{table}; a libm call as 40; sin/cos of q and of half angles from the sincos kernel "
+             f"{kernel_latency()}, its own chain, after its last argument). A single call waits at least this long however many units the core has; "
              "docs/latency.md compares it with measured times.", "",
              "| function | cycles | operations on it | add + mul + call after CSE |", "|---|---|---|---|"]
     for p in programs:

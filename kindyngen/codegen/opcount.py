@@ -200,8 +200,9 @@ LATENCY = {"add": 3, "mul": 3, "div": 13, "sqrt": 20, "select": 1, "call": 40, "
 (family 19h, AMD's Software Optimization Guide): vaddsd/vsubsd 3, vmulsd 3, vdivsd 13,
 vsqrtsd 20 (15-21), a blend or sign flip 1. ``call``: a libm call (sin, cos, atan2, ... of an
 argument the sincos kernel does not serve), a stated round figure (glibc's sin is 40-60
-cycles). ``kernel``: a sin or cos of a joint angle read from the sincos kernel's output, which
-runs at the start of the function: its latency is the kernel's own critical path
+cycles). ``kernel``: a sin or cos of a joint angle (or of an argument affine in the joint angles, a
+half angle) read from the sincos kernel's output, which runs at the start of the function:
+its latency is the kernel's own critical path after its last argument
 (:data:`kindyngen.codegen.trig_kernel.KERNEL_LATENCY` passed by the caller), 0 here. Strict C99: a*b + c is
 a product then a sum (no contraction), and every sum and product is evaluated left to right in
 the order the printer writes it."""

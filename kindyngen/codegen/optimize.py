@@ -95,13 +95,68 @@ def optimize(function: SymbolicFunction) -> Program:
 
 
 def _served(function: SymbolicFunction) -> set:
-    """The sin/cos the C sincos kernel serves: of entries of the ``q`` port."""
+    """The sin/cos the C sincos kernel serves as entries of the ``q`` port."""
     names = [p.name for p in function.inputs]
     served = set()
     if "q" in names:
         for sym in function.input_symbols[names.index("q")]:
             served |= {se.sin(sym), se.cos(sym)}
     return served
+
+
+def kernel_arguments(function: SymbolicFunction, assignments, outputs) -> dict:
+    """The sin/cos of the program, as printed, whose argument is affine in ``q`` without being
+    an entry of it (the half angles of the dual-quaternion functions, 0.5*(q[2] + q[0]), ...),
+    each with that argument written in ``q`` alone: the C computes these arguments before the
+    sincos kernel and runs it over them too. Affine, because such an argument costs a few adds
+    and muls ahead of the kernel; anything else stays a libm call.
+
+    >>> from kindyngen.algorithms.symbolic import Port
+    >>> q, t = se.symbols("q_0 q_1"), se.Symbol("t0")
+    >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((0,),))
+    >>> kernel_arguments(f, ((t, (q[0] + q[1])/2),), [se.sin(t) + se.cos(q[0]) + se.sin(q[0]*q[1])])
+    {sin(t0): (1/2)*(q_0 + q_1)}
+    """
+    names = [p.name for p in function.inputs]
+    if "q" not in names:
+        return {}
+    q = set(function.input_symbols[names.index("q")])
+    define = dict(assignments)
+    known: dict = {}
+
+    def affine(e):
+        """``e`` in terms of q alone when it is affine in q, else None."""
+        if e.is_Number or e in q:
+            return e
+        if e.is_Symbol:
+            if e not in known:
+                known[e] = affine(define[e]) if e in define else None
+            return known[e]
+        if isinstance(e, se.Add):
+            parts = [affine(a) for a in e.args]
+            return None if any(p is None for p in parts) else se.Add(*parts)
+        if isinstance(e, se.Mul):
+            numbers = [a for a in e.args if a.is_Number]
+            rest = [a for a in e.args if not a.is_Number]
+            inner = affine(rest[0]) if len(rest) == 1 else None
+            return None if inner is None else se.Mul(*numbers, inner)
+        return None
+
+    served = {}
+    for e in [e for _, e in assignments] + list(outputs):
+        for call in sorted(e.atoms(se.sin, se.cos), key=str):
+            if call not in served and call.args[0] not in q:
+                argument = affine(call.args[0])
+                if argument is not None and not argument.is_Number:
+                    served[call] = argument
+    return served
+
+
+def _kernel_wait(served: dict, assignments) -> int:
+    """Cycles until the sincos kernel's results are ready: the kernel's latency after its last
+    argument (:func:`kernel_arguments`) is computed."""
+    timer = ChainTimer()
+    return kernel_latency() + max((timer.ready(a)[0] for a in served.values()), default=0)
 
 
 def _shallower(function: SymbolicFunction, assignments, outputs):
@@ -115,7 +170,9 @@ def _shallower(function: SymbolicFunction, assignments, outputs):
     critical path alone, and the whole rewrite is kept only when the function's critical path
     is shorter and its add/mul/call count equal. Ready times are integers of the latency table:
     the choice is exact, the same on every CPU."""
-    timer = ChainTimer(_served(function), {"kernel": kernel_latency()})
+    extra = kernel_arguments(function, assignments, outputs)
+    served, wait = _served(function) | set(extra), {"kernel": _kernel_wait(extra, assignments)}
+    timer = ChainTimer(served, wait)
     used = [int(str(sym)[1:]) for sym, _ in assignments if str(sym)[1:].isdigit()]
     counter = [max(used, default=-1) + 1]
     program: list = []
@@ -174,8 +231,8 @@ def _shallower(function: SymbolicFunction, assignments, outputs):
         program.append((sym, new))
         timer.assign(sym, new)
     new_outputs = [rebuild(e) for e in outputs]
-    old_path = program_critical_path(assignments, outputs, timer.served, {"kernel": kernel_latency()})
-    new_path = program_critical_path(program, new_outputs, timer.served, {"kernel": kernel_latency()})
+    old_path = program_critical_path(assignments, outputs, served, wait)
+    new_path = program_critical_path(program, new_outputs, served, wait)
     if new_path.cycles < old_path.cycles and program_count(program, new_outputs) == program_count(assignments, outputs):
         return tuple(program), new_outputs
     return assignments, outputs
@@ -183,9 +240,12 @@ def _shallower(function: SymbolicFunction, assignments, outputs):
 
 def critical_path(function: SymbolicFunction, assignments, outputs) -> CriticalPath:
     """The program's critical path as generated with ``--trig kernel``: sin and cos of an entry
-    of the ``q`` port come from the sincos kernel (:func:`kindyngen.codegen.trig_kernel.kernel_latency`
-    cycles after the start), every other call from libm."""
-    return program_critical_path(assignments, outputs, _served(function), {"kernel": kernel_latency()})
+    of the ``q`` port or of an argument affine in q (:func:`kernel_arguments`) come from the
+    sincos kernel (:func:`kindyngen.codegen.trig_kernel.kernel_latency` cycles after its last
+    argument is ready), every other call from libm."""
+    extra = kernel_arguments(function, assignments, outputs)
+    return program_critical_path(assignments, outputs, _served(function) | set(extra),
+                                 {"kernel": _kernel_wait(extra, assignments)})
 
 
 def _cse(exprs):

@@ -17,7 +17,7 @@ from .. import __version__
 from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, kernel_c,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
-from .optimize import Program
+from .optimize import Program, kernel_arguments
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
 from ..model.robot_model import RobotModel
@@ -73,6 +73,7 @@ class FunctionView:
     critical: dict = None         # longest chain of dependent operations (cycles, operations)
     angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
+    arguments: tuple = ()         # C single calls: then these arguments affine in q (C text), e.g. half angles
     lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
     block: int = 0                # C batch: configurations per block
     in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
@@ -130,7 +131,8 @@ def input_names(program: Program, dialect: Dialect) -> dict:
 def kernel_angles(program: Program) -> tuple[int, int]:
     """Which sines/cosines the C sincos kernel computes: ``(first, count)``, the entries
     ``q[first:]``, or (0, 0) when no sin or cos has an entry of the ``q`` port exactly as its
-    argument (others, e.g. sin(q_1/2), stay libm calls). Leading entries that are no such
+    argument (arguments affine in q, e.g. sin(q_1/2), take the lanes after these:
+    :func:`kindyngen.codegen.optimize.kernel_arguments`). Leading entries that are no such
     argument (a floating base's position and quaternion) are left out where that saves a
     group of KERNEL_LANES lanes, else the kernel starts at q[0]."""
     f = program.function
@@ -147,6 +149,24 @@ def kernel_angles(program: Program) -> tuple[int, int]:
     if -(-(len(q) - first) // KERNEL_LANES) == -(-len(q) // KERNEL_LANES):
         first = 0
     return first, len(q) - first
+
+
+def _live_beside_kernel(program: Program, served) -> set:
+    """The temporaries still read once the ``served`` sin/cos are read from the kernel's arrays:
+    a half angle t0 = 0.5*q[1] read only by sin(t0) and cos(t0) is computed in the kernel's
+    arguments instead, and not printed (an unused variable is a warning)."""
+    served = {call: se.Symbol(f"_served{k}") for k, call in enumerate(served)}
+    reads = {sym: _reads(expr, served) for sym, expr in program.assignments}
+    live = set().union(*[_reads(e, served) for port in program.outputs for e in port])
+    for sym, _ in reversed(program.assignments):
+        if sym in live:
+            live |= reads[sym]
+    return live
+
+
+def _reads(expr, served) -> set:
+    calls = expr.atoms(se.sin, se.cos) & set(served)
+    return (expr.xreplace({c: served[c] for c in calls}) if calls else expr).free_symbols
 
 
 def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
@@ -177,17 +197,31 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         for k, sym in enumerate(q[first:]):
             where = f"[{k}][j]" if batch else f"[{k}]"
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
-    block, in_place = _batch_block(angles, sum(p.size for p in f.outputs)) if batch else (0, False)
+    # arguments affine in q (half angles) take the kernel's lanes after q's
+    arguments = []
+    if trig == "kernel":
+        lane: dict = {}
+        for call, argument in kernel_arguments(f, program.assignments, [e for p in program.outputs for e in p]).items():
+            if argument not in lane:
+                lane[argument] = angles + len(arguments)
+                arguments.append(dialect.expr(argument, names))
+            where = f"[{lane[argument]}][j]" if batch else f"[{lane[argument]}]"
+            names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where}"
+    # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
+    block, in_place = (_batch_block(angles + len(arguments), sum(p.size for p in f.outputs) + len(arguments))
+                       if batch else (0, False))
     used_symbols = set()
     for _, e in program.assignments:
         used_symbols |= e.free_symbols
     for port in program.outputs:
         for e in port:
             used_symbols |= e.free_symbols
+    live = _live_beside_kernel(program, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
     assignments = []
     for sym, expr in program.assignments:
         names[sym] = str(sym)
-        assignments.append((str(sym), dialect.expr(expr, names)))
+        if live is None or sym in live:
+            assignments.append((str(sym), dialect.expr(expr, names)))
     inputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
                             p.unit, p.description,
                             used=any(s in used_symbols for s in syms))
@@ -205,7 +239,8 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         critical=program.critical.to_json(),
         angles=angles,
         first_angle=first,
-        lanes=-(-angles // KERNEL_LANES) * KERNEL_LANES,
+        arguments=tuple(arguments),
+        lanes=-(-(angles + len(arguments)) // KERNEL_LANES) * KERNEL_LANES,
         block=block,
         in_place=in_place,
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,

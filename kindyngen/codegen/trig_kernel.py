@@ -34,7 +34,8 @@ The coefficients below are written out (generation must not depend on a fit's nu
 from __future__ import annotations
 
 TRIG_MODES = ("kernel", "libm")
-"""kernel: sin/cos of joint angles by the emitted kernel (default); libm: every sin/cos by libm."""
+"""kernel: sin/cos of joint angles and of arguments affine in them (half angles) by the emitted
+kernel (default); libm: every sin/cos by libm."""
 
 BOUND = 1048576.0
 """Largest |x| the kernel reduces itself (2^20 rad); beyond it, libm. Keeps |k| < 2^20."""

@@ -21,8 +21,8 @@ COUNTS = (0, 1, 7, 64, 65, 131)
 
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory):
-    """lwr4's C for a few functions (one with int outputs, one with half-angle libm calls), per
-    trig mode: (functions.json, the C folder)."""
+    """lwr4's C for a few functions (one with int outputs, one with half-angle arguments, which
+    the kernel serves too), per trig mode: (functions.json, the C folder)."""
     model = load_robot(ROOT / "robots" / "lwr4.yaml")
     out = {}
     for trig in ("kernel", "libm"):
@@ -114,7 +114,7 @@ def test_kernel_and_libm_agree(generated):
     rng = np.random.default_rng(11)
     dlls = {trig: library(generated[trig][1], ("-O2",)) for trig in generated}
     specs = {f["name"]: f for f in generated["kernel"][0]["functions"]}
-    for name in ("fk_hom", "jacobian", "M", "tau", "fd"):
+    for name in ("fk_hom", "jacobian", "M", "tau", "fd", "fk_dq"):
         arrays = inputs_for(specs[name], 50, rng)
         a, b = (call_single(dlls[t], specs[name], arrays)[0] for t in ("kernel", "libm"))
         scale = np.abs(b).max()
@@ -129,6 +129,9 @@ def test_trig_choice_recorded_and_applied(generated):
         assert f"generated with --trig {trig}" in header
         assert ("kdg_sincos" in source) == (trig == "kernel")
         assert ("sin(q[" in source) == (trig == "libm")
+        start = source.index("void lwr4_fk_dq(")
+        fk_dq = source[start:source.index("\nvoid ", source.index("void lwr4_fk_dq_batch(") + 1)]
+        assert ("sin(" in fk_dq) == (trig == "libm"), "half angles: kernel or libm, in both variants"
 
 
 def test_generate_help_and_bad_trig():

@@ -1,6 +1,6 @@
 """The sincos kernel emitted into generated C (kindyngen/codegen/trig_kernel.py) against glibc's sin and cos:
-dense grids, every multiple of pi/2 in the kernel's range, random doubles of random exponent
-and the special values, compiled strictly and with vectorisation and FMA contraction."""
+dense grids, the half angles of the dual-quaternion functions, every multiple of pi/2 in the
+kernel's range, random doubles of random exponent and the special values, compiled strictly and with vectorisation and FMA contraction."""
 import shutil
 import subprocess
 
@@ -85,6 +85,16 @@ int main(int argc, char **argv)
     int j;
     for (i = 0; i <= grid; ++i) add(-4.0*pi + 8.0*pi*(double)i/(double)grid);
     report("grid");
+    /* the half angles of the dual-quaternion functions, computed as the generated C does:
+     * 0.5*q and 0.5*(q_a +- q_b) for joint angles up to +-2 pi (arguments up to +-2 pi) */
+    for (i = 0; i <= grid/2; ++i) add(0.5*(-2.0*pi + 4.0*pi*(double)i/(double)(grid/2)));
+    for (i = 0; i < grid/4; ++i) {
+        const double a = -2.0*pi + 4.0*pi*(double)(next() >> 11)/9007199254740992.0;
+        const double b = -2.0*pi + 4.0*pi*(double)(next() >> 11)/9007199254740992.0;
+        add(0.5*(a + b));
+        add(0.5*(a - b));
+    }
+    report("half");
     /* logarithmic, from the smallest subnormal to 1e300 (beyond the kernel's bound: libm) */
     for (i = 0; i <= grid/10; ++i) {
         const double x = pow(10.0, -323.0 + 623.0*(double)i/(double)(grid/10));
@@ -157,6 +167,7 @@ def test_kernel_within_stated_ulp_of_libm(compiler, flags, tmp_path):
     results = run_driver(tmp_path, compiler, flags, trig_kernel.kernel_c())
     assert results.pop("special") == [0]
     assert results["grid"][2] == 10_000_001 and results["pi/2"][2] > 6_000_000
+    assert results["half"][2] == 5_000_001 + 5_000_000
     for name, (sin_ulp, cos_ulp, points) in results.items():
         assert sin_ulp <= trig_kernel.MAX_ULP and cos_ulp <= trig_kernel.MAX_ULP, (name, sin_ulp, cos_ulp)
 

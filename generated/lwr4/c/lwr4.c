@@ -197,41 +197,38 @@ out_T[15][j] = 1.0;
 
 void lwr4_fk_dq(const double *restrict q, double *restrict x)
 {
-    const double t0 = 0.5*(q[2] + q[0]);
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[1];
-    const double t3 = cos(t2);
-    const double t4 = 0.5*q[3];
-    const double t5 = cos(t4);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*(q[0] + q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] - q[2]), 0.5*q[5], 0.5*(q[4] + q[6]), 0.5*(q[4] - q[6]), 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = cos_q[1];
+    const double t5 = cos_q[2];
     const double t6 = t5*t3;
-    const double t7 = 0.5*(q[0] - q[2]);
-    const double t8 = sin(t7);
-    const double t9 = sin(t2);
-    const double t10 = sin(t4);
+    const double t8 = sin_q[3];
+    const double t9 = sin_q[1];
+    const double t10 = sin_q[2];
     const double t11 = t9*t10;
     const double t12 = t8*t11;
     const double t13 = t6*t1 + t12;
-    const double t14 = 0.5*(q[6] + q[4]);
-    const double t15 = 0.5*q[5];
-    const double t16 = cos(t15);
-    const double t17 = t16*sin(t14);
-    const double t18 = cos(t7);
+    const double t16 = cos_q[4];
+    const double t17 = t16*sin_q[5];
+    const double t18 = cos_q[3];
     const double t19 = t9*t5;
-    const double t20 = cos(t0);
+    const double t20 = cos_q[0];
     const double t21 = t3*t10;
     const double t22 = t21*t20;
     const double t23 = t22 - t19*t18;
-    const double t24 = sin(t15);
-    const double t25 = 0.5*(q[4] - q[6]);
-    const double t26 = cos(t25);
+    const double t24 = sin_q[4];
+    const double t26 = cos_q[6];
     const double t27 = t24*t26;
-    const double t28 = sin(t25);
+    const double t28 = sin_q[6];
     const double t29 = t1*t21;
     const double t30 = t8*t19 - t29;
     const double t31 = t24*t30;
     const double t32 = t11*t18;
     const double t33 = t32 + t6*t20;
-    const double t34 = t16*cos(t14);
+    const double t34 = t16*cos_q[5];
     const double t35 = t24*t13;
     const double t36 = t24*t28;
     const double t37 = 0.395*t33 - 0.4*t32;
@@ -264,7 +261,7 @@ void lwr4_fk_dq(const double *restrict q, double *restrict x)
     x[7] = t60 + t59;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_fk_dq_batch(long count, const double *restrict q, double *restrict x)
@@ -274,43 +271,50 @@ void lwr4_fk_dq_batch(long count, const double *restrict q, double *restrict x)
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_x[8][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*(q[2*count + start + j] + q[0*count + start + j]);
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[1*count + start + j];
-            const double t3 = cos(t2);
-            const double t4 = 0.5*q[3*count + start + j];
-            const double t5 = cos(t4);
+            arguments[0][j] = 0.5*(q[0*count + start + j] + q[2*count + start + j]);
+            arguments[1][j] = 0.5*q[1*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*(q[4*count + start + j] + q[6*count + start + j]);
+            arguments[6][j] = 0.5*(q[4*count + start + j] - q[6*count + start + j]);
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = cos_q[1][j];
+            const double t5 = cos_q[2][j];
             const double t6 = t5*t3;
-            const double t7 = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
-            const double t8 = sin(t7);
-            const double t9 = sin(t2);
-            const double t10 = sin(t4);
+            const double t8 = sin_q[3][j];
+            const double t9 = sin_q[1][j];
+            const double t10 = sin_q[2][j];
             const double t11 = t9*t10;
             const double t12 = t8*t11;
             const double t13 = t6*t1 + t12;
-            const double t14 = 0.5*(q[6*count + start + j] + q[4*count + start + j]);
-            const double t15 = 0.5*q[5*count + start + j];
-            const double t16 = cos(t15);
-            const double t17 = t16*sin(t14);
-            const double t18 = cos(t7);
+            const double t16 = cos_q[4][j];
+            const double t17 = t16*sin_q[5][j];
+            const double t18 = cos_q[3][j];
             const double t19 = t9*t5;
-            const double t20 = cos(t0);
+            const double t20 = cos_q[0][j];
             const double t21 = t3*t10;
             const double t22 = t21*t20;
             const double t23 = t22 - t19*t18;
-            const double t24 = sin(t15);
-            const double t25 = 0.5*(q[4*count + start + j] - q[6*count + start + j]);
-            const double t26 = cos(t25);
+            const double t24 = sin_q[4][j];
+            const double t26 = cos_q[6][j];
             const double t27 = t24*t26;
-            const double t28 = sin(t25);
+            const double t28 = sin_q[6][j];
             const double t29 = t1*t21;
             const double t30 = t8*t19 - t29;
             const double t31 = t24*t30;
             const double t32 = t11*t18;
             const double t33 = t32 + t6*t20;
-            const double t34 = t16*cos(t14);
+            const double t34 = t16*cos_q[5][j];
             const double t35 = t24*t13;
             const double t36 = t24*t28;
             const double t37 = 0.395*t33 - 0.4*t32;
@@ -563,42 +567,39 @@ out_J[41][j] = t46;
 
 void lwr4_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    const double t0 = 0.5*q[0];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[1];
-    const double t3 = sin(t2);
-    const double t4 = 0.5*q[2];
-    const double t5 = sin(t4);
-    const double t6 = 0.5*q[4];
-    const double t7 = sin(t6);
-    const double t8 = 0.5*q[5];
-    const double t9 = cos(t8);
-    const double t10 = 0.5*q[6];
-    const double t11 = cos(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = sin_q[1];
+    const double t5 = sin_q[2];
+    const double t7 = sin_q[3];
+    const double t9 = cos_q[4];
+    const double t11 = cos_q[5];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos(t6);
-    const double t15 = sin(t10);
+    const double t14 = cos_q[3];
+    const double t15 = sin_q[5];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t7*t13 + t14*t17;
-    const double t19 = 0.5*q[3];
-    const double t20 = sin(t19);
+    const double t20 = sin_q[6];
     const double t21 = t20*t18;
-    const double t22 = sin(t8);
+    const double t22 = sin_q[4];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 - t24*t14;
-    const double t26 = cos(t19);
+    const double t26 = cos_q[6];
     const double t27 = t21 + t26*t25;
-    const double t28 = cos(t4);
+    const double t28 = cos_q[2];
     const double t29 = t13*t14 - t7*t17;
     const double t30 = t29*t20;
     const double t31 = -t7*t24 - t23*t14;
     const double t32 = t30 + t26*t31;
     const double t33 = t5*t27 + t28*t32;
     const double t34 = t3*t33;
-    const double t35 = cos(t2);
+    const double t35 = cos_q[1];
     const double t36 = t25*t20;
     const double t37 = t26*t18 - t36;
     const double t38 = t20*t31;
@@ -607,7 +608,7 @@ void lwr4_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     const double t41 = t40*t35;
     const double t42 = t34 + t41;
     const double t43 = t1*t42;
-    const double t44 = cos(t0);
+    const double t44 = cos_q[0];
     const double t45 = t28*t27 - t5*t32;
     const double t46 = t3*t45;
     const double t47 = t5*t39 + t28*t37;
@@ -902,54 +903,61 @@ void lwr4_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     Jx[55] = t280 + t279;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_pose_jacobian_dq_batch(long count, const double *restrict q, double *restrict Jx)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_Jx[56][64];
+        double sin_q[7][32], cos_q[7][32];
+        double arguments[7][32];
+        double out_Jx[56][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[0*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[1*count + start + j];
-            const double t3 = sin(t2);
-            const double t4 = 0.5*q[2*count + start + j];
-            const double t5 = sin(t4);
-            const double t6 = 0.5*q[4*count + start + j];
-            const double t7 = sin(t6);
-            const double t8 = 0.5*q[5*count + start + j];
-            const double t9 = cos(t8);
-            const double t10 = 0.5*q[6*count + start + j];
-            const double t11 = cos(t10);
+            arguments[0][j] = 0.5*q[0*count + start + j];
+            arguments[1][j] = 0.5*q[1*count + start + j];
+            arguments[2][j] = 0.5*q[2*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = sin_q[1][j];
+            const double t5 = sin_q[2][j];
+            const double t7 = sin_q[3][j];
+            const double t9 = cos_q[4][j];
+            const double t11 = cos_q[5][j];
             const double t12 = 0.5*t11;
             const double t13 = t9*t12;
-            const double t14 = cos(t6);
-            const double t15 = sin(t10);
+            const double t14 = cos_q[3][j];
+            const double t15 = sin_q[5][j];
             const double t16 = 0.5*t15;
             const double t17 = t9*t16;
             const double t18 = t7*t13 + t14*t17;
-            const double t19 = 0.5*q[3*count + start + j];
-            const double t20 = sin(t19);
+            const double t20 = sin_q[6][j];
             const double t21 = t20*t18;
-            const double t22 = sin(t8);
+            const double t22 = sin_q[4][j];
             const double t23 = t22*t12;
             const double t24 = t22*t16;
             const double t25 = t7*t23 - t24*t14;
-            const double t26 = cos(t19);
+            const double t26 = cos_q[6][j];
             const double t27 = t21 + t26*t25;
-            const double t28 = cos(t4);
+            const double t28 = cos_q[2][j];
             const double t29 = t13*t14 - t7*t17;
             const double t30 = t29*t20;
             const double t31 = -t7*t24 - t23*t14;
             const double t32 = t30 + t26*t31;
             const double t33 = t5*t27 + t28*t32;
             const double t34 = t3*t33;
-            const double t35 = cos(t2);
+            const double t35 = cos_q[1][j];
             const double t36 = t25*t20;
             const double t37 = t26*t18 - t36;
             const double t38 = t20*t31;
@@ -958,7 +966,7 @@ void lwr4_pose_jacobian_dq_batch(long count, const double *restrict q, double *r
             const double t41 = t40*t35;
             const double t42 = t34 + t41;
             const double t43 = t1*t42;
-            const double t44 = cos(t0);
+            const double t44 = cos_q[0][j];
             const double t45 = t28*t27 - t5*t32;
             const double t46 = t3*t45;
             const double t47 = t5*t39 + t28*t37;
@@ -1262,39 +1270,36 @@ out_Jx[55][j] = t280 + t279;
 
 void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    const double t0 = 0.5*q[6];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[5];
-    const double t3 = cos(t2);
-    const double t4 = 0.5*q[4];
-    const double t5 = cos(t4);
-    const double t6 = 0.5*q[2];
-    const double t7 = cos(t6);
-    const double t8 = 0.5*q[1];
-    const double t9 = cos(t8);
-    const double t10 = 0.5*q[0];
-    const double t11 = sin(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[2], 0.5*q[1], 0.5*q[0], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = cos_q[1];
+    const double t5 = cos_q[2];
+    const double t7 = cos_q[3];
+    const double t9 = cos_q[4];
+    const double t11 = sin_q[5];
     const double t12 = t9*t11;
-    const double t13 = sin(t6);
-    const double t14 = cos(t10);
+    const double t13 = sin_q[3];
+    const double t14 = cos_q[5];
     const double t15 = t9*t14;
     const double t16 = t7*t12 + t13*t15;
-    const double t17 = 0.5*q[3];
-    const double t18 = cos(t17);
-    const double t19 = sin(t8);
+    const double t18 = cos_q[6];
+    const double t19 = sin_q[4];
     const double t20 = t19*t14;
     const double t21 = t19*t11;
     const double t22 = t7*t21 - t20*t13;
-    const double t23 = sin(t17);
+    const double t23 = sin_q[6];
     const double t24 = t23*t22;
     const double t25 = t16*t18 + t24;
-    const double t26 = sin(t4);
+    const double t26 = sin_q[2];
     const double t27 = -t7*t20 - t21*t13;
     const double t28 = t23*t27;
     const double t29 = t7*t15 - t12*t13;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t25 + t26*t30;
-    const double t32 = sin(t2);
+    const double t32 = sin_q[1];
     const double t33 = t29*t23;
     const double t34 = t27*t18 + t33;
     const double t35 = t23*t16;
@@ -1306,7 +1311,7 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t32;
     const double t42 = t5*t30 - t26*t25;
     const double t43 = t41 + t3*t42;
-    const double t44 = cos(t0);
+    const double t44 = cos_q[0];
     const double t45 = t43*t44 - t1*t39;
     const double t46 = 0.4*t5;
     const double t47 = 0.4*t26;
@@ -1508,7 +1513,7 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
     J[41] = t108;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_jacobian_dq_batch(long count, const double *restrict q, double *restrict J)
@@ -1518,41 +1523,48 @@ void lwr4_jacobian_dq_batch(long count, const double *restrict q, double *restri
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_J[42][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[6*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[5*count + start + j];
-            const double t3 = cos(t2);
-            const double t4 = 0.5*q[4*count + start + j];
-            const double t5 = cos(t4);
-            const double t6 = 0.5*q[2*count + start + j];
-            const double t7 = cos(t6);
-            const double t8 = 0.5*q[1*count + start + j];
-            const double t9 = cos(t8);
-            const double t10 = 0.5*q[0*count + start + j];
-            const double t11 = sin(t10);
+            arguments[0][j] = 0.5*q[6*count + start + j];
+            arguments[1][j] = 0.5*q[5*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[2*count + start + j];
+            arguments[4][j] = 0.5*q[1*count + start + j];
+            arguments[5][j] = 0.5*q[0*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = cos_q[1][j];
+            const double t5 = cos_q[2][j];
+            const double t7 = cos_q[3][j];
+            const double t9 = cos_q[4][j];
+            const double t11 = sin_q[5][j];
             const double t12 = t9*t11;
-            const double t13 = sin(t6);
-            const double t14 = cos(t10);
+            const double t13 = sin_q[3][j];
+            const double t14 = cos_q[5][j];
             const double t15 = t9*t14;
             const double t16 = t7*t12 + t13*t15;
-            const double t17 = 0.5*q[3*count + start + j];
-            const double t18 = cos(t17);
-            const double t19 = sin(t8);
+            const double t18 = cos_q[6][j];
+            const double t19 = sin_q[4][j];
             const double t20 = t19*t14;
             const double t21 = t19*t11;
             const double t22 = t7*t21 - t20*t13;
-            const double t23 = sin(t17);
+            const double t23 = sin_q[6][j];
             const double t24 = t23*t22;
             const double t25 = t16*t18 + t24;
-            const double t26 = sin(t4);
+            const double t26 = sin_q[2][j];
             const double t27 = -t7*t20 - t21*t13;
             const double t28 = t23*t27;
             const double t29 = t7*t15 - t12*t13;
             const double t30 = t29*t18 - t28;
             const double t31 = t5*t25 + t26*t30;
-            const double t32 = sin(t2);
+            const double t32 = sin_q[1][j];
             const double t33 = t29*t23;
             const double t34 = t27*t18 + t33;
             const double t35 = t23*t16;
@@ -1564,7 +1576,7 @@ void lwr4_jacobian_dq_batch(long count, const double *restrict q, double *restri
             const double t41 = t40*t32;
             const double t42 = t5*t30 - t26*t25;
             const double t43 = t41 + t3*t42;
-            const double t44 = cos(t0);
+            const double t44 = cos_q[0][j];
             const double t45 = t43*t44 - t1*t39;
             const double t46 = 0.4*t5;
             const double t47 = 0.4*t26;
@@ -19924,27 +19936,27 @@ out_c[6][j] = t958 + qd[0*count + start + j]*(t945 - (t584 + t194));
 
 void lwr4_M_dq(const double *restrict q, double *restrict M)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.5*q[4], 0.5*q[2], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[3];
-    const double t4 = sin(t3);
+    const double t4 = sin_q[1];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t7 = 0.5*q[5];
-    const double t8 = sin(t7);
+    const double t8 = sin_q[2];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t12 = 0.5*q[6];
-    const double t13 = sin(t12);
+    const double t13 = sin_q[3];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
-    const double t16 = cos(t12);
+    const double t16 = cos_q[3];
     const double t17 = t13*t16;
     const double t18 = 2.132e-05*t15 + 6.698e-05*t17;
     const double t19 = t18 - 0.00010112;
-    const double t20 = cos(t7);
+    const double t20 = cos_q[2];
     const double t21 = t8*t20;
     const double t22 = 2.0*t21;
     const double t23 = t22*t19;
@@ -19966,8 +19978,7 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t166 = 0.39*t36 + 0.00029096;
     const double t167 = t29*t10 - t24*t22;
     const double t37 = t167 + t166;
-    const double t38 = 0.5*q[4];
-    const double t39 = sin(t38);
+    const double t39 = sin_q[4];
     const double t40 = t39*t39;
     const double t41 = -2.0*t40 + 1.0;
     const double t42 = t41*t37;
@@ -19985,12 +19996,12 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t52 = t49*t10*t10;
     const double t170 = -t48 - 0.0702099;
     const double t53 = 0.39*(t51 + t52) + t170;
-    const double t54 = cos(t38);
+    const double t54 = cos_q[4];
     const double t55 = t54*t39;
     const double t56 = 2.0*t55;
     const double t57 = t56*t53;
     const double t58 = t57 - t42 - 0.0001025;
-    const double t59 = cos(t3);
+    const double t59 = cos_q[1];
     const double t60 = t4*t59;
     const double t61 = 2.0*t60;
     const double t62 = -t58*t61;
@@ -20021,8 +20032,7 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t81 = -t64 - t80*t61;
     const double t82 = -(t6*t63 + t81*t61) + 0.046847925;
     const double t83 = t2*t82;
-    const double t84 = 0.5*q[2];
-    const double t85 = sin(t84);
+    const double t85 = sin_q[5];
     const double t86 = -2.0*t85*t85 + 1.0;
     const double t180 = -t41*t41*t73 - 1.5867;
     const double t87 = t180 - 4.0*t40*t73*t54*t54;
@@ -20049,10 +20059,10 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t185 = 0.4*(-4.0*t5*t59*t59*t103 - t6*t6*t103) + 0.12652;
     const double t186 = t185 - t96;
     const double t104 = t186 - t100;
-    const double t105 = 2.0*t85*cos(t84);
+    const double t105 = 2.0*t85*cos_q[5];
     const double t106 = t86*t93 - t105*t104;
     const double t107 = t106 + 0.00028859;
-    const double t108 = 2.0*t1*cos(t0);
+    const double t108 = 2.0*t1*cos_q[0];
     const double t109 = 0.8*t60;
     const double t110 = 0.4*t6;
     const double t189 = -t61*(t103*t110 + t95) - 0.0006915;
@@ -20172,39 +20182,48 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     M[48] = 0.0006000875;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_M_dq_batch(long count, const double *restrict q, double *restrict M)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_M[49][64];
+        double sin_q[6][32], cos_q[6][32];
+        double arguments[6][32];
+        double out_M[49][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[3*count + start + j];
+            arguments[2][j] = 0.5*q[5*count + start + j];
+            arguments[3][j] = 0.5*q[6*count + start + j];
+            arguments[4][j] = 0.5*q[4*count + start + j];
+            arguments[5][j] = 0.5*q[2*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[3*count + start + j];
-            const double t4 = sin(t3);
+            const double t4 = sin_q[1][j];
             const double t5 = t4*t4;
             const double t6 = -2.0*t5 + 1.0;
-            const double t7 = 0.5*q[5*count + start + j];
-            const double t8 = sin(t7);
+            const double t8 = sin_q[2][j];
             const double t9 = t8*t8;
             const double t10 = -2.0*t9 + 1.0;
             const double t11 = 0.0006000875*t10;
-            const double t12 = 0.5*q[6*count + start + j];
-            const double t13 = sin(t12);
+            const double t13 = sin_q[3][j];
             const double t14 = t13*t13;
             const double t15 = -2.0*t14 + 1.0;
-            const double t16 = cos(t12);
+            const double t16 = cos_q[3][j];
             const double t17 = t13*t16;
             const double t18 = 2.132e-05*t15 + 6.698e-05*t17;
             const double t19 = t18 - 0.00010112;
-            const double t20 = cos(t7);
+            const double t20 = cos_q[2][j];
             const double t21 = t8*t20;
             const double t22 = 2.0*t21;
             const double t23 = t22*t19;
@@ -20226,8 +20245,7 @@ void lwr4_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t166 = 0.39*t36 + 0.00029096;
             const double t167 = t29*t10 - t24*t22;
             const double t37 = t167 + t166;
-            const double t38 = 0.5*q[4*count + start + j];
-            const double t39 = sin(t38);
+            const double t39 = sin_q[4][j];
             const double t40 = t39*t39;
             const double t41 = -2.0*t40 + 1.0;
             const double t42 = t41*t37;
@@ -20245,12 +20263,12 @@ void lwr4_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t52 = t49*t10*t10;
             const double t170 = -t48 - 0.0702099;
             const double t53 = 0.39*(t51 + t52) + t170;
-            const double t54 = cos(t38);
+            const double t54 = cos_q[4][j];
             const double t55 = t54*t39;
             const double t56 = 2.0*t55;
             const double t57 = t56*t53;
             const double t58 = t57 - t42 - 0.0001025;
-            const double t59 = cos(t3);
+            const double t59 = cos_q[1][j];
             const double t60 = t4*t59;
             const double t61 = 2.0*t60;
             const double t62 = -t58*t61;
@@ -20281,8 +20299,7 @@ void lwr4_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t81 = -t64 - t80*t61;
             const double t82 = -(t6*t63 + t81*t61) + 0.046847925;
             const double t83 = t2*t82;
-            const double t84 = 0.5*q[2*count + start + j];
-            const double t85 = sin(t84);
+            const double t85 = sin_q[5][j];
             const double t86 = -2.0*t85*t85 + 1.0;
             const double t180 = -t41*t41*t73 - 1.5867;
             const double t87 = t180 - 4.0*t40*t73*t54*t54;
@@ -20309,10 +20326,10 @@ void lwr4_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t185 = 0.4*(-4.0*t5*t59*t59*t103 - t6*t6*t103) + 0.12652;
             const double t186 = t185 - t96;
             const double t104 = t186 - t100;
-            const double t105 = 2.0*t85*cos(t84);
+            const double t105 = 2.0*t85*cos_q[5][j];
             const double t106 = t86*t93 - t105*t104;
             const double t107 = t106 + 0.00028859;
-            const double t108 = 2.0*t1*cos(t0);
+            const double t108 = 2.0*t1*cos_q[0][j];
             const double t109 = 0.8*t60;
             const double t110 = 0.4*t6;
             const double t189 = -t61*(t103*t110 + t95) - 0.0006915;
@@ -20441,41 +20458,39 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_g_dq(const double *restrict q, double *restrict g)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[2];
-    const double t4 = sin(t3);
+    const double t4 = sin_q[1];
     const double t5 = -2.0*t4*t4 + 1.0;
-    const double t6 = t1*cos(t0);
+    const double t6 = t1*cos_q[0];
     const double t7 = t5*t6;
-    const double t8 = t4*cos(t3);
+    const double t8 = t4*cos_q[1];
     const double t9 = t8*t6;
-    const double t10 = 0.5*q[3];
-    const double t11 = sin(t10);
+    const double t11 = sin_q[2];
     const double t12 = -2.0*t11*t11 + 1.0;
-    const double t13 = t11*cos(t10);
+    const double t13 = t11*cos_q[2];
     const double t51 = 19.62*t12;
     const double t52 = -19.62*t13;
     const double t14 = t2*t52 + t7*t51;
-    const double t15 = 0.5*q[4];
-    const double t16 = sin(t15);
+    const double t16 = sin_q[3];
     const double t17 = -2.0*t16*t16 + 1.0;
-    const double t18 = t16*cos(t15);
+    const double t18 = t16*cos_q[3];
     const double t53 = -78.48*t18;
     const double t19 = t14*t17 + t9*t53;
     const double t20 = 2.0*t18;
     const double t21 = -t20*t14 - 39.24*t9*t17;
-    const double t22 = 0.5*q[5];
-    const double t23 = sin(t22);
-    const double t24 = 2.0*t23*cos(t22);
+    const double t23 = sin_q[4];
+    const double t24 = 2.0*t23*cos_q[4];
     const double t57 = -39.24*t13;
     const double t25 = t7*t57 - 9.81*t2*t12;
     const double t26 = -2.0*t23*t23 + 1.0;
     const double t27 = -t24*t19 - t26*t25;
-    const double t28 = 0.5*q[6];
-    const double t29 = sin(t28);
-    const double t30 = t29*cos(t28);
+    const double t29 = sin_q[5];
+    const double t30 = t29*cos_q[5];
     const double t31 = t27*t30;
     const double t32 = -2.0*t29*t29 + 1.0;
     const double t33 = t27*t32;
@@ -20513,7 +20528,7 @@ void lwr4_g_dq(const double *restrict q, double *restrict g)
     g[6] = t37;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_g_dq_batch(long count, const double *restrict q, double *restrict g)
@@ -20523,43 +20538,50 @@ void lwr4_g_dq_batch(long count, const double *restrict q, double *restrict g)
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_g[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[2*count + start + j];
-            const double t4 = sin(t3);
+            const double t4 = sin_q[1][j];
             const double t5 = -2.0*t4*t4 + 1.0;
-            const double t6 = t1*cos(t0);
+            const double t6 = t1*cos_q[0][j];
             const double t7 = t5*t6;
-            const double t8 = t4*cos(t3);
+            const double t8 = t4*cos_q[1][j];
             const double t9 = t8*t6;
-            const double t10 = 0.5*q[3*count + start + j];
-            const double t11 = sin(t10);
+            const double t11 = sin_q[2][j];
             const double t12 = -2.0*t11*t11 + 1.0;
-            const double t13 = t11*cos(t10);
+            const double t13 = t11*cos_q[2][j];
             const double t51 = 19.62*t12;
             const double t52 = -19.62*t13;
             const double t14 = t2*t52 + t7*t51;
-            const double t15 = 0.5*q[4*count + start + j];
-            const double t16 = sin(t15);
+            const double t16 = sin_q[3][j];
             const double t17 = -2.0*t16*t16 + 1.0;
-            const double t18 = t16*cos(t15);
+            const double t18 = t16*cos_q[3][j];
             const double t53 = -78.48*t18;
             const double t19 = t14*t17 + t9*t53;
             const double t20 = 2.0*t18;
             const double t21 = -t20*t14 - 39.24*t9*t17;
-            const double t22 = 0.5*q[5*count + start + j];
-            const double t23 = sin(t22);
-            const double t24 = 2.0*t23*cos(t22);
+            const double t23 = sin_q[4][j];
+            const double t24 = 2.0*t23*cos_q[4][j];
             const double t57 = -39.24*t13;
             const double t25 = t7*t57 - 9.81*t2*t12;
             const double t26 = -2.0*t23*t23 + 1.0;
             const double t27 = -t24*t19 - t26*t25;
-            const double t28 = 0.5*q[6*count + start + j];
-            const double t29 = sin(t28);
-            const double t30 = t29*cos(t28);
+            const double t29 = sin_q[5][j];
+            const double t30 = t29*cos_q[5][j];
             const double t31 = t27*t30;
             const double t32 = -2.0*t29*t29 + 1.0;
             const double t33 = t27*t32;
@@ -20606,29 +20628,30 @@ out_g[6][j] = t37;
 
 void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
     const double t4 = 0.00028859*t3;
     const double t5 = 0.00037047*qd[1];
-    const double t6 = t1*cos(t0);
+    const double t6 = t1*cos_q[0];
     const double t7 = t6*qd[0];
     const double t148 = 2.761994276*t7 + t5;
     const double t8 = t4 + t148;
     const double t149 = 0.00074094*t7 + 1.388001512*qd[1];
     const double t9 = 0.0080121*t3 + t149;
     const double t10 = 2.0*t7;
-    const double t11 = 0.5*q[2];
-    const double t12 = sin(t11);
-    const double t13 = t12*cos(t11);
+    const double t12 = sin_q[1];
+    const double t13 = t12*cos_q[1];
     const double t14 = -2.0*t12*t12 + 1.0;
     const double t15 = t14*qd[1];
     const double t150 = -4.0*t13;
     const double t16 = t7*t150 - t15;
-    const double t17 = 0.5*q[3];
-    const double t18 = sin(t17);
-    const double t19 = t18*cos(t17);
+    const double t18 = sin_q[2];
+    const double t19 = t18*cos_q[2];
     const double t20 = t19*t16;
     const double t21 = 0.1532*t20;
     const double t22 = 2.0*t13;
@@ -20639,9 +20662,8 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     const double t27 = -t24*t23 - t26*t25;
     const double t28 = qd[4] - t27;
     const double t29 = t23*t26 - t24*t25;
-    const double t30 = 0.5*q[4];
-    const double t31 = sin(t30);
-    const double t32 = t31*cos(t30);
+    const double t31 = sin_q[3];
+    const double t32 = t31*cos_q[3];
     const double t33 = 2.0*t32;
     const double t34 = -2.0*t31*t31 + 1.0;
     const double t35 = qd[3] + t16;
@@ -20659,10 +20681,9 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     const double t45 = 0.001088*t20;
     const double t46 = t45 - 0.0702099*t28 - 0.00015448*t37;
     const double t47 = t43*t34 - t37*qd[4] - t41*t33;
-    const double t48 = 0.5*q[5];
-    const double t49 = sin(t48);
+    const double t49 = sin_q[4];
     const double t50 = -2.0*t49*t49 + 1.0;
-    const double t51 = t49*cos(t48);
+    const double t51 = t49*cos_q[4];
     const double t52 = 2.0*t51;
     const double t53 = t50*t37 + t52*t28;
     const double t54 = 0.4*t26;
@@ -20695,9 +20716,8 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     const double t167 = -t57*qd[4] - t40*t66;
     const double t75 = t167 - t74*t33;
     const double t76 = 0.39*t44 - t75;
-    const double t77 = 0.5*q[6];
-    const double t78 = sin(t77);
-    const double t79 = 2.0*t78*cos(t77);
+    const double t78 = sin_q[5];
+    const double t79 = 2.0*t78*cos_q[5];
     const double t80 = -2.0*t78*t78 + 1.0;
     const double t81 = -t79*t61 - t80*t68;
     const double t82 = qd[6] + t63;
@@ -20919,7 +20939,7 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     c[6] = t99;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_c_dq_batch(long count, const double *restrict q, const double *restrict qd, double *restrict c)
@@ -20929,31 +20949,41 @@ void lwr4_c_dq_batch(long count, const double *restrict q, const double *restric
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_c[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
             const double t4 = 0.00028859*t3;
             const double t5 = 0.00037047*qd[1*count + start + j];
-            const double t6 = t1*cos(t0);
+            const double t6 = t1*cos_q[0][j];
             const double t7 = t6*qd[0*count + start + j];
             const double t148 = 2.761994276*t7 + t5;
             const double t8 = t4 + t148;
             const double t149 = 0.00074094*t7 + 1.388001512*qd[1*count + start + j];
             const double t9 = 0.0080121*t3 + t149;
             const double t10 = 2.0*t7;
-            const double t11 = 0.5*q[2*count + start + j];
-            const double t12 = sin(t11);
-            const double t13 = t12*cos(t11);
+            const double t12 = sin_q[1][j];
+            const double t13 = t12*cos_q[1][j];
             const double t14 = -2.0*t12*t12 + 1.0;
             const double t15 = t14*qd[1*count + start + j];
             const double t150 = -4.0*t13;
             const double t16 = t7*t150 - t15;
-            const double t17 = 0.5*q[3*count + start + j];
-            const double t18 = sin(t17);
-            const double t19 = t18*cos(t17);
+            const double t18 = sin_q[2][j];
+            const double t19 = t18*cos_q[2][j];
             const double t20 = t19*t16;
             const double t21 = 0.1532*t20;
             const double t22 = 2.0*t13;
@@ -20964,9 +20994,8 @@ void lwr4_c_dq_batch(long count, const double *restrict q, const double *restric
             const double t27 = -t24*t23 - t26*t25;
             const double t28 = qd[4*count + start + j] - t27;
             const double t29 = t23*t26 - t24*t25;
-            const double t30 = 0.5*q[4*count + start + j];
-            const double t31 = sin(t30);
-            const double t32 = t31*cos(t30);
+            const double t31 = sin_q[3][j];
+            const double t32 = t31*cos_q[3][j];
             const double t33 = 2.0*t32;
             const double t34 = -2.0*t31*t31 + 1.0;
             const double t35 = qd[3*count + start + j] + t16;
@@ -20984,10 +21013,9 @@ void lwr4_c_dq_batch(long count, const double *restrict q, const double *restric
             const double t45 = 0.001088*t20;
             const double t46 = t45 - 0.0702099*t28 - 0.00015448*t37;
             const double t47 = t43*t34 - t37*qd[4*count + start + j] - t41*t33;
-            const double t48 = 0.5*q[5*count + start + j];
-            const double t49 = sin(t48);
+            const double t49 = sin_q[4][j];
             const double t50 = -2.0*t49*t49 + 1.0;
-            const double t51 = t49*cos(t48);
+            const double t51 = t49*cos_q[4][j];
             const double t52 = 2.0*t51;
             const double t53 = t50*t37 + t52*t28;
             const double t54 = 0.4*t26;
@@ -21020,9 +21048,8 @@ void lwr4_c_dq_batch(long count, const double *restrict q, const double *restric
             const double t167 = -t57*qd[4*count + start + j] - t40*t66;
             const double t75 = t167 - t74*t33;
             const double t76 = 0.39*t44 - t75;
-            const double t77 = 0.5*q[6*count + start + j];
-            const double t78 = sin(t77);
-            const double t79 = 2.0*t78*cos(t77);
+            const double t78 = sin_q[5][j];
+            const double t79 = 2.0*t78*cos_q[5][j];
             const double t80 = -2.0*t78*t78 + 1.0;
             const double t81 = -t79*t61 - t80*t68;
             const double t82 = qd[6*count + start + j] + t63;
@@ -21253,11 +21280,14 @@ out_c[6][j] = t99;
 
 void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
-    const double t4 = t1*cos(t0);
+    const double t4 = t1*cos_q[0];
     const double t5 = 2.0*t4;
     const double t6 = t3*qd[1] + t5*qdd[0];
     const double t7 = t4*qd[0];
@@ -21266,9 +21296,8 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t154 = 0.00074094*t7 + 1.388001512*qd[1];
     const double t9 = 0.0080121*t3 + t154;
     const double t10 = 2.0*t7;
-    const double t11 = 0.5*q[2];
-    const double t12 = sin(t11);
-    const double t13 = t12*cos(t11);
+    const double t12 = sin_q[1];
+    const double t13 = t12*cos_q[1];
     const double t14 = t4*t13;
     const double t15 = -2.0*t12*t12 + 1.0;
     const double t16 = t4*t15;
@@ -21282,18 +21311,16 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t157 = -t21*qd[2] - t15*qdd[1];
     const double t22 = t157 - t6*t18;
     const double t23 = qdd[3] + t22;
-    const double t24 = 0.5*q[4];
-    const double t25 = sin(t24);
+    const double t25 = sin_q[2];
     const double t26 = -2.0*t25*t25 + 1.0;
     const double t27 = qd[2] + t3;
-    const double t28 = 0.5*q[3];
-    const double t29 = sin(t28);
-    const double t30 = t29*cos(t28);
+    const double t29 = sin_q[3];
+    const double t30 = t29*cos_q[3];
     const double t31 = 2.0*t30;
     const double t32 = -2.0*t29*t29 + 1.0;
     const double t33 = t21*t32 - t27*t31;
     const double t34 = qd[3] + t17;
-    const double t35 = t25*cos(t24);
+    const double t35 = t25*cos_q[2];
     const double t36 = 2.0*t35;
     const double t37 = t26*t33 + t34*t36;
     const double t38 = t30*t17;
@@ -21301,9 +21328,8 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t40 = -t21*t31 - t27*t32;
     const double t41 = qd[4] - t40;
     const double t42 = t39 - 0.0702099*t41 - 0.00015448*t37;
-    const double t43 = 0.5*q[5];
-    const double t44 = sin(t43);
-    const double t45 = t44*cos(t43);
+    const double t44 = sin_q[4];
+    const double t45 = t44*cos_q[4];
     const double t46 = 2.0*t45;
     const double t47 = -2.0*t44*t44 + 1.0;
     const double t48 = t47*t41 - t46*t37;
@@ -21318,9 +21344,8 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t57 = t47*t50 - t46*t56;
     const double t58 = 0.000105*t57;
     const double t59 = t47*t37 + t46*t41;
-    const double t60 = 0.5*q[6];
-    const double t61 = sin(t60);
-    const double t62 = 2.0*t61*cos(t60);
+    const double t61 = sin_q[5];
+    const double t62 = 2.0*t61*cos_q[5];
     const double t63 = qd[5] - t51;
     const double t64 = -2.0*t61*t61 + 1.0;
     const double t65 = -t59*t62 - t64*t63;
@@ -21590,7 +21615,7 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     tau[6] = t112;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
@@ -21600,13 +21625,25 @@ void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restr
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_tau[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[3*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
-            const double t4 = t1*cos(t0);
+            const double t4 = t1*cos_q[0][j];
             const double t5 = 2.0*t4;
             const double t6 = t3*qd[1*count + start + j] + t5*qdd[0*count + start + j];
             const double t7 = t4*qd[0*count + start + j];
@@ -21615,9 +21652,8 @@ void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restr
             const double t154 = 0.00074094*t7 + 1.388001512*qd[1*count + start + j];
             const double t9 = 0.0080121*t3 + t154;
             const double t10 = 2.0*t7;
-            const double t11 = 0.5*q[2*count + start + j];
-            const double t12 = sin(t11);
-            const double t13 = t12*cos(t11);
+            const double t12 = sin_q[1][j];
+            const double t13 = t12*cos_q[1][j];
             const double t14 = t4*t13;
             const double t15 = -2.0*t12*t12 + 1.0;
             const double t16 = t4*t15;
@@ -21631,18 +21667,16 @@ void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restr
             const double t157 = -t21*qd[2*count + start + j] - t15*qdd[1*count + start + j];
             const double t22 = t157 - t6*t18;
             const double t23 = qdd[3*count + start + j] + t22;
-            const double t24 = 0.5*q[4*count + start + j];
-            const double t25 = sin(t24);
+            const double t25 = sin_q[2][j];
             const double t26 = -2.0*t25*t25 + 1.0;
             const double t27 = qd[2*count + start + j] + t3;
-            const double t28 = 0.5*q[3*count + start + j];
-            const double t29 = sin(t28);
-            const double t30 = t29*cos(t28);
+            const double t29 = sin_q[3][j];
+            const double t30 = t29*cos_q[3][j];
             const double t31 = 2.0*t30;
             const double t32 = -2.0*t29*t29 + 1.0;
             const double t33 = t21*t32 - t27*t31;
             const double t34 = qd[3*count + start + j] + t17;
-            const double t35 = t25*cos(t24);
+            const double t35 = t25*cos_q[2][j];
             const double t36 = 2.0*t35;
             const double t37 = t26*t33 + t34*t36;
             const double t38 = t30*t17;
@@ -21650,9 +21684,8 @@ void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restr
             const double t40 = -t21*t31 - t27*t32;
             const double t41 = qd[4*count + start + j] - t40;
             const double t42 = t39 - 0.0702099*t41 - 0.00015448*t37;
-            const double t43 = 0.5*q[5*count + start + j];
-            const double t44 = sin(t43);
-            const double t45 = t44*cos(t43);
+            const double t44 = sin_q[4][j];
+            const double t45 = t44*cos_q[4][j];
             const double t46 = 2.0*t45;
             const double t47 = -2.0*t44*t44 + 1.0;
             const double t48 = t47*t41 - t46*t37;
@@ -21667,9 +21700,8 @@ void lwr4_tau_dq_batch(long count, const double *restrict q, const double *restr
             const double t57 = t47*t50 - t46*t56;
             const double t58 = 0.000105*t57;
             const double t59 = t47*t37 + t46*t41;
-            const double t60 = 0.5*q[6*count + start + j];
-            const double t61 = sin(t60);
-            const double t62 = 2.0*t61*cos(t60);
+            const double t61 = sin_q[5][j];
+            const double t62 = 2.0*t61*cos_q[5][j];
             const double t63 = qd[5*count + start + j] - t51;
             const double t64 = -2.0*t61*t61 + 1.0;
             const double t65 = -t59*t62 - t64*t63;
@@ -21948,9 +21980,12 @@ out_tau[6][j] = t112;
 
 void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
-    const double t2 = cos(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t2 = cos_q[0];
     const double t3 = t1*t2;
     const double t4 = 2.0*t3;
     const double t5 = t4*qdd[0];
@@ -21970,11 +22005,10 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t18 = 4.0*t3;
     const double t19 = t7*qdd[0];
     const double t20 = -t7*t7*t11;
-    const double t21 = 0.5*q[2];
-    const double t22 = sin(t21);
+    const double t22 = sin_q[1];
     const double t23 = -2.0*t22*t22 + 1.0;
     const double t24 = t23*qd[0];
-    const double t25 = t22*cos(t21);
+    const double t25 = t22*cos_q[1];
     const double t26 = 2.0*t25;
     const double t27 = t4*t24 - t26*qd[1];
     const double t563 = t25*qd[0];
@@ -22031,11 +22065,10 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t73 = t40 + t71;
     const double t74 = t64 + t31;
     const double t75 = t68 - t57;
-    const double t76 = 0.5*q[3];
-    const double t77 = sin(t76);
+    const double t77 = sin_q[2];
     const double t78 = -2.0*t77*t77 + 1.0;
     const double t79 = t78*t27;
-    const double t80 = t77*cos(t76);
+    const double t80 = t77*cos_q[2];
     const double t81 = 2.0*t80;
     const double t82 = t81*t39;
     const double t83 = t79 - t82;
@@ -22123,9 +22156,8 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t147 = t78*t146 - t81*t144;
     const double t148 = t83*t145 + t139;
     const double t149 = -t78*t144 - t81*t146;
-    const double t150 = 0.5*q[4];
-    const double t151 = sin(t150);
-    const double t152 = t151*cos(t150);
+    const double t151 = sin_q[3];
+    const double t152 = t151*cos_q[3];
     const double t153 = 2.0*t152;
     const double t154 = t83*t153;
     const double t155 = -2.0*t151*t151 + 1.0;
@@ -22252,9 +22284,8 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t257 = t253*t153 + t254*t155;
     const double t258 = -t78*t252 - t81*t255;
     const double t259 = qd[5] - t157;
-    const double t260 = 0.5*q[5];
-    const double t261 = sin(t260);
-    const double t262 = t261*cos(t260);
+    const double t261 = sin_q[4];
+    const double t262 = t261*cos_q[4];
     const double t263 = 2.0*t262;
     const double t264 = t263*t165;
     const double t265 = -2.0*t261*t261 + 1.0;
@@ -22430,9 +22461,8 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t407 = -t78*t400 - t81*t404;
     const double t408 = qd[6] + t273;
     const double t409 = t269 - t270;
-    const double t410 = 0.5*q[6];
-    const double t411 = sin(t410);
-    const double t412 = t411*cos(t410);
+    const double t411 = sin_q[5];
+    const double t412 = t411*cos_q[5];
     const double t413 = 2.0*t412;
     const double t414 = -2.0*t411*t411 + 1.0;
     const double t415 = -t278*t413 - t272*t414;
@@ -22912,7 +22942,7 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     Y[300] = t436;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block, outputs stored in place (301 entries: too many for local arrays). */
 void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
@@ -22920,10 +22950,23 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
     for (start = 0; start < count; start += 64) {
         const long size = count - start < 64 ? count - start : 64;
         long j;
+        int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = cos(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t2 = cos_q[0][j];
             const double t3 = t1*t2;
             const double t4 = 2.0*t3;
             const double t5 = t4*qdd[0*count + start + j];
@@ -22943,11 +22986,10 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
             const double t18 = 4.0*t3;
             const double t19 = t7*qdd[0*count + start + j];
             const double t20 = -t7*t7*t11;
-            const double t21 = 0.5*q[2*count + start + j];
-            const double t22 = sin(t21);
+            const double t22 = sin_q[1][j];
             const double t23 = -2.0*t22*t22 + 1.0;
             const double t24 = t23*qd[0*count + start + j];
-            const double t25 = t22*cos(t21);
+            const double t25 = t22*cos_q[1][j];
             const double t26 = 2.0*t25;
             const double t27 = t4*t24 - t26*qd[1*count + start + j];
             const double t563 = t25*qd[0*count + start + j];
@@ -23004,11 +23046,10 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
             const double t73 = t40 + t71;
             const double t74 = t64 + t31;
             const double t75 = t68 - t57;
-            const double t76 = 0.5*q[3*count + start + j];
-            const double t77 = sin(t76);
+            const double t77 = sin_q[2][j];
             const double t78 = -2.0*t77*t77 + 1.0;
             const double t79 = t78*t27;
-            const double t80 = t77*cos(t76);
+            const double t80 = t77*cos_q[2][j];
             const double t81 = 2.0*t80;
             const double t82 = t81*t39;
             const double t83 = t79 - t82;
@@ -23096,9 +23137,8 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
             const double t147 = t78*t146 - t81*t144;
             const double t148 = t83*t145 + t139;
             const double t149 = -t78*t144 - t81*t146;
-            const double t150 = 0.5*q[4*count + start + j];
-            const double t151 = sin(t150);
-            const double t152 = t151*cos(t150);
+            const double t151 = sin_q[3][j];
+            const double t152 = t151*cos_q[3][j];
             const double t153 = 2.0*t152;
             const double t154 = t83*t153;
             const double t155 = -2.0*t151*t151 + 1.0;
@@ -23225,9 +23265,8 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
             const double t257 = t253*t153 + t254*t155;
             const double t258 = -t78*t252 - t81*t255;
             const double t259 = qd[5*count + start + j] - t157;
-            const double t260 = 0.5*q[5*count + start + j];
-            const double t261 = sin(t260);
-            const double t262 = t261*cos(t260);
+            const double t261 = sin_q[4][j];
+            const double t262 = t261*cos_q[4][j];
             const double t263 = 2.0*t262;
             const double t264 = t263*t165;
             const double t265 = -2.0*t261*t261 + 1.0;
@@ -23403,9 +23442,8 @@ void lwr4_Y_dq_batch(long count, const double *restrict q, const double *restric
             const double t407 = -t78*t400 - t81*t404;
             const double t408 = qd[6*count + start + j] + t273;
             const double t409 = t269 - t270;
-            const double t410 = 0.5*q[6*count + start + j];
-            const double t411 = sin(t410);
-            const double t412 = t411*cos(t410);
+            const double t411 = sin_q[5][j];
+            const double t412 = t411*cos_q[5][j];
             const double t413 = 2.0*t412;
             const double t414 = -2.0*t411*t411 + 1.0;
             const double t415 = -t278*t413 - t272*t414;

@@ -8,14 +8,15 @@
  * Every function is re-entrant: no globals, no allocation, no static state; outputs must
  * not alias inputs nor each other (the definitions declare the pointers restrict).
  *
- * Trigonometry (generated with --trig kernel): the sines and cosines of the joint angles q
- * are computed together at the start of a function by a polynomial kernel in the .c file
- * that compilers vectorise (kdg_sincos: Cody-Waite reduction, minimax polynomials). Its
+ * Trigonometry (generated with --trig kernel): the sines and cosines of the joint angles q,
+ * and in single calls those of arguments affine in q (the half angles of the dual-quaternion
+ * functions), are computed together at the start of a function by a polynomial kernel in the
+ * .c file that compilers vectorise (kdg_sincos: Cody-Waite reduction, minimax polynomials). Its
  * largest error against glibc's sin and cos over the whole finite range is 1 ulp (checked
  * on dense grids, at the doubles nearest every multiple of pi/2 up to 1048576, at random
  * doubles of random exponent and at +-0, subnormals, inf and NaN); |q| > 1048576 rad,
- * infinities and NaN are passed to libm sin/cos. Other sin/cos, e.g. of half angles, are libm
- * calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
+ * infinities and NaN are passed to libm sin/cos. Other sin/cos (and the half angles of the
+ * batch variants) are libm calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
  * -ffast-math (-ffp-contract=fast is fine).
  *
  * Fused multiply-adds: strict C99 (gcc -std=c99) keeps every product rounded; on FMA targets
@@ -75,7 +76,9 @@ void lwr4_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 36 add, 69 mul, 14 call
  * (as derived, before CSE: 184 add, 560 mul, 304 call);
- * critical path 70 cycles, 11 dependent operations.
+ * critical path 84 cycles, 10 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_fk_dq(const double *q, double *x);
 void lwr4_fk_dq_batch(long count, const double *q, double *x);
@@ -109,7 +112,9 @@ void lwr4_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 228 add, 359 mul, 14 call
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call);
- * critical path 82 cycles, 15 dependent operations.
+ * critical path 93 cycles, 14 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_pose_jacobian_dq(const double *q, double *Jx);
 void lwr4_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -127,7 +132,9 @@ void lwr4_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 142 add, 257 mul, 14 call
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call);
- * critical path 103 cycles, 22 dependent operations.
+ * critical path 114 cycles, 21 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_jacobian_dq(const double *q, double *J);
 void lwr4_jacobian_dq_batch(long count, const double *q, double *J);
@@ -370,7 +377,9 @@ void lwr4_c_christoffel_batch(long count, const double *q, const double *qd, dou
  *
  * Cost: 165 add, 241 mul, 12 call
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call);
- * critical path 127 cycles, 30 dependent operations.
+ * critical path 138 cycles, 29 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_M_dq(const double *q, double *M);
 void lwr4_M_dq_batch(long count, const double *q, double *M);
@@ -388,7 +397,9 @@ void lwr4_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 118 cycles, 27 dependent operations.
+ * critical path 129 cycles, 26 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_g_dq(const double *q, double *g);
 void lwr4_g_dq_batch(long count, const double *q, double *g);
@@ -407,7 +418,9 @@ void lwr4_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 290 add, 420 mul, 12 call
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call);
- * critical path 148 cycles, 37 dependent operations.
+ * critical path 159 cycles, 36 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_c_dq(const double *q, const double *qd, double *c);
 void lwr4_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -427,7 +440,9 @@ void lwr4_c_dq_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 313 add, 440 mul, 12 call
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call);
- * critical path 151 cycles, 38 dependent operations.
+ * critical path 162 cycles, 37 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void lwr4_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -449,7 +464,9 @@ void lwr4_tau_dq_batch(long count, const double *q, const double *qd, const doub
  *
  * Cost: 611 add, 853 mul, 12 call
  * (as derived, before CSE: 115759 add, 499001 mul, 168182 call);
- * critical path 136 cycles, 33 dependent operations.
+ * critical path 147 cycles, 32 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void lwr4_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void lwr4_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);

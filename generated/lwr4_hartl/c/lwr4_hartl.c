@@ -197,40 +197,37 @@ out_T[15][j] = 1.0;
 
 void lwr4_hartl_fk_dq(const double *restrict q, double *restrict x)
 {
-    const double t0 = 0.5*(q[6] + q[4]);
-    const double t1 = cos(t0);
-    const double t2 = 0.5*(q[0] - q[2]);
-    const double t3 = sin(t2);
-    const double t4 = 0.5*q[1];
-    const double t5 = cos(t4);
-    const double t6 = 0.5*q[3];
-    const double t7 = cos(t6);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*(q[4] + q[6]), 0.5*(q[0] - q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] + q[2]), 0.5*q[5], 0.5*(q[4] - q[6]), 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = cos_q[0];
+    const double t3 = sin_q[1];
+    const double t5 = cos_q[2];
+    const double t7 = cos_q[3];
     const double t8 = t5*t7;
-    const double t9 = sin(t6);
-    const double t10 = 0.5*(q[2] + q[0]);
-    const double t11 = sin(t4);
-    const double t12 = t11*sin(t10);
+    const double t9 = sin_q[3];
+    const double t11 = sin_q[2];
+    const double t12 = t11*sin_q[4];
     const double t13 = t9*t12;
     const double t14 = t8*t3 + t13;
-    const double t15 = 0.5*q[5];
-    const double t16 = sin(t15);
+    const double t16 = sin_q[5];
     const double t17 = t14*t16;
-    const double t18 = t11*cos(t10);
-    const double t19 = cos(t2);
+    const double t18 = t11*cos_q[4];
+    const double t19 = cos_q[1];
     const double t20 = t9*t5;
     const double t21 = t20*t19;
     const double t22 = t21 - t7*t18;
-    const double t23 = cos(t15);
-    const double t24 = 0.5*(q[4] - q[6]);
-    const double t25 = sin(t24);
+    const double t23 = cos_q[5];
+    const double t25 = sin_q[6];
     const double t26 = t23*t25;
     const double t27 = t3*t20;
     const double t28 = t7*t12 - t27;
-    const double t29 = cos(t24);
+    const double t29 = cos_q[6];
     const double t30 = t29*t23;
     const double t31 = t9*t18;
     const double t32 = t31 + t8*t19;
-    const double t33 = sin(t0);
+    const double t33 = sin_q[0];
     const double t34 = t33*t16;
     const double t35 = t1*t16;
     const double t36 = t28*t16;
@@ -265,7 +262,7 @@ void lwr4_hartl_fk_dq(const double *restrict q, double *restrict x)
     x[7] = t61 + t60;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_fk_dq_batch(long count, const double *restrict q, double *restrict x)
@@ -275,42 +272,49 @@ void lwr4_hartl_fk_dq_batch(long count, const double *restrict q, double *restri
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_x[8][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*(q[6*count + start + j] + q[4*count + start + j]);
-            const double t1 = cos(t0);
-            const double t2 = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
-            const double t3 = sin(t2);
-            const double t4 = 0.5*q[1*count + start + j];
-            const double t5 = cos(t4);
-            const double t6 = 0.5*q[3*count + start + j];
-            const double t7 = cos(t6);
+            arguments[0][j] = 0.5*(q[4*count + start + j] + q[6*count + start + j]);
+            arguments[1][j] = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
+            arguments[2][j] = 0.5*q[1*count + start + j];
+            arguments[3][j] = 0.5*q[3*count + start + j];
+            arguments[4][j] = 0.5*(q[0*count + start + j] + q[2*count + start + j]);
+            arguments[5][j] = 0.5*q[5*count + start + j];
+            arguments[6][j] = 0.5*(q[4*count + start + j] - q[6*count + start + j]);
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = cos_q[0][j];
+            const double t3 = sin_q[1][j];
+            const double t5 = cos_q[2][j];
+            const double t7 = cos_q[3][j];
             const double t8 = t5*t7;
-            const double t9 = sin(t6);
-            const double t10 = 0.5*(q[2*count + start + j] + q[0*count + start + j]);
-            const double t11 = sin(t4);
-            const double t12 = t11*sin(t10);
+            const double t9 = sin_q[3][j];
+            const double t11 = sin_q[2][j];
+            const double t12 = t11*sin_q[4][j];
             const double t13 = t9*t12;
             const double t14 = t8*t3 + t13;
-            const double t15 = 0.5*q[5*count + start + j];
-            const double t16 = sin(t15);
+            const double t16 = sin_q[5][j];
             const double t17 = t14*t16;
-            const double t18 = t11*cos(t10);
-            const double t19 = cos(t2);
+            const double t18 = t11*cos_q[4][j];
+            const double t19 = cos_q[1][j];
             const double t20 = t9*t5;
             const double t21 = t20*t19;
             const double t22 = t21 - t7*t18;
-            const double t23 = cos(t15);
-            const double t24 = 0.5*(q[4*count + start + j] - q[6*count + start + j]);
-            const double t25 = sin(t24);
+            const double t23 = cos_q[5][j];
+            const double t25 = sin_q[6][j];
             const double t26 = t23*t25;
             const double t27 = t3*t20;
             const double t28 = t7*t12 - t27;
-            const double t29 = cos(t24);
+            const double t29 = cos_q[6][j];
             const double t30 = t29*t23;
             const double t31 = t9*t18;
             const double t32 = t31 + t8*t19;
-            const double t33 = sin(t0);
+            const double t33 = sin_q[0][j];
             const double t34 = t33*t16;
             const double t35 = t1*t16;
             const double t36 = t28*t16;
@@ -567,34 +571,31 @@ out_J[41][j] = t47;
 
 void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    const double t0 = 0.5*q[0];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[1];
-    const double t3 = sin(t2);
-    const double t4 = 0.5*q[2];
-    const double t5 = sin(t4);
-    const double t6 = 0.5*q[5];
-    const double t7 = sin(t6);
-    const double t8 = 0.5*q[4];
-    const double t9 = sin(t8);
-    const double t10 = 0.5*q[6];
-    const double t11 = sin(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[5], 0.5*q[4], 0.5*q[6], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = sin_q[1];
+    const double t5 = sin_q[2];
+    const double t7 = sin_q[3];
+    const double t9 = sin_q[4];
+    const double t11 = sin_q[5];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos(t8);
-    const double t15 = cos(t10);
+    const double t14 = cos_q[4];
+    const double t15 = cos_q[5];
     const double t16 = 0.5*t15;
     const double t17 = t7*t16;
     const double t18 = t7*t13 - t14*t17;
-    const double t19 = 0.5*q[3];
-    const double t20 = sin(t19);
+    const double t20 = sin_q[6];
     const double t21 = t20*t18;
-    const double t22 = cos(t6);
+    const double t22 = cos_q[3];
     const double t23 = t22*t16;
     const double t24 = -t22*t13 - t23*t14;
-    const double t25 = cos(t19);
+    const double t25 = cos_q[6];
     const double t26 = t21 + t24*t25;
-    const double t27 = cos(t4);
+    const double t27 = cos_q[2];
     const double t28 = t12*t14;
     const double t29 = t9*t17 + t7*t28;
     const double t30 = t29*t20;
@@ -602,7 +603,7 @@ void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     const double t32 = t30 + t25*t31;
     const double t33 = t27*t32 - t5*t26;
     const double t34 = t3*t33;
-    const double t35 = cos(t2);
+    const double t35 = cos_q[1];
     const double t36 = t24*t20;
     const double t37 = t25*t18 - t36;
     const double t38 = t20*t31;
@@ -611,7 +612,7 @@ void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     const double t41 = t40*t35;
     const double t42 = t34 + t41;
     const double t43 = t1*t42;
-    const double t44 = cos(t0);
+    const double t44 = cos_q[0];
     const double t45 = t5*t32 + t27*t26;
     const double t46 = t3*t45;
     const double t47 = t27*t37 - t5*t39;
@@ -896,46 +897,53 @@ void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     Jx[55] = t272 + t15*t148;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *restrict q, double *restrict Jx)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_Jx[56][64];
+        double sin_q[7][32], cos_q[7][32];
+        double arguments[7][32];
+        double out_Jx[56][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[0*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[1*count + start + j];
-            const double t3 = sin(t2);
-            const double t4 = 0.5*q[2*count + start + j];
-            const double t5 = sin(t4);
-            const double t6 = 0.5*q[5*count + start + j];
-            const double t7 = sin(t6);
-            const double t8 = 0.5*q[4*count + start + j];
-            const double t9 = sin(t8);
-            const double t10 = 0.5*q[6*count + start + j];
-            const double t11 = sin(t10);
+            arguments[0][j] = 0.5*q[0*count + start + j];
+            arguments[1][j] = 0.5*q[1*count + start + j];
+            arguments[2][j] = 0.5*q[2*count + start + j];
+            arguments[3][j] = 0.5*q[5*count + start + j];
+            arguments[4][j] = 0.5*q[4*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = sin_q[1][j];
+            const double t5 = sin_q[2][j];
+            const double t7 = sin_q[3][j];
+            const double t9 = sin_q[4][j];
+            const double t11 = sin_q[5][j];
             const double t12 = 0.5*t11;
             const double t13 = t9*t12;
-            const double t14 = cos(t8);
-            const double t15 = cos(t10);
+            const double t14 = cos_q[4][j];
+            const double t15 = cos_q[5][j];
             const double t16 = 0.5*t15;
             const double t17 = t7*t16;
             const double t18 = t7*t13 - t14*t17;
-            const double t19 = 0.5*q[3*count + start + j];
-            const double t20 = sin(t19);
+            const double t20 = sin_q[6][j];
             const double t21 = t20*t18;
-            const double t22 = cos(t6);
+            const double t22 = cos_q[3][j];
             const double t23 = t22*t16;
             const double t24 = -t22*t13 - t23*t14;
-            const double t25 = cos(t19);
+            const double t25 = cos_q[6][j];
             const double t26 = t21 + t24*t25;
-            const double t27 = cos(t4);
+            const double t27 = cos_q[2][j];
             const double t28 = t12*t14;
             const double t29 = t9*t17 + t7*t28;
             const double t30 = t29*t20;
@@ -943,7 +951,7 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *restrict q, dou
             const double t32 = t30 + t25*t31;
             const double t33 = t27*t32 - t5*t26;
             const double t34 = t3*t33;
-            const double t35 = cos(t2);
+            const double t35 = cos_q[1][j];
             const double t36 = t24*t20;
             const double t37 = t25*t18 - t36;
             const double t38 = t20*t31;
@@ -952,7 +960,7 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *restrict q, dou
             const double t41 = t40*t35;
             const double t42 = t34 + t41;
             const double t43 = t1*t42;
-            const double t44 = cos(t0);
+            const double t44 = cos_q[0][j];
             const double t45 = t5*t32 + t27*t26;
             const double t46 = t3*t45;
             const double t47 = t27*t37 - t5*t39;
@@ -1246,39 +1254,36 @@ out_Jx[55][j] = t272 + t15*t148;
 
 void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    const double t0 = 0.5*q[6];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[5];
-    const double t3 = cos(t2);
-    const double t4 = 0.5*q[4];
-    const double t5 = cos(t4);
-    const double t6 = 0.5*q[1];
-    const double t7 = cos(t6);
-    const double t8 = 0.5*q[0];
-    const double t9 = sin(t8);
-    const double t10 = 0.5*q[2];
-    const double t11 = cos(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[1], 0.5*q[0], 0.5*q[2], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = cos_q[1];
+    const double t5 = cos_q[2];
+    const double t7 = cos_q[3];
+    const double t9 = sin_q[4];
+    const double t11 = cos_q[5];
     const double t12 = t9*t11;
-    const double t13 = cos(t8);
-    const double t14 = sin(t10);
+    const double t13 = cos_q[4];
+    const double t14 = sin_q[5];
     const double t15 = t7*t14;
     const double t16 = t7*t12 - t13*t15;
-    const double t17 = 0.5*q[3];
-    const double t18 = cos(t17);
-    const double t19 = sin(t6);
+    const double t18 = cos_q[6];
+    const double t19 = sin_q[3];
     const double t20 = t19*t14;
     const double t21 = t20*t13 + t19*t12;
-    const double t22 = sin(t17);
+    const double t22 = sin_q[6];
     const double t23 = t22*t21;
     const double t24 = t16*t18 + t23;
-    const double t25 = sin(t4);
+    const double t25 = sin_q[2];
     const double t26 = t11*t13;
     const double t27 = t9*t20 - t26*t19;
     const double t28 = t22*t27;
     const double t29 = t9*t15 + t7*t26;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t24 + t25*t30;
-    const double t32 = sin(t2);
+    const double t32 = sin_q[1];
     const double t33 = t29*t22;
     const double t34 = t27*t18 + t33;
     const double t35 = t22*t16;
@@ -1286,7 +1291,7 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
     const double t37 = t25*t34 + t5*t36;
     const double t38 = t32*t37;
     const double t39 = t3*t31 - t38;
-    const double t40 = cos(t0);
+    const double t40 = cos_q[0];
     const double t41 = t5*t34 - t25*t36;
     const double t42 = t41*t32;
     const double t43 = t5*t30 - t24*t25;
@@ -1492,7 +1497,7 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
     J[41] = t110;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_jacobian_dq_batch(long count, const double *restrict q, double *restrict J)
@@ -1502,41 +1507,48 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *restrict q, double *
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_J[42][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[6*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[5*count + start + j];
-            const double t3 = cos(t2);
-            const double t4 = 0.5*q[4*count + start + j];
-            const double t5 = cos(t4);
-            const double t6 = 0.5*q[1*count + start + j];
-            const double t7 = cos(t6);
-            const double t8 = 0.5*q[0*count + start + j];
-            const double t9 = sin(t8);
-            const double t10 = 0.5*q[2*count + start + j];
-            const double t11 = cos(t10);
+            arguments[0][j] = 0.5*q[6*count + start + j];
+            arguments[1][j] = 0.5*q[5*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[1*count + start + j];
+            arguments[4][j] = 0.5*q[0*count + start + j];
+            arguments[5][j] = 0.5*q[2*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = cos_q[1][j];
+            const double t5 = cos_q[2][j];
+            const double t7 = cos_q[3][j];
+            const double t9 = sin_q[4][j];
+            const double t11 = cos_q[5][j];
             const double t12 = t9*t11;
-            const double t13 = cos(t8);
-            const double t14 = sin(t10);
+            const double t13 = cos_q[4][j];
+            const double t14 = sin_q[5][j];
             const double t15 = t7*t14;
             const double t16 = t7*t12 - t13*t15;
-            const double t17 = 0.5*q[3*count + start + j];
-            const double t18 = cos(t17);
-            const double t19 = sin(t6);
+            const double t18 = cos_q[6][j];
+            const double t19 = sin_q[3][j];
             const double t20 = t19*t14;
             const double t21 = t20*t13 + t19*t12;
-            const double t22 = sin(t17);
+            const double t22 = sin_q[6][j];
             const double t23 = t22*t21;
             const double t24 = t16*t18 + t23;
-            const double t25 = sin(t4);
+            const double t25 = sin_q[2][j];
             const double t26 = t11*t13;
             const double t27 = t9*t20 - t26*t19;
             const double t28 = t22*t27;
             const double t29 = t9*t15 + t7*t26;
             const double t30 = t29*t18 - t28;
             const double t31 = t5*t24 + t25*t30;
-            const double t32 = sin(t2);
+            const double t32 = sin_q[1][j];
             const double t33 = t29*t22;
             const double t34 = t27*t18 + t33;
             const double t35 = t22*t16;
@@ -1544,7 +1556,7 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *restrict q, double *
             const double t37 = t25*t34 + t5*t36;
             const double t38 = t32*t37;
             const double t39 = t3*t31 - t38;
-            const double t40 = cos(t0);
+            const double t40 = cos_q[0][j];
             const double t41 = t5*t34 - t25*t36;
             const double t42 = t41*t32;
             const double t43 = t5*t30 - t24*t25;
@@ -20054,29 +20066,29 @@ out_c[6][j] = t1003 + qd[0*count + start + j]*(t990 - (t624 + t493));
 
 void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.5*q[4], 0.5*q[2], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[3];
-    const double t4 = sin(t3);
+    const double t4 = sin_q[1];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t7 = 0.5*q[5];
-    const double t8 = sin(t7);
+    const double t8 = sin_q[2];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t12 = 0.5*q[6];
-    const double t13 = sin(t12);
+    const double t13 = sin_q[3];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
     const double t16 = 2.132e-05*t15;
-    const double t17 = cos(t12);
+    const double t17 = cos_q[3];
     const double t18 = t13*t17;
     const double t19 = 6.698e-05*t18;
     const double t163 = -t19 - 0.00010112;
     const double t20 = t163 - t16;
-    const double t21 = cos(t7);
+    const double t21 = cos_q[2];
     const double t22 = t8*t21;
     const double t23 = 2.0*t22;
     const double t24 = t23*t20;
@@ -20090,8 +20102,7 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t165 = t25*t10 + 0.028522772;
     const double t31 = t23*t30 + t165;
     const double t32 = t6*t31;
-    const double t33 = 0.5*q[4];
-    const double t34 = sin(t33);
+    const double t34 = sin_q[4];
     const double t35 = t34*t34;
     const double t36 = -2.0*t35 + 1.0;
     const double t37 = 0.0466*t22;
@@ -20118,12 +20129,12 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t55 = t53*t10*t10;
     const double t169 = -t50 - 0.0702099;
     const double t56 = t169 + 0.39*(t54 + t55);
-    const double t57 = cos(t33);
+    const double t57 = cos_q[4];
     const double t58 = t57*t34;
     const double t59 = 2.0*t58;
     const double t60 = t56*t59;
     const double t61 = t60 - t44 - 0.0001025;
-    const double t62 = cos(t3);
+    const double t62 = cos_q[1];
     const double t63 = t4*t62;
     const double t64 = 2.0*t63;
     const double t65 = t64*t61;
@@ -20156,8 +20167,7 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t181 = t6*t66 + 0.046847925;
     const double t83 = t82*t64 + t181;
     const double t84 = t2*t83;
-    const double t85 = 0.5*q[2];
-    const double t86 = sin(t85);
+    const double t86 = sin_q[5];
     const double t87 = -2.0*t86*t86 + 1.0;
     const double t182 = -t74*t36*t36 - 1.5867;
     const double t88 = t182 - 4.0*t74*t57*t57*t35;
@@ -20184,11 +20194,11 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t105 = t103 + t104;
     const double t187 = 0.4*(4.0*t5*t62*t62*t105 + t6*t6*t105) - 0.12652;
     const double t106 = t187 - t102;
-    const double t107 = 2.0*t86*cos(t85);
+    const double t107 = 2.0*t86*cos_q[5];
     const double t108 = t107*t106;
     const double t189 = t108 + 0.00028859;
     const double t109 = t189 - t95;
-    const double t110 = 2.0*t1*cos(t0);
+    const double t110 = 2.0*t1*cos_q[0];
     const double t111 = 0.8*t63;
     const double t112 = 0.4*t6;
     const double t191 = -t64*(t105*t112 - t101) - 0.0006915;
@@ -20305,41 +20315,50 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     M[48] = 0.0006000875;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restrict M)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_M[49][64];
+        double sin_q[6][32], cos_q[6][32];
+        double arguments[6][32];
+        double out_M[49][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[3*count + start + j];
+            arguments[2][j] = 0.5*q[5*count + start + j];
+            arguments[3][j] = 0.5*q[6*count + start + j];
+            arguments[4][j] = 0.5*q[4*count + start + j];
+            arguments[5][j] = 0.5*q[2*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[3*count + start + j];
-            const double t4 = sin(t3);
+            const double t4 = sin_q[1][j];
             const double t5 = t4*t4;
             const double t6 = -2.0*t5 + 1.0;
-            const double t7 = 0.5*q[5*count + start + j];
-            const double t8 = sin(t7);
+            const double t8 = sin_q[2][j];
             const double t9 = t8*t8;
             const double t10 = -2.0*t9 + 1.0;
             const double t11 = 0.0006000875*t10;
-            const double t12 = 0.5*q[6*count + start + j];
-            const double t13 = sin(t12);
+            const double t13 = sin_q[3][j];
             const double t14 = t13*t13;
             const double t15 = -2.0*t14 + 1.0;
             const double t16 = 2.132e-05*t15;
-            const double t17 = cos(t12);
+            const double t17 = cos_q[3][j];
             const double t18 = t13*t17;
             const double t19 = 6.698e-05*t18;
             const double t163 = -t19 - 0.00010112;
             const double t20 = t163 - t16;
-            const double t21 = cos(t7);
+            const double t21 = cos_q[2][j];
             const double t22 = t8*t21;
             const double t23 = 2.0*t22;
             const double t24 = t23*t20;
@@ -20353,8 +20372,7 @@ void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restric
             const double t165 = t25*t10 + 0.028522772;
             const double t31 = t23*t30 + t165;
             const double t32 = t6*t31;
-            const double t33 = 0.5*q[4*count + start + j];
-            const double t34 = sin(t33);
+            const double t34 = sin_q[4][j];
             const double t35 = t34*t34;
             const double t36 = -2.0*t35 + 1.0;
             const double t37 = 0.0466*t22;
@@ -20381,12 +20399,12 @@ void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restric
             const double t55 = t53*t10*t10;
             const double t169 = -t50 - 0.0702099;
             const double t56 = t169 + 0.39*(t54 + t55);
-            const double t57 = cos(t33);
+            const double t57 = cos_q[4][j];
             const double t58 = t57*t34;
             const double t59 = 2.0*t58;
             const double t60 = t56*t59;
             const double t61 = t60 - t44 - 0.0001025;
-            const double t62 = cos(t3);
+            const double t62 = cos_q[1][j];
             const double t63 = t4*t62;
             const double t64 = 2.0*t63;
             const double t65 = t64*t61;
@@ -20419,8 +20437,7 @@ void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restric
             const double t181 = t6*t66 + 0.046847925;
             const double t83 = t82*t64 + t181;
             const double t84 = t2*t83;
-            const double t85 = 0.5*q[2*count + start + j];
-            const double t86 = sin(t85);
+            const double t86 = sin_q[5][j];
             const double t87 = -2.0*t86*t86 + 1.0;
             const double t182 = -t74*t36*t36 - 1.5867;
             const double t88 = t182 - 4.0*t74*t57*t57*t35;
@@ -20447,11 +20464,11 @@ void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restric
             const double t105 = t103 + t104;
             const double t187 = 0.4*(4.0*t5*t62*t62*t105 + t6*t6*t105) - 0.12652;
             const double t106 = t187 - t102;
-            const double t107 = 2.0*t86*cos(t85);
+            const double t107 = 2.0*t86*cos_q[5][j];
             const double t108 = t107*t106;
             const double t189 = t108 + 0.00028859;
             const double t109 = t189 - t95;
-            const double t110 = 2.0*t1*cos(t0);
+            const double t110 = 2.0*t1*cos_q[0][j];
             const double t111 = 0.8*t63;
             const double t112 = 0.4*t6;
             const double t191 = -t64*(t105*t112 - t101) - 0.0006915;
@@ -20577,25 +20594,24 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
 {
-    const double t0 = 0.5*q[2];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[2], 0.5*q[1], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[1];
-    const double t4 = sin(t3);
-    const double t5 = t4*cos(t3);
+    const double t4 = sin_q[1];
+    const double t5 = t4*cos_q[1];
     const double t6 = t5*t2;
-    const double t7 = t1*cos(t0);
+    const double t7 = t1*cos_q[0];
     const double t8 = t5*t7;
-    const double t9 = 0.5*q[5];
-    const double t10 = sin(t9);
+    const double t10 = sin_q[2];
     const double t11 = -2.0*t10*t10 + 1.0;
-    const double t12 = 0.5*q[4];
-    const double t13 = sin(t12);
-    const double t14 = t13*cos(t12);
+    const double t13 = sin_q[3];
+    const double t14 = t13*cos_q[3];
     const double t15 = -2.0*t4*t4 + 1.0;
-    const double t16 = 0.5*q[3];
-    const double t17 = sin(t16);
-    const double t18 = t17*cos(t16);
+    const double t17 = sin_q[4];
+    const double t18 = t17*cos_q[4];
     const double t19 = -2.0*t17*t17 + 1.0;
     const double t51 = 19.62*t19;
     const double t52 = -19.62*t18;
@@ -20605,12 +20621,11 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t8*t53 + t21*t20;
     const double t55 = -39.24*t18;
     const double t23 = t6*t55 - 9.81*t19*t15;
-    const double t24 = 2.0*cos(t9)*t10;
+    const double t24 = 2.0*cos_q[2]*t10;
     const double t25 = t22*t11 - t24*t23;
     const double t26 = -t24*t22 - t23*t11;
-    const double t27 = 0.5*q[6];
-    const double t28 = sin(t27);
-    const double t29 = t28*cos(t27);
+    const double t28 = sin_q[5];
+    const double t29 = t28*cos_q[5];
     const double t30 = t29*t26;
     const double t31 = -2.0*t28*t28 + 1.0;
     const double t32 = t26*t31;
@@ -20650,7 +20665,7 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
     g[6] = t38;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_g_dq_batch(long count, const double *restrict q, double *restrict g)
@@ -20660,27 +20675,35 @@ void lwr4_hartl_g_dq_batch(long count, const double *restrict q, double *restric
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_g[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[2*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[2*count + start + j];
+            arguments[1][j] = 0.5*q[1*count + start + j];
+            arguments[2][j] = 0.5*q[5*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[3*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[1*count + start + j];
-            const double t4 = sin(t3);
-            const double t5 = t4*cos(t3);
+            const double t4 = sin_q[1][j];
+            const double t5 = t4*cos_q[1][j];
             const double t6 = t5*t2;
-            const double t7 = t1*cos(t0);
+            const double t7 = t1*cos_q[0][j];
             const double t8 = t5*t7;
-            const double t9 = 0.5*q[5*count + start + j];
-            const double t10 = sin(t9);
+            const double t10 = sin_q[2][j];
             const double t11 = -2.0*t10*t10 + 1.0;
-            const double t12 = 0.5*q[4*count + start + j];
-            const double t13 = sin(t12);
-            const double t14 = t13*cos(t12);
+            const double t13 = sin_q[3][j];
+            const double t14 = t13*cos_q[3][j];
             const double t15 = -2.0*t4*t4 + 1.0;
-            const double t16 = 0.5*q[3*count + start + j];
-            const double t17 = sin(t16);
-            const double t18 = t17*cos(t16);
+            const double t17 = sin_q[4][j];
+            const double t18 = t17*cos_q[4][j];
             const double t19 = -2.0*t17*t17 + 1.0;
             const double t51 = 19.62*t19;
             const double t52 = -19.62*t18;
@@ -20690,12 +20713,11 @@ void lwr4_hartl_g_dq_batch(long count, const double *restrict q, double *restric
             const double t22 = t8*t53 + t21*t20;
             const double t55 = -39.24*t18;
             const double t23 = t6*t55 - 9.81*t19*t15;
-            const double t24 = 2.0*cos(t9)*t10;
+            const double t24 = 2.0*cos_q[2][j]*t10;
             const double t25 = t22*t11 - t24*t23;
             const double t26 = -t24*t22 - t23*t11;
-            const double t27 = 0.5*q[6*count + start + j];
-            const double t28 = sin(t27);
-            const double t29 = t28*cos(t27);
+            const double t28 = sin_q[5][j];
+            const double t29 = t28*cos_q[5][j];
             const double t30 = t29*t26;
             const double t31 = -2.0*t28*t28 + 1.0;
             const double t32 = t26*t31;
@@ -20744,43 +20766,41 @@ out_g[6][j] = t38;
 
 void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[6], 0.5*q[3], 0.5*q[5], 0.5*q[4], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
     const double t4 = qd[2] - t3;
-    const double t5 = 0.5*q[2];
-    const double t6 = sin(t5);
+    const double t6 = sin_q[1];
     const double t7 = -2.0*t6*t6 + 1.0;
-    const double t8 = t1*cos(t0);
+    const double t8 = t1*cos_q[0];
     const double t9 = t8*qd[0];
     const double t10 = 2.0*t9;
-    const double t11 = t6*cos(t5);
+    const double t11 = t6*cos_q[1];
     const double t12 = 2.0*t11;
     const double t13 = t7*t10 + t12*qd[1];
     const double t14 = -0.12652*t4 - 0.0006915*t13;
-    const double t15 = 0.5*q[6];
-    const double t16 = sin(t15);
+    const double t16 = sin_q[2];
     const double t17 = -2.0*t16*t16 + 1.0;
-    const double t18 = 0.5*q[3];
-    const double t19 = sin(t18);
-    const double t20 = t19*cos(t18);
+    const double t19 = sin_q[3];
+    const double t20 = t19*cos_q[3];
     const double t21 = 2.0*t20;
     const double t22 = -2.0*t19*t19 + 1.0;
     const double t23 = t4*t22 - t21*t13;
     const double t24 = qd[4] - t23;
-    const double t25 = 0.5*q[5];
-    const double t26 = sin(t25);
-    const double t27 = t26*cos(t25);
+    const double t26 = sin_q[4];
+    const double t27 = t26*cos_q[4];
     const double t28 = 2.0*t27;
     const double t29 = -2.0*t26*t26 + 1.0;
     const double t30 = t7*qd[1];
     const double t148 = -4.0*t11;
     const double t31 = t9*t148 + t30;
     const double t32 = qd[3] - t31;
-    const double t33 = 0.5*q[4];
-    const double t34 = sin(t33);
-    const double t35 = t34*cos(t33);
+    const double t34 = sin_q[5];
+    const double t35 = t34*cos_q[5];
     const double t36 = 2.0*t35;
     const double t37 = -2.0*t34*t34 + 1.0;
     const double t38 = t4*t21 + t22*t13;
@@ -20788,7 +20808,7 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t40 = t24*t28 + t29*t39;
     const double t41 = t32*t37 - t38*t36;
     const double t42 = qd[5] - t41;
-    const double t43 = 2.0*t16*cos(t15);
+    const double t43 = 2.0*t16*cos_q[2];
     const double t44 = t40*t17 + t43*t42;
     const double t45 = t31*qd[2] + t3*t30;
     const double t46 = t9*qd[1];
@@ -21064,7 +21084,7 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     c[6] = t114;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_c_dq_batch(long count, const double *restrict q, const double *restrict qd, double *restrict c)
@@ -21074,45 +21094,52 @@ void lwr4_hartl_c_dq_batch(long count, const double *restrict q, const double *r
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_c[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[6*count + start + j];
+            arguments[3][j] = 0.5*q[3*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[4*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
             const double t4 = qd[2*count + start + j] - t3;
-            const double t5 = 0.5*q[2*count + start + j];
-            const double t6 = sin(t5);
+            const double t6 = sin_q[1][j];
             const double t7 = -2.0*t6*t6 + 1.0;
-            const double t8 = t1*cos(t0);
+            const double t8 = t1*cos_q[0][j];
             const double t9 = t8*qd[0*count + start + j];
             const double t10 = 2.0*t9;
-            const double t11 = t6*cos(t5);
+            const double t11 = t6*cos_q[1][j];
             const double t12 = 2.0*t11;
             const double t13 = t7*t10 + t12*qd[1*count + start + j];
             const double t14 = -0.12652*t4 - 0.0006915*t13;
-            const double t15 = 0.5*q[6*count + start + j];
-            const double t16 = sin(t15);
+            const double t16 = sin_q[2][j];
             const double t17 = -2.0*t16*t16 + 1.0;
-            const double t18 = 0.5*q[3*count + start + j];
-            const double t19 = sin(t18);
-            const double t20 = t19*cos(t18);
+            const double t19 = sin_q[3][j];
+            const double t20 = t19*cos_q[3][j];
             const double t21 = 2.0*t20;
             const double t22 = -2.0*t19*t19 + 1.0;
             const double t23 = t4*t22 - t21*t13;
             const double t24 = qd[4*count + start + j] - t23;
-            const double t25 = 0.5*q[5*count + start + j];
-            const double t26 = sin(t25);
-            const double t27 = t26*cos(t25);
+            const double t26 = sin_q[4][j];
+            const double t27 = t26*cos_q[4][j];
             const double t28 = 2.0*t27;
             const double t29 = -2.0*t26*t26 + 1.0;
             const double t30 = t7*qd[1*count + start + j];
             const double t148 = -4.0*t11;
             const double t31 = t9*t148 + t30;
             const double t32 = qd[3*count + start + j] - t31;
-            const double t33 = 0.5*q[4*count + start + j];
-            const double t34 = sin(t33);
-            const double t35 = t34*cos(t33);
+            const double t34 = sin_q[5][j];
+            const double t35 = t34*cos_q[5][j];
             const double t36 = 2.0*t35;
             const double t37 = -2.0*t34*t34 + 1.0;
             const double t38 = t4*t21 + t22*t13;
@@ -21120,7 +21147,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *restrict q, const double *r
             const double t40 = t24*t28 + t29*t39;
             const double t41 = t32*t37 - t38*t36;
             const double t42 = qd[5*count + start + j] - t41;
-            const double t43 = 2.0*t16*cos(t15);
+            const double t43 = 2.0*t16*cos_q[2][j];
             const double t44 = t40*t17 + t43*t42;
             const double t45 = t31*qd[2*count + start + j] + t3*t30;
             const double t46 = t9*qd[1*count + start + j];
@@ -21405,15 +21432,17 @@ out_c[6][j] = t114;
 
 void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
     const double t4 = qd[2] - t3;
-    const double t5 = 0.5*q[2];
-    const double t6 = sin(t5);
-    const double t7 = t6*cos(t5);
-    const double t8 = t1*cos(t0);
+    const double t6 = sin_q[1];
+    const double t7 = t6*cos_q[1];
+    const double t8 = t1*cos_q[0];
     const double t9 = t8*qd[0];
     const double t10 = -2.0*t6*t6 + 1.0;
     const double t153 = -4.0*t7;
@@ -21433,39 +21462,35 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     const double t22 = t156 - t13*t18;
     const double t23 = t8*t10;
     const double t24 = t8*t7;
-    const double t25 = 0.5*q[4];
-    const double t26 = sin(t25);
+    const double t26 = sin_q[2];
     const double t27 = -2.0*t26*t26 + 1.0;
     const double t28 = 19.62*t23 + 0.4*t22;
-    const double t29 = 0.5*q[3];
-    const double t30 = sin(t29);
-    const double t31 = t30*cos(t29);
+    const double t30 = sin_q[3];
+    const double t31 = t30*cos_q[3];
     const double t32 = 2.0*t31;
     const double t33 = -2.0*t30*t30 + 1.0;
     const double t34 = t33*t11;
     const double t35 = 0.4*t34;
     const double t158 = -t35*qd[3] - 9.81*t2*t33;
     const double t36 = t158 - t28*t32;
-    const double t37 = 0.5*q[5];
-    const double t38 = sin(t37);
+    const double t38 = sin_q[4];
     const double t39 = -2.0*t38*t38 + 1.0;
     const double t40 = qd[3] - t11;
-    const double t41 = t26*cos(t25);
+    const double t41 = t26*cos_q[2];
     const double t42 = 2.0*t41;
     const double t43 = t4*t32 + t33*t14;
     const double t44 = t42*t40 + t43*t27;
     const double t45 = t4*t33 - t32*t14;
     const double t46 = qd[4] - t45;
-    const double t47 = t38*cos(t37);
+    const double t47 = t38*cos_q[4];
     const double t48 = 2.0*t47;
     const double t49 = t44*t39 + t46*t48;
     const double t50 = t40*t27 - t43*t42;
     const double t51 = qd[5] - t50;
     const double t52 = 0.00112*t51;
-    const double t53 = 0.5*q[6];
-    const double t54 = sin(t53);
+    const double t54 = sin_q[5];
     const double t55 = -2.0*t54*t54 + 1.0;
-    const double t56 = 2.0*t54*cos(t53);
+    const double t56 = 2.0*t54*cos_q[5];
     const double t57 = t49*t55 + t56*t51;
     const double t58 = t55*t51 - t49*t56;
     const double t59 = -0.00014*t58 - 0.000105*t57;
@@ -21747,7 +21772,7 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     tau[6] = t116;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void lwr4_hartl_tau_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
@@ -21757,17 +21782,28 @@ void lwr4_hartl_tau_dq_batch(long count, const double *restrict q, const double 
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_tau[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[3*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
             const double t4 = qd[2*count + start + j] - t3;
-            const double t5 = 0.5*q[2*count + start + j];
-            const double t6 = sin(t5);
-            const double t7 = t6*cos(t5);
-            const double t8 = t1*cos(t0);
+            const double t6 = sin_q[1][j];
+            const double t7 = t6*cos_q[1][j];
+            const double t8 = t1*cos_q[0][j];
             const double t9 = t8*qd[0*count + start + j];
             const double t10 = -2.0*t6*t6 + 1.0;
             const double t153 = -4.0*t7;
@@ -21787,39 +21823,35 @@ void lwr4_hartl_tau_dq_batch(long count, const double *restrict q, const double 
             const double t22 = t156 - t13*t18;
             const double t23 = t8*t10;
             const double t24 = t8*t7;
-            const double t25 = 0.5*q[4*count + start + j];
-            const double t26 = sin(t25);
+            const double t26 = sin_q[2][j];
             const double t27 = -2.0*t26*t26 + 1.0;
             const double t28 = 19.62*t23 + 0.4*t22;
-            const double t29 = 0.5*q[3*count + start + j];
-            const double t30 = sin(t29);
-            const double t31 = t30*cos(t29);
+            const double t30 = sin_q[3][j];
+            const double t31 = t30*cos_q[3][j];
             const double t32 = 2.0*t31;
             const double t33 = -2.0*t30*t30 + 1.0;
             const double t34 = t33*t11;
             const double t35 = 0.4*t34;
             const double t158 = -t35*qd[3*count + start + j] - 9.81*t2*t33;
             const double t36 = t158 - t28*t32;
-            const double t37 = 0.5*q[5*count + start + j];
-            const double t38 = sin(t37);
+            const double t38 = sin_q[4][j];
             const double t39 = -2.0*t38*t38 + 1.0;
             const double t40 = qd[3*count + start + j] - t11;
-            const double t41 = t26*cos(t25);
+            const double t41 = t26*cos_q[2][j];
             const double t42 = 2.0*t41;
             const double t43 = t4*t32 + t33*t14;
             const double t44 = t42*t40 + t43*t27;
             const double t45 = t4*t33 - t32*t14;
             const double t46 = qd[4*count + start + j] - t45;
-            const double t47 = t38*cos(t37);
+            const double t47 = t38*cos_q[4][j];
             const double t48 = 2.0*t47;
             const double t49 = t44*t39 + t46*t48;
             const double t50 = t40*t27 - t43*t42;
             const double t51 = qd[5*count + start + j] - t50;
             const double t52 = 0.00112*t51;
-            const double t53 = 0.5*q[6*count + start + j];
-            const double t54 = sin(t53);
+            const double t54 = sin_q[5][j];
             const double t55 = -2.0*t54*t54 + 1.0;
-            const double t56 = 2.0*t54*cos(t53);
+            const double t56 = 2.0*t54*cos_q[5][j];
             const double t57 = t49*t55 + t56*t51;
             const double t58 = t55*t51 - t49*t56;
             const double t59 = -0.00014*t58 - 0.000105*t57;
@@ -22110,13 +22142,16 @@ out_tau[6][j] = t116;
 
 void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = t1*t1;
     const double t3 = -2.0*t2 + 1.0;
     const double t4 = t3*qd[0];
     const double t5 = t4*qd[1];
-    const double t6 = cos(t0);
+    const double t6 = cos_q[0];
     const double t7 = t6*t1;
     const double t8 = 2.0*t7;
     const double t9 = t8*qdd[0];
@@ -22131,9 +22166,8 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t17 = -t16;
     const double t18 = t3*t3*t11;
     const double t19 = qd[2] - t4;
-    const double t20 = 0.5*q[2];
-    const double t21 = sin(t20);
-    const double t22 = t21*cos(t20);
+    const double t21 = sin_q[1];
+    const double t22 = t21*cos_q[1];
     const double t23 = t7*t22;
     const double t649 = 4.0*qd[0];
     const double t24 = t23*t649;
@@ -22194,9 +22228,8 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t74 = t654 + t653;
     const double t75 = t47 - t50;
     const double t76 = t43 - t63;
-    const double t77 = 0.5*q[3];
-    const double t78 = sin(t77);
-    const double t79 = t78*cos(t77);
+    const double t78 = sin_q[2];
+    const double t79 = t78*cos_q[2];
     const double t80 = 2.0*t79;
     const double t81 = t41*t80;
     const double t82 = -2.0*t78*t78 + 1.0;
@@ -22306,10 +22339,9 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t164 = t95*t158;
     const double t165 = t163 - t164;
     const double t166 = t82*t159 - t80*t161;
-    const double t167 = 0.5*q[4];
-    const double t168 = sin(t167);
+    const double t168 = sin_q[3];
     const double t169 = -2.0*t168*t168 + 1.0;
-    const double t170 = t168*cos(t167);
+    const double t170 = t168*cos_q[3];
     const double t171 = 2.0*t170;
     const double t172 = t95*t171;
     const double t173 = t87*t169;
@@ -22455,11 +22487,10 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t293 = -t291 - t292;
     const double t294 = t82*t287 - t80*t289;
     const double t295 = qd[5] - t181;
-    const double t296 = 0.5*q[5];
-    const double t297 = sin(t296);
+    const double t297 = sin_q[4];
     const double t298 = -2.0*t297*t297 + 1.0;
     const double t299 = t298*t184;
-    const double t300 = t297*cos(t296);
+    const double t300 = t297*cos_q[4];
     const double t301 = 2.0*t300;
     const double t302 = t301*t190;
     const double t303 = t299 + t302;
@@ -22647,9 +22678,8 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t457 = qd[6] - t313;
     const double t458 = t457*t457;
     const double t459 = -t458;
-    const double t460 = 0.5*q[6];
-    const double t461 = sin(t460);
-    const double t462 = t461*cos(t460);
+    const double t461 = sin_q[5];
+    const double t462 = t461*cos_q[5];
     const double t463 = 2.0*t462;
     const double t464 = t303*t463;
     const double t465 = -2.0*t461*t461 + 1.0;
@@ -23177,7 +23207,7 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     Y[300] = t481;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block, outputs stored in place (301 entries: too many for local arrays). */
 void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
@@ -23185,14 +23215,27 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
     for (start = 0; start < count; start += 64) {
         const long size = count - start < 64 ? count - start : 64;
         long j;
+        int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = t1*t1;
             const double t3 = -2.0*t2 + 1.0;
             const double t4 = t3*qd[0*count + start + j];
             const double t5 = t4*qd[1*count + start + j];
-            const double t6 = cos(t0);
+            const double t6 = cos_q[0][j];
             const double t7 = t6*t1;
             const double t8 = 2.0*t7;
             const double t9 = t8*qdd[0*count + start + j];
@@ -23207,9 +23250,8 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             const double t17 = -t16;
             const double t18 = t3*t3*t11;
             const double t19 = qd[2*count + start + j] - t4;
-            const double t20 = 0.5*q[2*count + start + j];
-            const double t21 = sin(t20);
-            const double t22 = t21*cos(t20);
+            const double t21 = sin_q[1][j];
+            const double t22 = t21*cos_q[1][j];
             const double t23 = t7*t22;
             const double t649 = 4.0*qd[0*count + start + j];
             const double t24 = t23*t649;
@@ -23270,9 +23312,8 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             const double t74 = t654 + t653;
             const double t75 = t47 - t50;
             const double t76 = t43 - t63;
-            const double t77 = 0.5*q[3*count + start + j];
-            const double t78 = sin(t77);
-            const double t79 = t78*cos(t77);
+            const double t78 = sin_q[2][j];
+            const double t79 = t78*cos_q[2][j];
             const double t80 = 2.0*t79;
             const double t81 = t41*t80;
             const double t82 = -2.0*t78*t78 + 1.0;
@@ -23382,10 +23423,9 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             const double t164 = t95*t158;
             const double t165 = t163 - t164;
             const double t166 = t82*t159 - t80*t161;
-            const double t167 = 0.5*q[4*count + start + j];
-            const double t168 = sin(t167);
+            const double t168 = sin_q[3][j];
             const double t169 = -2.0*t168*t168 + 1.0;
-            const double t170 = t168*cos(t167);
+            const double t170 = t168*cos_q[3][j];
             const double t171 = 2.0*t170;
             const double t172 = t95*t171;
             const double t173 = t87*t169;
@@ -23531,11 +23571,10 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             const double t293 = -t291 - t292;
             const double t294 = t82*t287 - t80*t289;
             const double t295 = qd[5*count + start + j] - t181;
-            const double t296 = 0.5*q[5*count + start + j];
-            const double t297 = sin(t296);
+            const double t297 = sin_q[4][j];
             const double t298 = -2.0*t297*t297 + 1.0;
             const double t299 = t298*t184;
-            const double t300 = t297*cos(t296);
+            const double t300 = t297*cos_q[4][j];
             const double t301 = 2.0*t300;
             const double t302 = t301*t190;
             const double t303 = t299 + t302;
@@ -23723,9 +23762,8 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             const double t457 = qd[6*count + start + j] - t313;
             const double t458 = t457*t457;
             const double t459 = -t458;
-            const double t460 = 0.5*q[6*count + start + j];
-            const double t461 = sin(t460);
-            const double t462 = t461*cos(t460);
+            const double t461 = sin_q[5][j];
+            const double t462 = t461*cos_q[5][j];
             const double t463 = 2.0*t462;
             const double t464 = t303*t463;
             const double t465 = -2.0*t461*t461 + 1.0;

@@ -217,33 +217,30 @@ out_T[15][j] = 1.0;
 
 void panda_fk_dq(const double *restrict q, double *restrict x)
 {
-    const double t0 = 0.5*q[6];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[5];
-    const double t3 = cos(t2);
-    const double t4 = 0.5*q[4];
-    const double t5 = cos(t4);
-    const double t6 = 0.5*q[3];
-    const double t7 = cos(t6);
-    const double t8 = 0.5*(q[0] - q[2]);
-    const double t9 = 0.5*q[1];
-    const double t10 = sin(t9);
-    const double t11 = cos(t8)*t10;
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[1], 0.5*(q[0] - q[2]), 0.5*(q[0] + q[2]), 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = cos_q[1];
+    const double t5 = cos_q[2];
+    const double t7 = cos_q[3];
+    const double t10 = sin_q[4];
+    const double t11 = cos_q[5]*t10;
     const double t12 = t7*t11;
-    const double t13 = sin(t6);
-    const double t14 = 0.5*(q[2] + q[0]);
-    const double t15 = cos(t9);
-    const double t16 = t15*cos(t14);
+    const double t13 = sin_q[3];
+    const double t15 = cos_q[4];
+    const double t16 = t15*cos_q[6];
     const double t17 = t13*t16;
     const double t18 = t12 - t17;
-    const double t19 = t15*sin(t14);
+    const double t19 = t15*sin_q[6];
     const double t20 = t19*t13;
-    const double t21 = sin(t8)*t10;
+    const double t21 = sin_q[5]*t10;
     const double t22 = t7*t21;
     const double t23 = t20 - t22;
-    const double t24 = sin(t4);
+    const double t24 = sin_q[2];
     const double t25 = t5*t18 - t24*t23;
-    const double t26 = sin(t2);
+    const double t26 = sin_q[1];
     const double t27 = t21*t13;
     const double t28 = t7*t19 + t27;
     const double t29 = t11*t13;
@@ -252,7 +249,7 @@ void panda_fk_dq(const double *restrict q, double *restrict x)
     const double t32 = t26*t31;
     const double t33 = t3*t25 - t32;
     const double t34 = t1*t33;
-    const double t35 = cos(t0);
+    const double t35 = cos_q[0];
     const double t36 = t5*t28 + t24*t30;
     const double t37 = t26*t36;
     const double t38 = t24*t18 + t5*t23;
@@ -300,7 +297,7 @@ void panda_fk_dq(const double *restrict q, double *restrict x)
     x[7] = t78 - (0.088*t47 + t57*t35 + t1*t60);
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_fk_dq_batch(long count, const double *restrict q, double *restrict x)
@@ -310,35 +307,42 @@ void panda_fk_dq_batch(long count, const double *restrict q, double *restrict x)
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_x[8][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[6*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[5*count + start + j];
-            const double t3 = cos(t2);
-            const double t4 = 0.5*q[4*count + start + j];
-            const double t5 = cos(t4);
-            const double t6 = 0.5*q[3*count + start + j];
-            const double t7 = cos(t6);
-            const double t8 = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
-            const double t9 = 0.5*q[1*count + start + j];
-            const double t10 = sin(t9);
-            const double t11 = cos(t8)*t10;
+            arguments[0][j] = 0.5*q[6*count + start + j];
+            arguments[1][j] = 0.5*q[5*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[3*count + start + j];
+            arguments[4][j] = 0.5*q[1*count + start + j];
+            arguments[5][j] = 0.5*(q[0*count + start + j] - q[2*count + start + j]);
+            arguments[6][j] = 0.5*(q[0*count + start + j] + q[2*count + start + j]);
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = cos_q[1][j];
+            const double t5 = cos_q[2][j];
+            const double t7 = cos_q[3][j];
+            const double t10 = sin_q[4][j];
+            const double t11 = cos_q[5][j]*t10;
             const double t12 = t7*t11;
-            const double t13 = sin(t6);
-            const double t14 = 0.5*(q[2*count + start + j] + q[0*count + start + j]);
-            const double t15 = cos(t9);
-            const double t16 = t15*cos(t14);
+            const double t13 = sin_q[3][j];
+            const double t15 = cos_q[4][j];
+            const double t16 = t15*cos_q[6][j];
             const double t17 = t13*t16;
             const double t18 = t12 - t17;
-            const double t19 = t15*sin(t14);
+            const double t19 = t15*sin_q[6][j];
             const double t20 = t19*t13;
-            const double t21 = sin(t8)*t10;
+            const double t21 = sin_q[5][j]*t10;
             const double t22 = t7*t21;
             const double t23 = t20 - t22;
-            const double t24 = sin(t4);
+            const double t24 = sin_q[2][j];
             const double t25 = t5*t18 - t24*t23;
-            const double t26 = sin(t2);
+            const double t26 = sin_q[1][j];
             const double t27 = t21*t13;
             const double t28 = t7*t19 + t27;
             const double t29 = t11*t13;
@@ -347,7 +351,7 @@ void panda_fk_dq_batch(long count, const double *restrict q, double *restrict x)
             const double t32 = t26*t31;
             const double t33 = t3*t25 - t32;
             const double t34 = t1*t33;
-            const double t35 = cos(t0);
+            const double t35 = cos_q[0][j];
             const double t36 = t5*t28 + t24*t30;
             const double t37 = t26*t36;
             const double t38 = t24*t18 + t5*t23;
@@ -663,42 +667,39 @@ out_J[41][j] = -t42;
 
 void panda_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    const double t0 = 0.5*q[0];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[1];
-    const double t3 = sin(t2);
-    const double t4 = 0.5*q[2];
-    const double t5 = sin(t4);
-    const double t6 = 0.5*q[4];
-    const double t7 = sin(t6);
-    const double t8 = 0.5*q[5];
-    const double t9 = sin(t8);
-    const double t10 = 0.5*q[6];
-    const double t11 = sin(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = sin_q[1];
+    const double t5 = sin_q[2];
+    const double t7 = sin_q[3];
+    const double t9 = sin_q[4];
+    const double t11 = sin_q[5];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos(t6);
-    const double t15 = cos(t10);
+    const double t14 = cos_q[3];
+    const double t15 = cos_q[5];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t14*t17 - t7*t13;
-    const double t19 = 0.5*q[3];
-    const double t20 = sin(t19);
+    const double t20 = sin_q[6];
     const double t21 = t20*t18;
-    const double t22 = cos(t8);
+    const double t22 = cos_q[4];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 + t24*t14;
-    const double t26 = cos(t19);
+    const double t26 = cos_q[6];
     const double t27 = t26*t25 - t21;
-    const double t28 = cos(t4);
+    const double t28 = cos_q[2];
     const double t29 = -t7*t17 - t13*t14;
     const double t30 = t29*t20;
     const double t31 = t7*t24 - t23*t14;
     const double t32 = t26*t31 - t30;
     const double t33 = t5*t27 + t28*t32;
     const double t34 = t3*t33;
-    const double t35 = cos(t2);
+    const double t35 = cos_q[1];
     const double t36 = t25*t20;
     const double t37 = t36 + t26*t18;
     const double t38 = t20*t31;
@@ -707,7 +708,7 @@ void panda_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     const double t41 = t40*t35;
     const double t42 = t41 - t34;
     const double t43 = t1*t42;
-    const double t44 = cos(t0);
+    const double t44 = cos_q[0];
     const double t45 = t28*t27 - t5*t32;
     const double t46 = t3*t45;
     const double t47 = t5*t39 + t28*t37;
@@ -1040,54 +1041,61 @@ void panda_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
     Jx[55] = t331 + t330;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_pose_jacobian_dq_batch(long count, const double *restrict q, double *restrict Jx)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_Jx[56][64];
+        double sin_q[7][32], cos_q[7][32];
+        double arguments[7][32];
+        double out_Jx[56][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[0*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[1*count + start + j];
-            const double t3 = sin(t2);
-            const double t4 = 0.5*q[2*count + start + j];
-            const double t5 = sin(t4);
-            const double t6 = 0.5*q[4*count + start + j];
-            const double t7 = sin(t6);
-            const double t8 = 0.5*q[5*count + start + j];
-            const double t9 = sin(t8);
-            const double t10 = 0.5*q[6*count + start + j];
-            const double t11 = sin(t10);
+            arguments[0][j] = 0.5*q[0*count + start + j];
+            arguments[1][j] = 0.5*q[1*count + start + j];
+            arguments[2][j] = 0.5*q[2*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = sin_q[1][j];
+            const double t5 = sin_q[2][j];
+            const double t7 = sin_q[3][j];
+            const double t9 = sin_q[4][j];
+            const double t11 = sin_q[5][j];
             const double t12 = 0.5*t11;
             const double t13 = t9*t12;
-            const double t14 = cos(t6);
-            const double t15 = cos(t10);
+            const double t14 = cos_q[3][j];
+            const double t15 = cos_q[5][j];
             const double t16 = 0.5*t15;
             const double t17 = t9*t16;
             const double t18 = t14*t17 - t7*t13;
-            const double t19 = 0.5*q[3*count + start + j];
-            const double t20 = sin(t19);
+            const double t20 = sin_q[6][j];
             const double t21 = t20*t18;
-            const double t22 = cos(t8);
+            const double t22 = cos_q[4][j];
             const double t23 = t22*t12;
             const double t24 = t22*t16;
             const double t25 = t7*t23 + t24*t14;
-            const double t26 = cos(t19);
+            const double t26 = cos_q[6][j];
             const double t27 = t26*t25 - t21;
-            const double t28 = cos(t4);
+            const double t28 = cos_q[2][j];
             const double t29 = -t7*t17 - t13*t14;
             const double t30 = t29*t20;
             const double t31 = t7*t24 - t23*t14;
             const double t32 = t26*t31 - t30;
             const double t33 = t5*t27 + t28*t32;
             const double t34 = t3*t33;
-            const double t35 = cos(t2);
+            const double t35 = cos_q[1][j];
             const double t36 = t25*t20;
             const double t37 = t36 + t26*t18;
             const double t38 = t20*t31;
@@ -1096,7 +1104,7 @@ void panda_pose_jacobian_dq_batch(long count, const double *restrict q, double *
             const double t41 = t40*t35;
             const double t42 = t41 - t34;
             const double t43 = t1*t42;
-            const double t44 = cos(t0);
+            const double t44 = cos_q[0][j];
             const double t45 = t28*t27 - t5*t32;
             const double t46 = t3*t45;
             const double t47 = t5*t39 + t28*t37;
@@ -1438,42 +1446,39 @@ out_Jx[55][j] = t331 + t330;
 
 void panda_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    const double t0 = 0.5*q[6];
-    const double t1 = sin(t0);
-    const double t2 = 0.5*q[5];
-    const double t3 = cos(t2);
-    const double t4 = 0.5*q[4];
-    const double t5 = cos(t4);
-    const double t6 = 0.5*q[2];
-    const double t7 = cos(t6);
-    const double t8 = 0.5*q[0];
-    const double t9 = sin(t8);
-    const double t10 = 0.5*q[1];
-    const double t11 = cos(t10);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[2], 0.5*q[0], 0.5*q[1], 0.5*q[3], 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
+    const double t3 = cos_q[1];
+    const double t5 = cos_q[2];
+    const double t7 = cos_q[3];
+    const double t9 = sin_q[4];
+    const double t11 = cos_q[5];
     const double t12 = t9*t11;
-    const double t13 = sin(t6);
-    const double t14 = cos(t8);
+    const double t13 = sin_q[3];
+    const double t14 = cos_q[4];
     const double t15 = t11*t14;
     const double t16 = t7*t12 + t13*t15;
-    const double t17 = 0.5*q[3];
-    const double t18 = cos(t17);
-    const double t19 = sin(t10);
+    const double t18 = cos_q[6];
+    const double t19 = sin_q[5];
     const double t20 = t19*t14;
     const double t21 = t20*t13;
     const double t22 = t9*t19;
     const double t23 = t7*t22;
     const double t24 = t21 - t23;
-    const double t25 = sin(t17);
+    const double t25 = sin_q[6];
     const double t26 = t24*t25;
     const double t27 = t16*t18 - t26;
-    const double t28 = sin(t4);
+    const double t28 = sin_q[2];
     const double t29 = t7*t20;
     const double t30 = t22*t13;
     const double t31 = t29 + t30;
     const double t32 = t7*t15 - t12*t13;
     const double t33 = t25*t31 + t32*t18;
     const double t34 = t5*t27 + t28*t33;
-    const double t35 = sin(t2);
+    const double t35 = sin_q[1];
     const double t36 = t25*t32;
     const double t37 = t31*t18 - t36;
     const double t38 = t25*t16;
@@ -1482,7 +1487,7 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t35;
     const double t42 = t3*t34 - t41;
     const double t43 = t1*t42;
-    const double t44 = cos(t0);
+    const double t44 = cos_q[0];
     const double t45 = t5*t37 - t28*t39;
     const double t46 = t45*t35;
     const double t47 = t5*t33 - t28*t27;
@@ -1722,7 +1727,7 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
     J[41] = t123;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_jacobian_dq_batch(long count, const double *restrict q, double *restrict J)
@@ -1732,44 +1737,51 @@ void panda_jacobian_dq_batch(long count, const double *restrict q, double *restr
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[7][64], cos_q[7][64];
+        double arguments[7][64];
         double out_J[42][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[6*count + start + j];
-            const double t1 = sin(t0);
-            const double t2 = 0.5*q[5*count + start + j];
-            const double t3 = cos(t2);
-            const double t4 = 0.5*q[4*count + start + j];
-            const double t5 = cos(t4);
-            const double t6 = 0.5*q[2*count + start + j];
-            const double t7 = cos(t6);
-            const double t8 = 0.5*q[0*count + start + j];
-            const double t9 = sin(t8);
-            const double t10 = 0.5*q[1*count + start + j];
-            const double t11 = cos(t10);
+            arguments[0][j] = 0.5*q[6*count + start + j];
+            arguments[1][j] = 0.5*q[5*count + start + j];
+            arguments[2][j] = 0.5*q[4*count + start + j];
+            arguments[3][j] = 0.5*q[2*count + start + j];
+            arguments[4][j] = 0.5*q[0*count + start + j];
+            arguments[5][j] = 0.5*q[1*count + start + j];
+            arguments[6][j] = 0.5*q[3*count + start + j];
+        }
+        for (k = 0; k < 7; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
+            const double t3 = cos_q[1][j];
+            const double t5 = cos_q[2][j];
+            const double t7 = cos_q[3][j];
+            const double t9 = sin_q[4][j];
+            const double t11 = cos_q[5][j];
             const double t12 = t9*t11;
-            const double t13 = sin(t6);
-            const double t14 = cos(t8);
+            const double t13 = sin_q[3][j];
+            const double t14 = cos_q[4][j];
             const double t15 = t11*t14;
             const double t16 = t7*t12 + t13*t15;
-            const double t17 = 0.5*q[3*count + start + j];
-            const double t18 = cos(t17);
-            const double t19 = sin(t10);
+            const double t18 = cos_q[6][j];
+            const double t19 = sin_q[5][j];
             const double t20 = t19*t14;
             const double t21 = t20*t13;
             const double t22 = t9*t19;
             const double t23 = t7*t22;
             const double t24 = t21 - t23;
-            const double t25 = sin(t17);
+            const double t25 = sin_q[6][j];
             const double t26 = t24*t25;
             const double t27 = t16*t18 - t26;
-            const double t28 = sin(t4);
+            const double t28 = sin_q[2][j];
             const double t29 = t7*t20;
             const double t30 = t22*t13;
             const double t31 = t29 + t30;
             const double t32 = t7*t15 - t12*t13;
             const double t33 = t25*t31 + t32*t18;
             const double t34 = t5*t27 + t28*t33;
-            const double t35 = sin(t2);
+            const double t35 = sin_q[1][j];
             const double t36 = t25*t32;
             const double t37 = t31*t18 - t36;
             const double t38 = t25*t16;
@@ -1778,7 +1790,7 @@ void panda_jacobian_dq_batch(long count, const double *restrict q, double *restr
             const double t41 = t40*t35;
             const double t42 = t3*t34 - t41;
             const double t43 = t1*t42;
-            const double t44 = cos(t0);
+            const double t44 = cos_q[0][j];
             const double t45 = t5*t37 - t28*t39;
             const double t46 = t45*t35;
             const double t47 = t5*t33 - t28*t27;
@@ -23612,20 +23624,21 @@ out_c[6][j] = t1310 + qd[0*count + start + j]*(t1302 - (t769 + t212));
 
 void panda_M_dq(const double *restrict q, double *restrict M)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[2], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[6];
-    const double t4 = sin(t3);
-    const double t5 = t4*cos(t3);
+    const double t4 = sin_q[1];
+    const double t5 = t4*cos_q[1];
     const double t6 = 0.006254879088*t5;
     const double t7 = -2.0*t4*t4 + 1.0;
     const double t8 = 0.007735484874*t7;
     const double t9 = -t6 - t8;
     const double t10 = -t9 + 0.164967552695;
-    const double t11 = 0.5*q[5];
-    const double t12 = sin(t11);
-    const double t13 = cos(t11);
+    const double t12 = sin_q[2];
+    const double t13 = cos_q[2];
     const double t14 = t12*t13;
     const double t15 = 2.0*t14;
     const double t16 = t15*t10;
@@ -23633,16 +23646,14 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t18 = -2.0*t17 + 1.0;
     const double t19 = 0.068832705569*t18;
     const double t20 = t16 - t19;
-    const double t21 = 0.5*q[4];
-    const double t22 = sin(t21);
+    const double t22 = sin_q[3];
     const double t23 = t22*t22;
     const double t24 = -2.0*t23 + 1.0;
-    const double t25 = cos(t21);
+    const double t25 = cos_q[3];
     const double t26 = -t24*t24*t20 - 4.0*t23*t25*t25*t20;
     const double t27 = -t26 + 1.720683553603;
-    const double t28 = 0.5*q[3];
-    const double t29 = sin(t28);
-    const double t30 = cos(t28);
+    const double t29 = sin_q[4];
+    const double t30 = cos_q[4];
     const double t31 = t29*t30;
     const double t32 = 2.0*t31;
     const double t33 = t27*t32;
@@ -23727,8 +23738,7 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t221 = t97*t32 + t220;
     const double t98 = t221 + t46*t82;
     const double t99 = -t2*t98;
-    const double t100 = 0.5*q[2];
-    const double t101 = sin(t100);
+    const double t101 = sin_q[5];
     const double t102 = t101*t101;
     const double t103 = -2.0*t102 + 1.0;
     const double t104 = t46*t97 - t82*t32 - 0.005487648106562256;
@@ -23751,7 +23761,7 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t113 = t230 - t112;
     const double t114 = t32*t109 + t46*t113;
     const double t115 = -t114 - 0.004377257121839584;
-    const double t116 = cos(t100);
+    const double t116 = cos_q[5];
     const double t117 = t101*t116;
     const double t118 = 2.0*t117;
     const double t119 = t115*t118;
@@ -23763,7 +23773,7 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t232 = -0.316*(t124 - t121) - 0.00398335888393552;
     const double t233 = t232 + t119;
     const double t125 = t233 - t105;
-    const double t126 = 2.0*t1*cos(t0);
+    const double t126 = 2.0*t1*cos_q[0];
     const double t127 = t44*t32;
     const double t128 = t46*t27;
     const double t129 = t127 + t128;
@@ -23905,32 +23915,42 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     M[48] = 0.004909651967360946;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 32 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_M_dq_batch(long count, const double *restrict q, double *restrict M)
 {
     long start;
-    for (start = 0; start < count; start += 64) {
-        const long size = count - start < 64 ? count - start : 64;
+    for (start = 0; start < count; start += 32) {
+        const long size = count - start < 32 ? count - start : 32;
         long j;
         int k;
-        double out_M[49][64];
+        double sin_q[6][32], cos_q[6][32];
+        double arguments[6][32];
+        double out_M[49][32];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[6*count + start + j];
+            arguments[2][j] = 0.5*q[5*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[3*count + start + j];
+            arguments[5][j] = 0.5*q[2*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[6*count + start + j];
-            const double t4 = sin(t3);
-            const double t5 = t4*cos(t3);
+            const double t4 = sin_q[1][j];
+            const double t5 = t4*cos_q[1][j];
             const double t6 = 0.006254879088*t5;
             const double t7 = -2.0*t4*t4 + 1.0;
             const double t8 = 0.007735484874*t7;
             const double t9 = -t6 - t8;
             const double t10 = -t9 + 0.164967552695;
-            const double t11 = 0.5*q[5*count + start + j];
-            const double t12 = sin(t11);
-            const double t13 = cos(t11);
+            const double t12 = sin_q[2][j];
+            const double t13 = cos_q[2][j];
             const double t14 = t12*t13;
             const double t15 = 2.0*t14;
             const double t16 = t15*t10;
@@ -23938,16 +23958,14 @@ void panda_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t18 = -2.0*t17 + 1.0;
             const double t19 = 0.068832705569*t18;
             const double t20 = t16 - t19;
-            const double t21 = 0.5*q[4*count + start + j];
-            const double t22 = sin(t21);
+            const double t22 = sin_q[3][j];
             const double t23 = t22*t22;
             const double t24 = -2.0*t23 + 1.0;
-            const double t25 = cos(t21);
+            const double t25 = cos_q[3][j];
             const double t26 = -t24*t24*t20 - 4.0*t23*t25*t25*t20;
             const double t27 = -t26 + 1.720683553603;
-            const double t28 = 0.5*q[3*count + start + j];
-            const double t29 = sin(t28);
-            const double t30 = cos(t28);
+            const double t29 = sin_q[4][j];
+            const double t30 = cos_q[4][j];
             const double t31 = t29*t30;
             const double t32 = 2.0*t31;
             const double t33 = t27*t32;
@@ -24032,8 +24050,7 @@ void panda_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t221 = t97*t32 + t220;
             const double t98 = t221 + t46*t82;
             const double t99 = -t2*t98;
-            const double t100 = 0.5*q[2*count + start + j];
-            const double t101 = sin(t100);
+            const double t101 = sin_q[5][j];
             const double t102 = t101*t101;
             const double t103 = -2.0*t102 + 1.0;
             const double t104 = t46*t97 - t82*t32 - 0.005487648106562256;
@@ -24056,7 +24073,7 @@ void panda_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t113 = t230 - t112;
             const double t114 = t32*t109 + t46*t113;
             const double t115 = -t114 - 0.004377257121839584;
-            const double t116 = cos(t100);
+            const double t116 = cos_q[5][j];
             const double t117 = t101*t116;
             const double t118 = 2.0*t117;
             const double t119 = t115*t118;
@@ -24068,7 +24085,7 @@ void panda_M_dq_batch(long count, const double *restrict q, double *restrict M)
             const double t232 = -0.316*(t124 - t121) - 0.00398335888393552;
             const double t233 = t232 + t119;
             const double t125 = t233 - t105;
-            const double t126 = 2.0*t1*cos(t0);
+            const double t126 = 2.0*t1*cos_q[0][j];
             const double t127 = t44*t32;
             const double t128 = t46*t27;
             const double t129 = t127 + t128;
@@ -24219,25 +24236,24 @@ out_M[48][j] = 0.004909651967360946;
 
 void panda_g_dq(const double *restrict q, double *restrict g)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t3 = 0.5*q[2];
-    const double t4 = sin(t3);
+    const double t4 = sin_q[1];
     const double t5 = -2.0*t4*t4 + 1.0;
-    const double t6 = t1*cos(t0);
+    const double t6 = t1*cos_q[0];
     const double t7 = t5*t6;
-    const double t8 = t4*cos(t3);
+    const double t8 = t4*cos_q[1];
     const double t9 = t8*t6;
-    const double t10 = 0.5*q[5];
-    const double t11 = sin(t10);
+    const double t11 = sin_q[2];
     const double t12 = -2.0*t11*t11 + 1.0;
-    const double t13 = 0.5*q[4];
-    const double t14 = sin(t13);
-    const double t15 = t14*cos(t13);
-    const double t16 = 0.5*q[3];
-    const double t17 = sin(t16);
-    const double t18 = t17*cos(t16);
+    const double t14 = sin_q[3];
+    const double t15 = t14*cos_q[3];
+    const double t17 = sin_q[4];
+    const double t18 = t17*cos_q[4];
     const double t19 = -2.0*t17*t17 + 1.0;
     const double t51 = -19.62*t19;
     const double t52 = 19.62*t18;
@@ -24247,12 +24263,11 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t9*t53 + t21*t20;
     const double t55 = 39.24*t18;
     const double t23 = t7*t55 + 9.81*t2*t19;
-    const double t24 = 2.0*t11*cos(t10);
+    const double t24 = 2.0*t11*cos_q[2];
     const double t25 = t22*t12 + t24*t23;
     const double t26 = t23*t12 - t24*t22;
-    const double t27 = 0.5*q[6];
-    const double t28 = sin(t27);
-    const double t29 = t28*cos(t27);
+    const double t28 = sin_q[5];
+    const double t29 = t28*cos_q[5];
     const double t30 = t29*t26;
     const double t31 = -2.0*t28*t28 + 1.0;
     const double t32 = t26*t31;
@@ -24292,7 +24307,7 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     g[6] = t38;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_g_dq_batch(long count, const double *restrict q, double *restrict g)
@@ -24302,27 +24317,35 @@ void panda_g_dq_batch(long count, const double *restrict q, double *restrict g)
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_g[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[5*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[3*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
-            const double t3 = 0.5*q[2*count + start + j];
-            const double t4 = sin(t3);
+            const double t4 = sin_q[1][j];
             const double t5 = -2.0*t4*t4 + 1.0;
-            const double t6 = t1*cos(t0);
+            const double t6 = t1*cos_q[0][j];
             const double t7 = t5*t6;
-            const double t8 = t4*cos(t3);
+            const double t8 = t4*cos_q[1][j];
             const double t9 = t8*t6;
-            const double t10 = 0.5*q[5*count + start + j];
-            const double t11 = sin(t10);
+            const double t11 = sin_q[2][j];
             const double t12 = -2.0*t11*t11 + 1.0;
-            const double t13 = 0.5*q[4*count + start + j];
-            const double t14 = sin(t13);
-            const double t15 = t14*cos(t13);
-            const double t16 = 0.5*q[3*count + start + j];
-            const double t17 = sin(t16);
-            const double t18 = t17*cos(t16);
+            const double t14 = sin_q[3][j];
+            const double t15 = t14*cos_q[3][j];
+            const double t17 = sin_q[4][j];
+            const double t18 = t17*cos_q[4][j];
             const double t19 = -2.0*t17*t17 + 1.0;
             const double t51 = -19.62*t19;
             const double t52 = 19.62*t18;
@@ -24332,12 +24355,11 @@ void panda_g_dq_batch(long count, const double *restrict q, double *restrict g)
             const double t22 = t9*t53 + t21*t20;
             const double t55 = 39.24*t18;
             const double t23 = t7*t55 + 9.81*t2*t19;
-            const double t24 = 2.0*t11*cos(t10);
+            const double t24 = 2.0*t11*cos_q[2][j];
             const double t25 = t22*t12 + t24*t23;
             const double t26 = t23*t12 - t24*t22;
-            const double t27 = 0.5*q[6*count + start + j];
-            const double t28 = sin(t27);
-            const double t29 = t28*cos(t27);
+            const double t28 = sin_q[5][j];
+            const double t29 = t28*cos_q[5][j];
             const double t30 = t29*t26;
             const double t31 = -2.0*t28*t28 + 1.0;
             const double t32 = t26*t31;
@@ -24386,18 +24408,20 @@ out_g[6][j] = t38;
 
 void panda_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
     const double t4 = qd[2] + t3;
-    const double t5 = 0.5*q[2];
-    const double t6 = sin(t5);
+    const double t6 = sin_q[1];
     const double t7 = -2.0*t6*t6 + 1.0;
-    const double t8 = t1*cos(t0);
+    const double t8 = t1*cos_q[0];
     const double t9 = 2.0*t8;
     const double t10 = t9*qd[0];
-    const double t11 = t6*cos(t5);
+    const double t11 = t6*cos_q[1];
     const double t12 = 2.0*t11;
     const double t13 = t12*qd[1] - t7*t10;
     const double t14 = -0.004377257121839584*t4 - 0.000121912420950744*t13;
@@ -24409,10 +24433,9 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     const double t20 = 0.632*t11;
     const double t171 = 0.632*t17;
     const double t21 = t7*t171 - t20*qd[1];
-    const double t22 = 0.5*q[3];
-    const double t23 = sin(t22);
+    const double t23 = sin_q[2];
     const double t24 = -2.0*t23*t23 + 1.0;
-    const double t25 = t23*cos(t22);
+    const double t25 = t23*cos_q[2];
     const double t26 = 2.0*t25;
     const double t27 = t24*t13 + t4*t26;
     const double t28 = 4.0*t18 + t15;
@@ -24424,15 +24447,13 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     const double t34 = t17*qd[1];
     const double t35 = t31*qd[3] + t24*t33 - 4.0*t25*t34;
     const double t36 = -t27*qd[3] - t26*t33 - t24*t10*qd[1];
-    const double t37 = 0.5*q[4];
-    const double t38 = sin(t37);
+    const double t38 = sin_q[3];
     const double t39 = -2.0*t38*t38 + 1.0;
     const double t40 = qd[4] + t31;
-    const double t41 = 0.5*q[5];
-    const double t42 = sin(t41);
-    const double t43 = 2.0*t42*cos(t41);
+    const double t42 = sin_q[4];
+    const double t43 = 2.0*t42*cos_q[4];
     const double t44 = -2.0*t42*t42 + 1.0;
-    const double t45 = 2.0*t38*cos(t37);
+    const double t45 = 2.0*t38*cos_q[3];
     const double t46 = t27*t39 - t45*t29;
     const double t47 = t43*t40 + t46*t44;
     const double t48 = -t45*t27 - t29*t39;
@@ -24447,10 +24468,9 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     const double t55 = t179 + t44*t53;
     const double t56 = 0.068832705569*t49;
     const double t57 = t44*t36 - t47*qd[5] - t43*t53;
-    const double t58 = 0.5*q[6];
-    const double t59 = sin(t58);
+    const double t59 = sin_q[5];
     const double t60 = -2.0*t59*t59 + 1.0;
-    const double t61 = 2.0*t59*cos(t58);
+    const double t61 = 2.0*t59*cos_q[5];
     const double t62 = t49*t60 - t47*t61;
     const double t63 = t47*t60 + t49*t61;
     const double t64 = -0.007735484874*t62 - 0.003127439544*t63;
@@ -24756,7 +24776,7 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     c[6] = t133;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_c_dq_batch(long count, const double *restrict q, const double *restrict qd, double *restrict c)
@@ -24766,20 +24786,31 @@ void panda_c_dq_batch(long count, const double *restrict q, const double *restri
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_c[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
             const double t4 = qd[2*count + start + j] + t3;
-            const double t5 = 0.5*q[2*count + start + j];
-            const double t6 = sin(t5);
+            const double t6 = sin_q[1][j];
             const double t7 = -2.0*t6*t6 + 1.0;
-            const double t8 = t1*cos(t0);
+            const double t8 = t1*cos_q[0][j];
             const double t9 = 2.0*t8;
             const double t10 = t9*qd[0*count + start + j];
-            const double t11 = t6*cos(t5);
+            const double t11 = t6*cos_q[1][j];
             const double t12 = 2.0*t11;
             const double t13 = t12*qd[1*count + start + j] - t7*t10;
             const double t14 = -0.004377257121839584*t4 - 0.000121912420950744*t13;
@@ -24791,10 +24822,9 @@ void panda_c_dq_batch(long count, const double *restrict q, const double *restri
             const double t20 = 0.632*t11;
             const double t171 = 0.632*t17;
             const double t21 = t7*t171 - t20*qd[1*count + start + j];
-            const double t22 = 0.5*q[3*count + start + j];
-            const double t23 = sin(t22);
+            const double t23 = sin_q[2][j];
             const double t24 = -2.0*t23*t23 + 1.0;
-            const double t25 = t23*cos(t22);
+            const double t25 = t23*cos_q[2][j];
             const double t26 = 2.0*t25;
             const double t27 = t24*t13 + t4*t26;
             const double t28 = 4.0*t18 + t15;
@@ -24806,15 +24836,13 @@ void panda_c_dq_batch(long count, const double *restrict q, const double *restri
             const double t34 = t17*qd[1*count + start + j];
             const double t35 = t31*qd[3*count + start + j] + t24*t33 - 4.0*t25*t34;
             const double t36 = -t27*qd[3*count + start + j] - t26*t33 - t24*t10*qd[1*count + start + j];
-            const double t37 = 0.5*q[4*count + start + j];
-            const double t38 = sin(t37);
+            const double t38 = sin_q[3][j];
             const double t39 = -2.0*t38*t38 + 1.0;
             const double t40 = qd[4*count + start + j] + t31;
-            const double t41 = 0.5*q[5*count + start + j];
-            const double t42 = sin(t41);
-            const double t43 = 2.0*t42*cos(t41);
+            const double t42 = sin_q[4][j];
+            const double t43 = 2.0*t42*cos_q[4][j];
             const double t44 = -2.0*t42*t42 + 1.0;
-            const double t45 = 2.0*t38*cos(t37);
+            const double t45 = 2.0*t38*cos_q[3][j];
             const double t46 = t27*t39 - t45*t29;
             const double t47 = t43*t40 + t46*t44;
             const double t48 = -t45*t27 - t29*t39;
@@ -24829,10 +24857,9 @@ void panda_c_dq_batch(long count, const double *restrict q, const double *restri
             const double t55 = t179 + t44*t53;
             const double t56 = 0.068832705569*t49;
             const double t57 = t44*t36 - t47*qd[5*count + start + j] - t43*t53;
-            const double t58 = 0.5*q[6*count + start + j];
-            const double t59 = sin(t58);
+            const double t59 = sin_q[5][j];
             const double t60 = -2.0*t59*t59 + 1.0;
-            const double t61 = 2.0*t59*cos(t58);
+            const double t61 = 2.0*t59*cos_q[5][j];
             const double t62 = t49*t60 - t47*t61;
             const double t63 = t47*t60 + t49*t61;
             const double t64 = -0.007735484874*t62 - 0.003127439544*t63;
@@ -25147,18 +25174,20 @@ out_c[6][j] = t133;
 
 void panda_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
     const double t4 = qd[2] + t3;
-    const double t5 = 0.5*q[2];
-    const double t6 = sin(t5);
+    const double t6 = sin_q[1];
     const double t7 = -2.0*t6*t6 + 1.0;
-    const double t8 = t1*cos(t0);
+    const double t8 = t1*cos_q[0];
     const double t9 = t8*qd[0];
     const double t10 = 2.0*t9;
-    const double t11 = t6*cos(t5);
+    const double t11 = t6*cos_q[1];
     const double t12 = 2.0*t11;
     const double t13 = t12*qd[1] - t7*t10;
     const double t14 = -0.004377257121839584*t4 - 0.000121912420950744*t13;
@@ -25167,10 +25196,9 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     const double t17 = 0.316*t15 + 1.264*t16;
     const double t18 = 0.632*t11;
     const double t19 = 0.632*t9*t7 - t18*qd[1];
-    const double t20 = 0.5*q[3];
-    const double t21 = sin(t20);
+    const double t21 = sin_q[2];
     const double t22 = -2.0*t21*t21 + 1.0;
-    const double t23 = t21*cos(t20);
+    const double t23 = t21*cos_q[2];
     const double t24 = 2.0*t23;
     const double t25 = t22*t13 + t4*t24;
     const double t26 = 4.0*t16 + t15;
@@ -25187,15 +25215,13 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     const double t175 = t29*qd[3] + t24*t36;
     const double t37 = t175 + t22*t34;
     const double t38 = t22*t36 - t25*qd[3] - t24*t34;
-    const double t39 = 0.5*q[4];
-    const double t40 = sin(t39);
+    const double t40 = sin_q[3];
     const double t41 = -2.0*t40*t40 + 1.0;
     const double t42 = qd[4] + t29;
-    const double t43 = 0.5*q[5];
-    const double t44 = sin(t43);
-    const double t45 = 2.0*t44*cos(t43);
+    const double t44 = sin_q[4];
+    const double t45 = 2.0*t44*cos_q[4];
     const double t46 = -2.0*t44*t44 + 1.0;
-    const double t47 = 2.0*t40*cos(t39);
+    const double t47 = 2.0*t40*cos_q[3];
     const double t48 = t41*t25 - t47*t27;
     const double t49 = t42*t45 + t46*t48;
     const double t50 = -t47*t25 - t41*t27;
@@ -25212,9 +25238,8 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     const double t59 = t181 + t46*t57;
     const double t182 = t46*t58 - t49*qd[5];
     const double t60 = t182 - t45*t57;
-    const double t61 = 0.5*q[6];
-    const double t62 = sin(t61);
-    const double t63 = 2.0*t62*cos(t61);
+    const double t62 = sin_q[5];
+    const double t63 = 2.0*t62*cos_q[5];
     const double t64 = -2.0*t62*t62 + 1.0;
     const double t65 = t51*t64 - t49*t63;
     const double t66 = t49*t64 + t51*t63;
@@ -25525,7 +25550,7 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     tau[6] = t138;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block that compilers vectorise across configurations, into local arrays copied out
  * at the end of the block. */
 void panda_tau_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
@@ -25535,20 +25560,31 @@ void panda_tau_dq_batch(long count, const double *restrict q, const double *rest
         const long size = count - start < 64 ? count - start : 64;
         long j;
         int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         double out_tau[7][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = -2.0*t1*t1 + 1.0;
             const double t3 = t2*qd[0*count + start + j];
             const double t4 = qd[2*count + start + j] + t3;
-            const double t5 = 0.5*q[2*count + start + j];
-            const double t6 = sin(t5);
+            const double t6 = sin_q[1][j];
             const double t7 = -2.0*t6*t6 + 1.0;
-            const double t8 = t1*cos(t0);
+            const double t8 = t1*cos_q[0][j];
             const double t9 = t8*qd[0*count + start + j];
             const double t10 = 2.0*t9;
-            const double t11 = t6*cos(t5);
+            const double t11 = t6*cos_q[1][j];
             const double t12 = 2.0*t11;
             const double t13 = t12*qd[1*count + start + j] - t7*t10;
             const double t14 = -0.004377257121839584*t4 - 0.000121912420950744*t13;
@@ -25557,10 +25593,9 @@ void panda_tau_dq_batch(long count, const double *restrict q, const double *rest
             const double t17 = 0.316*t15 + 1.264*t16;
             const double t18 = 0.632*t11;
             const double t19 = 0.632*t9*t7 - t18*qd[1*count + start + j];
-            const double t20 = 0.5*q[3*count + start + j];
-            const double t21 = sin(t20);
+            const double t21 = sin_q[2][j];
             const double t22 = -2.0*t21*t21 + 1.0;
-            const double t23 = t21*cos(t20);
+            const double t23 = t21*cos_q[2][j];
             const double t24 = 2.0*t23;
             const double t25 = t22*t13 + t4*t24;
             const double t26 = 4.0*t16 + t15;
@@ -25577,15 +25612,13 @@ void panda_tau_dq_batch(long count, const double *restrict q, const double *rest
             const double t175 = t29*qd[3*count + start + j] + t24*t36;
             const double t37 = t175 + t22*t34;
             const double t38 = t22*t36 - t25*qd[3*count + start + j] - t24*t34;
-            const double t39 = 0.5*q[4*count + start + j];
-            const double t40 = sin(t39);
+            const double t40 = sin_q[3][j];
             const double t41 = -2.0*t40*t40 + 1.0;
             const double t42 = qd[4*count + start + j] + t29;
-            const double t43 = 0.5*q[5*count + start + j];
-            const double t44 = sin(t43);
-            const double t45 = 2.0*t44*cos(t43);
+            const double t44 = sin_q[4][j];
+            const double t45 = 2.0*t44*cos_q[4][j];
             const double t46 = -2.0*t44*t44 + 1.0;
-            const double t47 = 2.0*t40*cos(t39);
+            const double t47 = 2.0*t40*cos_q[3][j];
             const double t48 = t41*t25 - t47*t27;
             const double t49 = t42*t45 + t46*t48;
             const double t50 = -t47*t25 - t41*t27;
@@ -25602,9 +25635,8 @@ void panda_tau_dq_batch(long count, const double *restrict q, const double *rest
             const double t59 = t181 + t46*t57;
             const double t182 = t46*t58 - t49*qd[5*count + start + j];
             const double t60 = t182 - t45*t57;
-            const double t61 = 0.5*q[6*count + start + j];
-            const double t62 = sin(t61);
-            const double t63 = 2.0*t62*cos(t61);
+            const double t62 = sin_q[5][j];
+            const double t63 = 2.0*t62*cos_q[5][j];
             const double t64 = -2.0*t62*t62 + 1.0;
             const double t65 = t51*t64 - t49*t63;
             const double t66 = t49*t64 + t51*t63;
@@ -25924,13 +25956,16 @@ out_tau[6][j] = t138;
 
 void panda_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    const double t0 = 0.5*q[1];
-    const double t1 = sin(t0);
+    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
+    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
+    double sin_q[8], cos_q[8];
+    kdg_sincos(8, angles, sin_q, cos_q);
+    const double t1 = sin_q[0];
     const double t2 = t1*t1;
     const double t3 = -2.0*t2 + 1.0;
     const double t4 = t3*qd[0];
     const double t5 = t4*qd[1];
-    const double t6 = cos(t0);
+    const double t6 = cos_q[0];
     const double t7 = t6*t1;
     const double t8 = 2.0*t7;
     const double t9 = -t8*qdd[0];
@@ -25946,12 +25981,11 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t18 = -t17;
     const double t19 = t3*t3*t15;
     const double t20 = qd[2] + t4;
-    const double t21 = 0.5*q[2];
-    const double t22 = sin(t21);
+    const double t22 = sin_q[1];
     const double t23 = -2.0*t22*t22 + 1.0;
     const double t24 = t23*qd[1];
     const double t25 = 0.316*t24;
-    const double t26 = t22*cos(t21);
+    const double t26 = t22*cos_q[1];
     const double t27 = 1.264*t26*t11;
     const double t28 = t25 + t27;
     const double t29 = t28*t20;
@@ -26022,9 +26056,8 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t89 = qd[3] - t41;
     const double t90 = 0.0825*t20;
     const double t91 = t38 + t90;
-    const double t92 = 0.5*q[3];
-    const double t93 = sin(t92);
-    const double t94 = t93*cos(t92);
+    const double t93 = sin_q[2];
+    const double t94 = t93*cos_q[2];
     const double t95 = 2.0*t94;
     const double t96 = t95*t28;
     const double t97 = -2.0*t93*t93 + 1.0;
@@ -26146,10 +26179,9 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t202 = t138 + t201;
     const double t203 = t95*t170;
     const double t204 = t97*t170 + t181;
-    const double t205 = 0.5*q[4];
-    const double t206 = sin(t205);
+    const double t206 = sin_q[3];
     const double t207 = -2.0*t206*t206 + 1.0;
-    const double t208 = t206*cos(t205);
+    const double t208 = t206*cos_q[3];
     const double t209 = 2.0*t208;
     const double t210 = t209*t116;
     const double t211 = t89*t207;
@@ -26332,9 +26364,8 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t357 = t209*t298;
     const double t358 = -t319;
     const double t359 = t357 + t358;
-    const double t360 = 0.5*q[5];
-    const double t361 = sin(t360);
-    const double t362 = t361*cos(t360);
+    const double t361 = sin_q[4];
+    const double t362 = t361*cos_q[4];
     const double t363 = t362*t317;
     const double t364 = -2.0*t361*t361 + 1.0;
     const double t365 = 2.0*t362;
@@ -26533,13 +26564,12 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t529 = t209*t523;
     const double t530 = t207*t433;
     const double t531 = t529 + t530;
-    const double t532 = 0.5*q[6];
-    const double t533 = sin(t532);
+    const double t533 = sin_q[5];
     const double t534 = -2.0*t533*t533 + 1.0;
     const double t535 = qd[6] - t378;
     const double t536 = t535*t535;
     const double t537 = -t536;
-    const double t538 = t533*cos(t532);
+    const double t538 = t533*cos_q[5];
     const double t539 = 2.0*t538;
     const double t540 = t366*t539;
     const double t541 = t370*t534;
@@ -27203,7 +27233,7 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     Y[300] = t546;
 }
 
-/* Blocks of 64 configurations: then the arithmetic in a loop
+/* Blocks of 64 configurations: sin/cos of their half angles, then the arithmetic in a loop
  * over the block, outputs stored in place (301 entries: too many for local arrays). */
 void panda_Y_dq_batch(long count, const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
@@ -27211,14 +27241,27 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
     for (start = 0; start < count; start += 64) {
         const long size = count - start < 64 ? count - start : 64;
         long j;
+        int k;
+        double sin_q[6][64], cos_q[6][64];
+        double arguments[6][64];
         for (j = 0; j < size; ++j) {
-            const double t0 = 0.5*q[1*count + start + j];
-            const double t1 = sin(t0);
+            arguments[0][j] = 0.5*q[1*count + start + j];
+            arguments[1][j] = 0.5*q[2*count + start + j];
+            arguments[2][j] = 0.5*q[3*count + start + j];
+            arguments[3][j] = 0.5*q[4*count + start + j];
+            arguments[4][j] = 0.5*q[5*count + start + j];
+            arguments[5][j] = 0.5*q[6*count + start + j];
+        }
+        for (k = 0; k < 6; ++k) {
+            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+        }
+        for (j = 0; j < size; ++j) {
+            const double t1 = sin_q[0][j];
             const double t2 = t1*t1;
             const double t3 = -2.0*t2 + 1.0;
             const double t4 = t3*qd[0*count + start + j];
             const double t5 = t4*qd[1*count + start + j];
-            const double t6 = cos(t0);
+            const double t6 = cos_q[0][j];
             const double t7 = t6*t1;
             const double t8 = 2.0*t7;
             const double t9 = -t8*qdd[0*count + start + j];
@@ -27234,12 +27277,11 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
             const double t18 = -t17;
             const double t19 = t3*t3*t15;
             const double t20 = qd[2*count + start + j] + t4;
-            const double t21 = 0.5*q[2*count + start + j];
-            const double t22 = sin(t21);
+            const double t22 = sin_q[1][j];
             const double t23 = -2.0*t22*t22 + 1.0;
             const double t24 = t23*qd[1*count + start + j];
             const double t25 = 0.316*t24;
-            const double t26 = t22*cos(t21);
+            const double t26 = t22*cos_q[1][j];
             const double t27 = 1.264*t26*t11;
             const double t28 = t25 + t27;
             const double t29 = t28*t20;
@@ -27310,9 +27352,8 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
             const double t89 = qd[3*count + start + j] - t41;
             const double t90 = 0.0825*t20;
             const double t91 = t38 + t90;
-            const double t92 = 0.5*q[3*count + start + j];
-            const double t93 = sin(t92);
-            const double t94 = t93*cos(t92);
+            const double t93 = sin_q[2][j];
+            const double t94 = t93*cos_q[2][j];
             const double t95 = 2.0*t94;
             const double t96 = t95*t28;
             const double t97 = -2.0*t93*t93 + 1.0;
@@ -27434,10 +27475,9 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
             const double t202 = t138 + t201;
             const double t203 = t95*t170;
             const double t204 = t97*t170 + t181;
-            const double t205 = 0.5*q[4*count + start + j];
-            const double t206 = sin(t205);
+            const double t206 = sin_q[3][j];
             const double t207 = -2.0*t206*t206 + 1.0;
-            const double t208 = t206*cos(t205);
+            const double t208 = t206*cos_q[3][j];
             const double t209 = 2.0*t208;
             const double t210 = t209*t116;
             const double t211 = t89*t207;
@@ -27620,9 +27660,8 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
             const double t357 = t209*t298;
             const double t358 = -t319;
             const double t359 = t357 + t358;
-            const double t360 = 0.5*q[5*count + start + j];
-            const double t361 = sin(t360);
-            const double t362 = t361*cos(t360);
+            const double t361 = sin_q[4][j];
+            const double t362 = t361*cos_q[4][j];
             const double t363 = t362*t317;
             const double t364 = -2.0*t361*t361 + 1.0;
             const double t365 = 2.0*t362;
@@ -27821,13 +27860,12 @@ void panda_Y_dq_batch(long count, const double *restrict q, const double *restri
             const double t529 = t209*t523;
             const double t530 = t207*t433;
             const double t531 = t529 + t530;
-            const double t532 = 0.5*q[6*count + start + j];
-            const double t533 = sin(t532);
+            const double t533 = sin_q[5][j];
             const double t534 = -2.0*t533*t533 + 1.0;
             const double t535 = qd[6*count + start + j] - t378;
             const double t536 = t535*t535;
             const double t537 = -t536;
-            const double t538 = t533*cos(t532);
+            const double t538 = t533*cos_q[5][j];
             const double t539 = 2.0*t538;
             const double t540 = t366*t539;
             const double t541 = t370*t534;

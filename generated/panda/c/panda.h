@@ -8,14 +8,15 @@
  * Every function is re-entrant: no globals, no allocation, no static state; outputs must
  * not alias inputs nor each other (the definitions declare the pointers restrict).
  *
- * Trigonometry (generated with --trig kernel): the sines and cosines of the joint angles q
- * are computed together at the start of a function by a polynomial kernel in the .c file
- * that compilers vectorise (kdg_sincos: Cody-Waite reduction, minimax polynomials). Its
+ * Trigonometry (generated with --trig kernel): the sines and cosines of the joint angles q,
+ * and in single calls those of arguments affine in q (the half angles of the dual-quaternion
+ * functions), are computed together at the start of a function by a polynomial kernel in the
+ * .c file that compilers vectorise (kdg_sincos: Cody-Waite reduction, minimax polynomials). Its
  * largest error against glibc's sin and cos over the whole finite range is 1 ulp (checked
  * on dense grids, at the doubles nearest every multiple of pi/2 up to 1048576, at random
  * doubles of random exponent and at +-0, subnormals, inf and NaN); |q| > 1048576 rad,
- * infinities and NaN are passed to libm sin/cos. Other sin/cos, e.g. of half angles, are libm
- * calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
+ * infinities and NaN are passed to libm sin/cos. Other sin/cos (and the half angles of the
+ * batch variants) are libm calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
  * -ffast-math (-ffp-contract=fast is fine).
  *
  * Fused multiply-adds: strict C99 (gcc -std=c99) keeps every product rounded; on FMA targets
@@ -75,7 +76,9 @@ void panda_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 52 add, 93 mul, 14 call
  * (as derived, before CSE: 664 add, 2332 mul, 1284 call);
- * critical path 85 cycles, 16 dependent operations.
+ * critical path 96 cycles, 14 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_fk_dq(const double *q, double *x);
 void panda_fk_dq_batch(long count, const double *q, double *x);
@@ -109,7 +112,9 @@ void panda_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 286 add, 427 mul, 14 call
  * (as derived, before CSE: 3672 add, 26272 mul, 13432 call);
- * critical path 91 cycles, 18 dependent operations.
+ * critical path 102 cycles, 17 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_pose_jacobian_dq(const double *q, double *Jx);
 void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -127,7 +132,9 @@ void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 188 add, 313 mul, 14 call
  * (as derived, before CSE: 27455 add, 193768 mul, 107648 call);
- * critical path 112 cycles, 25 dependent operations.
+ * critical path 123 cycles, 24 dependent operations.
+ * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_jacobian_dq(const double *q, double *J);
 void panda_jacobian_dq_batch(long count, const double *q, double *J);
@@ -370,7 +377,9 @@ void panda_c_christoffel_batch(long count, const double *q, const double *qd, do
  *
  * Cost: 219 add, 303 mul, 12 call
  * (as derived, before CSE: 14791 add, 48807 mul, 16807 call);
- * critical path 133 cycles, 32 dependent operations.
+ * critical path 144 cycles, 31 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_M_dq(const double *q, double *M);
 void panda_M_dq_batch(long count, const double *q, double *M);
@@ -388,7 +397,9 @@ void panda_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 118 cycles, 27 dependent operations.
+ * critical path 129 cycles, 26 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_g_dq(const double *q, double *g);
 void panda_g_dq_batch(long count, const double *q, double *g);
@@ -407,7 +418,9 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 332 add, 468 mul, 12 call
  * (as derived, before CSE: 148676 add, 646792 mul, 215417 call);
- * critical path 151 cycles, 38 dependent operations.
+ * critical path 162 cycles, 37 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_c_dq(const double *q, const double *qd, double *c);
 void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -427,7 +440,9 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 353 add, 484 mul, 12 call
  * (as derived, before CSE: 164689 add, 688748 mul, 229617 call);
- * critical path 154 cycles, 39 dependent operations.
+ * critical path 165 cycles, 38 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void panda_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -449,7 +464,9 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  *
  * Cost: 842 add, 963 mul, 12 call
  * (as derived, before CSE: 179060 add, 753806 mul, 252381 call);
- * critical path 139 cycles, 34 dependent operations.
+ * critical path 150 cycles, 33 dependent operations.
+ * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
+ * sincos kernel over those arguments.
  */
 void panda_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void panda_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
