@@ -15,7 +15,7 @@ Without a C compiler ``load`` raises ``BuildError`` saying so: the pure-numpy mo
 Example (the functions take and return what the numpy module's do, one configuration each):
 
 >>> import numpy as np
->>> from kindyngen import python_c
+>>> from kindyngen.runtime import python_c
 >>> lwr4 = python_c.load("generated/lwr4")          # compiles on first use   # doctest: +SKIP
 >>> T = lwr4.fk_hom(np.zeros(7))                    # (4, 4) float64           # doctest: +SKIP
 >>> float(T[2, 3])                                                              # doctest: +SKIP

@@ -3,7 +3,6 @@ structural properties: M symmetric positive definite, Mdot - 2 S skew-symmetric,
 equal, symbolic parameters equal to the baked-in ones, energy conserved by fd."""
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pinocchio as pin
@@ -235,15 +234,6 @@ def test_interface(case):
             assert "tau = M(q) qdd + c(q, qd) + g(q)" in f.conventions
             assert "Gravity" in f.conventions
             assert ("Christoffel" in f.summary) or ("Newton-Euler" in f.summary)
-
-
-def test_generation_time():
-    """Every dynamics function of lwr4 and panda derives and optimizes well within 10 s."""
-    start = time.perf_counter()
-    for name in ROBOTS:
-        for f in derive_all(robot(name), "numeric", only=set(DYNAMICS)):
-            optimize(f)
-    assert time.perf_counter() - start < 10.0
 
 
 # ----------------------------------------------------------------------------- other geometries
