@@ -153,13 +153,16 @@ def _std_percent(Y, residual, values) -> np.ndarray:
         return np.where(np.abs(values) > 0, 100 * std / np.abs(values), np.inf)
 
 
-def _segments(paths, n, settings, progress, what, split=None):
+def _segments(paths, n, settings, progress, what, split=None, check_segment=None):
     """The segments of every file; with ``split``, (training, validation) cut file by file:
-    each file is its own experiment, with its own time span."""
+    each file is its own experiment, with its own time span. ``check_segment(segment)`` may
+    refuse one (raising)."""
     train, held = [], []
     for path in paths:
         progress(f"reading {what} log {path}")
         segments = load_segments(path, n, settings)
+        for segment in segments if check_segment is not None else ():
+            check_segment(segment)
         if split is None:
             train.extend(segments)
         else:
@@ -183,16 +186,23 @@ def check_consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tu
     return not notes, tuple(notes)
 
 
-def identify(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None) -> Identification:
-    """Run the identification of ``request`` (see the module text)."""
+def identify(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
+             check_segment: Callable | None = None, check_fit: Callable | None = None) -> Identification:
+    """Run the identification of ``request`` (see the module text). The optional checks may
+    refuse the data (raising): ``check_segment(model, segment)`` each segment read,
+    ``check_fit(samples, columns, condition)`` the first fit (``condition()`` its stacked
+    regressor's condition number), returning notes for the report (the command line passes
+    the streamed identification's limits, :mod:`kindyngen.measured.streaming`)."""
     model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     n = model.n
     settings = request.preprocessing
+    check = None if check_segment is None else (lambda segment: check_segment(model, segment))
     if request.split is not None:
-        train, held_out = _segments(request.data, n, settings, progress, "training", request.split)
+        train, held_out = _segments(request.data, n, settings, progress, "training", request.split, check)
     else:
-        train, held_out = _segments(request.data, n, settings, progress, "training"), ()
-    validation = tuple(held_out) + _segments(request.validate, n, settings, progress, "validation")
+        train, held_out = _segments(request.data, n, settings, progress, "training", check_segment=check), ()
+    validation = tuple(held_out) + _segments(request.validate, n, settings, progress, "validation",
+                                             check_segment=check)
     notes = tuple(dict.fromkeys(note for s in train + validation for note in s.notes))
     filters = tuple(dict.fromkeys(s.low_pass.describe() for s in train + validation if s.low_pass is not None))
     if filters:
@@ -245,6 +255,16 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
     prior = parameter_vector(model)
     linearised = P @ prior                    # the sensing columns' base parameters
     sensing_notes = ()
+    overridden = ()
+    if check_fit is not None:
+        E_first = np.concatenate([E_joint, sensing_rows(train, linearised)], axis=2) if sensing else E_joint
+        stacked = np.concatenate([Yb, E_first], axis=2).reshape(-1, k_base + E_first.shape[2])
+
+        def condition():
+            singular = np.linalg.svd(stacked, compute_uv=False)
+            return float(singular[0] / singular[-1])
+        # samples counted at the log's own rate, before decimation, as the streamed fit counts them
+        overridden = tuple(check_fit(sum(len(seg.t) for seg in train), stacked.shape[1], condition))
     for iteration in range(SENSING_ITERATIONS if sensing else 1):
         used = linearised
         E = np.concatenate([E_joint, sensing_rows(train, used)], axis=2) if sensing else E_joint
@@ -285,7 +305,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
 
     rms_train = rms_per_joint(tau, predicted(Yb, E))
     consistent, consistency_notes = check_consistency(full, n, enames, evalues)
-    consistency_notes = sensing_notes + consistency_notes
+    consistency_notes = overridden + sensing_notes + consistency_notes
     bias = None
     if "motor_side_elasticity" in sensing:
         bias = elastic_noise_bias(lambda q, qd, qdd: regressor(q, qd, qdd) @ base, train)

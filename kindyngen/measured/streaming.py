@@ -656,18 +656,25 @@ def identify_streamed(request: IdentificationRequest, progress: Callable[[str], 
 
 
 def _check_fit(train: LSFactor, limits: FitLimits, raw_samples: int | None = None) -> tuple[str, ...]:
-    """Refuse (IdentificationDataError) a fit below ``limits``; with ``override`` the reasons
-    come back as notes for the report instead."""
+    """:func:`check_fit` of the training factor (samples counted before decimation when
+    ``raw_samples`` is given: the limit is stated for samples of the log's own rate)."""
+    return check_fit(train.samples if raw_samples is None else raw_samples, train.k,
+                     lambda: condition_number(train), limits)
+
+
+def check_fit(samples: int, columns: int, condition: Callable[[], float], limits: FitLimits) -> tuple[str, ...]:
+    """Refuse (IdentificationDataError) a fit of ``columns`` unknowns on ``samples`` training
+    samples below ``limits`` (``condition()``: the stacked regressor's condition number, asked
+    only when the samples suffice); with ``override`` the reasons come back as notes for the
+    report instead."""
     reasons = []
-    # counted before decimation: the limit is stated for samples of the log's own rate
-    samples = train.samples if raw_samples is None else raw_samples
-    per_column = samples / train.k
+    per_column = samples / columns
     if per_column < limits.min_samples_per_column:
-        reasons.append(f"{samples} training samples for {train.k} regressor columns ({per_column:.3g} per "
+        reasons.append(f"{samples} training samples for {columns} regressor columns ({per_column:.3g} per "
                        f"column) is below the minimum of {limits.min_samples_per_column:g} per column "
                        f"(--min-samples-per-column): give more data or a larger --split")
     else:
-        cond = condition_number(train)
+        cond = condition()
         if cond > limits.max_condition:
             reasons.append(f"the condition number of the stacked training regressor is {cond:.3g}, above the "
                            f"limit {limits.max_condition:.3g} (--max-condition): the data do not excite every "

@@ -91,6 +91,21 @@ def test_condition_number_above_the_limit_is_refused(log, capsys, tmp_path):
               "--out", str(tmp_path / "o")], capsys, "condition number", "above the limit 10")
 
 
+@pytest.mark.parametrize("data, extra, phrases", [
+    ("degrees", ["--split", "0.7"], ("far outside the joint limits", "look like degrees")),
+    ("run", ["--split", "0.03", "--cutoff", "none"], ("per column", "below the minimum of 10")),
+    ("run", ["--split", "0.7", "--max-condition", "10"], ("condition number", "above the limit 10"))],
+    ids=["degrees", "few-samples", "condition"])
+def test_effects_on_the_measurement_are_refused_the_same(log, capsys, tmp_path, data, extra, phrases):
+    """Effects on the measurement (here motor-side elasticity) are fitted in memory, not
+    streamed: the same data are refused there, with the same reasons."""
+    root, run, degrees = log
+    path = {"run": run, "degrees": degrees}[data]
+    _refused(["identify", "--robot", PANDA, "--data", path, *extra, "--effects", "motor_side_elasticity",
+              "--out", str(tmp_path / "o")], capsys, *phrases)
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("option, value, phrase", [("--holdout", "0.99", "at most 0.8 may be held out"),
                                                    ("--folds", "1", "at least 2 blocks"),
                                                    ("--folds", "500", "at most 50 cross-validation blocks")])
