@@ -59,6 +59,7 @@ from .kinematics_conventions import q_port
 from .rigid_bodies import ZERO, Body, cross, qd_port, qdd_port, vadd
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, dynamics_function, setup
+from .ldlt import tree_ldlt_factor, tree_ldlt_substitute
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
 
 
@@ -237,45 +238,6 @@ def _subtree(model: RobotModel, j: int):
 
 # ----------------------------------------------------------------------------- the tree-sparse factor
 
-def tree_ltdl_factor(M, parents, stages: Stages | None = None):
-    """``M = L^T D L`` with L as sparse as the tree (the factor of
-    :func:`kindyngen.algorithms.ldlt.tree_ldlt_solve`, kept for many right-hand sides):
-    ``(H, inv_d, ancestors)``, ``H[k][i]`` the entries of L for i above k."""
-    name = naming(stages)
-    n = len(M)
-    H = [list(row) for row in M]
-    ancestors = []
-    for k in range(n):
-        up, i = [], parents[k]
-        while i >= 0:
-            up.append(i)
-            i = parents[i]
-        ancestors.append(up)
-    inv_d = [None] * n
-    for k in range(n - 1, -1, -1):
-        inv_d[k] = name(se.Pow(H[k][k], -1))
-        for pos, i in enumerate(ancestors[k]):
-            a = name(H[k][i] * inv_d[k])
-            for j in [i] + ancestors[k][pos + 1:]:
-                H[i][j] = name(H[i][j] - a * H[k][j])
-            H[k][i] = a
-    return H, inv_d, ancestors
-
-
-def tree_ltdl_substitute(factor, b, name):
-    """``x = M^-1 b`` from :func:`tree_ltdl_factor` (exact zeros of b fold away)."""
-    H, inv_d, ancestors = factor
-    n = len(b)
-    x = [name(e) for e in b]
-    for k in range(n - 1, -1, -1):
-        for i in ancestors[k]:
-            x[i] = name(x[i] - H[k][i] * x[k])
-    x = [name(x[k] * inv_d[k]) for k in range(n)]
-    for k in range(n):
-        x[k] = name(se.Add(x[k], *(-H[k][i] * x[i] for i in ancestors[k])))
-    return x
-
-
 # ----------------------------------------------------------------------------- functions
 
 NOTE = (" Matrices are row-major, row i the output of coordinate i, column j the input of coordinate j (d out_i "
@@ -314,18 +276,18 @@ def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_mi
     nv = model.nv
     qd, tau = port_symbols("qd", (nv,)), port_symbols("tau", (nv,))
     M, _, _ = crba(ts, stages)
-    factor = tree_ltdl_factor(M, expanded_parents(model), stages)
+    factor = tree_ldlt_factor(M, expanded_parents(model), stages)
     bias = rnea(ts, qd, None, True, stages)
-    qdd = tree_ltdl_substitute(factor, [t - b for t, b in zip(tau, bias)], name_)
+    qdd = tree_ldlt_substitute(factor, [t - b for t, b in zip(tau, bias)], name_)
     dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
-    solved = [[tree_ltdl_substitute(factor, [-B[i][j] for i in range(nv)], name_) for j in range(nv)]
+    solved = [[tree_ldlt_substitute(factor, [-B[i][j] for i in range(nv)], name_) for j in range(nv)]
               for B in (dq, dqd)]
     outputs = [[col[i] for i in range(nv) for col in columns] for columns in solved]
     ports = [_matrix_port(model, "dqdd_dq", "dqdd_i / dq_j", "1/s^2 and mixed units by coordinate"),
              _matrix_port(model, "dqdd_dqd", "dqdd_i / dqd_j", "1/s and mixed units by coordinate")]
     what = "dqdd/dtau is M^-1"
     if with_minv:
-        columns = [tree_ltdl_substitute(factor, _unit_column(nv, k), name_) for k in range(nv)]
+        columns = [tree_ldlt_substitute(factor, _unit_column(nv, k), name_) for k in range(nv)]
         outputs.append([columns[min(i, k)][max(i, k)] for i in range(nv) for k in range(nv)])
         ports.append(_matrix_port(model, "Minv", "inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric)",
                                   "1/(kg m^2) and mixed units by coordinate"))

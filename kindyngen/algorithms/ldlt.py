@@ -67,6 +67,12 @@ def tree_ldlt_solve(M, parents, b, stages=None):
     With ``stages`` (:class:`kindyngen.algorithms.symbolic.Stages`) every updated entry and every
     intermediate of the solves is a named intermediate.
     """
+    return tree_ldlt_substitute(tree_ldlt_factor(M, parents, stages), b, naming(stages))
+
+
+def tree_ldlt_factor(M, parents, stages=None):
+    """The factor of :func:`tree_ldlt_solve`, kept for many right-hand sides: ``(H, inv_d,
+    ancestors)``, ``H[k][i]`` the entries of L for i above k, ``inv_d`` the ``1 / D_k``."""
     name = naming(stages)
     n = len(M)
     H = [list(row) for row in M]
@@ -85,6 +91,14 @@ def tree_ldlt_solve(M, parents, b, stages=None):
             for j in [i] + ancestors[k][pos + 1:]:
                 H[i][j] = name(H[i][j] - a * H[k][j])
             H[k][i] = a
+    return H, inv_d, ancestors
+
+
+def tree_ldlt_substitute(factor, b, name):
+    """``x = M^-1 b`` from :func:`tree_ldlt_factor` (``name``: :func:`naming` of the stages;
+    exact zeros of b fold away)."""
+    H, inv_d, ancestors = factor
+    n = len(b)
     x = [name(e) for e in b]           # L^T y = b, leaves first
     for k in range(n - 1, -1, -1):
         for i in ancestors[k]:
