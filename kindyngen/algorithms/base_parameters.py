@@ -239,6 +239,19 @@ def numeric_rank(A: np.ndarray, tol: float = RANK_TOL) -> tuple[int, np.ndarray]
     return int(np.sum(diag > tol * diag[0])), diag
 
 
+def condition_number_2norm(A: np.ndarray) -> float:
+    """2-norm condition number of ``A``: its largest over its smallest singular value; inf
+    when the smallest is 0, 1 for an empty matrix (that of a 0 x 0 identity).
+
+    >>> condition_number_2norm(np.diag([4.0, 0.5])), condition_number_2norm(np.zeros((3, 2)))
+    (8.0, inf)
+    """
+    if A.size == 0:
+        return 1.0
+    s = np.linalg.svd(A, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+
 def independent_columns(A: np.ndarray, tol: float = DEPENDENT_TOL, margin: float | None = None) -> tuple[int, ...]:
     """Columns of ``A`` not in the span of the columns before them (unpivoted QR).  With
     ``margin``, refuse (:func:`check_margin`) when a column's ratio is near ``tol``."""
@@ -308,8 +321,6 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
         raise BaseParameterError(f"grouping relations fail at fresh samples: relative residual {max_residual:.3g}")
     zero_rows = tuple(int(r) for r in np.flatnonzero(
         np.all(np.abs(A3) <= 1e-13 * max(np.abs(A3).max(), 1e-300), axis=(0, 2))))
-    sv = np.linalg.svd(B, compute_uv=False) if B.size else np.ones(1)
-    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     return BaseParameters(full_names=full_names, base=base, dependent=dependent, T=T, rank=rank,
-                          condition_number=cond, samples=A.shape[0], zero_rows=zero_rows,
+                          condition_number=condition_number_2norm(B), samples=A.shape[0], zero_rows=zero_rows,
                           max_residual=max_residual, exact=exact)

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ..algorithms.base_parameters import RANK_TOL, numeric_rank
+from ..algorithms.base_parameters import RANK_TOL, condition_number_2norm, numeric_rank
 from . import MeasuredDataError
 
 
@@ -179,9 +179,8 @@ def identify(Y, y, names=None, rank_tol: float = RANK_TOL, hint: str = "") -> Es
     Y, y, names = check_identifiable(Y, y, names, rank_tol, hint)
     values, *_ = np.linalg.lstsq(Y, y, rcond=None)
     residual = y - Y @ values
-    sv = np.linalg.svd(Y, compute_uv=False)
     return Estimate(names=names, values=values, residual_rms=float(np.sqrt(np.mean(residual ** 2))),
-                    condition_number=float(sv[0] / sv[-1]), rows=Y.shape[0])
+                    condition_number=condition_number_2norm(Y), rows=Y.shape[0])
 
 
 def stacked_regressor(model, kind: str, inputs: dict) -> np.ndarray:
@@ -320,17 +319,21 @@ def effect_hint(error: RankDeficientError) -> str:
 
 
 def _solve(A: np.ndarray, b: np.ndarray):
-    """Least squares by a QR factorisation of ``[A b]`` (A has full column rank): values,
-    diag((A^T A)^-1) (``(A^T A)^-1 = R^-1 R^-T``), plain and column-scaled 2-norm condition
-    numbers (those of R, whose columns have A's norms)."""
+    """Least squares by a QR factorisation of ``[A b]`` (A has full column rank): what
+    :func:`solve_triangle` gives for its factor."""
     k = A.shape[1]
     F = scipy.linalg.qr(np.column_stack([A, b]), mode="r")[0]
-    R, c = F[:k, :k], F[:k, k]
+    return solve_triangle(F[:k, :k], F[:k, k])
+
+
+def solve_triangle(R: np.ndarray, c: np.ndarray):
+    """Least squares from the triangular factor ``R`` of a full-column-rank ``A`` and
+    ``c = Q^T b``: values ``R^-1 c``, diag((A^T A)^-1) (``(A^T A)^-1 = R^-1 R^-T``), plain
+    and column-scaled 2-norm condition numbers (those of R, whose columns have A's norms)."""
     values = scipy.linalg.solve_triangular(R, c)
-    R_inv = scipy.linalg.solve_triangular(R, np.eye(k))
-    s = np.linalg.svd(R, compute_uv=False)
-    s_scaled = np.linalg.svd(R / np.linalg.norm(R, axis=0), compute_uv=False)
-    return values, np.sum(R_inv ** 2, axis=1), float(s[0] / s[-1]), float(s_scaled[0] / s_scaled[-1])
+    R_inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]))
+    return (values, np.sum(R_inv ** 2, axis=1), condition_number_2norm(R),
+            condition_number_2norm(R / np.linalg.norm(R, axis=0)))
 
 
 def least_squares(Y, tau, names=None, weighted: bool = False) -> Fit:

@@ -44,6 +44,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize
 
+from ..algorithms.base_parameters import condition_number_2norm
 from ..model.robot_model import RobotModel
 from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .regressor_rows import TorqueRegressor, torque_regressor
@@ -280,8 +281,7 @@ def condition_number(regressor: TorqueRegressor, trajectory: FourierTrajectory, 
 
     ``regressor``: ``TorqueRegressor(model)`` (built once: it compiles the regressor)."""
     W = stacked_regressor(regressor, trajectory, samples_per_period, friction, coulomb_smoothing)
-    s = np.linalg.svd(W, compute_uv=False)
-    return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    return condition_number_2norm(W)
 
 
 class _Objective:

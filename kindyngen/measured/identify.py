@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from ..algorithms.base_parameters import condition_number_2norm
 from ..model.inertial_parameters import parameter_vector
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
@@ -153,12 +154,6 @@ def _std_percent(Y, residual, values) -> np.ndarray:
         return np.where(np.abs(values) > 0, 100 * std / np.abs(values), np.inf)
 
 
-def _condition_number(Y: np.ndarray) -> float:
-    """Largest over smallest singular value of the stacked rows ``Y`` (rows, columns)."""
-    singular = np.linalg.svd(Y, compute_uv=False)
-    return float(singular[0] / singular[-1])
-
-
 def _segments(paths, n, settings, progress, what, split=None, check_segment=None):
     """The segments of every file; with ``split``, (training, validation) cut file by file:
     each file is its own experiment, with its own time span. ``check_segment(segment)`` may
@@ -268,7 +263,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
 
         # samples counted at the log's own rate, before decimation, as the streamed fit counts them
         overridden = tuple(check_fit(sum(len(seg.t) for seg in train), stacked.shape[1],
-                                     lambda: _condition_number(stacked)))
+                                     lambda: condition_number_2norm(stacked)))
     for iteration in range(SENSING_ITERATIONS if sensing else 1):
         used = linearised
         E = np.concatenate([E_joint, sensing_rows(train, used)], axis=2) if sensing else E_joint
@@ -279,7 +274,7 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
             base = P @ full
             base_std = effect_std = None
             Y_all = np.concatenate([Yb, E], axis=2)
-            cond = _condition_number(Y_all.reshape(-1, Y_all.shape[2]))
+            cond = condition_number_2norm(Y_all.reshape(-1, Y_all.shape[2]))
             method = "physically consistent (semidefinite program, CLARABEL)"
         else:
             progress(f"least squares ({len(tau)} samples, {k_base + len(enames)} columns)")

@@ -36,10 +36,11 @@ from functools import reduce
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-import scipy.linalg
 from scipy.linalg.lapack import dgeqrf as _geqrf
 
-from .estimation import Fit, IdentificationDataError, RankDeficientError, check_identifiable, effect_hint
+from ..algorithms.base_parameters import condition_number_2norm
+from .estimation import (Fit, IdentificationDataError, RankDeficientError, check_identifiable, effect_hint,
+                         solve_triangle)
 
 
 def _triangle(stacked: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -157,19 +158,9 @@ def combine_in_order(factors) -> LSFactor:
     return reduce(combine, factors)
 
 
-def _solve_triangle(R: np.ndarray, c: np.ndarray):
-    k = R.shape[0]
-    values = scipy.linalg.solve_triangular(R, c)
-    R_inv = scipy.linalg.solve_triangular(R, np.eye(k))
-    s = np.linalg.svd(R, compute_uv=False)
-    s_scaled = np.linalg.svd(R / np.linalg.norm(R, axis=0), compute_uv=False)
-    return values, np.sum(R_inv ** 2, axis=1), float(s[0] / s[-1]), float(s_scaled[0] / s_scaled[-1])
-
-
 def condition_number(factor: LSFactor) -> float:
     """2-norm condition number of the stacked regressor (that of its triangular factor)."""
-    s = np.linalg.svd(factor.stacked()[0], compute_uv=False)
-    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    return condition_number_2norm(factor.stacked()[0])
 
 
 def least_squares_factor(factor: LSFactor, names=None, weighted: bool = False) -> Fit:
@@ -195,7 +186,7 @@ def least_squares_factor(factor: LSFactor, names=None, weighted: bool = False) -
     if dof <= 0:
         raise IdentificationDataError(f"too few samples for standard deviations: {N} samples x {n} joints = "
                                       f"{N * n} equations for {k} parameters leave no degree of freedom")
-    values, inverse_diagonal, cond, cond_scaled = _solve_triangle(R, c)
+    values, inverse_diagonal, cond, cond_scaled = solve_triangle(R, c)
     if not weighted:
         sigma2 = float(np.sum(factor.residual_sums(values))) / dof
         std = np.sqrt(sigma2 * inverse_diagonal)
@@ -210,7 +201,7 @@ def least_squares_factor(factor: LSFactor, names=None, weighted: bool = False) -
         sigma = np.maximum(sigma, 1e-6 * largest) if largest > 0 else np.ones(n)
         weights = 1.0 / sigma
         Rw, cw, _ = factor.stacked(weights)
-        values, inverse_diagonal, cond, cond_scaled = _solve_triangle(Rw, cw)
+        values, inverse_diagonal, cond, cond_scaled = solve_triangle(Rw, cw)
         sigma_w2 = float(np.sum(weights ** 2 * factor.residual_sums(values))) / dof
         std = np.sqrt(sigma_w2 * inverse_diagonal)
         method = "wls"
