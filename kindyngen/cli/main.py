@@ -86,9 +86,6 @@ def load(path, args):
         if args.base or args.tip:
             raise UsageError("--base and --tip choose one chain; a tree (--tree, --floating-base, --frames) "
                              "has every branch")
-        if getattr(args, "params", "numeric") != "numeric":
-            raise UsageError("--params symbolic: a kinematic tree is generated with its description's "
-                             "parameters only (the regressor Y is the identification route)")
         model = load_robot(path, snap_angles=not args.keep_angles, tree=True, frames=args.frames,
                            floating_base=args.floating_base)
     else:
@@ -480,7 +477,8 @@ def parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of c,python,casadi,python_c,jax,matlab (default: all; python_c "
                         "and matlab's MEX gateway need c)")
     g.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
-                   help="inertial parameters baked in from the YAML (numeric) or an extra input p (symbolic)")
+                   help="inertial parameters baked in from the description (numeric) or an extra input p "
+                        "(symbolic: 10 per body, a floating base's root body first)")
     g.add_argument("--trig", choices=TRIG_MODES, default="kernel",
                    help="C: sin/cos of joint angles by a vectorisable polynomial kernel emitted into the .c, "
                         "within 1 ulp of glibc (kernel, default), or every sin/cos by libm (libm)")
@@ -500,7 +498,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
     _robot_options(c)
     _tree_options(c)
-    c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric")
+    c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
+                   help="inertial parameters baked in (numeric) or an extra input p (symbolic), as for generate")
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")

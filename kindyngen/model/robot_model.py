@@ -21,7 +21,7 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import sympy
@@ -183,6 +183,21 @@ class RobotModel:
         """Fixed base, each joint's parent the joint before it: what the chain-only
         derivations (closed-form IK, DH-based code) need."""
         return not self.floating_base and self.parents == tuple(range(-1, self.n - 1))
+
+    @property
+    def flange_chain(self) -> "RobotModel | None":
+        """This model as the arm the flange derivations (dual-quaternion kinematics, closed-form
+        IK) read: a chain (:attr:`is_chain`) with one flange. An arm is its own; a chain read
+        as a tree has for flange its one frame of interest when that is on the last link (the
+        frame's placement as the tool); None otherwise (a branched tree, a floating base,
+        several frames of interest or one elsewhere)."""
+        if not self.is_chain:
+            return None
+        if not self.is_tree:
+            return self
+        if len(self.frames) != 1 or self.frames[0].body != self.n - 1:
+            return None
+        return replace(self, tool=self.frames[0].placement)
 
     @property
     def flange_frame(self) -> Frame:
