@@ -301,12 +301,22 @@ class RobotModel:
 
     @property
     def length_symbols(self) -> tuple:
-        """Symbolic DH lengths (plain names in the YAML), in order of first appearance."""
+        """Symbolic lengths (plain names in the YAML: DH ``a`` and ``d``, ``xyz`` of an origin
+        or of the tool), in order of first appearance: each joint's (DH row, else its
+        placements), then the tool's and the frames' of interest."""
         seen = []
+
+        def add(values):
+            seen.extend(v for v in values if isinstance(v, sympy.Symbol) and v not in seen)
+
         for joint in self.joints:
-            for value in ((joint.dh.a, joint.dh.d) if joint.dh is not None else ()):
-                if isinstance(value, sympy.Symbol) and value not in seen:
-                    seen.append(value)
+            if joint.dh is not None:
+                add((joint.dh.a, joint.dh.d))
+            else:
+                add(_translations(joint.before) + _translations(joint.after))
+        add(_translations(self.tool))
+        for frame in self.frames:
+            add(_translations(frame.placement))
         return tuple(seen)
 
     @property
@@ -314,6 +324,11 @@ class RobotModel:
         """The name as a C identifier (used as the prefix of generated functions)."""
         ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
         return ident if not ident[0].isdigit() else "r_" + ident
+
+
+def _translations(placement: Placement) -> tuple:
+    """The entries of a placement's translations, in order."""
+    return tuple(v for kind, *rest in placement.factors if kind == "trans" for v in rest[0])
 
 
 def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:
