@@ -157,6 +157,18 @@ def test_params_symbolic_tree_equals_pinocchio(tmp_path, capsys, monkeypatch):
                     assert error <= 1e-9, (lang, name, port, error)
 
 
+def test_tree_with_named_lengths_is_refused_where_y_is_asked(tmp_path, capsys, monkeypatch):
+    """Named lengths in a tree's origins: generate (base_params.json is Y's) and count --only Y
+    are refused in one line; count without Y derives them."""
+    path = tmp_path / "named.yaml"
+    path.write_text(YAML_TREE.replace("xyz: [0, 0, -0.3]", "xyz: [0, 0, thigh]"))
+    message = "named lengths (thigh) in a tree: the regressor Y and base_params.json need numbers"
+    _refused(["generate", str(path), "--tree", "--out", str(tmp_path)], capsys, monkeypatch, message)
+    _refused(["count", str(path), "--tree", "--only", "tau", "Y"], capsys, monkeypatch, message)
+    code, out, err = _run(["count", str(path), "--tree", "--only", "tau"], capsys, monkeypatch)
+    assert code == 0 and "| tau |" in out, err
+
+
 def test_help_names_the_tree_options(capsys, monkeypatch):
     code, out, _ = _run(["generate", "--help"], capsys, monkeypatch)
     assert code == 0
