@@ -96,3 +96,24 @@ def test_branched_or_floating_trees_get_no_chain_routes():
     floating_chain = load_urdf(DATA / "slider_arm.urdf", floating_base=True)
     assert not floating_chain.is_chain
     assert not {f.name for f in derive_all(floating_chain, only={"fk_dq", "S", "M_lagrange", "Y_g"})}
+
+
+def test_chain_read_as_tree_with_symbolic_parameters():
+    """The chain-only routes take p on a chain read as a tree as on the arm: same values at a
+    random p (not the description's)."""
+    path = DATA / "slider_arm.urdf"
+    arm, tree = load_urdf(path), load_urdf(path, tree=True, frames=["tool"])
+    only = {"tau", "S", "M_lagrange", "tau_dq", "fd_derivatives"}
+    arm_functions = {f.name: f for f in derive_all(arm, "symbolic", only=only)}
+    tree_functions = {f.name: f for f in derive_all(tree, "symbolic", only=only)}
+    assert set(arm_functions) == set(tree_functions) == only
+    rng = np.random.default_rng(12)
+    p = np.concatenate([np.r_[rng.uniform(0.5, 2), rng.uniform(-0.1, 0.1, 3), 0.05, 0.001, 0.04, -0.002, 0.001, 0.03]
+                        for _ in range(arm.n)])
+    state = {"q": rng.uniform(arm.lower, arm.upper), "qd": rng.uniform(-2, 2, arm.n),
+             "qdd": rng.uniform(-3, 3, arm.n), "tau": rng.uniform(-5, 5, arm.n), "p": p}
+    for name, f in arm_functions.items():
+        assert tree_functions[name].inputs[-1].name == "p"
+        a, t = _values(f, state), _values(tree_functions[name], state)
+        for port in a:
+            assert np.allclose(t[port], a[port], rtol=1e-12, atol=1e-12), (name, port)
