@@ -3,8 +3,8 @@ the tree whose parent of joint j is j - 1), derived symbolically in joint frames
 primitives of :mod:`kindyngen.algorithms.joint_frame_steps`; one recursion per algorithm, for arms
 and trees alike, in both inertial-parameter modes ("numeric": the description's values;
 "symbolic": the input ``p`` of 10 barycentric parameters per body, a floating base's root
-body first) and with the description's joint
-effects (friction and offset in tau and fd's bias, the armature on M's diagonal):
+body first) and with the description's joint effects (friction and offset in tau and fd's
+bias, the armature on M's diagonal):
 
 * **Joint frames.** Joint j's frame is placed on its parent's joint frame by an exact
   constant rotation ``C_j`` and translation ``t_j`` (``after_parent * before_j``), so every
@@ -190,8 +190,9 @@ def setup(model: RobotModel, params: str = "numeric") -> TreeSetup:
     """Joint frames, grouped bodies and base pose of ``model`` on ``q`` symbols, with the
     inertial parameters of ``params`` ("numeric": the description's, a payload merged into
     the last link; "symbolic": the input ``p`` of 10 barycentric parameters per body, a
-    floating base's root body first, grouped expressions collected); cached: every function starts from it (its exact constant
-    transforms cost a tenth of a second on a humanoid) and nothing changes it."""
+    floating base's root body first, grouped expressions collected); cached: every function
+    starts from it (its exact constant transforms cost a tenth of a second on a humanoid) and
+    nothing changes it."""
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)

@@ -1,8 +1,9 @@
 """Which functions are generated for a robot: one entry per derivation, in output order.
 
-Each builder takes the robot model and the inertial-parameter mode ("numeric": the YAML
-values baked in; "symbolic": an extra input ``p`` of 10 n barycentric parameters) and returns
-a SymbolicFunction, or None where the derivation does not apply to that robot.
+Each builder takes the robot model and the inertial-parameter mode ("numeric": the
+description's values baked in; "symbolic": an extra input ``p`` of 10 barycentric parameters
+per body, a floating base's root body first) and returns a SymbolicFunction, or None where
+the derivation does not apply to that robot.
 """
 from __future__ import annotations
 

@@ -307,7 +307,9 @@ class RobotModel:
         seen = []
 
         def add(values):
-            seen.extend(v for v in values if isinstance(v, sympy.Symbol) and v not in seen)
+            for value in values:
+                if isinstance(value, sympy.Symbol) and value not in seen:
+                    seen.append(value)
 
         for joint in self.joints:
             if joint.dh is not None:

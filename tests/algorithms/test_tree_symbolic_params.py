@@ -124,6 +124,18 @@ def test_symbolic_parameters_equal_pinocchio(floating):
     assert not bad, bad
 
 
+@pytest.mark.parametrize("floating", [False, True], ids=["fixed", "floating"])
+def test_p_is_pinocchios_inertias_of_the_urdf(floating):
+    """The description's p (parameter_vector: the root body first) is Pinocchio's
+    ``model.inertias[1:]`` of ``buildModelFromUrdf`` by toDynamicParameters, as the headers say."""
+    tree = load_urdf(TREE, tree=True, floating_base=floating)
+    model = (pin.buildModelFromUrdf(str(TREE), pin.JointModelFreeFlyer()) if floating
+             else pin.buildModelFromUrdf(str(TREE)))
+    p = np.concatenate([model.inertias[k].toDynamicParameters() for k in range(1, model.njoints)])
+    assert p.shape == (10 * (tree.n + floating),)
+    assert np.abs(p - parameter_vector(tree)).max() <= 1e-12
+
+
 def test_description_parameters_give_the_numeric_build():
     """p = parameter_vector(tree) (the root body first) reproduces the baked-in numbers."""
     tree = load_urdf(TREE, tree=True, floating_base=True)
