@@ -142,3 +142,59 @@ def test_tree_origins_with_names_equal_pinocchio(floating, params):
                 got = flat[start:start + port.size].reshape(value.shape)
                 start += port.size
                 assert np.abs(got - value).max() <= 1e-9 * max(1.0, np.abs(value).max()), (f.name, port.name)
+
+
+ARM_BY_ORIGIN = """
+name: named_arm
+dh: none
+gravity: [0, 0, -9.81]
+joints:
+  - {origin: {xyz: [0, 0, 0.1]}, axis: [0, 0, 1], lower: -3, upper: 3}
+  - {origin: {xyz: [0, 0, $upper]}, axis: [0, 1, 0], lower: -2, upper: 2}
+  - {origin: {xyz: [$fore, 0, 0], rpy: [0.3, 0, 0]}, axis: [0, 1, 0], lower: -2, upper: 2}
+links:
+  - {mass: 2.0, com: [0, 0.01, 0.05], inertia: [0.02, 0.021, 0.002, 0, 0.001, 0]}
+  - {mass: 1.1, com: [0.01, 0, 0.14], inertia: [0.011, 0.0115, 0.001, 0, 0, 0.0003]}
+  - {mass: 0.8, com: [0.05, 0.01, 0], inertia: [0.001, 0.004, 0.0045, 0, 0, 0.0002]}
+tool: {xyz: [0, 0, $tool]}
+"""
+ARM_LENGTHS = {"upper": 0.4, "fore": 0.35, "tool": 0.12}
+
+
+def test_arm_origins_and_tool_with_names_equal_pinocchio():
+    """An arm by origin and axis may name lengths in its origins and its tool (once a traceback
+    in generation): fk_hom, M, tau and fd take them and equal Pinocchio's model of the arm
+    written with the numbers, the flange moved by the tool."""
+    import symengine as se
+    import yaml
+    from kindyngen.codegen.catalog import derive_all
+    from kindyngen.readers.yaml_description import parse_robot
+    from tests.algorithms.test_tree_derivatives import pinocchio_tree
+    pin = pytest.importorskip("pinocchio")
+    template = string.Template(ARM_BY_ORIGIN)
+    named = parse_robot(yaml.safe_load(template.substitute({k: k for k in ARM_LENGTHS})), "named_arm.yaml")
+    numbers = parse_robot(yaml.safe_load(template.substitute(ARM_LENGTHS)), "numbers.yaml")
+    assert [str(s) for s in named.length_symbols] == list(ARM_LENGTHS)
+    model = pinocchio_tree(numbers)
+    R, p = (numbers.joints[-1].after * numbers.tool).matrix()
+    flange = model.addFrame(pin.Frame("flange", numbers.n, 0, pin.SE3(np.array(R.evalf(), float),
+                                                                     np.array(p.evalf(), float).ravel()),
+                                      pin.FrameType.OP_FRAME))
+    data = model.createData()
+    functions = derive_all(named, only={"fk_hom", "M", "tau", "fd"})
+    assert all(f.inputs[-1].name == "lengths" for f in functions) and len(functions) == 4
+    rng = np.random.default_rng(9)
+    for _ in range(10):
+        q = rng.uniform(numbers.lower, numbers.upper)
+        qd, qdd, tau = (rng.uniform(-3, 3, numbers.n) for _ in range(3))
+        pin.framesForwardKinematics(model, data, q)
+        M = pin.crba(model, data, q)
+        expected = {"fk_hom": data.oMf[flange].homogeneous.copy(), "M": np.triu(M) + np.triu(M, 1).T,
+                    "tau": pin.rnea(model, data, q, qd, qdd).copy(), "fd": pin.aba(model, data, q, qd, tau).copy()}
+        inputs = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "lengths": list(ARM_LENGTHS.values())}
+        for f in functions:
+            args = [s for syms in f.input_symbols for s in syms]
+            fn = se.Lambdify(args, [e for exprs in f.inlined_outputs() for e in exprs], cse=True)
+            got = np.ravel(fn(np.concatenate([np.ravel(inputs[p.name]) for p in f.inputs])))
+            value = expected[f.name]
+            assert np.abs(got.reshape(value.shape) - value).max() <= 1e-9 * max(1.0, np.abs(value).max()), f.name
