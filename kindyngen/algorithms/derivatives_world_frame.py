@@ -253,9 +253,10 @@ def _matrix_port(model: RobotModel, name: str, what: str, unit: str) -> Port:
     return Port(name, (model.nv, model.nv), what + " (row-major, nv x nv)", unit)
 
 
-def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives") -> SymbolicFunction:
-    """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` in the world-frame formulation."""
-    ts, stages = setup(model), Stages()
+def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives", params: str = "numeric") -> SymbolicFunction:
+    """``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` in the world-frame formulation
+    (``params``: see :func:`kindyngen.algorithms.dynamics.setup`)."""
+    ts, stages = setup(model, params), Stages()
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
     f = dynamics_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the world-frame "
@@ -268,10 +269,11 @@ def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives") -> Sy
     return _noted(f)
 
 
-def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_minv: bool = True) -> SymbolicFunction:
+def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_minv: bool = True,
+                        params: str = "numeric") -> SymbolicFunction:
     """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd[, Minv]``: ``-M^-1 dtau/dx`` at
     ``qdd = fd(q, qd, tau)``, every column solved through one tree-sparse factor of M."""
-    ts, stages = setup(model), Stages()
+    ts, stages = setup(model, params), Stages()
     name_ = naming(stages)
     nv = model.nv
     qd, tau = port_symbols("qd", (nv,)), port_symbols("tau", (nv,))

@@ -2,8 +2,9 @@
 the tree whose parent of joint j is j - 1), derived symbolically in joint frames with the
 primitives of :mod:`kindyngen.algorithms.joint_frame_steps`; one recursion per algorithm, for arms
 and trees alike, in both inertial-parameter modes ("numeric": the description's values;
-"symbolic": the input ``p`` of 10 n barycentric parameters) and with the description's joint
-effects (friction and offset in tau and fd's bias, the armature on M's diagonal):
+"symbolic": the input ``p`` of 10 barycentric parameters per body, a floating base's root
+body first) and with the description's joint effects (friction and offset in tau and fd's
+bias, the armature on M's diagonal):
 
 * **Joint frames.** Joint j's frame is placed on its parent's joint frame by an exact
   constant rotation ``C_j`` and translation ``t_j`` (``after_parent * before_j``), so every
@@ -57,12 +58,11 @@ import symengine as se
 from .joint_frame_steps import joint_step, mat3, omega_products, rotate_body, u_matrix
 from .ldlt import tree_ldlt_solve
 from .geometry import constant_parts, exact, joint_cos_sin
-from ..model.inertial_parameters import barycentric
 from .kinematics_conventions import joint_units, q_port
 from ..model.placement import Placement
 from .effect_torques import effect_torques, with_armature
 from .rigid_bodies import (ZERO, Body, JointFrame, conventions as arm_conventions, cross, inertials, qd_port, qdd_port,
-                           vadd, vscale)
+                           root_inertials, vadd, vscale)
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
 
@@ -87,7 +87,13 @@ def conventions(model: RobotModel, params: str = "numeric") -> str:
             if model.floating_base else f"Fixed base: the root link '{model.base_name}' does not move. ")
     return (f"{base}Joints in {model.order_text}. Equation of motion: tau = M(q) qdd + c(q, qd) + g(q). "
             f"Gravity in the {'world' if model.floating_base else 'root'} frame: ({gx:g}, {gy:g}, {gz:g}) m/s^2. "
-            "Inertial parameters: the robot description's values, baked in.")
+            + (PARAMETERS_INPUT.format(root="the root body's (base frame), then " if model.floating_base else "")
+               if params == "symbolic" else "Inertial parameters: the robot description's values, baked in."))
+
+
+PARAMETERS_INPUT = ("Inertial parameters: input p, 10 per body, {root}each joint's link in joint order (its link "
+                    "frame): m, m*cx, m*cy, m*cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz (inertia about the link frame origin, "
+                    "link-frame axes; Pinocchio's model.inertias[1:] by toDynamicParameters).")
 
 
 # ----------------------------------------------------------------------------- the tree in joint frames
@@ -183,18 +189,20 @@ def grouped(model: RobotModel, joints, bodies, root: Body) -> tuple[list[Body], 
 def setup(model: RobotModel, params: str = "numeric") -> TreeSetup:
     """Joint frames, grouped bodies and base pose of ``model`` on ``q`` symbols, with the
     inertial parameters of ``params`` ("numeric": the description's, a payload merged into
-    the last link; "symbolic": the input ``p`` of 10 n barycentric parameters, grouped
-    expressions collected); cached: every function starts from it (its exact constant
-    transforms cost a tenth of a second on a humanoid) and nothing changes it."""
+    the last link; "symbolic": the input ``p`` of 10 barycentric parameters per body, a
+    floating base's root body first, grouped expressions collected); cached: every function
+    starts from it (its exact constant transforms cost a tenth of a second on a humanoid) and
+    nothing changes it."""
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)
     links, ports, syms = inertials(model, params)
     bodies = [frame_body(li.as_vector(), joint.after) for li, joint in zip(links, model.joints)]
     empty = Body(ZERO, [ZERO] * 3, [[ZERO] * 3 for _ in range(3)])
-    bodies, root = grouped(model, joints, bodies, frame_body(barycentric(model.root)) if model.floating_base else empty)
+    bodies, root = grouped(model, joints, bodies, frame_body(root_inertials(model, syms)) if model.floating_base else empty)
     if params == "symbolic":
         bodies = [b.collected() for b in bodies]
+        root = root.collected() if model.floating_base else root
     rotation = quaternion_rotation(*q[3:7]) if model.floating_base else None
     return TreeSetup(model, q, joints, tuple(bodies), root, rotation, list(q[0:3]) if model.floating_base else None,
                      params, ports, syms)

@@ -36,7 +36,8 @@ from dataclasses import dataclass
 
 import symengine as se
 
-from ..model.inertial_parameters import LinkInertials, numeric_inertials, parameter_symbols, symbolic_inertials
+from ..model.inertial_parameters import (LinkInertials, barycentric, numeric_inertials, parameter_symbols,
+                                        symbolic_inertials)
 from .effect_torques import description_text
 from .kinematics_conventions import joint_units
 from ..model.robot_model import RobotModel
@@ -50,8 +51,11 @@ PARAMS = ("numeric", "symbolic")
 
 
 def p_port(model: RobotModel) -> Port:
-    return Port("p", (10 * model.n,),
-                "barycentric inertial parameters, per link: m, m*cx, m*cy, m*cz, Ixx, Ixy, Iyy, "
+    """The input p of symbolic mode: 10 per body, a floating base's root body first (the
+    order of the tree regressor's columns and of Pinocchio's ``model.inertias[1:]``)."""
+    root = "the floating base's root body (base frame), then " if model.floating_base else ""
+    return Port("p", (10 * (model.n + model.floating_base),),
+                f"barycentric inertial parameters, {root}per link: m, m*cx, m*cy, m*cz, Ixx, Ixy, Iyy, "
                 "Ixz, Iyz, Izz about the link frame origin", "kg, kg m, kg m^2")
 
 
@@ -207,13 +211,21 @@ class Body:
 
 
 def inertials(model: RobotModel, params: str):
-    """(LinkInertials per link, extra input ports, extra input symbols) for a params mode."""
+    """(LinkInertials per link, extra input ports, extra input symbols) for a params mode;
+    in symbolic mode a floating base's root body has the first 10 symbols (``m0 .. Izz0``),
+    see :func:`root_inertials`."""
     if params == "numeric":
         return numeric_inertials(model), (), ()
     if params == "symbolic":
-        p = parameter_symbols(model.n)
-        return symbolic_inertials(model.n, p), (p_port(model),), (p,)
+        p = parameter_symbols(model.n, first=0 if model.floating_base else 1)
+        return symbolic_inertials(model.n, p[10 * model.floating_base:]), (p_port(model),), (p,)
     raise ValueError(f"params must be one of {PARAMS}, got {params!r}")
+
+
+def root_inertials(model: RobotModel, param_symbols: tuple) -> tuple:
+    """The 10 barycentric parameters of a floating base's root body: the description's
+    (numeric mode, no parameter symbols) or the first 10 of p."""
+    return tuple(param_symbols[0][:10]) if param_symbols else barycentric(model.root)
 
 
 def _collect(e: se.Basic) -> se.Basic:

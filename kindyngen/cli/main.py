@@ -86,9 +86,6 @@ def load(path, args):
         if args.base or args.tip:
             raise UsageError("--base and --tip choose one chain; a tree (--tree, --floating-base, --frames) "
                              "has every branch")
-        if getattr(args, "params", "numeric") != "numeric":
-            raise UsageError("--params symbolic: a kinematic tree is generated with its description's "
-                             "parameters only (the regressor Y is the identification route)")
         model = load_robot(path, snap_angles=not args.keep_angles, tree=True, frames=args.frames,
                            floating_base=args.floating_base)
     else:
@@ -96,6 +93,16 @@ def load(path, args):
     for note in model.notes:
         print(f"note: {note}", file=sys.stderr)
     return model
+
+
+def refuse_tree_lengths(model, path, only) -> None:
+    """A tree with named lengths gets every function but Y (whose base parameters are decided
+    on numeric samples of the tree regressor): asking for Y, or for a whole generation (whose
+    base_params.json is Y's), is refused in one line."""
+    if model.is_tree and model.length_symbols and (only is None or "Y" in only):
+        names = ", ".join(map(str, model.length_symbols))
+        raise UsageError(f"{path}: named lengths ({names}) in a tree: the regressor Y and base_params.json "
+                         "need numbers; count --only without Y takes them")
 
 
 def _cmd_generate(args) -> int:
@@ -108,6 +115,7 @@ def _cmd_generate(args) -> int:
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
     for path in args.robots:
         model = load(path, args)
+        refuse_tree_lengths(model, path, None)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
                        only=only, scalar=args.scalar, batch=not args.no_batch)
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
@@ -154,6 +162,7 @@ def _cmd_count(args) -> int:
         only = set(args.only)
     for path in args.robots:
         model = load(path, args)
+        refuse_tree_lengths(model, path, only)
         programs = build_programs(model, args.params, only=only, progress=False)
         for note in undecided_notes(model, only):
             print(f"note: {note}", file=sys.stderr)
@@ -480,7 +489,8 @@ def parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of c,python,casadi,python_c,jax,matlab (default: all; python_c "
                         "and matlab's MEX gateway need c)")
     g.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
-                   help="inertial parameters baked in from the YAML (numeric) or an extra input p (symbolic)")
+                   help="inertial parameters baked in from the description (numeric) or an extra input p "
+                        "(symbolic: 10 per body, a floating base's root body first)")
     g.add_argument("--trig", choices=TRIG_MODES, default="kernel",
                    help="C: sin/cos of joint angles by a vectorisable polynomial kernel emitted into the .c, "
                         "within 1 ulp of glibc (kernel, default), or every sin/cos by libm (libm)")
@@ -500,7 +510,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("robots", nargs="+", metavar="ROBOT", help="robot descriptions: YAML or URDF (.urdf)")
     _robot_options(c)
     _tree_options(c)
-    c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric")
+    c.add_argument("--params", choices=("numeric", "symbolic"), default="numeric",
+                   help="inertial parameters baked in (numeric) or an extra input p (symbolic), as for generate")
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")

@@ -1,8 +1,9 @@
 """Which functions are generated for a robot: one entry per derivation, in output order.
 
-Each builder takes the robot model and the inertial-parameter mode ("numeric": the YAML
-values baked in; "symbolic": an extra input ``p`` of 10 n barycentric parameters) and returns
-a SymbolicFunction, or None where the derivation does not apply to that arm.
+Each builder takes the robot model and the inertial-parameter mode ("numeric": the
+description's values baked in; "symbolic": an extra input ``p`` of 10 barycentric parameters
+per body, a floating base's root body first) and returns a SymbolicFunction, or None where
+the derivation does not apply to that robot.
 """
 from __future__ import annotations
 
@@ -37,18 +38,30 @@ def forward_dynamics_routes(model: RobotModel, params: str = "numeric", name: st
     return replace(forward_dynamics_tree(model, params, name), alternatives=(forward_dynamics_aba(model, params, name),))
 
 
-def arm_only(build: Builder) -> Builder:
-    """A derivation written for serial arms (the Lagrange, dual-quaternion and derivative
-    routes, the closed-form IK, the gravity and inertia regressors): None for a model read
-    as a tree."""
-    def arm_build(model, params):
-        return None if model.is_tree else build(model, params)
-    arm_build.arm_only = True
-    return arm_build
+def chain_only(build: Builder) -> Builder:
+    """A derivation written for serial chains (the Lagrange and dual-quaternion dynamics, the
+    gravity and inertia regressors): None unless the model is one (fixed base, each joint's
+    parent the joint before it: :attr:`RobotModel.is_chain`), however it was read."""
+    def chain_build(model, params):
+        return build(model, params) if model.is_chain else None
+    chain_build.chain_only = True
+    return chain_build
+
+
+def flange_only(build: Builder) -> Builder:
+    """A derivation of a chain's flange (dual-quaternion kinematics, closed-form IK), built on
+    :attr:`RobotModel.flange_chain` (a chain read as a tree: its one frame of interest on the
+    last link as the flange); None where there is no such flange."""
+    def flange_build(model, params):
+        arm = model.flange_chain
+        return build(arm, params) if arm is not None else None
+    flange_build.chain_only = True
+    return flange_build
 
 
 def tree_only(build: Builder) -> Builder:
-    """A function of trees only (the centre of mass): None for an arm."""
+    """A function a model read as a tree gets besides an arm's (the centre of mass, fd's
+    derivatives without Minv): None for a model read as an arm, whose generated set is kept."""
     def tree_build(model, params):
         return build(model, params) if model.is_tree else None
     tree_build.tree_only = True
@@ -56,64 +69,62 @@ def tree_only(build: Builder) -> Builder:
 
 
 # every robot's functions, in output order; one builder per function, each written over the
-# tree (an arm is the tree whose parent of joint j is j - 1) or marked arm_only / tree_only
+# tree (an arm is the tree whose parent of joint j is j - 1) or marked chain_only / flange_only
+# (by the model's structure) or tree_only (by how it was read)
 BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("fk_hom", lambda model, params: fk_hom_tree(model)),
-    ("fk_dq", arm_only(lambda model, params: fk_dq(model))),
+    ("fk_dq", flange_only(lambda model, params: fk_dq(model))),
     ("jacobian", lambda model, params: jacobian_tree(model)),
-    ("pose_jacobian_dq", arm_only(lambda model, params: pose_jacobian_dq(model))),
-    ("jacobian_dq", arm_only(lambda model, params: jacobian_dq(model))),
+    ("pose_jacobian_dq", flange_only(lambda model, params: pose_jacobian_dq(model))),
+    ("jacobian_dq", flange_only(lambda model, params: jacobian_dq(model))),
     # dynamics: public names by the route with fewer operations after CSE (numeric LWR),
     # the other route under a suffixed name (kindyngen/algorithms/)
     ("M", lambda model, params: mass_matrix_tree(model, params, "M")),
     ("g", lambda model, params: gravity_tree(model, params, "g")),
     ("c", lambda model, params: coriolis_tree(model, params, "c")),
-    ("S", arm_only(lambda model, params: coriolis_matrix(model, params, "S"))),
+    ("S", chain_only(lambda model, params: coriolis_matrix(model, params, "S"))),
     ("tau", lambda model, params: inverse_dynamics_tree(model, params, "tau")),
     ("fd", lambda model, params: forward_dynamics_routes(model, params, "fd")),
     ("com", tree_only(lambda model, params: centre_of_mass_tree(model, params, "com"))),
-    # their partial derivatives, for optimal control: on a fixed base by the adjoint sweeps
-    # over the Newton-Euler pass (kindyngen/algorithms/derivatives_sweeps.py; they carry the joint
-    # effects), on a tree read as such by the world-frame formulation (algorithms/derivatives_world_frame.py,
-    # which takes a floating base; on lwr4 and panda read as trees it costs 7-9 % more
-    # operations than the sweeps, with a shorter critical path: docs/latency.md)
-    ("tau_derivatives", lambda model, params: tau_derivatives_tree(model, "tau_derivatives") if model.is_tree
-     else tau_derivatives(model, params, "tau_derivatives")),
-    ("fd_derivatives", lambda model, params: fd_derivatives_tree(model, "fd_derivatives") if model.is_tree
-     else fd_derivatives(model, params, "fd_derivatives")),
+    # their partial derivatives, for optimal control: on a chain by the adjoint sweeps over the
+    # Newton-Euler pass (kindyngen/algorithms/derivatives_sweeps.py; they carry the joint effects),
+    # on a branched tree or a floating base by the world-frame formulation
+    # (algorithms/derivatives_world_frame.py; on lwr4 and panda it costs 7-9 % more operations
+    # than the sweeps, with a shorter critical path: docs/latency.md)
+    ("tau_derivatives", lambda model, params: tau_derivatives(model, params, "tau_derivatives") if model.is_chain
+     else tau_derivatives_tree(model, "tau_derivatives", params)),
+    ("fd_derivatives", lambda model, params: fd_derivatives(model, params, "fd_derivatives") if model.is_chain
+     else fd_derivatives_tree(model, "fd_derivatives", params=params)),
     # the same without Minv, for callers that do not need it (each column through the factor)
     ("fd_derivatives_no_minv", tree_only(lambda model, params: fd_derivatives_tree(
-        model, "fd_derivatives_no_minv", with_minv=False))),
-    ("M_lagrange", arm_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
-    ("g_lagrange", arm_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
-    ("c_christoffel", arm_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),
+        model, "fd_derivatives_no_minv", with_minv=False, params=params))),
+    ("M_lagrange", chain_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
+    ("g_lagrange", chain_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
+    ("c_christoffel", chain_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),
     # the same dynamics in dual-quaternion form (kindyngen/algorithms/dualquat/dq_dynamics.py); Y_dq: the
     # regressor of tau_dq on Y's base parameters, the same function in both params modes
-    ("M_dq", arm_only(lambda model, params: mass_matrix_dq(model, params, "M_dq"))),
-    ("g_dq", arm_only(lambda model, params: gravity_dq(model, params, "g_dq"))),
-    ("c_dq", arm_only(lambda model, params: coriolis_dq(model, params, "c_dq"))),
-    ("tau_dq", arm_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
-    ("Y_dq", arm_only(lambda model, params: regressor_dq(model, "Y_dq"))),
+    ("M_dq", chain_only(lambda model, params: mass_matrix_dq(model, params, "M_dq"))),
+    ("g_dq", chain_only(lambda model, params: gravity_dq(model, params, "g_dq"))),
+    ("c_dq", chain_only(lambda model, params: coriolis_dq(model, params, "c_dq"))),
+    ("tau_dq", chain_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
+    ("Y_dq", chain_only(lambda model, params: regressor_dq(model, "Y_dq"))),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
-    ("ik_hom", arm_only(lambda model, params: ik_hom(model))),
-    ("ik_dq", arm_only(lambda model, params: ik_dq(model))),
+    ("ik_hom", flange_only(lambda model, params: ik_hom(model))),
+    ("ik_dq", flange_only(lambda model, params: ik_dq(model))),
     # regressors on base parameters (kindyngen/algorithms/regressors.py, algorithms/tree_regressors.py): the same
     # functions in both params modes
-    ("Y_g", arm_only(lambda model, params: regressor(model, "Y_g"))),
-    ("Y_m", arm_only(lambda model, params: regressor(model, "Y_m"))),
+    ("Y_g", chain_only(lambda model, params: regressor(model, "Y_g"))),
+    ("Y_m", chain_only(lambda model, params: regressor(model, "Y_m"))),
     ("Y", lambda model, params: tree_regressor(model) if model.is_tree else regressor(model, "Y")),
 )
 
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
-# the functions a model read as a tree gets
-TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "arm_only", False))
+# the functions a branched tree (or a floating base) read as a tree gets
+TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
 
 
 def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
     """All applicable functions for ``model`` (optionally only the named ones)."""
-    if model.is_tree and params != "numeric":
-        raise ValueError("a kinematic tree is generated with its description's parameters only "
-                         "(--params numeric)")
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:

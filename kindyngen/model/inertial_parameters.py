@@ -67,9 +67,10 @@ def numeric_inertials(model: RobotModel) -> tuple[LinkInertials, ...]:
     return tuple(out)
 
 
-def parameter_symbols(n: int) -> tuple[se.Symbol, ...]:
-    """The 10 n barycentric symbols, link by link in :data:`NAMES` order (``m1, mx1, ...``)."""
-    return tuple(se.Symbol(f"{name}{i + 1}") for i in range(n) for name in NAMES)
+def parameter_symbols(n: int, first: int = 1) -> tuple[se.Symbol, ...]:
+    """The 10 n barycentric symbols, link by link in :data:`NAMES` order (``m1, mx1, ...``);
+    ``first=0``: body 0 (a floating base's root) first, then the n links (10 (n + 1))."""
+    return tuple(se.Symbol(f"{name}{i}") for i in range(first, n + 1) for name in NAMES)
 
 
 def symbolic_inertials(n: int, symbols=None) -> tuple[LinkInertials, ...]:
@@ -91,6 +92,8 @@ def exact_parameter_vector(model: RobotModel) -> tuple[sympy.Rational, ...]:
 
 
 def parameter_vector(model: RobotModel) -> np.ndarray:
-    """All links' barycentric numbers stacked (10 n; the payload merged into the last link) as
-    floats: the values of the input ``p`` that reproduce the numeric build in symbolic mode."""
-    return np.array([float(v) for v in exact_parameter_vector(model)])
+    """All links' barycentric numbers stacked (10 n; the payload merged into the last link;
+    a floating base's root body first) as floats: the values of the input ``p`` that
+    reproduce the numeric build in symbolic mode."""
+    root = barycentric(model.root) if model.floating_base else ()
+    return np.array([float(v) for v in root + exact_parameter_vector(model)])

@@ -21,7 +21,7 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import sympy
@@ -185,6 +185,21 @@ class RobotModel:
         return not self.floating_base and self.parents == tuple(range(-1, self.n - 1))
 
     @property
+    def flange_chain(self) -> "RobotModel | None":
+        """This model as the arm the flange derivations (dual-quaternion kinematics, closed-form
+        IK) read: a chain (:attr:`is_chain`) with one flange. An arm is its own; a chain read
+        as a tree has for flange its one frame of interest when that is on the last link (the
+        frame's placement as the tool); None otherwise (a branched tree, a floating base,
+        several frames of interest or one elsewhere)."""
+        if not self.is_chain:
+            return None
+        if not self.is_tree:
+            return self
+        if len(self.frames) != 1 or self.frames[0].body != self.n - 1:
+            return None
+        return replace(self, tool=self.frames[0].placement)
+
+    @property
     def flange_frame(self) -> Frame:
         """The arm's flange frame (the last link frame moved by the tool)."""
         return Frame(self.flange_name or "flange", self.n - 1, self.tool)
@@ -286,12 +301,24 @@ class RobotModel:
 
     @property
     def length_symbols(self) -> tuple:
-        """Symbolic DH lengths (plain names in the YAML), in order of first appearance."""
+        """Symbolic lengths (plain names in the YAML: DH ``a`` and ``d``, ``xyz`` of an origin
+        or of the tool), in order of first appearance: each joint's (DH row, else its
+        placements), then the tool's and the frames' of interest."""
         seen = []
-        for joint in self.joints:
-            for value in ((joint.dh.a, joint.dh.d) if joint.dh is not None else ()):
+
+        def add(values):
+            for value in values:
                 if isinstance(value, sympy.Symbol) and value not in seen:
                     seen.append(value)
+
+        for joint in self.joints:
+            if joint.dh is not None:
+                add((joint.dh.a, joint.dh.d))
+            else:
+                add(_translations(joint.before) + _translations(joint.after))
+        add(_translations(self.tool))
+        for frame in self.frames:
+            add(_translations(frame.placement))
         return tuple(seen)
 
     @property
@@ -299,6 +326,11 @@ class RobotModel:
         """The name as a C identifier (used as the prefix of generated functions)."""
         ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
         return ident if not ident[0].isdigit() else "r_" + ident
+
+
+def _translations(placement: Placement) -> tuple:
+    """The entries of a placement's translations, in order."""
+    return tuple(v for kind, *rest in placement.factors if kind == "trans" for v in rest[0])
 
 
 def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:

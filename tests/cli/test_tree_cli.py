@@ -113,9 +113,60 @@ def test_floating_joint_in_urdf_is_refused(tmp_path, capsys, monkeypatch):
              "joint 'right_joint' type': a floating joint is not supported")
 
 
-def test_params_symbolic_is_refused_for_trees(tmp_path, capsys, monkeypatch):
-    _refused(["generate", TREE, "--tree", "--params", "symbolic", "--out", str(tmp_path)], capsys, monkeypatch,
-             "a kinematic tree is generated with its description's parameters only")
+def test_params_symbolic_tree_equals_pinocchio(tmp_path, capsys, monkeypatch):
+    """generate --floating-base --params symbolic: the C and Python of M, g, c, tau, fd and com
+    take p (10 per body, the root body first) and equal Pinocchio with the same random
+    parameters (tests/algorithms/test_tree_symbolic_params.py builds them), 20 states, 1e-9."""
+    pin = pytest.importorskip("pinocchio")
+    from kindyngen.readers.urdf import load_urdf
+    from kindyngen.runtime.evaluate import load_generated
+    from tests.algorithms.test_tree_derivatives import pinocchio_tree
+    from tests.algorithms.test_tree_symbolic_params import parameters_from_pinocchio, pinocchio_values, random_inertia
+    functions = ("M", "g", "c", "tau", "fd", "com")
+    code, _, err = _run(["generate", TREE, "--floating-base", "--params", "symbolic", "--lang", "c,python",
+                         "--no-batch", "--functions", ",".join(functions), "--out", str(tmp_path), "--quiet"],
+                        capsys, monkeypatch)
+    assert code == 0, err
+    folder = tmp_path / "mobile_slider_tree"
+    interface = json.loads((folder / "functions.json").read_text())
+    assert interface["params"] == "symbolic"
+    assert {f["name"]: f["inputs"][-1]["shape"] for f in interface["functions"]} == {name: [60] for name in functions}
+    tree = load_urdf(TREE, tree=True, floating_base=True)
+    model = pinocchio_tree(tree)
+    rng = np.random.default_rng(7)
+    for k in range(1, model.njoints):
+        model.inertias[k] = random_inertia(rng)
+    data = model.createData()
+    p = parameters_from_pinocchio(tree, model)
+    states = []
+    for _ in range(20):
+        quat = rng.standard_normal(4)
+        q = np.r_[rng.uniform(-1, 1, 3), quat / np.linalg.norm(quat),
+                  rng.uniform([max(j.lower, -3) for j in tree.joints], [min(j.upper, 3) for j in tree.joints])]
+        states.append((q,) + tuple(rng.uniform(-3, 3, tree.nv) for _ in range(3)))
+    for lang in ("c", "python"):
+        library = load_generated(folder, lang)
+        for q, qd, qdd, tau in states:
+            expected = pinocchio_values(model, data, q, qd, qdd, tau)
+            inputs = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "p": p}
+            for name in functions:
+                spec = next(f for f in interface["functions"] if f["name"] == name)
+                got = library.call(name, {port["name"]: inputs[port["name"]] for port in spec["inputs"]})
+                for port, value in expected[name].items():
+                    error = np.abs(got[port] - value).max() / max(1.0, np.abs(value).max())
+                    assert error <= 1e-9, (lang, name, port, error)
+
+
+def test_tree_with_named_lengths_is_refused_where_y_is_asked(tmp_path, capsys, monkeypatch):
+    """Named lengths in a tree's origins: generate (base_params.json is Y's) and count --only Y
+    are refused in one line; count without Y derives them."""
+    path = tmp_path / "named.yaml"
+    path.write_text(YAML_TREE.replace("xyz: [0, 0, -0.3]", "xyz: [0, 0, thigh]"))
+    message = "named lengths (thigh) in a tree: the regressor Y and base_params.json need numbers"
+    _refused(["generate", str(path), "--tree", "--out", str(tmp_path)], capsys, monkeypatch, message)
+    _refused(["count", str(path), "--tree", "--only", "tau", "Y"], capsys, monkeypatch, message)
+    code, out, err = _run(["count", str(path), "--tree", "--only", "tau"], capsys, monkeypatch)
+    assert code == 0 and "| tau |" in out, err
 
 
 def test_help_names_the_tree_options(capsys, monkeypatch):
