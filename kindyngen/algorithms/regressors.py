@@ -1,34 +1,41 @@
 """Linear parametrisation of the dynamics: regressors on base parameters (identification
-paper, Sect. V, eqs. 17, 18, 23).
+paper, Sect. V, eqs. 17, 18, 23), one derivation for every robot.
 
-The dynamics is linear in the standard barycentric parameters ``p`` (10 per link, see
-:mod:`kindyngen.model.inertial_parameters`), so each regressor column is the derivative of a
-symbolic dynamics function with respect to one parameter, taken on the DAG with ``se.diff``
-(nothing is expanded):
+The dynamics is linear in the bodies' barycentric parameters (10 per body: m, mx, my, mz,
+Ixx, Ixy, Iyy, Ixz, Iyz, Izz in the link frame, inertia about its origin; a floating base's
+root body is body 0 and comes first, then the link of joint j as body j + 1, see
+:mod:`kindyngen.model.inertial_parameters`) and in the description's joint-effect
+coefficients (``fv1``, ``fc1``, ``f01``, ``Ia1``, ...: :mod:`kindyngen.algorithms.effect_torques`):
 
+* ``Y(q, qd, qdd) -> Y``, shape ``(nv, p)``: ``tau = Y(q, qd, qdd) pi``, for every robot;
 * ``Y_g(q) -> Y``, shape ``(n, p_g)``: ``g(q) = Y_g(q) pi_g`` (eq. 17);
 * ``Y_m(q) -> Y``, shape ``(n(n+1)/2, p_m)``: the inertia stack ``m~(q) = Y_m(q) pi_m``
   (eq. 18), the lower triangle of M row by row: ``M00, M10, M11, M20, M21, M22, ...``
-  (row ``i(i+1)/2 + j`` holds ``M_ij``, ``j <= i``, 0-based);
-* ``Y(q, qd, qdd) -> Y``, shape ``(n, p)``: ``tau = Y(q, qd, qdd) pi``.
+  (row ``i(i+1)/2 + j`` holds ``M_ij``, ``j <= i``, 0-based).
 
-The columns are those of the base parameters of each (found by
-:mod:`kindyngen.algorithms.base_parameters`: independent columns kept in parameter order, the others
-grouped into them, paper eq. 23), so ``Y`` times the base values equals the dynamics.  The
-symbolic dynamics comes from the catalog in symbolic mode (``g_lagrange``, ``M_lagrange`` and
-``tau``: the routes whose derivatives are cheapest after CSE, see :data:`SOURCES`); the
-regressor does not depend on the inertial values, so numeric and symbolic mode register the
-same functions.
+Y's column of a link parameter is the torque a unit value of it causes: that body's wrench in
+its joint frame (``F = m a + U h``, ``N = I wd + w x I w + h x a`` with the motion of
+:func:`kindyngen.algorithms.dynamics.motion_states`) carried up to every ancestor joint (and
+the floating base), so entries for joints off the body's branch are exact zeros and nothing is
+differentiated.  Y_g's and Y_m's columns are the parameter derivatives (``se.diff`` on the DAG)
+of the Lagrange route's g and M (:data:`SOURCES`).  An effect coefficient's column is what
+multiplies it on its joint's row (``qd_i``, the Coulomb shape, 1, ``qdd_i``; the armature's is 1
+on ``M_ii`` in Y_m).
 
-The paper's parameters (mass, CoM, inertia about the CoM) map to the barycentric ones by
-:func:`barycentric_in_paper` (parallel-axis theorem) and back by :func:`paper_in_barycentric`.
+The base parameters are found by :func:`kindyngen.algorithms.base_parameters.find_base_parameters`
+on one numeric evaluation of the full regressor at random states (:func:`random_states`,
+:func:`evaluate_full`; every decision exact or with its stated margin): independent columns kept
+in parameter order, the others grouped into them (paper eq. 23), so ``Y`` times the base values
+equals the dynamics.  The regressors do not depend on the inertial values, so numeric and
+symbolic mode register the same functions.
 
 Example:
 
->>> from kindyngen.readers.yaml_description import load_robot
->>> b = base_parameters(load_robot("robots/lwr4.yaml"), "Y_g")    # doctest: +SKIP
->>> b.rank, b.names[:2]                                            # doctest: +SKIP
-(12, ('mx2', 'mz2R'))
+>>> from kindyngen.readers.urdf import parse_urdf
+>>> from kindyngen.readers.urdf import TWO_PENDULUMS
+>>> b = base_parameters(parse_urdf(TWO_PENDULUMS, tree=True), "Y")
+>>> b.rank, b.names      # left turns about y: mx, mz, Iyy act; right about x: my, mz, Ixx
+(6, ('mx1', 'mz1', 'Iyy1', 'my2', 'mz2', 'Ixx2'))
 """
 from __future__ import annotations
 
@@ -41,26 +48,26 @@ import symengine as se
 import sympy
 
 from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
-from .lagrange import gravity_lagrange, mass_matrix_lagrange
-from .dynamics import inverse_dynamics_tree
-from ..model.inertial_parameters import NAMES, exact_parameter_vector, parameter_symbols
+from .dynamics import carry, conventions as dynamics_conventions, force_port, frame_body, motion_states, setup
 from .effect_torques import effect_columns, effect_parameter_names, effect_parameter_values
-from ..model.robot_model import RobotModel
-from .symbolic import Port, Stages, SymbolicFunction
-from .tree_regressors import link_parameter_columns
+from .joint_frame_steps import mat3
+from .kinematics_conventions import q_port
+from .lagrange import gravity_lagrange, mass_matrix_lagrange
+from .rigid_bodies import ZERO, cross, qd_port, qdd_port, vadd, vscale
+from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
+from ..model.inertial_parameters import NAMES, barycentric, exact_parameter_vector
+from ..model.robot_model import FREE_FLYER_NV, RobotModel
 
 KINDS = ("Y_g", "Y_m", "Y")
-# catalog functions each regressor is differentiated from, first available wins: the routes
-# whose parameter derivatives cost least after CSE (LWR4: Y_g 31/70 add/mul from g_lagrange
-# against 47/107 from g; Y_m 328/764 from M_lagrange against 708/1086 from the composite-body
-# M; Y 512/719 from Newton-Euler tau against 3666/4792 from the Lagrange energy)
-# the dynamics each regressor differentiates: the routes whose derivatives are cheapest after CSE
-# (rigid bodies only: the joint effects are appended as their own columns, see full_regressor)
+# what Y_g and Y_m differentiate: the Lagrange route, whose parameter derivatives cost least
+# after CSE (LWR4: Y_g 31/70 add/mul from g_lagrange against 47/107 from g; Y_m 328/764 from
+# M_lagrange against 708/1086 from the composite-body M). That route sums a chain's energies,
+# so Y_g and Y_m are chain-only (:func:`kinds`); Y's link columns are carried up the tree
+# (LWR4: 512/719 against 3666/4792 from the Lagrange energy) and exist for every robot.
 SOURCES = {"Y_g": gravity_lagrange,
-           "Y_m": lambda model, params: mass_matrix_lagrange(model, params, effects=False),
-           "Y": lambda model, params: inverse_dynamics_tree(model, params, effects=False, named=False)}
+           "Y_m": lambda model, params: mass_matrix_lagrange(model, params, effects=False)}
 QUANTITY = {"Y_g": "g", "Y_m": "M", "Y": "tau"}
-SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random samples for the rank analysis
+SAMPLES = {"Y_g": 40, "Y_m": 12, "Y": 40}          # random states for the rank analysis
 SEEDS = (20140, 20141)                             # analysis, verification
 
 SUMMARIES = {
@@ -71,34 +78,29 @@ SUMMARIES = {
 }
 
 
-@dataclass(frozen=True)
-class FullRegressor:
-    """A dynamics quantity as rows of expressions linear in the parameters ``p``: the 10 n
-    barycentric symbols, then the description's joint-effect coefficients (``fv1``, ...).
-    Column k is ``d rigid_rows / d p_k`` for a link parameter, ``effect_columns[k - 10 n]``
-    (per row) for an effect coefficient."""
+def kinds(model: RobotModel) -> tuple[str, ...]:
+    """The regressors ``model`` has: Y always, Y_g and Y_m for a model read as a chain (their
+    sources, :data:`SOURCES`, are written for chains)."""
+    return ("Y",) if model.is_tree else KINDS
 
-    kind: str
-    inputs: tuple[Port, ...]
-    input_symbols: tuple[tuple[se.Symbol, ...], ...]
-    p: tuple[se.Symbol, ...]
-    rigid_rows: tuple[se.Basic, ...]
-    effect_columns: tuple[tuple[se.Basic, ...], ...]
-    row_names: tuple[str, ...]
-    gravity: tuple[float, float, float]
 
-    @property
-    def rows(self) -> tuple[se.Basic, ...]:
-        """The modelled quantity, linear in ``p``."""
-        rigid = len(self.p) - len(self.effect_columns)
-        return tuple(se.Add(row, *(self.p[rigid + j] * column[r] for j, column in enumerate(self.effect_columns)))
-                     for r, row in enumerate(self.rigid_rows))
+# ----------------------------------------------------------------------------- parameters
 
-    def columns(self, indices) -> tuple[se.Basic, ...]:
-        """Row-major entries of the regressor restricted to columns ``indices``."""
-        rigid = len(self.p) - len(self.effect_columns)
-        return tuple(se.diff(row, self.p[k]) if k < rigid else self.effect_columns[k - rigid][r]
-                     for r, row in enumerate(self.rigid_rows) for k in indices)
+def body_labels(model: RobotModel) -> tuple[str, ...]:
+    """The link each parameter block belongs to, in column order."""
+    return ((model.base_name,) if model.floating_base else ()) + tuple(
+        _link_name(model, j) for j in range(model.n))
+
+
+def _link_name(model: RobotModel, j: int) -> str:
+    names = [f.name for f in model.frames if f.body == j and f.placement.is_identity]
+    return names[0] if names else model.joints[j].name
+
+
+def link_parameter_names(model: RobotModel) -> tuple[str, ...]:
+    """``m0 .. Izz0`` for a floating base's root body, then ``m1 .. Izz1`` for joint 0's link, ..."""
+    first = 0 if model.floating_base else 1
+    return tuple(f"{name}{first + b}" for b in range(len(body_labels(model))) for name in NAMES)
 
 
 def effect_names(model: RobotModel, kind: str) -> tuple[str, ...]:
@@ -109,81 +111,220 @@ def effect_names(model: RobotModel, kind: str) -> tuple[str, ...]:
 
 
 def full_values(model: RobotModel, kind: str) -> tuple:
-    """Exact values of the full regressor's parameters: the barycentric link parameters (the
-    payload merged into the last link) followed by the effect coefficients of ``kind``."""
+    """Exact values of the full regressor's parameters: the barycentric ones of the bodies (a
+    floating base's root first; a payload merged into the last link) followed by the effect
+    coefficients of ``kind``."""
+    root = barycentric(model.root) if model.floating_base else ()
     effects = dict(zip(effect_parameter_names(model), effect_parameter_values(model)))
-    return exact_parameter_vector(model) + tuple(effects[name] for name in effect_names(model, kind))
+    return tuple(root) + exact_parameter_vector(model) + tuple(effects[name] for name in effect_names(model, kind))
+
+
+# ----------------------------------------------------------------------------- the full regressor
+
+@dataclass(frozen=True)
+class FullRegressor:
+    """A dynamics quantity as rows linear in the parameters ``p``: the barycentric ones of the
+    bodies, then the description's joint-effect coefficients of ``kind``.  A link parameter's
+    column is ``d rigid_rows / d p_k`` where ``rigid_rows`` is given (Y_g, Y_m, the
+    dual-quaternion Y_dq), else (Y) the torque its unit value causes, carried up the tree;
+    an effect coefficient's is ``effect_columns[k - links]`` (per row)."""
+
+    model: RobotModel
+    kind: str
+    inputs: tuple[Port, ...]
+    input_symbols: tuple[tuple[se.Symbol, ...], ...]
+    p: tuple[se.Symbol, ...]
+    rigid_rows: tuple[se.Basic, ...] | None
+    effect_columns: tuple[tuple[se.Basic, ...], ...]
+    row_names: tuple[str, ...]
+
+    @property
+    def links(self) -> int:
+        """How many of ``p`` are link parameters."""
+        return len(self.p) - len(self.effect_columns)
+
+    def columns(self, indices, stages: Stages | None = None) -> tuple[se.Basic, ...]:
+        """Row-major entries of the regressor restricted to columns ``indices``; with
+        ``stages``, Y's carried motion states and wrenches are named there."""
+        wanted = sorted(k for k in indices if k < self.links)
+        if self.rigid_rows is None:
+            column = dict(zip(wanted, link_parameter_columns(self.model, frozenset(wanted), stages)))
+        else:
+            column = {k: [se.diff(row, self.p[k]) for row in self.rigid_rows] for k in wanted}
+        return tuple(column[k][r] if k < self.links else self.effect_columns[k - self.links][r]
+                     for r in range(len(self.row_names)) for k in indices)
 
 
 @lru_cache(maxsize=None)
 def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
-    """The rows (g, the inertia stack, or tau) of ``model`` as functions of q (qd, qdd) and p."""
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    f = SOURCES[kind](model, "symbolic")
-    names = [port.name for port in f.inputs]
-    k = names.index("p")
-    p = f.input_symbols[k]
-    assert tuple(map(str, p)) == tuple(map(str, parameter_symbols(model.n))), "catalog p is not the barycentric vector"
-    inputs = tuple(port for port in f.inputs if port.name != "p")
-    input_symbols = tuple(s for port, s in zip(f.inputs, f.input_symbols) if port.name != "p")
-    exprs = f.output_exprs[0]
-    n = model.n
-    # the description's joint effects: coefficients appended to p, each a column that acts on
-    # one joint's torque (friction and offset on tau only, the armature on tau and M's diagonal)
-    values = {port.name: syms for port, syms in zip(inputs, input_symbols)}
-    wanted = effect_names(model, kind)
-    effect_symbols = tuple(se.Symbol(name) for name in wanted)
-    zero = se.Integer(0)
+    """The rows (tau, g or the inertia stack) of ``model`` as functions of q (qd, qdd) and p."""
+    if kind not in kinds(model):
+        raise ValueError(f"kind must be one of {kinds(model)} for {model.identifier}, got {kind!r}")
+    n, zero = model.n, se.Integer(0)
     if kind == "Y":
-        columns = effect_columns(model, values["qd"], values["qdd"])
-    else:   # Y_m: the armature's column is 1 on M_ii
-        columns = effect_columns(model, [zero] * n, [se.Integer(1)] * n)
-    chosen = [c for name, c in zip(effect_parameter_names(model), columns) if name in wanted]
-    if kind == "Y_m":
-        rows = tuple(exprs[i * n + j] for i in range(n) for j in range(i + 1))
-        row_names = tuple(f"M{i}{j}" if n <= 10 else f"M{i}_{j}" for i in range(n) for j in range(i + 1))
-        row_index = {i: i * (i + 1) // 2 + i for i in range(n)}      # M_ii in the stack
+        inputs = (q_port(model), qd_port(model), qdd_port(model))
+        input_symbols = (setup(model).q, port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,)))
+        rigid_rows, link_names = None, link_parameter_names(model)
+        base = FREE_FLYER_NV if model.floating_base else 0
+        shapes = effect_columns(model, input_symbols[1][base:], input_symbols[2][base:])
+        row_index = {i: base + i for i in range(n)}
+        row_names = tuple(f"tau{i}" for i in range(model.nv))
     else:
-        rows = tuple(exprs)
-        row_names = tuple(f"{QUANTITY[kind]}{i}" for i in range(n))
-        row_index = {i: i for i in range(n)}
-    effect_cols = tuple(tuple(shape if r == row_index[i] else zero for r in range(len(rows))) for i, shape in chosen)
-    return FullRegressor(kind, inputs, input_symbols, tuple(p) + effect_symbols, rows, effect_cols, row_names,
-                         tuple(float(g) for g in model.gravity))
-
-
-def random_inputs(model: RobotModel, inputs: tuple[Port, ...], count: int, seed: int) -> dict:
-    """Random samples for each input port: q uniform within the joint limits, others
-    (velocities, accelerations) standard normal."""
-    rng = np.random.default_rng(seed)
-    out = {}
-    for port in inputs:
-        if port.name == "q":
-            out[port.name] = rng.uniform(model.lower, model.upper, size=(count, model.n))
+        f = SOURCES[kind](model, "symbolic")
+        k = [port.name for port in f.inputs].index("p")
+        link_names = tuple(map(str, f.input_symbols[k]))
+        assert link_names == link_parameter_names(model), "catalog p is not the barycentric vector"
+        inputs, input_symbols = f.inputs[:k] + f.inputs[k + 1:], f.input_symbols[:k] + f.input_symbols[k + 1:]
+        exprs = f.output_exprs[0]
+        # the armature's column is 1 on M_ii (qd = 0, qdd = 1 in its torque)
+        shapes = effect_columns(model, [zero] * n, [se.Integer(1)] * n)
+        if kind == "Y_m":
+            rigid_rows = tuple(exprs[i * n + j] for i in range(n) for j in range(i + 1))
+            row_names = tuple(f"M{i}{j}" if n <= 10 else f"M{i}_{j}" for i in range(n) for j in range(i + 1))
+            row_index = {i: i * (i + 1) // 2 + i for i in range(n)}      # M_ii in the stack
         else:
-            out[port.name] = rng.normal(size=(count, port.size))
+            rigid_rows, row_names, row_index = tuple(exprs), tuple(f"g{i}" for i in range(n)), {}
+    # the joint effects: coefficients appended to p, each a column that acts on one joint's row
+    # (friction and offset on tau only, the armature on tau and M's diagonal)
+    wanted = effect_names(model, kind)
+    chosen = [c for name, c in zip(effect_parameter_names(model), shapes) if name in wanted]
+    effect_cols = tuple(tuple(shape if r == row_index[i] else zero for r in range(len(row_names)))
+                        for i, shape in chosen)
+    p = tuple(se.Symbol(name) for name in link_names + wanted)
+    return FullRegressor(model, kind, inputs, input_symbols, p, rigid_rows, effect_cols, row_names)
+
+
+def _unit_wrenches(after, a, w, wd, U):
+    """The wrench in the joint frame of each of a body's 10 unit parameters."""
+    out = []
+    for k in range(10):
+        body = frame_body([1 if i == k else 0 for i in range(10)], after)
+        h, I, m = body.h, body.I, body.m
+        F = vscale(m, a) if U is None else vadd(vscale(m, a), mat3(U, h))
+        N = cross(h, a) if U is None else vadd(mat3(I, wd), cross(w, mat3(I, w)), cross(h, a))
+        out.append((F, N))
     return out
 
 
+def link_parameter_columns(model: RobotModel, wanted=None, stages: Stages | None = None) -> list:
+    """The torque regressor's link-parameter columns (each nv entries) in parameter order, only
+    those in ``wanted`` if given, on the symbols of :func:`full_regressor`; with ``stages``,
+    every motion state and carried wrench is named there."""
+    name = naming(stages)
+    ts = setup(model)
+    qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
+    root_state, state = motion_states(ts, qd, qdd, True, stages)
+    base = FREE_FLYER_NV if model.floating_base else 0
+    blocks = ((None, -1, root_state),) if model.floating_base else ()
+    blocks += tuple((model.joints[j].after, j, state[j]) for j in range(model.n))
+    columns = []
+    for index, (after, j, motion) in enumerate(blocks):
+        for k, (F, N) in enumerate(_unit_wrenches(after, *motion)):
+            if wanted is not None and 10 * index + k not in wanted:
+                continue
+            column = [ZERO] * model.nv
+            node = j
+            while node >= 0:
+                column[base + node] = F[2] if model.joints[node].prismatic else N[2]
+                F, N = carry(ts.joints[node], F, N)
+                F, N = [name(e) for e in F], [name(e) for e in N]
+                node = model.parents[node]
+            if model.floating_base:
+                column[0:6] = list(F) + list(N)
+            columns.append(column)
+    return columns
+
+
+# ----------------------------------------------------------------------------- numeric evaluation
+
+def random_states(model: RobotModel, count: int, seed: int) -> dict:
+    """Random inputs of Y (those of Y_g and Y_m are its q): q with joints within their limits
+    (clipped to +-pi) and a floating base anywhere within 1 m with a random unit quaternion;
+    qd and qdd standard normal."""
+    rng = np.random.default_rng(seed)
+    lower = np.array([max(j.lower, -np.pi) for j in model.joints])
+    upper = np.array([min(j.upper, np.pi) for j in model.joints])
+    q = rng.uniform(lower, upper, size=(count, model.n))
+    if model.floating_base:
+        quat = rng.standard_normal((count, 4))
+        q = np.hstack([rng.uniform(-1, 1, (count, 3)), quat / np.linalg.norm(quat, axis=1, keepdims=True), q])
+    velocities = rng.standard_normal((count, 2 * model.nv))
+    return {"q": q, "qd": velocities[:, :model.nv], "qdd": velocities[:, model.nv:]}
+
+
+def _select(*args):
+    """A Piecewise's value: the first branch whose condition holds."""
+    values = np.broadcast_arrays(*args)
+    return np.select(values[1::2], values[0::2])
+
+
+_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "piecewise": _select,
+              "strictlessthan": np.less, "booleantrue": lambda: True}
+
+
+def evaluate_dag(exprs, values: dict) -> list:
+    """Numeric values of symengine expressions at arrays of ``values`` (symbol -> array), each
+    shared node evaluated once, in one walk of the DAG (cheaper than compiling it: the full
+    regressor is evaluated at one batch of states per decision).
+
+    >>> x = se.Symbol("x")
+    >>> evaluate_dag([se.sin(x) ** 2 + 3 * x], {x: np.array([0.0, 1.0])})[0].tolist()
+    [0.0, 3.708073418273571]
+    """
+    done = {k: np.asarray(v, float) for k, v in values.items()}
+    stack = list(exprs)
+    while stack:
+        e = stack[-1]
+        if e in done:
+            stack.pop()
+            continue
+        if e.is_Number:
+            done[e] = float(e)
+            stack.pop()
+            continue
+        pending = [a for a in e.args if a not in done]
+        if pending:
+            stack.extend(pending)
+            continue
+        stack.pop()
+        args = [done[a] for a in e.args]
+        if isinstance(e, se.Add):
+            done[e] = sum(args[1:], args[0])
+        elif isinstance(e, se.Mul):
+            value = args[0]
+            for a in args[1:]:
+                value = value * a
+            done[e] = value
+        elif isinstance(e, se.Pow):
+            done[e] = args[0] ** args[1]
+        else:
+            done[e] = _FUNCTIONS[type(e).__name__.lower()](*args)
+    return [done[e] for e in exprs]
+
+
 @lru_cache(maxsize=None)
-def _numeric(model: RobotModel, kind: str):
+def _all_columns(model: RobotModel, kind: str) -> tuple[se.Basic, ...]:
     full = full_regressor(model, kind)
-    args = [s for syms in full.input_symbols for s in syms] + list(full.p)
-    return se.Lambdify(args, list(full.rows), cse=True)
+    return full.columns(range(len(full.p)))
 
 
-def evaluate_full(model: RobotModel, kind: str, inputs: dict) -> np.ndarray:
-    """The full regressor (samples x rows x 10 n) at numeric inputs, by evaluating the
-    dynamics at every unit parameter vector (the dynamics is linear and homogeneous in p)."""
+def evaluate_full(model: RobotModel, kind: str, inputs: dict, chunk: int = 512) -> np.ndarray:
+    """The full regressor ``kind`` (samples x rows x parameters) at numeric ``inputs`` (port
+    name -> samples x size), in chunks of ``chunk`` samples (the walk keeps every node's
+    values)."""
     full = full_regressor(model, kind)
-    fn = _numeric(model, kind)
     x = np.concatenate([np.asarray(inputs[port.name], float).reshape(-1, port.size) for port in full.inputs], axis=1)
-    count, P = x.shape[0], len(full.p)
-    batch = np.concatenate([np.repeat(x, P, axis=0), np.tile(np.eye(P), (count, 1))], axis=1)
-    out = np.asarray(fn(batch), float).reshape(count, P, len(full.rows))
-    return out.transpose(0, 2, 1)
+    symbols = [s for group in full.input_symbols for s in group]
+    entries = _all_columns(model, kind)
+    out = np.empty((x.shape[0], len(entries)))
+    for start in range(0, x.shape[0], chunk):
+        part = x[start:start + chunk]
+        values = evaluate_dag(entries, {s: part[:, k] for k, s in enumerate(symbols)})
+        out[start:start + chunk] = np.stack([np.broadcast_to(v, (part.shape[0],)) for v in values], axis=1)
+    return out.reshape(x.shape[0], len(full.row_names), len(full.p))
 
+
+# ----------------------------------------------------------------------------- base parameters
 
 def common_denominator(model: RobotModel) -> int | None:
     """A common denominator of every grouping coefficient: the squared lcm of the joint
@@ -212,19 +353,23 @@ def common_denominator(model: RobotModel) -> int | None:
 
 
 @lru_cache(maxsize=None)
-def base_parameters(model: RobotModel, kind: str) -> BaseParameters:
+def base_parameters(model: RobotModel, kind: str = "Y") -> BaseParameters:
     """Rank analysis and grouping of the full regressor ``kind`` of ``model``."""
     full = full_regressor(model, kind)
-    names = tuple(map(str, full.p))
 
     def evaluate(seed):
-        return evaluate_full(model, kind, random_inputs(model, full.inputs, SAMPLES[kind], seed))
+        return evaluate_full(model, kind, random_states(model, SAMPLES[kind], seed))
 
-    return find_base_parameters(evaluate, names, SEEDS, common_denominator(model))
+    return find_base_parameters(evaluate, tuple(map(str, full.p)), SEEDS, common_denominator(model))
+
+
+def supported(model: RobotModel) -> bool:
+    """Regressors need numeric lengths (the grouping coefficients are found numerically)."""
+    return not model.length_symbols
 
 
 @lru_cache(maxsize=None)
-def unavailable(model: RobotModel, kind: str) -> str | None:
+def unavailable(model: RobotModel, kind: str = "Y") -> str | None:
     """Why regressor ``kind`` is not generated for ``model``, or None when it is: symbolic
     lengths, or a rank / column decision the samples cannot make with the stated margin
     (:func:`kindyngen.algorithms.base_parameters.check_margin`; seen on real arms with millimetre
@@ -243,37 +388,39 @@ def undecided_notes(model: RobotModel, only=None) -> list[str]:
     """One line per regressor (of ``only``, default all) left out because its base parameters
     could not be decided (robots with symbolic lengths have none, and say so elsewhere)."""
     return [f"{model.identifier}: regressor {kind} not generated: {unavailable(model, kind)}"
-            for kind in KINDS if (only is None or kind in only)
+            for kind in kinds(model) if (only is None or kind in only)
             and unavailable(model, kind) not in (None, "symbolic lengths")]
 
 
-def supported(model: RobotModel) -> bool:
-    """Regressors need numeric DH lengths (the grouping coefficients are found numerically)."""
-    return not model.length_symbols
+# ----------------------------------------------------------------------------- the functions
 
-
-def regressor(model: RobotModel, kind: str, name: str | None = None) -> SymbolicFunction | None:
-    """``Y_g(q)``, ``Y_m(q)`` or ``Y(q, qd, qdd)`` on base parameters (output port ``Y``);
+def regressor(model: RobotModel, kind: str = "Y", name: str | None = None) -> SymbolicFunction | None:
+    """``Y(q, qd, qdd)``, ``Y_g(q)`` or ``Y_m(q)`` on base parameters (output port ``Y``);
     None where :func:`unavailable` says why not."""
     if unavailable(model, kind):
         return None
     full = full_regressor(model, kind)
     base = base_parameters(model, kind)
-    rows, cols = len(full.rows), len(base.base)
+    rows, cols = len(full.row_names), len(base.base)
     stages = Stages()
-    exprs = torque_columns(model, full, base.base, stages) if kind == "Y" else full.columns(base.base)
+    exprs = full.columns(base.base, stages)
     what = {"Y_g": "gravity torques g", "Y_m": "inertia stack (lower triangle of M, row by row)",
-            "Y": "joint torques tau"}[kind]
-    unit = {"Y_g": "N m per base parameter", "Y_m": "kg m^2 per base parameter", "Y": "N m per base parameter"}[kind]
+            "Y": "base wrench and joint torques tau" if model.floating_base else "joint torques tau"}[kind]
+    unit = "kg m^2" if kind == "Y_m" else force_port(model, "tau", "torque").unit
     port = Port("Y", (rows, cols), f"regressor of the {what} on the base parameters (row-major; "
-                f"columns: {', '.join(base.names)})", unit)
-    gx, gy, gz = full.gravity
+                f"columns: {', '.join(base.names)})", f"{unit} per base parameter")
+    gx, gy, gz = (float(g) for g in model.gravity)
+    # a tree's joints and base are worded as its dynamics' headers word them
+    lead = (dynamics_conventions(model).split(" Inertial parameters")[0] if model.is_tree else
+            f"Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame: "
+            f"({gx:g}, {gy:g}, {gz:g}) m/s^2.")
+    bodies = "per body, body 0 the floating base and body j + 1 the link of joint j" if model.floating_base \
+        else "per link"
     conventions = (
-        f"Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2). Gravity in the base frame: "
-        f"({gx:g}, {gy:g}, {gz:g}) m/s^2. Rows: {', '.join(full.row_names)}. "
+        f"{lead} Rows: {', '.join(full.row_names)}. "
         f"Columns: the {cols} base parameters (rank of the full {len(base.full_names)}-column regressor), "
         f"named after the barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, "
-        f"Izz per link, inertia about the link frame origin in link-frame axes; suffix R: other "
+        f"Izz {bodies}, inertia about the link frame origin in link-frame axes; suffix R: other "
         f"parameters grouped into it); their expressions and the robot's values are in "
         f"base_params.json. Y times those values equals the modelled quantity.")
     return SymbolicFunction(
@@ -283,93 +430,28 @@ def regressor(model: RobotModel, kind: str, name: str | None = None) -> Symbolic
         metadata={"params": "none", "base_parameters": base.names}, stages=stages.definitions)
 
 
-def torque_columns(model: RobotModel, full: FullRegressor, indices, stages: Stages) -> tuple[se.Basic, ...]:
-    """Row-major entries of the torque regressor restricted to columns ``indices``: a link
-    parameter's column as the torque its unit value causes, carried up the tree
-    (:mod:`kindyngen.algorithms.tree_regressors`: nothing differentiated, fewer operations after CSE
-    than ``d tau / d p``), an effect coefficient's as :attr:`FullRegressor.effect_columns`."""
-    rigid = len(full.p) - len(full.effect_columns)
-    wanted = sorted(k for k in indices if k < rigid)
-    _, columns = link_parameter_columns(model, frozenset(wanted), stages)
-    column = dict(zip(wanted, columns))
-    return tuple(column[k][r] if k < rigid else full.effect_columns[k - rigid][r]
-                 for r in range(len(full.rows)) for k in indices)
-
-
 def base_params_document(model: RobotModel) -> dict | None:
     """Content of ``base_params.json``: per regressor the base parameters in column order,
-    their expressions in the barycentric symbols and their values for the robot's YAML
-    parameters (``Y @ values`` is the modelled quantity), plus rank and condition number."""
+    their expressions in the barycentric symbols and their values for the robot's
+    description (``Y @ values`` is the modelled quantity), rank and column count; for a tree
+    also which link each body is (None for a robot with symbolic lengths)."""
     if not supported(model):
         return None
     out = {}
-    for kind in KINDS:
+    for kind in kinds(model):
         if unavailable(model, kind):
             out[kind] = {"unavailable": unavailable(model, kind)}
             continue
         b = base_parameters(model, kind)
-        values = full_values(model, kind)
         out[kind] = {
             "names": list(b.names),
             "expressions": list(b.expression_strings()),
             # exact sums of the description's rationals, rounded once to a double
-            "values": [float(v) for v in b.exact_values(values)],
+            "values": [float(v) for v in b.exact_values(full_values(model, kind))],
             "rank": b.rank,
             "full_columns": len(b.full_names),
             "exact": b.exact,
         }
+        if model.is_tree:     # an arm's bodies are its links in order (its files predate the key)
+            out[kind]["bodies"] = list(body_labels(model))
     return out
-
-
-# ----------------------------------------------------------------------------- paper parameters
-
-PAPER_NAMES = ("m", "cx", "cy", "cz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
-
-
-def paper_symbols(n: int) -> tuple[sympy.Symbol, ...]:
-    """The paper's parameters per link: ``m1, c1x, c1y, c1z, I1xx, I1yy, I1zz, I1xy, I1xz,
-    I1yz`` (mass, CoM in link frame i, inertia about the CoM in link-frame axes)."""
-    out = []
-    for i in range(1, n + 1):
-        out.append(sympy.Symbol(f"m{i}"))
-        out += [sympy.Symbol(f"c{i}{a}") for a in "xyz"]
-        out += [sympy.Symbol(f"I{i}{a}") for a in ("xx", "yy", "zz", "xy", "xz", "yz")]
-    return tuple(out)
-
-
-def barycentric_symbols(n: int) -> tuple[sympy.Symbol, ...]:
-    """sympy twins of :func:`kindyngen.model.inertial_parameters.parameter_symbols`."""
-    return tuple(sympy.Symbol(f"{name}{i + 1}") for i in range(n) for name in NAMES)
-
-
-def barycentric_in_paper(n: int) -> tuple[sympy.Expr, ...]:
-    """The 10 n barycentric parameters as expressions of the paper's (parallel-axis theorem):
-    ``mx = m cx``, ``Ixx = I_xx + m (cy^2 + cz^2)``, ``Ixy = I_xy - m cx cy``, ..."""
-    s = paper_symbols(n)
-    out = []
-    for i in range(n):
-        m, cx, cy, cz, ixx, iyy, izz, ixy, ixz, iyz = s[10 * i:10 * i + 10]
-        out += [m, m * cx, m * cy, m * cz,
-                ixx + m * (cy ** 2 + cz ** 2), ixy - m * cx * cy, iyy + m * (cx ** 2 + cz ** 2),
-                ixz - m * cx * cz, iyz - m * cy * cz, izz + m * (cx ** 2 + cy ** 2)]
-    return tuple(out)
-
-
-def paper_in_barycentric(n: int) -> tuple[sympy.Expr, ...]:
-    """Inverse of :func:`barycentric_in_paper`: ``cx = mx / m``, ``I_xx = Ixx - (my^2 + mz^2)
-    / m``, ``I_xy = Ixy + mx my / m``, ... (in :func:`paper_symbols` order)."""
-    s = barycentric_symbols(n)
-    out = []
-    for i in range(n):
-        m, hx, hy, hz, ixx, ixy, iyy, ixz, iyz, izz = s[10 * i:10 * i + 10]
-        out += [m, hx / m, hy / m, hz / m,
-                ixx - (hy ** 2 + hz ** 2) / m, iyy - (hx ** 2 + hz ** 2) / m, izz - (hx ** 2 + hy ** 2) / m,
-                ixy + hx * hy / m, ixz + hx * hz / m, iyz + hy * hz / m]
-    return tuple(out)
-
-
-def base_expressions_in_paper(model: RobotModel, kind: str) -> tuple[sympy.Expr, ...]:
-    """The base parameters of ``kind`` as polynomials in the paper's parameters."""
-    b = base_parameters(model, kind)
-    subs = dict(zip(barycentric_symbols(model.n), barycentric_in_paper(model.n)))
-    return tuple(sympy.expand(e.xreplace(subs)) for e in b.expressions(barycentric_symbols(model.n)))

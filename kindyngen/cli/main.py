@@ -148,7 +148,8 @@ def _cmd_describe(args) -> int:
 
 
 def _cmd_count(args) -> int:
-    from ..codegen.catalog import NAMES, undecided_notes
+    from ..algorithms.regressors import undecided_notes
+    from ..codegen.catalog import NAMES
     from ..codegen.pipeline import build_programs
     from ..codegen.count_report import opcounts_json, opcounts_markdown
     only = None

@@ -19,15 +19,13 @@ from ..ik.lwr_dualquat import ik_dq
 from ..ik.lwr_homogeneous import ik_hom
 from ..algorithms.dualquat.dq_kinematics import fk_dq, jacobian_dq, pose_jacobian_dq
 from ..model.robot_model import RobotModel
-from ..algorithms.regressors import base_params_document as arm_base_params_document, regressor
-from ..algorithms.regressors import undecided_notes as arm_undecided_notes
+from ..algorithms.regressors import regressor
 from ..algorithms.symbolic import Port, SymbolicFunction
 from ..algorithms.articulated_body import forward_dynamics_aba
 from ..algorithms.dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
                                    inverse_dynamics_tree, mass_matrix_tree)
 from ..algorithms.kinematics import fk_hom_tree, jacobian_tree
 from ..algorithms.derivatives_world_frame import fd_derivatives_tree, tau_derivatives_tree
-from ..algorithms.tree_regressors import tree_base_params_document, tree_regressor, unavailable as tree_regressor_unavailable
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -111,11 +109,11 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
     ("ik_hom", flange_only(lambda model, params: ik_hom(model))),
     ("ik_dq", flange_only(lambda model, params: ik_dq(model))),
-    # regressors on base parameters (kindyngen/algorithms/regressors.py, algorithms/tree_regressors.py): the same
-    # functions in both params modes
+    # regressors on base parameters (kindyngen/algorithms/regressors.py): the same functions in both
+    # params modes; Y_g and Y_m differentiate the Lagrange route, which is written for chains
     ("Y_g", chain_only(lambda model, params: regressor(model, "Y_g"))),
     ("Y_m", chain_only(lambda model, params: regressor(model, "Y_m"))),
-    ("Y", lambda model, params: tree_regressor(model) if model.is_tree else regressor(model, "Y")),
+    ("Y", lambda model, params: regressor(model, "Y")),
 )
 
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
@@ -133,21 +131,6 @@ def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[Sy
         if function is not None:
             out.append(with_lengths_port(function, model))
     return out
-
-
-def base_params_document(model: RobotModel) -> dict | None:
-    """Content of ``base_params.json`` for either kind of model (None for an arm with symbolic
-    lengths)."""
-    return tree_base_params_document(model) if model.is_tree else arm_base_params_document(model)
-
-
-def undecided_notes(model: RobotModel, only=None) -> list[str]:
-    """One line per regressor (of ``only``, default all) left out because its base parameters
-    could not be decided."""
-    if not model.is_tree:
-        return arm_undecided_notes(model, only)
-    reason = tree_regressor_unavailable(model) if only is None or "Y" in only else None
-    return [f"{model.identifier}: regressor Y not generated: {reason}"] if reason else []
 
 
 def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

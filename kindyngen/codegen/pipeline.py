@@ -11,7 +11,8 @@ import sys
 import time
 from pathlib import Path
 
-from .catalog import base_params_document, derive_all, undecided_notes
+from ..algorithms.regressors import base_params_document, undecided_notes
+from .catalog import derive_all
 from .interface import manifest
 from .optimize import Program, optimize
 from .render import RENDERERS

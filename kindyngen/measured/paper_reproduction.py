@@ -54,7 +54,8 @@ from typing import Callable
 import numpy as np
 import sympy
 
-from ..algorithms.regressors import base_expressions_in_paper, base_parameters, paper_symbols
+from ..algorithms.paper_parameters import base_expressions_in_paper, paper_symbols
+from ..algorithms.regressors import base_parameters
 from ..model.robot_model import RobotModel
 from .estimation import Fit, least_squares
 from .fri_source import DynamicsSource, Motion

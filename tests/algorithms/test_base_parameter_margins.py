@@ -27,8 +27,7 @@ def _ratios(A):
 @pytest.mark.parametrize("kind", regressors.KINDS)
 def test_shipped_robots_decide_far_from_the_thresholds(name, kind):
     model = robot(name)
-    full = regressors.full_regressor(model, kind)
-    A = regressors.evaluate_full(model, kind, regressors.random_inputs(model, full.inputs, regressors.SAMPLES[kind],
+    A = regressors.evaluate_full(model, kind, regressors.random_states(model, regressors.SAMPLES[kind],
                                                                        regressors.SEEDS[0]))
     rank_ratios, column_ratios = _ratios(A.reshape(-1, A.shape[-1]))
     for ratios, tol in ((rank_ratios, RANK_TOL), (column_ratios, DEPENDENT_TOL)):

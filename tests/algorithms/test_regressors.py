@@ -14,8 +14,8 @@ import sympy
 
 from tests.harness import GENERATED, evaluate, robot
 from tests.reference import pinocchio_model, random_configurations
-from kindyngen.algorithms.regressors import (barycentric_in_paper, base_parameters, base_params_document, paper_in_barycentric,
-                                  paper_symbols, regressor)
+from kindyngen.algorithms.paper_parameters import barycentric_in_paper, paper_in_barycentric, paper_symbols
+from kindyngen.algorithms.regressors import base_parameters, base_params_document, regressor
 
 ROBOTS = ("lwr4", "lwr4_hartl", "panda")
 KINDS = ("Y_g", "Y_m", "Y")
@@ -140,7 +140,7 @@ def test_paper_collection_of_g_is_eq28():
 def test_base_parameters_of_gravity_are_eq28():
     """Our pi_g (barycentric base parameters of Y_g, mapped to the paper's parameters) is
     eq. 28 entry by entry, up to sign, at the LWR's d1, d2."""
-    from kindyngen.algorithms.regressors import base_expressions_in_paper
+    from kindyngen.algorithms.paper_parameters import base_expressions_in_paper
     found = base_expressions_in_paper(robot("lwr4"), "Y_g")
     lengths = {d1: sympy.Rational(2, 5), d2: sympy.Rational(39, 100)}
     match_entries(found, [sympy.expand(e.xreplace(lengths)) for e in EQ28])
@@ -317,7 +317,7 @@ def test_paper_parameter_maps_round_trip():
         I = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
         np.testing.assert_allclose(bary[10 * i:10 * i + 10],
                                    pin.Inertia(mm, np.array([cx, cy, cz]), I).toDynamicParameters(), atol=1e-14)
-    from kindyngen.algorithms.regressors import barycentric_symbols
+    from kindyngen.algorithms.paper_parameters import barycentric_symbols
     back = [float(e.xreplace(dict(zip(barycentric_symbols(n), bary)))) for e in paper_in_barycentric(n)]
     np.testing.assert_allclose(back, [vals[s] for s in paper], atol=1e-12)
 
