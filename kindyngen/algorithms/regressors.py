@@ -79,9 +79,9 @@ SUMMARIES = {
 
 
 def kinds(model: RobotModel) -> tuple[str, ...]:
-    """The regressors ``model`` has: Y always, Y_g and Y_m for a model read as a chain (their
-    sources, :data:`SOURCES`, are written for chains)."""
-    return ("Y",) if model.is_tree else KINDS
+    """The regressors ``model`` has: Y always, Y_g and Y_m for a chain, however it was read
+    (their sources, :data:`SOURCES`, are written for chains)."""
+    return KINDS if model.is_chain else ("Y",)
 
 
 # ----------------------------------------------------------------------------- parameters

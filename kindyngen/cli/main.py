@@ -95,16 +95,6 @@ def load(path, args):
     return model
 
 
-def refuse_tree_lengths(model, path, only) -> None:
-    """A tree with named lengths gets every function but Y (whose base parameters are decided
-    on numeric samples of the tree regressor): asking for Y, or for a whole generation (whose
-    base_params.json is Y's), is refused in one line."""
-    if model.is_tree and model.length_symbols and (only is None or "Y" in only):
-        names = ", ".join(map(str, model.length_symbols))
-        raise UsageError(f"{path}: named lengths ({names}) in a tree: the regressor Y and base_params.json "
-                         "need numbers; count --only without Y takes them")
-
-
 def _cmd_generate(args) -> int:
     from ..codegen.pipeline import generate
     only = set(args.functions) if args.functions else None
@@ -115,7 +105,6 @@ def _cmd_generate(args) -> int:
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
     for path in args.robots:
         model = load(path, args)
-        refuse_tree_lengths(model, path, None)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
                        only=only, scalar=args.scalar, batch=not args.no_batch)
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
@@ -163,7 +152,6 @@ def _cmd_count(args) -> int:
         only = set(args.only)
     for path in args.robots:
         model = load(path, args)
-        refuse_tree_lengths(model, path, only)
         programs = build_programs(model, args.params, only=only, progress=False)
         for note in undecided_notes(model, only):
             print(f"note: {note}", file=sys.stderr)

@@ -157,14 +157,20 @@ def test_params_symbolic_tree_equals_pinocchio(tmp_path, capsys, monkeypatch):
                     assert error <= 1e-9, (lang, name, port, error)
 
 
-def test_tree_with_named_lengths_is_refused_where_y_is_asked(tmp_path, capsys, monkeypatch):
-    """Named lengths in a tree's origins: generate (base_params.json is Y's) and count --only Y
-    are refused in one line; count without Y derives them."""
+def test_tree_with_named_lengths_gets_every_function_but_the_regressor(tmp_path, capsys, monkeypatch):
+    """Named lengths in a tree's origins, as in an arm's: the functions take a ``lengths`` input,
+    Y (whose base parameters are decided on numeric samples) is not generated and the run says
+    so; count --only Y refuses in one line."""
     path = tmp_path / "named.yaml"
     path.write_text(YAML_TREE.replace("xyz: [0, 0, -0.3]", "xyz: [0, 0, thigh]"))
-    message = "named lengths (thigh) in a tree: the regressor Y and base_params.json need numbers"
-    _refused(["generate", str(path), "--tree", "--out", str(tmp_path)], capsys, monkeypatch, message)
-    _refused(["count", str(path), "--tree", "--only", "tau", "Y"], capsys, monkeypatch, message)
+    code, out, err = _run(["generate", str(path), "--tree", "--functions", "tau,Y", "--lang", "python",
+                           "--out", str(tmp_path / "gen")], capsys, monkeypatch)
+    assert code == 0, err
+    assert "Y does not apply" in err
+    functions = json.loads(next((tmp_path / "gen").rglob("functions.json")).read_text())["functions"]
+    (tau,) = [f for f in functions if f["name"] == "tau"]
+    assert [f["name"] for f in functions] == ["tau"] and tau["inputs"][-1]["name"] == "lengths"
+    _refused(["count", str(path), "--tree", "--only", "tau", "Y"], capsys, monkeypatch, "--only: Y not generated")
     code, out, err = _run(["count", str(path), "--tree", "--only", "tau"], capsys, monkeypatch)
     assert code == 0 and "| tau |" in out, err
 

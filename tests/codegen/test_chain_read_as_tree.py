@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import symengine as se
 
-from kindyngen.codegen.catalog import TREE_NAMES, base_params_document, derive_all
+from kindyngen.algorithms.regressors import base_params_document
+from kindyngen.codegen.catalog import TREE_NAMES, derive_all
 from kindyngen.readers.urdf import load_urdf
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "urdf"
