@@ -14,6 +14,18 @@ torque, held constant, for h at 1 kHz. The first step is the cold solve from res
 solve applies the previous plan's next torque; with --max-iter K a re-solve stopped after K
 IPOPT iterations applies its iterate (examples/mpc_warm_start.py measures what that costs).
 
+With --solver sqp (or rti) the controller is a different one: examples/mpc_sqp.py's tracking
+MPC of a planned motion (lwr4: the converged reach, 2 RK4 steps per interval; panda: a
+minimum-jerk joint motion), Gauss-Newton SQP with full steps on the condensed dense QP in the
+N * 7 torques (DAQP), warm-started from the shifted nodes, torques and working set, iterated
+to tol 1e-4 (rti: one iteration per step); the plant carries a payload the MPC does not know
+(--payload, default 1 kg at the flange) and the MPC estimates a constant torque disturbance
+from each interval's prediction error (--no-estimate to switch off). mpc.json then also has
+the iterations per step, reference_rms (plant vs the reference) and the disturbance.
+
+    .venv/bin/python examples/mpc.py --problem lwr4 --solver sqp --out /tmp/mpc_lwr4_sqp
+    .venv/bin/python examples/mpc.py --problem panda --solver rti --out /tmp/mpc_panda_rti
+
 Output in --out: mpc.json (solve_ms per step, its median, 95th percentile and worst,
 iterations, tracking_rms = RMS over steps of |plant state - the plan's predicted next node|
 (rad, rad/s), goal error of the flange over time, violations = plant samples beyond a joint,
@@ -23,7 +35,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -164,15 +178,28 @@ def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipop
             "violations": int(sum(violations.values())), "violations_by_kind": violations}
 
 
+def machine() -> dict:
+    """The CPU model and the load while the loop ran (a shared machine: wall times swing)."""
+    import platform
+    import subprocess
+    cpu = platform.processor()
+    if Path("/proc/cpuinfo").exists():
+        cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), cpu)
+    return {"cpu": cpu, "cores": os.cpu_count(),
+            "uptime": subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()}
+
+
 PAYLOAD_KG = 1.0          # the plant's unmodelled payload at the flange (--solver sqp | rti)
 
 
 def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool = False, rti: bool = False,
-            substeps: int = 2, payload_kg: float = PAYLOAD_KG, tol: float = 1e-4, max_iter: int = 10) -> dict:
+            substeps: int = 2, payload_kg: float = PAYLOAD_KG, tol: float = 1e-4, max_iter: int = 10,
+            estimate: bool = True) -> dict:
     """The closed loop with examples/mpc_sqp.py's tracking MPC (Gauss-Newton SQP, condensed QP,
     DAQP): at every control step the SQP from the shifted torques of the previous step, to
     `tol` (or one iteration with rti=True: the real-time iteration), the plant carrying a
-    payload the model does not have."""
+    payload the model does not have; with `estimate` the MPC estimates a constant torque
+    disturbance from each interval's prediction error (offset-free MPC, timed with the solve)."""
     import mpc_sqp
     funcs = mpc_sqp.load(problem)
     ref = mpc_sqp.reference(problem, N, substeps, funcs)
@@ -188,10 +215,15 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
     violations = {"q": 0, "qd": 0, "tau": 0, "failed_solves": 0}
     tol_lim = 1e-6
     Nr = len(ref["U"])
+    x_prev = u_prev = None
     for i in range(steps):
+        t0, c0 = time.perf_counter(), time.process_time()
+        if estimate and x_prev is not None:
+            ctl.estimate_disturbance(x_prev, u_prev, x)
+        est_s, est_cpu_s = time.perf_counter() - t0, time.process_time() - c0
         r = ctl.solve(x, X, U, i, active=active)
-        log["solve_ms"].append(1e3 * r["solve_s"])
-        log["solve_cpu_ms"].append(1e3 * r["solve_cpu_s"])
+        log["solve_ms"].append(1e3 * (r["solve_s"] + est_s))
+        log["solve_cpu_ms"].append(1e3 * (r["solve_cpu_s"] + est_cpu_s))
         log["iterations"].append(r["iterations"])
         log["qp_iterations"].append(r["qp_iterations"])
         status = "converged" if r["converged"] else ("rti" if rti and r["success"] else "not converged")
@@ -204,6 +236,7 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
         # the prediction of the applied torque: the plan's first RK4 step from the measured state
         # (at convergence the plan's node 1; capped, the node may still have a gap)
         pred = ctl.linearise(x, r["X"], r["U"])[0][0]
+        x_prev, u_prev = x, u
         x, samples = step(x, u, h)
         violations["q"] += int(np.sum(np.any((samples[:, :n] > lim["q_hi"] + tol_lim) |
                                              (samples[:, :n] < lim["q_lo"] - tol_lim), axis=1)))
@@ -232,6 +265,9 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
             "reference": ref["description"], "reference_solve_s": ref["solve_s"],
             "weights": vars(ctl.weights), "compile_s": ctl.compile_s,
             "disturbance": f"plant payload {payload_kg:g} kg at the flange origin (point mass), not in the MPC's model",
+            "disturbance_estimate": ("constant torque offset from each interval's prediction error "
+                                     "(d += pinv(B_0) (x_measured - x_predicted))") if estimate else "none",
+            "disturbance_estimate_final": ctl.d.tolist(),
             **log,
             "solve_ms_cold": float(ms[0]), "solve_ms_median": float(np.median(warm)),
             "solve_ms_p95": float(np.percentile(warm, 95)), "solve_ms_worst": float(warm.max()),
@@ -288,6 +324,8 @@ def main(argv=None) -> int:
                          "convergence; rti: the same, one SQP iteration per step (real-time iteration)")
     ap.add_argument("--payload", type=float, default=PAYLOAD_KG,
                     help=f"sqp, rti: the plant's payload at the flange in kg, unknown to the MPC (default {PAYLOAD_KG:g})")
+    ap.add_argument("--no-estimate", action="store_true",
+                    help="sqp, rti: no disturbance estimate (default: the MPC estimates a constant torque offset)")
     ap.add_argument("--substeps", type=int, default=2,
                     help="sqp, rti: RK4 steps per interval in the MPC's prediction and the reference (default 2)")
     ap.add_argument("--max-iter", type=int, default=None,
@@ -311,11 +349,13 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.solver in ("sqp", "rti"):
         doc = run_sqp(args.problem, args.steps, args.N, args.verbose, args.solver == "rti", args.substeps,
-                      args.payload, max_iter=10 if args.max_iter is None else args.max_iter)
+                      args.payload, max_iter=10 if args.max_iter is None else args.max_iter,
+                      estimate=not args.no_estimate)
     else:
         doc = run(args.steps, args.N, args.verbose, args.solver,
                   None if args.max_iter is None else {"ipopt.max_iter": args.max_iter})
     doc["max_iter"] = args.max_iter
+    doc["machine"] = machine()
     doc["plots"] = [plot(doc, out)]
     (out / "mpc.json").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"{args.problem} MPC ({args.solver}): {args.steps} steps, re-solve median {doc['solve_ms_median']:.1f} ms, p95 "
