@@ -1,4 +1,5 @@
-"""Closed-loop model-predictive control of the LWR reach: the receding-horizon problem of
+"""Closed-loop model-predictive control of the LWR reach (and, with --solver sqp or rti, of a
+Panda motion): the receding-horizon problem of
 examples/ocp_reach.py re-solved at every control step, warm-started by the shifted solution,
 while a plant that shares no code with the generator (Pinocchio's ABA on tests/reference.py's
 model, RK4 at 1 kHz) moves the arm.

@@ -159,3 +159,14 @@ def test_mpc_sqp_short_run(tmp_path, problem):
     assert kinds["tau"] == 0 and kinds["q"] == 0 and kinds["failed_solves"] == 0
     assert all(s == "converged" for s in doc["status"])
     assert (out / "mpc.png").exists()
+
+
+@pytest.mark.parametrize("args", [["--problem", "panda", "--solver", "stages"],
+                                  ["--problem", "lwr4", "--solver", "sqp", "--payload", "-1"],
+                                  ["--problem", "lwr4", "--solver", "sqp", "--substeps", "0"]])
+def test_bad_sqp_arguments(args, tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "mpc.py"), *args, "--out", "x"], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:")
