@@ -1,4 +1,5 @@
-"""Closed-loop model-predictive control of the LWR reach: the receding-horizon problem of
+"""Closed-loop model-predictive control of the LWR reach (and, with --solver sqp or rti, of a
+Panda motion): the receding-horizon problem of
 examples/ocp_reach.py re-solved at every control step, warm-started by the shifted solution,
 while a plant that shares no code with the generator (Pinocchio's ABA on tests/reference.py's
 model, RK4 at 1 kHz) moves the arm.
@@ -14,6 +15,18 @@ torque, held constant, for h at 1 kHz. The first step is the cold solve from res
 solve applies the previous plan's next torque; with --max-iter K a re-solve stopped after K
 IPOPT iterations applies its iterate (examples/mpc_warm_start.py measures what that costs).
 
+With --solver sqp (or rti) the controller is a different one: examples/mpc_sqp.py's tracking
+MPC of a planned motion (lwr4: the converged reach, 2 RK4 steps per interval; panda: a
+minimum-jerk joint motion), Gauss-Newton SQP with full steps on the condensed dense QP in the
+N * 7 torques (DAQP), warm-started from the shifted nodes, torques and working set, iterated
+to tol 1e-4 (rti: one iteration per step); the plant carries a payload the MPC does not know
+(--payload, default 1 kg at the flange) and the MPC estimates a constant torque disturbance
+from each interval's prediction error (--no-estimate to switch off). mpc.json then also has
+the iterations per step, reference_rms (plant vs the reference) and the disturbance.
+
+    .venv/bin/python examples/mpc.py --problem lwr4 --solver sqp --out /tmp/mpc_lwr4_sqp
+    .venv/bin/python examples/mpc.py --problem panda --solver rti --out /tmp/mpc_panda_rti
+
 Output in --out: mpc.json (solve_ms per step, its median, 95th percentile and worst,
 iterations, tracking_rms = RMS over steps of |plant state - the plan's predicted next node|
 (rad, rad/s), goal error of the flange over time, violations = plant samples beyond a joint,
@@ -23,7 +36,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -53,11 +68,17 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def plant(robot):
-    """x, tau, duration -> x after `duration` of RK4 at PLANT_HZ on Pinocchio's ABA."""
+def plant(robot, payload_kg: float = 0.0):
+    """x, tau, duration -> x after `duration` of RK4 at PLANT_HZ on Pinocchio's ABA; with
+    `payload_kg` a point mass at the flange origin that the controller's model does not have."""
     import pinocchio as pin
     from reference import pinocchio_model
     model, data, flange = pinocchio_model(robot)
+    if payload_kg:
+        fr = model.frames[flange]
+        model.appendBodyToJoint(fr.parentJoint, fr.placement.act(pin.Inertia(payload_kg, np.zeros(3), np.zeros((3, 3)))),
+                                pin.SE3.Identity())
+        data = model.createData()
     n = robot.n
     dt = 1.0 / PLANT_HZ
 
@@ -158,6 +179,108 @@ def run(steps: int = 30, N: int = 20, verbose: bool = False, solver: str = "ipop
             "violations": int(sum(violations.values())), "violations_by_kind": violations}
 
 
+def machine() -> dict:
+    """The CPU model and the load while the loop ran (a shared machine: wall times swing)."""
+    import platform
+    import subprocess
+    cpu = platform.processor()
+    if Path("/proc/cpuinfo").exists():
+        cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), cpu)
+    return {"cpu": cpu, "cores": os.cpu_count(),
+            "uptime": subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()}
+
+
+PAYLOAD_KG = 1.0          # the plant's unmodelled payload at the flange (--solver sqp | rti)
+
+
+def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool = False, rti: bool = False,
+            substeps: int = 2, payload_kg: float = PAYLOAD_KG, tol: float = 1e-4, max_iter: int = 10,
+            estimate: bool = True) -> dict:
+    """The closed loop with examples/mpc_sqp.py's tracking MPC (Gauss-Newton SQP, condensed QP,
+    DAQP): at every control step the SQP from the shifted torques of the previous step, to
+    `tol` (or one iteration with rti=True: the real-time iteration), the plant carrying a
+    payload the model does not have; with `estimate` the MPC estimates a constant torque
+    disturbance from each interval's prediction error (offset-free MPC, timed with the solve)."""
+    import mpc_sqp
+    funcs = mpc_sqp.load(problem)
+    ref = mpc_sqp.reference(problem, N, substeps, funcs)
+    lim, h, n = ref["limits"], ref["h"], funcs["robot"].n
+    ctl = mpc_sqp.TrackingMPC(funcs, lim, ref["X"], ref["U"], h, N, substeps=substeps, tol=tol,
+                              max_iter=1 if rti else max_iter)
+    step, tip = plant(funcs["robot"], payload_kg)
+    x = ref["x0"].copy()
+    X, U = ctl.initial_guess(0)
+    active = None
+    log = {"solve_ms": [], "solve_cpu_ms": [], "iterations": [], "qp_iterations": [], "status": [], "tracking": [],
+           "reference_error": [], "goal_error_m": [], "tau": [], "t": []}
+    violations = {"q": 0, "qd": 0, "tau": 0, "failed_solves": 0}
+    tol_lim = 1e-6
+    Nr = len(ref["U"])
+    x_prev = u_prev = None
+    for i in range(steps):
+        t0, c0 = time.perf_counter(), time.process_time()
+        if estimate and x_prev is not None:
+            ctl.estimate_disturbance(x_prev, u_prev, x)
+        est_s, est_cpu_s = time.perf_counter() - t0, time.process_time() - c0
+        r = ctl.solve(x, X, U, i, active=active)
+        log["solve_ms"].append(1e3 * (r["solve_s"] + est_s))
+        log["solve_cpu_ms"].append(1e3 * (r["solve_cpu_s"] + est_cpu_s))
+        log["iterations"].append(r["iterations"])
+        log["qp_iterations"].append(r["qp_iterations"])
+        status = "converged" if r["converged"] else ("rti" if rti and r["success"] else "not converged")
+        log["status"].append(status)
+        if not r["success"]:
+            violations["failed_solves"] += 1
+        u = r["U"][0]
+        if np.any(np.abs(u) > lim["tau_max"] + tol_lim):
+            violations["tau"] += 1
+        # the prediction of the applied torque: the plan's first RK4 step from the measured state
+        # (at convergence the plan's node 1; capped, the node may still have a gap)
+        pred = ctl.linearise(x, r["X"], r["U"])[0][0]
+        x_prev, u_prev = x, u
+        x, samples = step(x, u, h)
+        violations["q"] += int(np.sum(np.any((samples[:, :n] > lim["q_hi"] + tol_lim) |
+                                             (samples[:, :n] < lim["q_lo"] - tol_lim), axis=1)))
+        violations["qd"] += int(np.sum(np.any(np.abs(samples[:, n:]) > lim["qd_max"] + tol_lim, axis=1)))
+        log["tracking"].append(float(np.linalg.norm(x - pred)))
+        log["reference_error"].append(float(np.linalg.norm(x - ref["X"][min(i + 1, Nr)])))
+        log["goal_error_m"].append(float(np.linalg.norm(tip(x[:n]) - ref["goal"])))
+        log["tau"].append(u.tolist())
+        log["t"].append((i + 1) * h)
+        X, U = ctl.shifted(r["X"], r["U"], i)
+        active = ctl.shifted_active(r["active"])
+        if verbose:
+            print(f"step {i:3d}: {status:13s} it={r['iterations']:2d} qp={r['qp_iterations']} "
+                  f"{log['solve_ms'][-1]:7.2f} ms (CPU {log['solve_cpu_ms'][-1]:6.2f}) "
+                  f"ref err {log['reference_error'][-1]:.2e} goal {1e3 * log['goal_error_m'][-1]:7.2f} mm", flush=True)
+    ms, cpu = np.array(log["solve_ms"]), np.array(log["solve_cpu_ms"])
+    warm, warm_cpu = (ms[1:], cpu[1:]) if steps > 1 else (ms, cpu)
+    tr, re = np.array(log["tracking"]), np.array(log["reference_error"])
+    its = np.array(log["iterations"][1:] if steps > 1 else log["iterations"])
+    return {"problem": problem, "N": N, "h_s": h, "plant_hz": PLANT_HZ, "steps": steps,
+            "formulation": f"tracking, multiple shooting condensed, RK4 ({substeps} steps per interval) of the generated fd, "
+                           "Jacobians from fd_derivatives, compiled C",
+            "solver": ("real-time iteration (one Gauss-Newton SQP step)" if rti else
+                       f"Gauss-Newton SQP to tol {tol:g} (max |du_j| / tau_max_j), at most {max_iter} iterations")
+                      + ", condensed dense QP, DAQP",
+            "reference": ref["description"], "reference_solve_s": ref["solve_s"],
+            "weights": vars(ctl.weights), "compile_s": ctl.compile_s,
+            "disturbance": f"plant payload {payload_kg:g} kg at the flange origin (point mass), not in the MPC's model",
+            "disturbance_estimate": ("constant torque offset from each interval's prediction error "
+                                     "(d += pinv(B_0) (x_measured - x_predicted))") if estimate else "none",
+            "disturbance_estimate_final": ctl.d.tolist(),
+            **log,
+            "solve_ms_cold": float(ms[0]), "solve_ms_median": float(np.median(warm)),
+            "solve_ms_p95": float(np.percentile(warm, 95)), "solve_ms_worst": float(warm.max()),
+            "solve_cpu_ms_median": float(np.median(warm_cpu)), "solve_cpu_ms_p95": float(np.percentile(warm_cpu, 95)),
+            "solve_cpu_ms_worst": float(warm_cpu.max()),
+            "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),
+            "tracking_rms": float(np.sqrt(np.mean(tr ** 2))),
+            "reference_rms": float(np.sqrt(np.mean(re ** 2))),
+            "goal_error_final_m": log["goal_error_m"][-1],
+            "violations": int(sum(violations.values())), "violations_by_kind": violations}
+
+
 def plot(doc, out: Path) -> str:
     import matplotlib
     matplotlib.use("Agg")
@@ -166,7 +289,9 @@ def plot(doc, out: Path) -> str:
     t = np.array(doc["t"])
     axes[0].semilogy(t, np.array(doc["goal_error_m"]) * 1e3)
     axes[0].set_ylabel("flange to goal [mm]")
-    axes[1].plot(t, doc["solve_ms"], "o-", ms=3)
+    axes[1].plot(t, doc["solve_ms"], "o-", ms=3, label="wall")
+    axes[1].plot(t, doc["solve_cpu_ms"], "s-", ms=3, label="CPU")
+    axes[1].legend(fontsize=8)
     axes[1].set_yscale("log")
     axes[1].set_ylabel("solve [ms]")
     tau = np.array(doc["tau"])
@@ -175,8 +300,10 @@ def plot(doc, out: Path) -> str:
     axes[2].set_ylabel("tau [N m]")
     axes[2].set_xlabel("t [s]")
     axes[2].legend(fontsize=7, ncol=7)
-    axes[0].set_title(f"MPC, LWR reach, N = {doc['N']}, plant Pinocchio ABA + RK4 at {doc['plant_hz']} Hz: "
-                      f"median re-solve {doc['solve_ms_median']:.0f} ms")
+    what = "LWR reach" if doc["problem"] == "lwr4" else doc["problem"]
+    axes[0].set_title(f"MPC ({doc['solver'].split(' (')[0].split(',')[0]}), {what}, N = {doc['N']}, plant Pinocchio "
+                      f"ABA + RK4 at {doc['plant_hz']} Hz: median solve {doc['solve_ms_median']:.1f} ms wall, "
+                      f"{doc['solve_cpu_ms_median']:.1f} ms CPU", fontsize=9)
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -188,14 +315,23 @@ def plot(doc, out: Path) -> str:
 def main(argv=None) -> int:
     ap = _Parser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter,
                  epilog="\n\n".join(__doc__.split("\n\n")[2:]))
-    ap.add_argument("--problem", choices=("lwr4",), required=True)
+    ap.add_argument("--problem", choices=("lwr4", "panda"), required=True,
+                    help="lwr4: the LWR reach; panda: a Panda joint motion (--solver sqp or rti only)")
     ap.add_argument("--out", required=True, help="output folder (created)")
     ap.add_argument("--steps", type=int, default=30, help="control steps (default 30, 1.5 s)")
     ap.add_argument("--N", type=int, default=20, help="shooting intervals of the 1 s horizon (default 20)")
-    ap.add_argument("--solver", choices=("ipopt", "stages"), default="ipopt",
-                    help="ipopt: IPOPT on the SX graph (examples/ocp_reach.py); stages: IPOPT with the "
-                         "per-interval functions compiled to C (examples/ocp_stages.py; the first run "
-                         "compiles for minutes, later runs load the cache)")
+    ap.add_argument("--solver", choices=("ipopt", "stages", "sqp", "rti"), default="ipopt",
+                    help="ipopt: the reach re-solved by IPOPT on the SX graph (examples/ocp_reach.py); "
+                         "stages: IPOPT with the per-interval functions compiled to C (examples/ocp_stages.py; "
+                         "the first run compiles for minutes, later runs load the cache); sqp: tracking MPC "
+                         "of the planned motion, Gauss-Newton SQP on a condensed QP (examples/mpc_sqp.py) to "
+                         "convergence; rti: the same, one SQP iteration per step (real-time iteration)")
+    ap.add_argument("--payload", type=float, default=PAYLOAD_KG,
+                    help=f"sqp, rti: the plant's payload at the flange in kg, unknown to the MPC (default {PAYLOAD_KG:g})")
+    ap.add_argument("--no-estimate", action="store_true",
+                    help="sqp, rti: no disturbance estimate (default: the MPC estimates a constant torque offset)")
+    ap.add_argument("--substeps", type=int, default=2,
+                    help="sqp, rti: RK4 steps per interval in the MPC's prediction and the reference (default 2)")
     ap.add_argument("--max-iter", type=int, default=None,
                     help="cap on IPOPT's iterations per warm re-solve (the capped iterate is applied; "
                          "default: none, every re-solve converges to tol 1e-8)")
@@ -207,14 +343,26 @@ def main(argv=None) -> int:
         ap.error(f"--N {args.N}: must be at least 2")
     if args.max_iter is not None and args.max_iter < 1:
         ap.error(f"--max-iter {args.max_iter}: must be at least 1")
+    if args.problem == "panda" and args.solver in ("ipopt", "stages"):
+        ap.error(f"--solver {args.solver}: the reach re-solve exists for --problem lwr4 only (panda: sqp or rti)")
+    if args.payload < 0:
+        ap.error(f"--payload {args.payload}: must be at least 0")
+    if args.substeps < 1:
+        ap.error(f"--substeps {args.substeps}: must be at least 1")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    doc = run(args.steps, args.N, args.verbose, args.solver,
-              None if args.max_iter is None else {"ipopt.max_iter": args.max_iter})
+    if args.solver in ("sqp", "rti"):
+        doc = run_sqp(args.problem, args.steps, args.N, args.verbose, args.solver == "rti", args.substeps,
+                      args.payload, max_iter=10 if args.max_iter is None else args.max_iter,
+                      estimate=not args.no_estimate)
+    else:
+        doc = run(args.steps, args.N, args.verbose, args.solver,
+                  None if args.max_iter is None else {"ipopt.max_iter": args.max_iter})
     doc["max_iter"] = args.max_iter
+    doc["machine"] = machine()
     doc["plots"] = [plot(doc, out)]
     (out / "mpc.json").write_text(json.dumps(doc, indent=1) + "\n")
-    print(f"lwr4 MPC: {args.steps} steps, re-solve median {doc['solve_ms_median']:.1f} ms, p95 "
+    print(f"{args.problem} MPC ({args.solver}): {args.steps} steps, re-solve median {doc['solve_ms_median']:.1f} ms, p95 "
           f"{doc['solve_ms_p95']:.1f} ms, worst {doc['solve_ms_worst']:.1f} ms (cold {doc['solve_ms_cold']:.0f} ms); "
           f"tracking rms {doc['tracking_rms']:.2e}; flange {1e3 * doc['goal_error_final_m']:.2f} mm from the goal; "
           f"violations {doc['violations']} {doc['violations_by_kind']}")
