@@ -49,10 +49,9 @@ CACHE = Path(os.environ.get("KINDYNGEN_OCP_CACHE", Path(tempfile.gettempdir()) /
 CFLAGS = ("-O1", "-shared", "-fPIC")
 
 
-def compile_functions(functions: list[ca.Function], stem: str) -> dict:
-    """C code of `functions` (CasADi CodeGenerator), compiled by gcc -O1 into a shared library
-    cached under CACHE by the hash of the source and flags; returns {name: external Function}
-    (the jac_* helpers stay in the library, where CasADi finds them by name)."""
+def compile_library(functions: list[ca.Function], stem: str) -> str:
+    """C code of `functions` (CasADi CodeGenerator) in one file, compiled by gcc -O1 into a
+    shared library cached under CACHE by the hash of the source and flags; returns its path."""
     cg = ca.CodeGenerator(f"{stem}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
@@ -66,14 +65,21 @@ def compile_functions(functions: list[ca.Function], stem: str) -> dict:
         tmp = so.with_suffix(f".{os.getpid()}.tmp")
         subprocess.run(["gcc", *CFLAGS, "-o", str(tmp), str(c), "-lm"], check=True)
         tmp.replace(so)        # atomic: a parallel run never loads a half-written library
-    return {f.name(): ca.external(f.name(), str(so)) for f in functions if not f.name().startswith("jac_")}
+    return str(so)
+
+
+def compile_functions(functions: list[ca.Function], stem: str) -> dict:
+    """compile_library(), then {name: external Function} (the jac_* helpers stay in the
+    library, where CasADi finds them by name)."""
+    so = compile_library(functions, stem)
+    return {f.name(): ca.external(f.name(), so) for f in functions if not f.name().startswith("jac_")}
 
 
 class StageReach:
     """The reach NLP of examples/ocp_reach.py (id_rk4, one RK4 step per interval) built from
     compiled per-interval functions. Parameters p = (initial state, goal position)."""
 
-    def __init__(self, N: int = 20, funcs: dict | None = None):
+    def __init__(self, N: int = 20, funcs: dict | None = None, compile_stages: bool = True):
         t0 = time.perf_counter()
         self.funcs = funcs or ocp_reach.load()
         self.setup = ocp_reach.setup_dict(self.funcs, N)
@@ -100,43 +106,56 @@ class StageReach:
               ca.Function("reach_ht", [xN, lamT], [ca.triu(ca.hessian(ca.dot(lamT, term), xN)[0])])]
         # jac_reach_c and jac_reach_t give the externals derivatives (CasADi looks them up by
         # name), which nlpsol's multiplier post-processing needs; the solvers use the others
-        fs += [fs[0].jacobian(), fs[3].jacobian()]
-        t1 = time.perf_counter()
-        self.ext = compile_functions(fs, f"reach_{self.funcs['robot'].name}_N{N}")
-        self.compile_s = time.perf_counter() - t1
-        self._build_nlp_functions()
+        self.stage_functions = fs
+        self.nz = N * self.st + nx
         self._bounds()
+        self.compile_s = 0.0
+        if compile_stages:     # ocp_fatrop compiles them with the NLP's functions instead
+            fs = fs + [fs[0].jacobian(), fs[3].jacobian()]
+            t1 = time.perf_counter()
+            self.ext = compile_functions(fs, f"reach_{self.funcs['robot'].name}_N{N}")
+            self.compile_s = time.perf_counter() - t1
+            self._build_nlp_functions()
         self.build_s = time.perf_counter() - t0
 
     # ---- the NLP's functions, assembled from the compiled per-interval ones -------------
-    def _build_nlp_functions(self):
-        N, nx, st, nc, n = self.N, self.nx, self.st, self.nc, self.n
-        nz = N * st + nx
-        self.nz = nz
-        Z, P = ca.MX.sym("z", nz), ca.MX.sym("p", nx + 3)
+    def assemble(self, Z, P, fns: dict):
+        """The NLP's constraints g(Z, P), their Jacobian and (a callable of the multipliers) the
+        upper triangle of the Hessian of the Lagrangian, in MX from the per-interval functions
+        `fns` (reach_c, reach_jc, reach_hl, reach_t, reach_jt, reach_ht; compiled externals or
+        the SX originals) mapped over the horizon."""
+        N, nx, st, nc, n, nz = self.N, self.nx, self.st, self.nc, self.n, self.nz
         V = ca.horzcat(*[Z[k * st:k * st + st + nx] for k in range(N)])
-        C = self.ext["reach_c"].map(N)(V)
-        JC = self.ext["reach_jc"].map(N)(V)
+        C = fns["reach_c"].map(N)(V)
+        JC = fns["reach_jc"].map(N)(V)
         xN = Z[N * st:]
-        g = ca.vertcat(C[:, 0], Z[:nx] - P[:nx], ca.vec(C[:, 1:]), self.ext["reach_t"](xN, P[nx:]))
-        self.ng = g.numel()
+        g = ca.vertcat(C[:, 0], Z[:nx] - P[:nx], ca.vec(C[:, 1:]), fns["reach_t"](xN, P[nx:]))
         blocks = ca.horzsplit(JC, list(range(0, N * (st + nx) + 1, st + nx)))
         rows = []
         for k, B in enumerate(blocks):
             rows.append(ca.horzcat(ca.MX(nc, k * st), B, ca.MX(nc, nz - k * st - st - nx)))
             if k == 0:
                 rows.append(ca.horzcat(ca.MX.eye(nx), ca.MX(nx, nz - nx)))
-        rows.append(ca.horzcat(ca.MX(3 + n, N * st), self.ext["reach_jt"](xN, P[nx:])))
+        rows.append(ca.horzcat(ca.MX(3 + n, N * st), fns["reach_jt"](xN, P[nx:])))
         J = ca.vertcat(*rows)
+
+        def hess(lam_f, lam_g):
+            # the multipliers of the stage rows in g's order: stage 0, x0, stages 1..N-1, terminal
+            Lc = ca.horzcat(lam_g[:nc], ca.reshape(lam_g[nc + nx:nc + nx + (N - 1) * nc], nc, N - 1))
+            W = ca.reshape(Z[:N * st], st, N)
+            H = fns["reach_hl"].map(N)(W, Lc, ca.repmat(lam_f, 1, N))
+            Hb = ca.horzsplit(H, list(range(0, N * st + 1, st)))
+            return ca.diagcat(*Hb, fns["reach_ht"](xN, lam_g[-(3 + n):]))
+        return g, J, hess
+
+    def _build_nlp_functions(self):
+        N, nx, st, n = self.N, self.nx, self.st, self.n
+        Z, P = ca.MX.sym("z", self.nz), ca.MX.sym("p", nx + 3)
+        g, J, hess = self.assemble(Z, P, self.ext)
+        self.ng = g.numel()
         f = self.h * sum(ca.sumsqr(Z[k * st + nx:k * st + nx + n]) for k in range(N))
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.ng)
-        # the multipliers of the stage rows in g's order: stage 0, x0, stages 1..N-1, terminal
-        Lc = ca.horzcat(lam_g[:nc], ca.reshape(lam_g[nc + nx:nc + nx + (N - 1) * nc], nc, N - 1))
-        W = ca.reshape(Z[:N * st], st, N)
-        H = self.ext["reach_hl"].map(N)(W, Lc, ca.repmat(lam_f, 1, N))
-        Hb = ca.horzsplit(H, list(range(0, N * st + 1, st)))
-        Ht = self.ext["reach_ht"](xN, lam_g[-(3 + n):])
-        Hfull = ca.diagcat(*Hb, Ht)
+        Hfull = hess(lam_f, lam_g)
         self.nlp = {"x": Z, "p": P, "f": f, "g": g}
         self.f_jac_g = ca.Function("nlp_jac_g", [Z, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
         self.f_hess = ca.Function("nlp_hess_l", [Z, P, lam_f, lam_g], [Hfull], ["x", "p", "lam_f", "lam_g"],
@@ -152,6 +171,7 @@ class StageReach:
         free = np.full(self.nx, np.inf)   # node 0 is fixed by x0 = p (see ocp_reach)
         self.lbx = np.concatenate([-free, ulo] + [np.concatenate([xlo, ulo])] * (N - 1) + [xlo])
         self.ubx = np.concatenate([free, uhi] + [np.concatenate([xhi, uhi])] * (N - 1) + [xhi])
+        self.ng = N * self.nc + self.nx + 3 + n
         self.lbg = np.zeros(self.ng)
 
     # ---- helpers shared with ReachNLP ---------------------------------------------------

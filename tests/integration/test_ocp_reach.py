@@ -9,6 +9,8 @@ Pinocchio (tests/reference.py's model), not by the generated code.
 - examples/ocp_stages.py (the per-interval functions compiled to C, IPOPT given the assembled
   derivatives) solves the same discrete problem: the same Pinocchio checks, and its optimum
   equals that of IPOPT on the whole SX graph (1e-6 relative).
+- examples/ocp_fatrop.py (fatrop on the same compiled functions) reaches IPOPT's optimum
+  (1e-6 relative), with the same Pinocchio checks.
 - a short MPC run writes the documented fields; no torque or joint-position violation and no
   failed solve (speed limits hold at the nodes only, so the 1 kHz plant samples may pass them:
   counted, not asserted; see docs/optimal_control.md).
@@ -83,6 +85,28 @@ def test_compiled_stages_reach(stages, reach):
     lim = sim["limit_excess"]
     assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
     assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
+
+
+def test_fatrop_on_compiled_stages_reach(stages):
+    """examples/ocp_fatrop.py: fatrop (its own Riccati-based interior point, structure declared
+    by hand) on the same compiled functions reaches the KKT point IPOPT reaches, checked by
+    Pinocchio like the others."""
+    import ocp_fatrop
+    import pinocchio as pin
+    from tests.reference import pinocchio_model
+    fr = ocp_fatrop.FatropReach(20)
+    res = fr.solve()
+    setup = fr.s.setup
+    sim = ocp_reach.check(setup, res, fr.s.funcs)
+    assert res["success"], (res["status"], res["fatrop_return_flag"])
+    assert sim["plan_step_error"] < 1e-6
+    model, data, flange = pinocchio_model(setup["robot"])
+    pin.framesForwardKinematics(model, data, res["q"][-1])
+    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
+    assert np.abs(res["qd"][-1]).max() < 1e-6
+    lim = sim["limit_excess"]
+    assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+    assert abs(res["objective"] - stages[1]["objective"]) < 1e-6 * stages[1]["objective"]
 
 
 def test_shifted_warm_start_is_stationary(stages):
