@@ -83,6 +83,7 @@ class FatropReach:
         t1 = time.perf_counter()
         lib = ocp_stages.compile_library(funcs_c, f"reach_fatrop_{s.funcs['robot'].name}_N{N}")
         self.compile_s = time.perf_counter() - t1
+        self.oracle_library = lib
         self.oracle = ca.external("nlp", lib)
         s.f_g = ca.external("nlp_g", lib)
         opts = {"structure_detection": "manual", "N": N, "nx": [s.nx] * (N + 1), "nu": [s.nu] * N + [0],
