@@ -164,3 +164,26 @@ def test_bad_arguments(script, args, tmp_path):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:")
+
+
+def test_stage_hessian_is_the_lagrangians(reach):
+    """examples/ocp_stages.py builds the interval's Hessian from one inverse dynamics' Hessian
+    (sum_i L_i' H_i L_i); CasADi's AD of the interval's whole Lagrangian is the reference."""
+    import casadi as ca
+    import ocp_stages
+    funcs = reach[3]
+    n, h, N = 7, 0.05, 20
+    stage = ocp_reach._id_rk4_stage(funcs["tau"], n, h)
+    v = ca.SX.sym("v", 5 * n + 2 * n + 2 * n)
+    xn, r = stage(v[:2 * n], v[2 * n:7 * n])
+    c = ca.vertcat(v[7 * n:] - xn, r)
+    lam, sigma = ca.SX.sym("lam", c.numel()), ca.SX.sym("sigma")
+    w = v[:7 * n]
+    ref = ca.Function("ref", [v, lam, sigma],
+                      [ca.hessian(sigma * h * ca.sumsqr(w[2 * n:3 * n]) + ca.dot(lam, c), w)[0]])
+    ours = ca.Function("ours", [v, lam, sigma], [ocp_stages.lagrangian_hessian(funcs["tau"], n, h, w, lam, sigma)])
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        vv, ll = rng.standard_normal(v.numel()), 10 * rng.standard_normal(c.numel())
+        a, b = np.array(ref(vv, ll, 1.7)), np.array(ours(vv, ll, 1.7))
+        assert np.abs(a - b).max() < 1e-9 * max(1.0, np.abs(a).max())
