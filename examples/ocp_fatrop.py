@@ -85,7 +85,7 @@ class FatropReach:
         self.compile_s = time.perf_counter() - t1
         self.oracle_library = lib
         self.oracle = ca.external("nlp", lib)
-        s.f_g = ca.external("nlp_g", lib)
+        s.f_g = ca.external("nlp_g", lib)     # StageReach.result's constraint check, compiled
         opts = {"structure_detection": "manual", "N": N, "nx": [s.nx] * (N + 1), "nu": [s.nu] * N + [0],
                 "ng": [s.nc] + [s.nc - s.nx] * (N - 1) + [3 + s.n],
                 "print_time": False, "fatrop": dict(FATROP_OPTIONS, **(options or {}))}
@@ -102,7 +102,7 @@ class FatropReach:
         sol = self.solver(**args)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         st = self.solver.stats()
-        res = s._result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["unified_return_status"],
+        res = s.result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["unified_return_status"],
                         bool(st["success"]), "fatrop (compiled stages)", np.array(sol["lam_g"]).ravel(), p)
         res["fatrop_return_flag"] = int(st["return_status"])
         res["fatrop_stats"] = {k: float(v) for k, v in st["fatrop"].items()}

@@ -243,8 +243,10 @@ class StageReach:
         x_init = np.concatenate([self.setup["q0"], np.zeros(self.n)]) if x_init is None else np.asarray(x_init)
         return np.concatenate([x_init, self.setup["goal"] if goal is None else np.asarray(goal)])
 
-    def _result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None,
+    def result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None,
                 lam_x=None):
+        """The result dict of a solve ending at z (whichever solver: examples/ocp_fatrop.py
+        reports through it too); its constraint violation by self.f_g."""
         X, U = self.unpack(z)
         n, N, T = self.n, self.N, self.setup["T"]
         g = np.array(self.f_g(z, self.p() if p is None else p)).ravel()
@@ -276,6 +278,6 @@ class StageReach:
         sol = solver(**args)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         st = solver.stats()
-        return self._result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["return_status"],
+        return self.result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["return_status"],
                             bool(st["success"]), "ipopt (compiled stages)", np.array(sol["lam_g"]).ravel(), p,
                             np.array(sol["lam_x"]).ravel())
