@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -37,9 +38,11 @@ sys.path.insert(0, str(ROOT / "examples"))
 import ocp_reach  # noqa: E402
 
 VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
-            ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1)]
+            ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1),
+            ("id_rk4", "fatrop_stages", 1)]
 # "stages": examples/ocp_stages.py, the per-interval functions compiled to C and IPOPT given the
-# assembled Jacobian and Hessian; "mu_init=1e-2" starts IPOPT's barrier lower (the default 0.1)
+# assembled Jacobian and Hessian; "mu_init=1e-2" starts IPOPT's barrier lower (the default 0.1);
+# "fatrop_stages": examples/ocp_fatrop.py, fatrop on the same compiled functions
 STAGE_OPTIONS = {"stages": {}, "stages mu_init=1e-2": {"ipopt.mu_init": 1e-2}}
 
 
@@ -167,6 +170,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp.json"))
     ap.add_argument("--no-peers", action="store_true", help="skip adam, urdf2casadi and Crocoddyl")
+    ap.add_argument("--repeats", type=int, default=5,
+                    help="solves of the baseline and of the compiled rows, median CPU time used (default 5)")
     ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"),
                     help="virtual environment with crocoddyl==3.0.1 pin==3.4.0 (default .venv-crocoddyl)")
     ap.add_argument("--only-crocoddyl", action="store_true",
@@ -179,27 +184,44 @@ def main(argv=None):
         print(doc["crocoddyl"])
         return
     funcs = ocp_reach.load()
-    doc = {"machine": _machine(), "cores": len(__import__("os").sched_getaffinity(0)), "casadi": ca.__version__,
+    doc = {"machine": _machine(), "cores": len(os.sched_getaffinity(0)), "casadi": ca.__version__,
            "python": platform.python_version(),
            "versions": {d: _version(d) for d in ("casadi", "pin", "adam-robotics", "urdf2casadi")},
            "problem": "lwr4_reach N = 20, T = 1 s, data-sheet qd limits (examples/ocp_reach.py)",
            "note": "wall times on a shared 2-core machine; compare rows of this run only",
-           "rows": [], "peer_failures": []}
+           "rows": [], "peer_failures": [], "loadavg_start": list(os.getloadavg())}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    # read before the rows overwrite the file: without a Crocoddyl environment here the earlier
+    # run's Crocoddyl row is kept, marked as such
+    old_crocoddyl = json.loads(out.read_text()).get("crocoddyl", {}) if out.exists() else {}
     base_s = None
     setup = ocp_reach.setup_dict(funcs)
     for form, solver, M in VARIANTS:
         name = f"{form} {solver} M={M}"
+        # the baseline and the sub-second compiled rows are solved --repeats times (same built
+        # solver, same start) and their median CPU time is used: a single sub-second solve on
+        # the shared machine swings by up to 1.7x with the other jobs' load
         if form == "baseline":
-            res = ocp_reach.solve_baseline(funcs=funcs, substeps=M)
+            solve = lambda: ocp_reach.solve_baseline(funcs=funcs, substeps=M)   # noqa: E731
+        elif solver == "fatrop_stages":
+            import ocp_fatrop
+            solve = ocp_fatrop.FatropReach(20, funcs).solve
         elif solver in STAGE_OPTIONS:
             import ocp_stages
             stages = ocp_stages.StageReach(20, funcs)
-            res = stages.solve_ipopt(stages.ipopt(STAGE_OPTIONS[solver]))
+            built = stages.ipopt(STAGE_OPTIONS[solver])
+            solve = lambda: stages.solve_ipopt(built)   # noqa: E731
         else:
-            res = ocp_reach.reach_problem(form, solver, funcs=funcs, substeps=M).solve()
+            solve = ocp_reach.reach_problem(form, solver, funcs=funcs, substeps=M).solve
+        repeats = args.repeats if (form == "baseline" or "stages" in solver) else 1
+        runs = [solve() for _ in range(repeats)]
+        res = runs[-1]
+        res["solve_cpu_s_runs"] = [r["solve_cpu_s"] for r in runs]
+        res["solve_cpu_s"] = float(np.median(res["solve_cpu_s_runs"]))
+        res["solve_s"] = float(np.median([r["solve_s"] for r in runs]))
         doc["rows"].append(_row(name, "generated", res, setup, funcs, base_s))
+        doc["rows"][-1]["solve_cpu_s_runs"] = res["solve_cpu_s_runs"]
         if form == "baseline":
             base_s = res["solve_cpu_s"]
         out.write_text(json.dumps(doc, indent=1) + "\n")
@@ -216,12 +238,16 @@ def main(argv=None):
                 doc["rows"].append(row)
                 out.write_text(json.dumps(doc, indent=1) + "\n")
         doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
+        if "error" in doc["crocoddyl"] and old_crocoddyl and "error" not in old_crocoddyl:
+            doc["crocoddyl"] = dict(old_crocoddyl, carried_over_from_earlier_run=True,
+                                    this_run_error=doc["crocoddyl"]["error"])
         print(f"crocoddyl: {doc['crocoddyl']}", flush=True)
     doc["warm_resolve"] = warm_resolve(funcs)
     print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
     doc["warm_resolve_stages"] = warm_resolve_stages(funcs)
     print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
           f"iterations {doc['warm_resolve_stages']['iterations']}")
+    doc["loadavg_end"] = list(os.getloadavg())
     out.write_text(json.dumps(doc, indent=1) + "\n")
     plot(doc, out.with_suffix(".png"))
     print(f"wrote {out} and {out.with_suffix('.png')}")

@@ -17,8 +17,8 @@ diagonal (x_{k+1} enters c_k linearly, the cost |tau_k|^2 is separable).
 
 Solver: IPOPT (MUMPS) with the assembled exact Jacobian and Hessian (nlpsol options jac_g,
 hess_lag): the same iterates as examples/ocp_reach.py's id_rk4 + IPOPT. The first build
-compiles (gcc on 4 MB of straight-line C, mostly the Hessian: about 17 s of CPU time); later
-builds load the cached library.
+compiles (gcc on 3 MB of straight-line C, mostly the Hessian: 76 s wall on the shared 2-core
+machine at load 10); later builds load the cached library.
 
 Worked example::
 
@@ -44,15 +44,15 @@ import ocp_reach
 CACHE = Path(os.environ.get("KINDYNGEN_OCP_CACHE", Path(tempfile.gettempdir()) / "kindyngen_ocp_stages"))
 
 
-# -O1: on the reach's 4 MB of straight-line C, 17 s of gcc CPU time against minutes for -O2,
-# and the same speed of the compiled Hessian (126 vs 121 us a call, AMD EPYC)
+# -O1: on the reach's 4 MB of straight-line C (the Hessian before lagrangian_hessian), 17 s of
+# gcc CPU time against minutes for -O2, and the same speed of the compiled Hessian (126 vs
+# 121 us a call, AMD EPYC)
 CFLAGS = ("-O1", "-shared", "-fPIC")
 
 
-def compile_functions(functions: list[ca.Function], stem: str) -> dict:
-    """C code of `functions` (CasADi CodeGenerator), compiled by gcc -O1 into a shared library
-    cached under CACHE by the hash of the source and flags; returns {name: external Function}
-    (the jac_* helpers stay in the library, where CasADi finds them by name)."""
+def compile_library(functions: list[ca.Function], stem: str) -> str:
+    """C code of `functions` (CasADi CodeGenerator) in one file, compiled by gcc -O1 into a
+    shared library cached under CACHE by the hash of the source and flags; returns its path."""
     cg = ca.CodeGenerator(f"{stem}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
@@ -66,14 +66,47 @@ def compile_functions(functions: list[ca.Function], stem: str) -> dict:
         tmp = so.with_suffix(f".{os.getpid()}.tmp")
         subprocess.run(["gcc", *CFLAGS, "-o", str(tmp), str(c), "-lm"], check=True)
         tmp.replace(so)        # atomic: a parallel run never loads a half-written library
-    return {f.name(): ca.external(f.name(), str(so)) for f in functions if not f.name().startswith("jac_")}
+    return str(so)
+
+
+def compile_functions(functions: list[ca.Function], stem: str) -> dict:
+    """compile_library(), then {name: external Function} (the jac_* helpers stay in the
+    library, where CasADi finds them by name)."""
+    so = compile_library(functions, stem)
+    return {f.name(): ca.external(f.name(), so) for f in functions if not f.name().startswith("jac_")}
+
+
+def lagrangian_hessian(tau: ca.Function, n: int, h: float, w: ca.SX, lam: ca.SX, sigma: ca.SX) -> ca.SX:
+    """Hessian over w = (x_k, u_k) of interval k's Lagrangian term
+    sigma h |tau_k|^2 + lam' c_k(w, x_{k+1}) for the id_rk4 interval of one RK4 step.
+
+    The gap rows are linear in (w, x_{k+1}) (h is a constant), so only the four inverse-dynamics
+    rows lam_i' tau(q_i, qd_i, a_i) contribute, and their stage states y_i = (q_i, qd_i, a_i) =
+    L_i w are linear in w: the Hessian is sum_i L_i' H_i(y_i, lam_i) L_i with H_i the 21 x 21
+    Hessian of one inverse dynamics. Built that way its compiled code costs 46 us a call
+    against 77 us for CasADi's Hessian of the whole interval (same values to 1e-14; AMD EPYC).
+    """
+    nx = 2 * n
+    q, qd, a, mult = ca.SX.sym("q", n), ca.SX.sym("qd", n), ca.SX.sym("a", n), ca.SX.sym("mult", n)
+    y = ca.vertcat(q, qd, a)
+    one = ca.Function("id_hessian", [y, mult], [ca.hessian(ca.dot(mult, tau(q, qd, a)), y)[0]])
+    acc = [w[nx + n * (1 + i):nx + n * (2 + i)] for i in range(4)]
+    vs = [w[n:nx], w[n:nx] + h / 2 * acc[0], w[n:nx] + h / 2 * acc[1], w[n:nx] + h * acc[2]]
+    qs = [w[:n], w[:n] + h / 2 * vs[0], w[:n] + h / 2 * vs[1], w[:n] + h * vs[2]]
+    H = ca.SX(w.numel(), w.numel())
+    for i in range(4):
+        yi = ca.vertcat(qs[i], vs[i], acc[i])
+        L = ca.evalf(ca.jacobian(yi, w))
+        H += ca.mtimes([L.T, one(yi, lam[nx + n * i:nx + n * (i + 1)]), L])
+    H[nx:nx + n, nx:nx + n] += 2 * h * sigma * ca.SX.eye(n)
+    return H
 
 
 class StageReach:
     """The reach NLP of examples/ocp_reach.py (id_rk4, one RK4 step per interval) built from
     compiled per-interval functions. Parameters p = (initial state, goal position)."""
 
-    def __init__(self, N: int = 20, funcs: dict | None = None):
+    def __init__(self, N: int = 20, funcs: dict | None = None, compile_stages: bool = True):
         t0 = time.perf_counter()
         self.funcs = funcs or ocp_reach.load()
         self.setup = ocp_reach.setup_dict(self.funcs, N)
@@ -88,8 +121,7 @@ class StageReach:
         c = ca.vertcat(v[self.st:] - xn, r)
         lam, sigma = ca.SX.sym("lam", self.nc), ca.SX.sym("sigma")
         w = v[:self.st]
-        lag = sigma * self.h * ca.sumsqr(w[nx:nx + n]) + ca.dot(lam, c)
-        hess = ca.triu(ca.hessian(lag, w)[0])      # x_{k+1} enters linearly: no Hessian block
+        hess = ca.triu(lagrangian_hessian(self.funcs["tau"], n, self.h, w, lam, sigma))
         xN, goal, lamT = ca.SX.sym("xN", nx), ca.SX.sym("goal", 3), ca.SX.sym("lamT", 3 + n)
         term = ca.vertcat(self.funcs["fk_hom"](xN[:n])[:3, 3] - goal, xN[n:])
         fs = [ca.Function("reach_c", [v], [c]),
@@ -100,43 +132,56 @@ class StageReach:
               ca.Function("reach_ht", [xN, lamT], [ca.triu(ca.hessian(ca.dot(lamT, term), xN)[0])])]
         # jac_reach_c and jac_reach_t give the externals derivatives (CasADi looks them up by
         # name), which nlpsol's multiplier post-processing needs; the solvers use the others
-        fs += [fs[0].jacobian(), fs[3].jacobian()]
-        t1 = time.perf_counter()
-        self.ext = compile_functions(fs, f"reach_{self.funcs['robot'].name}_N{N}")
-        self.compile_s = time.perf_counter() - t1
-        self._build_nlp_functions()
+        self.stage_functions = fs
+        self.nz = N * self.st + nx
         self._bounds()
+        self.compile_s = 0.0
+        if compile_stages:     # ocp_fatrop compiles them with the NLP's functions instead
+            fs = fs + [fs[0].jacobian(), fs[3].jacobian()]
+            t1 = time.perf_counter()
+            self.ext = compile_functions(fs, f"reach_{self.funcs['robot'].name}_N{N}")
+            self.compile_s = time.perf_counter() - t1
+            self._build_nlp_functions()
         self.build_s = time.perf_counter() - t0
 
     # ---- the NLP's functions, assembled from the compiled per-interval ones -------------
-    def _build_nlp_functions(self):
-        N, nx, st, nc, n = self.N, self.nx, self.st, self.nc, self.n
-        nz = N * st + nx
-        self.nz = nz
-        Z, P = ca.MX.sym("z", nz), ca.MX.sym("p", nx + 3)
+    def assemble(self, Z, P, fns: dict):
+        """The NLP's constraints g(Z, P), their Jacobian and (a callable of the multipliers) the
+        upper triangle of the Hessian of the Lagrangian, in MX from the per-interval functions
+        `fns` (reach_c, reach_jc, reach_hl, reach_t, reach_jt, reach_ht; compiled externals or
+        the SX originals) mapped over the horizon."""
+        N, nx, st, nc, n, nz = self.N, self.nx, self.st, self.nc, self.n, self.nz
         V = ca.horzcat(*[Z[k * st:k * st + st + nx] for k in range(N)])
-        C = self.ext["reach_c"].map(N)(V)
-        JC = self.ext["reach_jc"].map(N)(V)
+        C = fns["reach_c"].map(N)(V)
+        JC = fns["reach_jc"].map(N)(V)
         xN = Z[N * st:]
-        g = ca.vertcat(C[:, 0], Z[:nx] - P[:nx], ca.vec(C[:, 1:]), self.ext["reach_t"](xN, P[nx:]))
-        self.ng = g.numel()
+        g = ca.vertcat(C[:, 0], Z[:nx] - P[:nx], ca.vec(C[:, 1:]), fns["reach_t"](xN, P[nx:]))
         blocks = ca.horzsplit(JC, list(range(0, N * (st + nx) + 1, st + nx)))
         rows = []
         for k, B in enumerate(blocks):
             rows.append(ca.horzcat(ca.MX(nc, k * st), B, ca.MX(nc, nz - k * st - st - nx)))
             if k == 0:
                 rows.append(ca.horzcat(ca.MX.eye(nx), ca.MX(nx, nz - nx)))
-        rows.append(ca.horzcat(ca.MX(3 + n, N * st), self.ext["reach_jt"](xN, P[nx:])))
+        rows.append(ca.horzcat(ca.MX(3 + n, N * st), fns["reach_jt"](xN, P[nx:])))
         J = ca.vertcat(*rows)
+
+        def hess(lam_f, lam_g):
+            # the multipliers of the stage rows in g's order: stage 0, x0, stages 1..N-1, terminal
+            Lc = ca.horzcat(lam_g[:nc], ca.reshape(lam_g[nc + nx:nc + nx + (N - 1) * nc], nc, N - 1))
+            W = ca.reshape(Z[:N * st], st, N)
+            H = fns["reach_hl"].map(N)(W, Lc, ca.repmat(lam_f, 1, N))
+            Hb = ca.horzsplit(H, list(range(0, N * st + 1, st)))
+            return ca.diagcat(*Hb, fns["reach_ht"](xN, lam_g[-(3 + n):]))
+        return g, J, hess
+
+    def _build_nlp_functions(self):
+        N, nx, st, n = self.N, self.nx, self.st, self.n
+        Z, P = ca.MX.sym("z", self.nz), ca.MX.sym("p", nx + 3)
+        g, J, hess = self.assemble(Z, P, self.ext)
+        self.ng = g.numel()
         f = self.h * sum(ca.sumsqr(Z[k * st + nx:k * st + nx + n]) for k in range(N))
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.ng)
-        # the multipliers of the stage rows in g's order: stage 0, x0, stages 1..N-1, terminal
-        Lc = ca.horzcat(lam_g[:nc], ca.reshape(lam_g[nc + nx:nc + nx + (N - 1) * nc], nc, N - 1))
-        W = ca.reshape(Z[:N * st], st, N)
-        H = self.ext["reach_hl"].map(N)(W, Lc, ca.repmat(lam_f, 1, N))
-        Hb = ca.horzsplit(H, list(range(0, N * st + 1, st)))
-        Ht = self.ext["reach_ht"](xN, lam_g[-(3 + n):])
-        Hfull = ca.diagcat(*Hb, Ht)
+        Hfull = hess(lam_f, lam_g)
         self.nlp = {"x": Z, "p": P, "f": f, "g": g}
         self.f_jac_g = ca.Function("nlp_jac_g", [Z, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
         self.f_hess = ca.Function("nlp_hess_l", [Z, P, lam_f, lam_g], [Hfull], ["x", "p", "lam_f", "lam_g"],
@@ -152,6 +197,7 @@ class StageReach:
         free = np.full(self.nx, np.inf)   # node 0 is fixed by x0 = p (see ocp_reach)
         self.lbx = np.concatenate([-free, ulo] + [np.concatenate([xlo, ulo])] * (N - 1) + [xlo])
         self.ubx = np.concatenate([free, uhi] + [np.concatenate([xhi, uhi])] * (N - 1) + [xhi])
+        self.ng = N * self.nc + self.nx + 3 + n
         self.lbg = np.zeros(self.ng)
 
     # ---- helpers shared with ReachNLP ---------------------------------------------------
@@ -197,8 +243,10 @@ class StageReach:
         x_init = np.concatenate([self.setup["q0"], np.zeros(self.n)]) if x_init is None else np.asarray(x_init)
         return np.concatenate([x_init, self.setup["goal"] if goal is None else np.asarray(goal)])
 
-    def _result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None,
+    def result(self, z, solve_s, solve_cpu_s, iterations, status, success, solver, lam_g=None, p=None,
                 lam_x=None):
+        """The result dict of a solve ending at z (whichever solver: examples/ocp_fatrop.py
+        reports through it too); its constraint violation by self.f_g."""
         X, U = self.unpack(z)
         n, N, T = self.n, self.N, self.setup["T"]
         g = np.array(self.f_g(z, self.p() if p is None else p)).ravel()
@@ -230,6 +278,6 @@ class StageReach:
         sol = solver(**args)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         st = solver.stats()
-        return self._result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["return_status"],
+        return self.result(np.array(sol["x"]).ravel(), wall, cpu, int(st["iter_count"]), st["return_status"],
                             bool(st["success"]), "ipopt (compiled stages)", np.array(sol["lam_g"]).ravel(), p,
                             np.array(sol["lam_x"]).ravel())

@@ -9,6 +9,8 @@ Pinocchio (tests/reference.py's model), not by the generated code.
 - examples/ocp_stages.py (the per-interval functions compiled to C, IPOPT given the assembled
   derivatives) solves the same discrete problem: the same Pinocchio checks, and its optimum
   equals that of IPOPT on the whole SX graph (1e-6 relative).
+- examples/ocp_fatrop.py (fatrop on the same compiled functions) reaches IPOPT's optimum
+  (1e-6 relative), with the same Pinocchio checks.
 - a short MPC run writes the documented fields; no torque or joint-position violation and no
   failed solve (speed limits hold at the nodes only, so the 1 kHz plant samples may pass them:
   counted, not asserted; see docs/optimal_control.md).
@@ -85,6 +87,28 @@ def test_compiled_stages_reach(stages, reach):
     assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
 
 
+def test_fatrop_on_compiled_stages_reach(stages):
+    """examples/ocp_fatrop.py: fatrop (its own Riccati-based interior point, structure declared
+    by hand) on the same compiled functions reaches the KKT point IPOPT reaches, checked by
+    Pinocchio like the others."""
+    import ocp_fatrop
+    import pinocchio as pin
+    from tests.reference import pinocchio_model
+    fr = ocp_fatrop.FatropReach(20)
+    res = fr.solve()
+    setup = fr.s.setup
+    sim = ocp_reach.check(setup, res, fr.s.funcs)
+    assert res["success"], (res["status"], res["fatrop_return_flag"])
+    assert sim["plan_step_error"] < 1e-6
+    model, data, flange = pinocchio_model(setup["robot"])
+    pin.framesForwardKinematics(model, data, res["q"][-1])
+    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
+    assert np.abs(res["qd"][-1]).max() < 1e-6
+    lim = sim["limit_excess"]
+    assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+    assert abs(res["objective"] - stages[1]["objective"]) < 1e-6 * stages[1]["objective"]
+
+
 def test_shifted_warm_start_is_stationary(stages):
     """The MPC's warm start (examples/ocp_stages.py shifted, shifted_lam, shifted_lam_x): the
     converged plan and its constraint and bound multipliers moved one interval earlier, with the
@@ -140,3 +164,26 @@ def test_bad_arguments(script, args, tmp_path):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:")
+
+
+def test_stage_hessian_is_the_lagrangians(reach):
+    """examples/ocp_stages.py builds the interval's Hessian from one inverse dynamics' Hessian
+    (sum_i L_i' H_i L_i); CasADi's AD of the interval's whole Lagrangian is the reference."""
+    import casadi as ca
+    import ocp_stages
+    funcs = reach[3]
+    n, h, N = 7, 0.05, 20
+    stage = ocp_reach._id_rk4_stage(funcs["tau"], n, h)
+    v = ca.SX.sym("v", 5 * n + 2 * n + 2 * n)
+    xn, r = stage(v[:2 * n], v[2 * n:7 * n])
+    c = ca.vertcat(v[7 * n:] - xn, r)
+    lam, sigma = ca.SX.sym("lam", c.numel()), ca.SX.sym("sigma")
+    w = v[:7 * n]
+    ref = ca.Function("ref", [v, lam, sigma],
+                      [ca.hessian(sigma * h * ca.sumsqr(w[2 * n:3 * n]) + ca.dot(lam, c), w)[0]])
+    ours = ca.Function("ours", [v, lam, sigma], [ocp_stages.lagrangian_hessian(funcs["tau"], n, h, w, lam, sigma)])
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        vv, ll = rng.standard_normal(v.numel()), 10 * rng.standard_normal(c.numel())
+        a, b = np.array(ref(vv, ll, 1.7)), np.array(ours(vv, ll, 1.7))
+        assert np.abs(a - b).max() < 1e-9 * max(1.0, np.abs(a).max())
