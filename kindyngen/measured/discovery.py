@@ -50,6 +50,13 @@ motion estimate (the low-passed q and its derivatives), then filtered with the r
 against a filtered torque would smear a Coulomb step into a spurious negative Stribeck dip;
 a linear filter applied to both sides keeps every linear-in-parameters law exact.
 
+**Streamed.**  The columns are computed and filtered window by window (:class:`Recording`:
+a recording read piece by piece, any length) and folded into moments (:class:`_Moments`: per
+fold Gram matrices and per-joint triangular factors, per-joint lagged products for ``N_eff``);
+every fit and statistic below comes from those, so memory does not grow with the log.  The
+noise floor's median, the Stribeck refinement and the elasticity's noise bias take further
+passes over the data.
+
 Judgement (constants below; each rule says why):
 
 * **Held-out error**: every recording cut into K contiguous time blocks (``folds``), fold k
@@ -557,8 +564,10 @@ def _bounded_solve(G, b, lower, upper):
 MAX_LAG = 32
 #: rows of lagged products formed at once (a (LAG_ROWS, columns x MAX_LAG) temporary)
 LAG_ROWS = 1024
-#: filtered rows per chunk of the data pass (the parallel filter's output chunk)
+#: samples per chunk of the data pass (the parallel filter's output chunk)
 CHUNK_ROWS = 20000
+#: samples whose columns are computed at once (at most the chunk): (4096, 7, 124) doubles are 28 MB
+WINDOW_ROWS = 4096
 
 
 class _Moments:
@@ -822,7 +831,7 @@ def _physical_payload(problem: _Problem, fit: dict):
     from .consistent import pseudo_inertia
     idx = fit["idx"]
     own = problem.slices["payload"]
-    where = np.searchsorted(idx, own) if np.all(np.isin(own, idx)) else None
+    where = np.flatnonzero(np.isin(idx, own)) if np.all(np.isin(own, idx)) else None
     if where is None:
         return None
     values = fit["theta"] * problem.scale[idx]
@@ -950,7 +959,7 @@ class _PassResult:
     names: dict
     details: dict
     peak: np.ndarray | None
-    floors: list            # per recording: (raw noise floor (n), filtered rows)
+    floors: list            # per recording: (counts of |d2| per bin, noise gain, filtered rows)
     low_pass: tuple
     chunks: int
     residual: np.ndarray | None
@@ -963,7 +972,8 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
     with the unfiltered torque (chunked parallel filter), and folded into :class:`_Moments`.
     The elasticity columns are folded undivided (the peak |torque|, found along the way, scales
     them afterwards); ``peak``: given, when known from an earlier pass.  The noise floor's
-    second differences are kept per recording (the median needs them).  ``coef``: raw
+    second differences are counted per recording in bins (:func:`_count_bins`; the exact median
+    follows in :func:`_median_pass`).  ``coef``: raw
     coefficients of the columns of ``specs``: the residual ``r - A coef`` of every row is kept
     as well (``residual``), for a fit whose autocorrelation reaches beyond the lags folded."""
     import time
@@ -979,7 +989,7 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
     started, last, read, chunks = time.perf_counter(), time.perf_counter(), 0, 0
     residual = []
     for rec in recordings:
-        state = dict(emitted=0, m_total=None, filt=None, d2=[])
+        state = dict(emitted=0, m_total=None, filt=None, bins=np.zeros((n, MEDIAN_BINS), np.int64))
 
         def fold(F, tau):
             nonlocal moments, chunks
@@ -1007,14 +1017,14 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
                                                                                  order=lp.order), first.dt),
                                                   chunk_rows)
             low_pass_text.append(lp.describe())
-        for seg, a, context, s, e in piece_windows(rec.pieces(), chunk_rows, max(halo, 2)):
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), max(halo, 2)):
             i0, i1 = s - a, e - a
             # the nominal torque on the window's rows and 2 on either side (second differences)
             c0, c1 = max(0, i0 - 2), min(len(context["q"]), i1 + 2)
             tau_ctx = nominal_torques(model, context["q"][c0:c1], context["qd"][c0:c1], context["qdd"][c0:c1])
             d2 = np.diff(context["raw"][c0:c1] - tau_ctx, 2, axis=0)
             centre = a + c0 + 1 + np.arange(len(d2))
-            state["d2"].append(np.abs(d2[(centre >= s) & (centre < e)]))
+            _count_bins(state["bins"], d2[(centre >= s) & (centre < e)])
             q, qd, qdd = context["q"][i0:i1], context["qd"][i0:i1], context["qdd"][i0:i1]
             tau_nom = tau_ctx[i0 - c0:i1 - c0]
             spring = _spring(context, seg.dt, i0, i1, smoothing) if need_spring else None
@@ -1045,9 +1055,7 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
         if state["filt"] is not None:
             for out in state["filt"].finish():
                 fold(out[:, :-n].reshape(len(out), n, -1), out[:, -n:])
-        d2 = np.concatenate(state["d2"]) if state["d2"] else np.zeros((0, n))
-        floor = 1.4826 * np.median(d2, axis=0) / math.sqrt(6.0) if len(d2) else np.zeros(n)
-        floors.append((floor, noise_gain(lp), state["emitted"]))
+        floors.append((state["bins"], noise_gain(lp), state["emitted"]))
     now = time.perf_counter()
     if moments is not None:
         progress(f"{read} samples read, {moments.samples} rows folded in {chunks} chunks in {now - started:.1f} s "
@@ -1055,6 +1063,60 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
     return _PassResult(moments, widths, names, details, found_peak if peak is None else peak, floors,
                        tuple(dict.fromkeys(low_pass_text)), chunks,
                        np.concatenate(residual) if residual else None)
+
+
+#: bins of |second difference| for the noise floor's median: the top 16 bits of the IEEE double
+#: (its exponent and 4 mantissa bits, 1/16 of an octave each; the bit pattern of a non-negative
+#: double orders like its value)
+MEDIAN_BINS = 1 << 15
+
+
+def _bin_of(x: np.ndarray) -> np.ndarray:
+    return (np.abs(np.ascontiguousarray(x, float)).view(np.int64) >> 48).astype(np.intp)
+
+
+def _count_bins(bins: np.ndarray, d2: np.ndarray) -> None:
+    """Add the |values| of ``d2`` (m, n) to the per-joint counts ``bins`` (n, MEDIAN_BINS)."""
+    b = _bin_of(d2)
+    for j in range(bins.shape[0]):
+        bins[j] += np.bincount(b[:, j], minlength=MEDIAN_BINS)
+
+
+def _median_pass(model, recordings, counts, chunk_rows) -> list[np.ndarray]:
+    """Per recording, the noise floor ``1.4826 median|d2 r| / sqrt(6)`` of its unfiltered
+    residual (:func:`noise_floor`), exactly and in bounded memory: the data pass counted the
+    values per bin, so the bins of the two middle ranks are known; this pass keeps only the
+    values in those bins and picks the ranks among them (``np.median``'s mean of the two middle
+    values for an even count)."""
+    n = model.n
+    out = []
+    for rec, bins in zip(recordings, counts):
+        total = int(bins[0].sum())
+        if total == 0:
+            out.append(np.zeros(n))
+            continue
+        ranks = ((total - 1) // 2, total // 2)
+        cum = np.cumsum(bins, axis=1)
+        wanted = [[int(np.searchsorted(cum[j], k, side="right")) for k in ranks] for j in range(n)]
+        kept = [[] for _ in range(n)]
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), 2):
+            i0, i1 = s - a, e - a
+            c0, c1 = max(0, i0 - 2), min(len(context["q"]), i1 + 2)
+            tau_ctx = nominal_torques(model, context["q"][c0:c1], context["qd"][c0:c1], context["qdd"][c0:c1])
+            d2 = np.diff(context["raw"][c0:c1] - tau_ctx, 2, axis=0)
+            centre = a + c0 + 1 + np.arange(len(d2))
+            d2 = np.abs(d2[(centre >= s) & (centre < e)])
+            b = _bin_of(d2)
+            for j in range(n):
+                kept[j].append(d2[np.isin(b[:, j], wanted[j]), j])
+        floor = np.empty(n)
+        for j in range(n):
+            values = np.sort(np.concatenate(kept[j]))
+            first = int(cum[j][wanted[j][0] - 1]) if wanted[j][0] > 0 else 0     # values below the lower bin
+            middle = [values[k - first] for k in ranks]
+            floor[j] = 1.4826 * np.mean(middle) / math.sqrt(6.0)
+        out.append(floor)
+    return out
 
 
 def _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) -> np.ndarray:
@@ -1089,7 +1151,7 @@ def _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) -> np.nd
             C, Cn, r = F[:, :, :n], F[:, :, n:2 * n], F[:, :, 2 * n]
             num = num + np.einsum("tji,tj->i", Cn, r)
             den = den + np.einsum("tji,tji->i", C, C)
-        for seg, a, context, s, e in piece_windows(rec.pieces(), chunk_rows, halo):
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), halo):
             b = a + len(context["q"])
             if n0 + len(noise) < b:
                 noise = np.concatenate([noise, sigma * rng.standard_normal((b - n0 - len(noise), n))])
@@ -1244,8 +1306,11 @@ def discover(model: RobotModel, segments: Sequence[Segment | Recording], candida
     N, n = main.moments.samples, model.n
     if N < 10 * folds:
         raise ValueError(f"{N} samples are too few for {folds} folds")
+    progress("the noise floor: the middle values of the binned second differences (a pass over the data)")
+    raw_floors = _median_pass(model, recordings, [f[0] for f in main.floors], chunk_rows)
     w = np.array([f[2] for f in main.floors], float)[:, None]
-    floor = np.sqrt(np.sum(w * np.array([f[0] * f[1] for f in main.floors]) ** 2, axis=0) / w.sum())
+    floor = np.sqrt(np.sum(w * np.array([fl * f[1] for fl, f in zip(raw_floors, main.floors)]) ** 2, axis=0)
+                    / w.sum())
     scale = math.sqrt(main.moments.sum_tau2 / (N * n)) or 1.0
     problem = problem_of(main, specs)
     peak = problem.peak
@@ -1483,7 +1548,7 @@ def discover(model: RobotModel, segments: Sequence[Segment | Recording], candida
     std_natural = np.concatenate([natural(c, std[np.isin(idx, final_problem.slices[c])]) for c in chosen]) \
         if chosen else np.zeros(0)
     std_of = dict(zip(names, map(float, std_natural)))
-    bias = _elastic_noise_bias_pass(model, recordings, [f[0] for f in main.floors], chunk_rows) \
+    bias = _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) \
         if any(_public(k) == "motor_side_elasticity" for k in chosen) else None
     not_determined = undetermined(
         {_public(k): block_names[k] for k in chosen}, value_of, std_of,

@@ -39,8 +39,8 @@ import yaml
 
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import links_from_barycentric
-from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, Discovery, Recording, discover, in_memory,
-                        piece_windows, predict_effects, spring_torque)
+from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, Discovery, Recording, discover,
+                        in_memory, piece_windows, predict_effects, spring_torque)
 from .effect_columns import EFFECTS, coulomb_eps, effect_names
 from .log_formats import joint_names_of, read_any
 from .log_preparing import Preprocessing, Segment, preprocess, split_time
@@ -184,7 +184,7 @@ def _heldout(model, written, d, recordings, chunk_rows=CHUNK_ROWS):
             out["tau"].append(tau)
             for k, key in enumerate(keys):
                 out[key].append(F[:, :, k])
-        for seg, a, context, s, e in piece_windows(rec.pieces(), chunk_rows, 2):
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), 2):
             lp = seg.low_pass
             if filt is None and lp is not None:
                 filt = ChunkedParallelFilter(lp, overlap_rows(Preprocessing(cutoff_hz=lp.cutoff_hz, order=lp.order),
