@@ -50,6 +50,13 @@ motion estimate (the low-passed q and its derivatives), then filtered with the r
 against a filtered torque would smear a Coulomb step into a spurious negative Stribeck dip;
 a linear filter applied to both sides keeps every linear-in-parameters law exact.
 
+**Streamed.**  The columns are computed and filtered window by window (:class:`Recording`:
+a recording read piece by piece, any length) and folded into moments (:class:`_Moments`: per
+fold Gram matrices and per-joint triangular factors, per-joint lagged products for ``N_eff``);
+every fit and statistic below comes from those, so memory does not grow with the log.  The
+noise floor's median, the Stribeck refinement and the elasticity's noise bias take further
+passes over the data.
+
 Judgement (constants below; each rule says why):
 
 * **Held-out error**: every recording cut into K contiguous time blocks (``folds``), fold k
@@ -112,7 +119,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from scipy.stats import chi2
@@ -150,7 +157,7 @@ def _bounds(candidate: str) -> tuple[float, float]:
     if candidate == "encoder_offset":
         return -ENCODER_OFFSET_MAX, ENCODER_OFFSET_MAX
     if candidate == "motor_side_elasticity":
-        return 0.0, ENCODER_OFFSET_MAX          # fitted as the peak deflection (rad), see _Rows
+        return 0.0, ENCODER_OFFSET_MAX          # fitted as the peak deflection (rad), see _Problem
     return -np.inf, np.inf
 
 
@@ -551,46 +558,129 @@ def _bounded_solve(G, b, lower, upper):
     return lsq_linear(root, target, bounds=(lower, upper), method="bvls").x
 
 
+#: lags of the residual's autocorrelation folded for the effective sample count (filtered,
+#: decimated rows decorrelate within a few lags); a fit whose residual is still correlated at
+#: MAX_LAG lags has its residual computed in one more pass over the data instead
+MAX_LAG = 32
+#: rows of lagged products formed at once (a (LAG_ROWS, columns x MAX_LAG) temporary)
+LAG_ROWS = 1024
+#: samples per chunk of the data pass (the parallel filter's output chunk)
+CHUNK_ROWS = 20000
+#: samples whose columns are computed at once (at most the chunk): (4096, 7, 124) doubles are 28 MB
+WINDOW_ROWS = 4096
+
+
+class _Moments:
+    """What the data pass keeps of the filtered rows ``[A | r]`` (candidate columns, residual of
+    the nominal model) and of the signals: per cross-validation fold the Gram matrix and
+    right-hand side summed over joints and the per-joint triangular factor (exact residual
+    sums, :class:`kindyngen.measured.ls_factor.LSFactor`); per joint the Gram matrix of
+    ``[A | r | signals | 1]``; per joint the lagged products of ``[A_j | r_j]`` over the
+    columns that can be non-zero on joint j, lags 1 .. MAX_LAG, with the first and last
+    MAX_LAG rows (the autocorrelation of any fit's residual, exactly).  Memory O(columns^2 x
+    (folds + joints x MAX_LAG)), whatever the log length; Gram matrices and factors of
+    chunks, folds and files add up."""
+
+    def __init__(self, n, widths, support, folds, lags):
+        from .ls_factor import LSFactor
+        p = int(sum(widths))
+        self.n, self.p, self.folds, self.lags = n, p, folds, lags
+        self.factors = [LSFactor.empty(n, p) for _ in range(folds)]
+        self.G = np.zeros((folds, p, p))
+        self.b = np.zeros((folds, p))
+        self.rows = np.zeros(folds, int)
+        self.signals = np.zeros((n, p + 7, p + 7))
+        self.support = support                      # per joint: column indices (into A) that can be non-zero
+        self.lagged = [np.zeros((lags, len(s) + 1, len(s) + 1)) for s in support]
+        self.head = [np.zeros((0, len(s) + 1)) for s in support]
+        self.tail = [np.zeros((0, len(s) + 1)) for s in support]
+        self.sum_tau2 = 0.0
+
+    def add(self, fold_of, A, r, signals, tau):
+        """Fold filtered rows: ``A`` (m, n, p), ``r`` (m, n) residual of the nominal model,
+        ``signals`` (m, n, 5), ``tau`` (m, n) the filtered torque, rows in time order;
+        ``fold_of`` (m) their folds."""
+        m, n = r.shape
+        for k in np.unique(fold_of):
+            rows = fold_of == k
+            Ak, rk = A[rows], r[rows]
+            self.factors[k] = self.factors[k].fold(Ak, rk)
+            A2 = Ak.reshape(len(Ak) * n, self.p)
+            self.G[k] += A2.T @ A2
+            self.b[k] += A2.T @ rk.reshape(-1)
+            self.rows[k] += int(rows.sum())
+        Z = np.concatenate([A, r[:, :, None], signals, np.ones((m, n, 1))], axis=2).transpose(1, 0, 2)
+        self.signals += Z.transpose(0, 2, 1) @ Z
+        self.sum_tau2 += float(np.sum(tau ** 2))
+        L = self.lags
+        for j in range(n):
+            X = np.concatenate([A[:, j, self.support[j]], r[:, j, None]], axis=1)
+            if L == 0:
+                continue
+            Y = np.concatenate([self.tail[j], X])
+            t0 = len(self.tail[j])
+            if len(Y) > L:
+                # rows t >= L of Y against their L predecessors: M_k += sum_t y_{t-k} y_t^T, all
+                # lags in one product per block of rows (the window view copied LAG_ROWS at a time)
+                windows = np.lib.stride_tricks.sliding_window_view(Y, L + 1, axis=0)   # (rows, w, L + 1)
+                for a in range(max(t0, L), len(Y), LAG_ROWS):
+                    b = min(len(Y), a + LAG_ROWS)
+                    past = windows[a - L:b - L, :, :L]            # y_{t-L} .. y_{t-1} for t in [a, b)
+                    self.lagged[j] += np.tensordot(past, Y[a:b], axes=([0], [0]))[:, ::-1].transpose(1, 0, 2)
+            for t in range(t0, min(L, len(Y))):                   # the first rows of the data: fewer lags
+                for k in range(1, t + 1):
+                    self.lagged[j][k - 1] += np.outer(Y[t - k], Y[t])
+            if len(self.head[j]) < L:
+                self.head[j] = np.concatenate([self.head[j], X[:L - len(self.head[j])]])
+            self.tail[j] = Y[-L:] if L else Y[:0]
+
+    @property
+    def samples(self) -> int:
+        return int(self.rows.sum())
+
+
 class _Problem:
-    """All candidate columns stacked once; fits of any subset via Gram matrices, inside the
+    """Fits of any subset of the candidate blocks from the data pass's moments, inside the
     physical domain (coefficients flagged non-negative are held >= 0).
 
-    ``fold_of``: the fold of every row (each recording cut into ``folds`` contiguous time
-    blocks, fold k the k-th block of every recording: the same folds whatever the order of
+    The columns are scaled to unit norm (the scaled unknowns ``theta``); the elasticity
+    candidate's columns are divided by the peak |joint torque| first (fitted as the peak
+    deflection, :meth:`natural`).  Folds: each recording cut into ``folds`` contiguous time
+    blocks, fold k the k-th block of every recording (the same folds whatever the order of
     the recordings)."""
 
-    def __init__(self, blocks, r, fold_of, folds):
-        self.N, self.n = r.shape
-        self.r = r
-        self.blocks = blocks
-        A = np.concatenate([b[0] for b in blocks.values()], axis=2) if blocks else np.zeros((self.N, self.n, 0))
-        self.slices, start = {}, 0
-        lower = []                               # (low, high) per column
-        for name, (cols, _, _) in blocks.items():
-            self.slices[name] = np.arange(start, start + cols.shape[2])
-            start += cols.shape[2]
-            lower += [_bounds(_public(name))] * cols.shape[2]
-        scale = np.sqrt(np.sum(A ** 2, axis=(0, 1)))
-        self.scale = np.where(scale > 0, 1.0 / np.where(scale > 0, scale, 1), 0.0)
+    def __init__(self, moments: _Moments, keys, widths, details, names, peak, specs):
+        self.m = moments
+        self.N, self.n = moments.samples, moments.n
+        self.keys, self.details, self.names = list(keys), dict(details), dict(names)
+        self.peak, self.specs = peak, specs
+        self.slices, start, lower, unit = {}, 0, [], []
+        for key, width in zip(keys, widths):
+            self.slices[key] = np.arange(start, start + width)
+            start += width
+            lower += [_bounds(_public(key))] * width
+            unit.append(1.0 / peak if _public(key) == "motor_side_elasticity" else np.ones(width))
+        d = np.concatenate(unit) if unit else np.zeros(0)
+        G_raw = moments.G.sum(axis=0)
+        norm = np.sqrt(np.maximum(np.diag(G_raw), 0.0)) * d
+        self.scale = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1), 0.0)
+        self.to_raw = d * self.scale             # coefficient of the raw (as folded) columns per theta
         bounds = np.array(lower, float).reshape(-1, 2)
-        # bounds on the scaled unknowns theta = value / scale (a zero column is free)
         live = np.where(self.scale > 0, self.scale, 1.0)
         self.lower = np.where(self.scale > 0, bounds[:, 0] / live, -np.inf)
         self.upper = np.where(self.scale > 0, bounds[:, 1] / live, np.inf)
-        self.A = A * self.scale                  # unit columns (zero columns stay zero)
-        self.fold_rows = [np.flatnonzero(fold_of == k) for k in range(folds)]
-        A2 = self.A.reshape(self.N * self.n, -1)
-        r2 = r.reshape(-1)
-        self.G = A2.T @ A2
-        self.b = A2.T @ r2
-        self.Gf, self.bf = [], []
-        for rows in self.fold_rows:
-            Af = self.A[rows].reshape(len(rows) * self.n, -1)
-            self.Gf.append(Af.T @ Af)
-            self.bf.append(Af.T @ r[rows].reshape(-1))
+        D = self.to_raw
+        self.Gf = [D[:, None] * G * D[None, :] for G in moments.G]
+        self.bf = [D * b for b in moments.b]
+        self.G = D[:, None] * G_raw * D[None, :]
+        self.b = D * moments.b.sum(axis=0)
 
     def columns(self, names):
         return np.concatenate([self.slices[c] for c in names]) if names else np.zeros(0, int)
+
+    def live(self, key) -> bool:
+        """Whether a block has any non-zero column on this motion."""
+        return bool(np.any(np.diag(self.m.G.sum(axis=0))[self.slices[key]] > 0))
 
     def _solve(self, G, b, idx):
         """Solution in the physical domain and pseudo-inverse of the normal equations; rank."""
@@ -605,23 +695,128 @@ class _Problem:
             theta = _bounded_solve(G, b, lower, upper)
         return theta, inv, int(keep.sum())
 
+    def raw(self, idx, theta) -> np.ndarray:
+        """Coefficients of all the folded (raw) columns for ``theta`` on ``idx``."""
+        out = np.zeros(self.m.p)
+        out[idx] = theta * self.to_raw[idx]
+        return out
+
+    def residual_sums(self, coef) -> np.ndarray:
+        """Per joint, the sum of squared residuals ``r - A coef`` over all rows (from the factors)."""
+        return np.sum([f.residual_sums(coef) for f in self.m.factors], axis=0)
+
     def fit(self, names):
-        """Full-data fit and out-of-fold residuals of the candidates ``names``."""
+        """Full-data fit and out-of-fold residual sums of the candidates ``names``."""
         idx = self.columns(names)
         theta, inv, rank = self._solve(self.G[np.ix_(idx, idx)], self.b[idx], idx)
-        residual = self.r - self.A[:, :, idx] @ theta
-        oof = np.empty_like(self.r)
-        for rows, Gf, bf in zip(self.fold_rows, self.Gf, self.bf):
+        joint_rss = self.residual_sums(self.raw(idx, theta))
+        oof = np.zeros((self.m.folds, self.n))
+        for k, (factor, Gf, bf) in enumerate(zip(self.m.factors, self.Gf, self.bf)):
             th, _, _ = self._solve((self.G - Gf)[np.ix_(idx, idx)], (self.b - bf)[idx], idx)
-            oof[rows] = self.r[rows] - self.A[rows][:, :, idx] @ th
-        fold_mse = np.array([np.sum(np.mean(oof[rows] ** 2, axis=0)) for rows in self.fold_rows])
-        return dict(names=tuple(names), idx=idx, theta=theta, inv=inv, rank=rank, residual=residual,
-                    rss=float(np.sum(residual ** 2)), oof=oof, fold_mse=fold_mse,
-                    heldout=np.sqrt(np.mean(oof ** 2, axis=0)), mse=float(np.sum(np.mean(oof ** 2, axis=0))))
+            oof[k] = factor.residual_sums(self.raw(idx, th))
+        fold_mse = np.sum(oof, axis=1) / np.maximum(self.m.rows, 1)
+        heldout = np.sqrt(np.maximum(np.sum(oof, axis=0), 0) / self.N)
+        return dict(names=tuple(names), idx=idx, theta=theta, inv=inv, rank=rank, joint_rss=joint_rss,
+                    rss=float(np.sum(joint_rss)), fold_mse=fold_mse, heldout=heldout,
+                    mse=float(np.sum(np.maximum(np.sum(oof, axis=0), 0)) / self.N))
+
+    def with_theta(self, fit, theta) -> dict:
+        """``fit`` with other coefficients (the same columns): its residual sums again."""
+        joint_rss = self.residual_sums(self.raw(fit["idx"], theta))
+        return dict(fit, theta=theta, joint_rss=joint_rss, rss=float(np.sum(joint_rss)))
+
+    def residual_rms(self, fit) -> np.ndarray:
+        return np.sqrt(np.maximum(fit["joint_rss"], 0) / self.N)
 
     def criterion(self, fit, n_eff_total):
         rows = self.N * self.n
         return float(n_eff_total * math.log(max(fit["rss"], 1e-300) / rows) + fit["rank"] * math.log(n_eff_total))
+
+    def _residual_sums_1(self, fit, j):
+        """Joint j: (sum of the residual, the weights w with residual = [A_j | r_j] w on the support)."""
+        coef = self.raw(fit["idx"], fit["theta"])
+        sup = self.m.support[j]
+        w = np.concatenate([-coef[sup], [1.0]])
+        S = self.m.signals[j]
+        p = self.m.p
+        total = S[p, p + 6] - coef @ S[:p, p + 6]       # sum of r_j minus sum of A_j coef
+        return total, w
+
+    def effective_samples(self, fit) -> tuple[np.ndarray, bool]:
+        """:func:`effective_samples` of the fit's residual from the lagged products (per joint
+        ``N / (1 + 2 sum rho_k)`` up to the first non-positive lag), and whether that lag lies
+        within the lags folded (else the residual itself is needed)."""
+        N, L = self.N, self.m.lags
+        out = np.empty(self.n)
+        exact = True
+        for j in range(self.n):
+            total, w = self._residual_sums_1(fit, j)
+            mean = total / N
+            acf0 = fit["joint_rss"][j] - N * mean ** 2
+            if acf0 <= 0:
+                out[j] = N
+                continue
+            head = np.cumsum(self.m.head[j] @ w)              # sums of the first k residuals
+            tail = np.cumsum((self.m.tail[j] @ w)[::-1])      # sums of the last k residuals
+            s = 0.0
+            lags = min(L, N - 1)
+            for k in range(1, lags + 1):
+                acf = w @ self.m.lagged[j][k - 1] @ w - mean * ((total - tail[k - 1]) + (total - head[k - 1])) \
+                    + (N - k) * mean ** 2
+                rho = acf / acf0
+                if rho <= 0:
+                    break
+                s += rho
+            else:
+                exact = exact and lags >= N - 1
+            out[j] = min(N, max(1.0, N / (1.0 + 2.0 * s)))
+        return out, exact
+
+    def contribution_rms(self, fit, column) -> np.ndarray:
+        """Per joint, the RMS of one column's torque in ``fit`` (N m)."""
+        where = np.flatnonzero(fit["idx"] == column)[0]
+        c = fit["theta"][where] * self.to_raw[column]
+        return np.abs(c) * np.sqrt(np.maximum(self.m.signals[:, column, column], 0) / self.N)
+
+    def correlations(self, fit, j) -> list[tuple[float, str]]:
+        """(|correlation|, label) of joint j's residual with each filtered signal."""
+        S = self.m.signals[j]
+        p, N = self.m.p, self.N
+        coef = self.raw(fit["idx"], fit["theta"])
+        w = np.concatenate([-coef, [1.0]])
+        total = S[p, p + 6] - coef @ S[:p, p + 6]
+        r_norm2 = fit["joint_rss"][j] - total ** 2 / N
+        out = []
+        for k, label in enumerate(SIGNALS):
+            x = p + 1 + k
+            cross = w @ S[:p + 1, x] - total * S[x, p + 6] / N
+            x_norm2 = S[x, x] - S[x, p + 6] ** 2 / N
+            den = math.sqrt(max(r_norm2, 0) * max(x_norm2, 0))
+            out.append((abs(float(cross)) / den if den > 0 else 0.0, label))
+        return out
+
+    def root(self):
+        """A square matrix with the Gram matrix of the scaled columns (summed over joints and
+        rows) as its own: the triangular factor of all folds' and joints' factors stacked."""
+        stacked = np.vstack([f.R[j] for f in self.m.factors for j in range(self.n)])
+        R = np.linalg.qr(stacked, mode="r") if len(stacked) else stacked
+        return R * self.to_raw
+
+
+def _support(keys, widths, n) -> list[np.ndarray]:
+    """Per joint, the columns of the stacked blocks that can be non-zero on it: a per-joint
+    law's column i acts on joint i only; the payload, the base tilt and the effects on the
+    measurement act on every joint."""
+    out = [[] for _ in range(n)]
+    start = 0
+    for key, width in zip(keys, widths):
+        dense = _public(key) in ("payload", "base_tilt", "encoder_offset", "motor_side_elasticity")
+        for c in range(width):
+            for j in range(n):
+                if dense or c % n == j:
+                    out[j].append(start + c)
+        start += width
+    return [np.array(s, int) for s in out]
 
 
 #: smallest eigenvalue (kg m^2) the payload's pseudo-inertia is held to in the constrained fit
@@ -636,7 +831,7 @@ def _physical_payload(problem: _Problem, fit: dict):
     from .consistent import pseudo_inertia
     idx = fit["idx"]
     own = problem.slices["payload"]
-    where = np.searchsorted(idx, own) if np.all(np.isin(own, idx)) else None
+    where = np.flatnonzero(np.isin(idx, own)) if np.all(np.isin(own, idx)) else None
     if where is None:
         return None
     values = fit["theta"] * problem.scale[idx]
@@ -662,13 +857,13 @@ def _physical_payload(problem: _Problem, fit: dict):
     if x.value is None:
         return None
     theta = np.asarray(x.value, float)
-    residual = problem.r - problem.A[:, :, idx] @ theta
     before = float(np.linalg.eigvalsh(pseudo_inertia(values[where]))[0])
-    out = dict(fit, theta=theta, residual=residual, rss=float(np.sum(residual ** 2)))
+    out = problem.with_theta(fit, theta)
+    size = problem.N * problem.n
     return out, (f"payload: the free fit's pseudo-inertia has smallest eigenvalue {before:.3g} kg m^2; fitted "
                  f"again inside the physical domain (pseudo-inertia >= {PAYLOAD_EPSILON:g} kg m^2, a semidefinite "
-                 f"program): full-data RMS {math.sqrt(fit['rss'] / residual.size):.4g} -> "
-                 f"{math.sqrt(out['rss'] / residual.size):.4g} N m")
+                 f"program): full-data RMS {math.sqrt(fit['rss'] / size):.4g} -> "
+                 f"{math.sqrt(out['rss'] / size):.4g} N m")
 
 
 def _principal_cosine(A, B) -> float:
@@ -687,68 +882,300 @@ def _principal_cosine(A, B) -> float:
 # ---------------------------------------------------------------------------------------------
 # the search
 
-class _Rows:
-    """Every recording's candidate columns, computed from its motion estimate and filtered
-    together with its unfiltered torque (:func:`kindyngen.measured.log_preparing.filtered_rows`)."""
+#: signals filtered alongside the columns, for the "what the residual left correlates with" verdict
+SIGNALS = ("q", "qd", "qdd", "sign(qd)", "nominal torque")
 
-    #: signals filtered alongside, for the "what the residual left correlates with" verdict
-    SIGNALS = ("q", "qd", "qdd", "sign(qd)", "nominal torque")
 
-    def __init__(self, model, segments, folds, eps, ripple_k, need_spring):
-        self.model, self.segments, self.eps, self.ripple_k = model, tuple(segments), eps, ripple_k
-        self.motion, self.spring = [], []
-        nominal, measured, signals, fold_of, floors, weights = [], [], [], [], [], []
-        for seg in self.segments:
-            q, qd, qdd = seg.q, seg.qd, seg.qdd
-            tau_nom = nominal_torques(model, q, qd, qdd)
-            raw = seg.tau_unfiltered if seg.low_pass is not None else seg.tau
-            self.spring.append(spring_of(seg) if need_spring else None)
-            self.motion.append((q, qd, qdd, tau_nom))
-            stack = np.stack([tau_nom, q, qd, qdd, np.sign(qd), tau_nom], axis=2)
-            _, F, tau_f = filtered_rows(seg, stack)
-            nominal.append(F[:, :, 0])
-            signals.append(F[:, :, 1:])
-            measured.append(tau_f)
-            m = len(tau_f)
-            fold_of.append(np.minimum((np.arange(m) * folds) // m, folds - 1))
-            floors.append(noise_floor(raw - tau_nom, [len(raw)]) * noise_gain(seg.low_pass))
-            weights.append(m)
-        # motor_side_elasticity is fitted as the peak deflection ce_i max|tau_i| (rad), so that
-        # its bound is the first-order model's range of validity, as for an encoder offset
-        self.spring_peak = (np.max([np.max(np.abs(sp[0]), axis=0) for sp in self.spring], axis=0)
-                            if need_spring else None)
-        self.nominal = np.concatenate(nominal)
-        self.tau = np.concatenate(measured)
-        self.signals = np.concatenate(signals)
-        self.fold_of = np.concatenate(fold_of)
-        w = np.array(weights, float)[:, None]
-        self.floor = np.sqrt(np.sum(w * np.array(floors) ** 2, axis=0) / w.sum())
-        self.low_pass = tuple(dict.fromkeys(s.low_pass.describe() for s in self.segments if s.low_pass))
+@dataclass(frozen=True)
+class Recording:
+    """One segment of a recording as the data pass reads it: ``rows`` samples, given by
+    ``pieces()`` (a fresh iterator of consecutive preprocessed pieces at each call: every pass
+    reads the recording again), each a :class:`kindyngen.measured.log_preparing.Segment` with
+    its unfiltered torque and ``low_pass``.  ``index``: the recording's place among all (the
+    seed of its noise for :func:`elastic_noise_bias`)."""
 
-    def block(self, key, vs=None):
-        """(filtered columns (rows, n, k), names, detail) of one candidate key."""
-        name = _public(key)
-        if vs is None and "@" in key:
-            vs = float(key.split("@")[1])
-        parts, names, detail = [], (), ""
-        for seg, (q, qd, qdd, tau_nom), spring in zip(self.segments, self.motion, self.spring):
-            cols, names, detail = _columns(name, self.model, q, qd, qdd, tau_nom, self.eps, self.ripple_k, vs, spring)
-            if name == "motor_side_elasticity":
-                cols = cols / self.peak()
-            parts.append(filtered_rows(seg, cols)[1])
-        return np.concatenate(parts), names, detail
+    rows: int
+    pieces: Callable[[], Iterable[Segment]]
+    index: int = 0
 
-    def elasticity_noise_bias(self) -> np.ndarray:
-        """Per joint, the compliance the torque noise alone gives (:func:`elastic_noise_bias`)."""
-        return elastic_noise_bias(lambda *m: nominal_torques(self.model, *m), self.segments, self.spring)
 
-    def peak(self) -> np.ndarray:
-        """Per joint, the largest |joint torque| (N m; 1 where it is zero)."""
-        return np.where(self.spring_peak > 0, self.spring_peak, 1.0)
+def in_memory(segments: Sequence[Segment]) -> tuple[Recording, ...]:
+    """Recordings of segments already in memory (each piece the whole segment)."""
+    return tuple(Recording(len(seg.t), (lambda seg=seg: iter((seg,))), i) for i, seg in enumerate(segments))
 
-    def natural(self, key, values) -> np.ndarray:
-        """A block's fitted values in the candidate's own units (a peak deflection -> ce)."""
-        return values / self.peak() if _public(key) == "motor_side_elasticity" else values
+
+def _smoothing(rows: int, dt: float, low_pass):
+    """(rate, cutoff, order) of the smoothing :func:`spring_of` applies to the torque (None:
+    none: a segment filtered already, or too short) and the halo of rows it needs."""
+    if low_pass is not None or rows < 60:
+        return None, 2
+    from .streaming import overlap_rows
+    from .log_preparing import Preprocessing
+    cutoff = min(5.0, 0.2 / dt)
+    return (1.0 / dt, cutoff, 4), overlap_rows(Preprocessing(cutoff_hz=cutoff), dt) + 2
+
+
+def piece_windows(pieces, chunk: int, halo: int):
+    """Windows of a segment fed in consecutive pieces: ``(first, context, s, e)`` with
+    ``context`` the arrays (t, q, qd, qdd, tau, raw torque) of rows ``[first, first + len)``, the
+    window's own rows ``[s, e)`` (global indices) and up to ``halo`` rows of either
+    neighbour; every row in exactly one window, in order."""
+    buf, b0, s, first_piece = None, 0, 0, None
+    names = ("t", "q", "qd", "qdd", "tau", "raw")
+    for piece in pieces:
+        if first_piece is None:
+            first_piece = piece
+        raw = piece.tau_unfiltered if piece.low_pass is not None else piece.tau
+        new = dict(zip(names, (piece.t, piece.q, piece.qd, piece.qdd, piece.tau, raw)))
+        buf = new if buf is None else {k: np.concatenate([buf[k], new[k]]) for k in names}
+        while b0 + len(buf["q"]) >= s + chunk + halo:
+            a, e = max(0, s - halo), s + chunk
+            yield first_piece, a, {k: v[a - b0:e + halo - b0] for k, v in buf.items()}, s, e
+            s = e
+            drop = max(0, s - halo - b0)
+            buf = {k: v[drop:] for k, v in buf.items()}
+            b0 += drop
+    if buf is None:
+        return
+    end = b0 + len(buf["q"])
+    while s < end:
+        a, e = max(0, s - halo), min(end, s + chunk)
+        yield first_piece, a, {k: v[a - b0:min(end, e + halo) - b0] for k, v in buf.items()}, s, e
+        s = e
+
+
+def _spring(context, dt, i0, i1, smoothing):
+    """The spring torque and its derivatives (:func:`spring_of`) on rows ``i0:i1`` of a window."""
+    tau = context["tau"]
+    if smoothing is not None:
+        tau = zero_phase_low_pass(tau, *smoothing)
+    return tuple(x[i0:i1] for x in spring_torque(tau, dt))
+
+
+@dataclass
+class _PassResult:
+    moments: "_Moments"
+    widths: list
+    names: dict
+    details: dict
+    peak: np.ndarray | None
+    floors: list            # per recording: (counts of |d2| per bin, noise gain, filtered rows)
+    low_pass: tuple
+    chunks: int
+    residual: np.ndarray | None
+
+
+def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags, need_spring, progress,
+               peak=None, coef=None) -> _PassResult:
+    """One pass over the recordings: every candidate column of ``specs`` (block key -> (name,
+    Stribeck velocity or None)) computed window by window from the motion estimate, filtered
+    with the unfiltered torque (chunked parallel filter), and folded into :class:`_Moments`.
+    The elasticity columns are folded undivided (the peak |torque|, found along the way, scales
+    them afterwards); ``peak``: given, when known from an earlier pass.  The noise floor's
+    second differences are counted per recording in bins (:func:`_count_bins`; the exact median
+    follows in :func:`_median_pass`).  ``coef``: raw
+    coefficients of the columns of ``specs``: the residual ``r - A coef`` of every row is kept
+    as well (``residual``), for a fit whose autocorrelation reaches beyond the lags folded."""
+    import time
+
+    from .streaming import ChunkedParallelFilter, overlap_rows
+    from .log_preparing import Preprocessing
+    n = model.n
+    keys = list(specs)
+    widths, names, details = None, {}, {}
+    moments = None
+    found_peak = np.zeros(n)
+    floors, low_pass_text = [], []
+    started, last, read, chunks = time.perf_counter(), time.perf_counter(), 0, 0
+    residual = []
+    for rec in recordings:
+        state = dict(emitted=0, m_total=None, filt=None, bins=np.zeros((n, MEDIAN_BINS), np.int64))
+
+        def fold(F, tau):
+            nonlocal moments, chunks
+            p = int(sum(widths))
+            A, nominal, signals = F[:, :, :p], F[:, :, p], F[:, :, p + 1:]
+            if moments is None:
+                moments = _Moments(n, widths, _support(keys, widths, n), folds, lags)
+            i = state["emitted"] + np.arange(len(tau))
+            state["emitted"] += len(tau)
+            M = state["m_total"]
+            moments.add(np.minimum((i * folds) // M, folds - 1), A, tau - nominal, signals, tau)
+            if coef is not None:
+                residual.append(tau - nominal - A @ coef)
+            chunks += 1
+
+        # the halo depends on the segment (its filter): look at its first piece
+        first = next(iter(rec.pieces()), None)
+        if first is None:
+            continue
+        lp = first.low_pass
+        smoothing, halo = _smoothing(rec.rows, first.dt, lp) if need_spring else (None, 2)
+        state["m_total"] = -(-rec.rows // lp.decimate) if lp is not None else rec.rows
+        if lp is not None:
+            state["filt"] = ChunkedParallelFilter(lp, overlap_rows(Preprocessing(cutoff_hz=lp.cutoff_hz,
+                                                                                 order=lp.order), first.dt),
+                                                  chunk_rows)
+            low_pass_text.append(lp.describe())
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), max(halo, 2)):
+            i0, i1 = s - a, e - a
+            # the nominal torque on the window's rows and 2 on either side (second differences)
+            c0, c1 = max(0, i0 - 2), min(len(context["q"]), i1 + 2)
+            tau_ctx = nominal_torques(model, context["q"][c0:c1], context["qd"][c0:c1], context["qdd"][c0:c1])
+            d2 = np.diff(context["raw"][c0:c1] - tau_ctx, 2, axis=0)
+            centre = a + c0 + 1 + np.arange(len(d2))
+            _count_bins(state["bins"], d2[(centre >= s) & (centre < e)])
+            q, qd, qdd = context["q"][i0:i1], context["qd"][i0:i1], context["qdd"][i0:i1]
+            tau_nom = tau_ctx[i0 - c0:i1 - c0]
+            spring = _spring(context, seg.dt, i0, i1, smoothing) if need_spring else None
+            if spring is not None:
+                found_peak = np.maximum(found_peak, np.max(np.abs(spring[0]), axis=0))
+            blocks = []
+            for key in keys:
+                name, vs = specs[key]
+                cols, nm, detail = _columns(name, model, q, qd, qdd, tau_nom, eps, ripple_k, vs, spring)
+                blocks.append(cols)
+                names[key], details[key] = nm, detail
+            if widths is None:
+                widths = [b.shape[2] for b in blocks]
+            stack = np.concatenate(blocks + [np.stack([tau_nom, q, qd, qdd, np.sign(qd), tau_nom], axis=2)], axis=2)
+            m = len(q)
+            read += m
+            if state["filt"] is None:
+                fold(stack, context["tau"][i0:i1])
+            else:
+                flat = np.concatenate([stack.reshape(m, -1), context["raw"][i0:i1]], axis=1)
+                for out in state["filt"].push(flat):
+                    fold(out[:, :-n].reshape(len(out), n, -1), out[:, -n:])
+            now = time.perf_counter()
+            if now - last > 5.0:
+                last = now
+                progress(f"{read} samples read ({read / (now - started):,.0f} samples/s), "
+                         f"{moments.samples if moments else 0} rows folded in {chunks} chunks (after decimation)")
+        if state["filt"] is not None:
+            for out in state["filt"].finish():
+                fold(out[:, :-n].reshape(len(out), n, -1), out[:, -n:])
+        floors.append((state["bins"], noise_gain(lp), state["emitted"]))
+    now = time.perf_counter()
+    if moments is not None:
+        progress(f"{read} samples read, {moments.samples} rows folded in {chunks} chunks in {now - started:.1f} s "
+                 f"({read / max(now - started, 1e-9):,.0f} samples/s)")
+    return _PassResult(moments, widths, names, details, found_peak if peak is None else peak, floors,
+                       tuple(dict.fromkeys(low_pass_text)), chunks,
+                       np.concatenate(residual) if residual else None)
+
+
+#: bins of |second difference| for the noise floor's median: the top 16 bits of the IEEE double
+#: (its exponent and 4 mantissa bits, 1/16 of an octave each; the bit pattern of a non-negative
+#: double orders like its value)
+MEDIAN_BINS = 1 << 15
+
+
+def _bin_of(x: np.ndarray) -> np.ndarray:
+    return (np.abs(np.ascontiguousarray(x, float)).view(np.int64) >> 48).astype(np.intp)
+
+
+def _count_bins(bins: np.ndarray, d2: np.ndarray) -> None:
+    """Add the |values| of ``d2`` (m, n) to the per-joint counts ``bins`` (n, MEDIAN_BINS)."""
+    b = _bin_of(d2)
+    for j in range(bins.shape[0]):
+        bins[j] += np.bincount(b[:, j], minlength=MEDIAN_BINS)
+
+
+def _median_pass(model, recordings, counts, chunk_rows) -> list[np.ndarray]:
+    """Per recording, the noise floor ``1.4826 median|d2 r| / sqrt(6)`` of its unfiltered
+    residual (:func:`noise_floor`), exactly and in bounded memory: the data pass counted the
+    values per bin, so the bins of the two middle ranks are known; this pass keeps only the
+    values in those bins and picks the ranks among them (``np.median``'s mean of the two middle
+    values for an even count)."""
+    n = model.n
+    out = []
+    for rec, bins in zip(recordings, counts):
+        total = int(bins[0].sum())
+        if total == 0:
+            out.append(np.zeros(n))
+            continue
+        ranks = ((total - 1) // 2, total // 2)
+        cum = np.cumsum(bins, axis=1)
+        wanted = [[int(np.searchsorted(cum[j], k, side="right")) for k in ranks] for j in range(n)]
+        kept = [[] for _ in range(n)]
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), 2):
+            i0, i1 = s - a, e - a
+            c0, c1 = max(0, i0 - 2), min(len(context["q"]), i1 + 2)
+            tau_ctx = nominal_torques(model, context["q"][c0:c1], context["qd"][c0:c1], context["qdd"][c0:c1])
+            d2 = np.diff(context["raw"][c0:c1] - tau_ctx, 2, axis=0)
+            centre = a + c0 + 1 + np.arange(len(d2))
+            d2 = np.abs(d2[(centre >= s) & (centre < e)])
+            b = _bin_of(d2)
+            for j in range(n):
+                kept[j].append(d2[np.isin(b[:, j], wanted[j]), j])
+        floor = np.empty(n)
+        for j in range(n):
+            values = np.sort(np.concatenate(kept[j]))
+            first = int(cum[j][wanted[j][0] - 1]) if wanted[j][0] > 0 else 0     # values below the lower bin
+            middle = [values[k - first] for k in ranks]
+            floor[j] = 1.4826 * np.mean(middle) / math.sqrt(6.0)
+        out.append(floor)
+    return out
+
+
+def _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) -> np.ndarray:
+    """:func:`elastic_noise_bias` of the recordings, window by window: the noise of each
+    recording drawn in order from its seed (the same numbers as drawn whole), smoothed and
+    differentiated in windows with the smoothing's overlap, its columns and the measured
+    torque's through the chunked parallel filter."""
+    from .streaming import ChunkedParallelFilter, overlap_rows
+    from .log_preparing import Preprocessing
+
+    def torques(*motion):
+        return nominal_torques(model, *motion)
+    n = model.n
+    num = den = 0.0
+    for rec, sigma in zip(recordings, raw_floors):
+        first = next(iter(rec.pieces()), None)
+        if first is None:
+            continue
+        lp, dt = first.low_pass, first.dt
+        measured_smoothing, halo = _smoothing(rec.rows, dt, lp)
+        if lp is not None:
+            noise_smoothing = (lp.rate_hz, lp.cutoff_hz, lp.order)
+            halo = overlap_rows(Preprocessing(cutoff_hz=lp.cutoff_hz, order=lp.order), dt) + 2
+            filt = ChunkedParallelFilter(lp, halo - 2, chunk_rows)
+        else:
+            noise_smoothing, filt = measured_smoothing, None
+        rng = np.random.default_rng(24 + rec.index)
+        noise, n0 = np.zeros((0, n)), 0           # drawn rows [n0, n0 + len)
+
+        def add(F):
+            nonlocal num, den
+            C, Cn, r = F[:, :, :n], F[:, :, n:2 * n], F[:, :, 2 * n]
+            num = num + np.einsum("tji,tj->i", Cn, r)
+            den = den + np.einsum("tji,tji->i", C, C)
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), halo):
+            b = a + len(context["q"])
+            if n0 + len(noise) < b:
+                noise = np.concatenate([noise, sigma * rng.standard_normal((b - n0 - len(noise), n))])
+            window = noise[a - n0:b - n0]
+            i0, i1 = s - a, e - a
+            smooth = window if noise_smoothing is None else zero_phase_low_pass(window, *noise_smoothing)
+            noise_spring = tuple(x[i0:i1] for x in spring_torque(smooth, dt))
+            spring = _spring(context, dt, i0, i1, measured_smoothing)
+            q, qd, qdd = context["q"][i0:i1], context["qd"][i0:i1], context["qdd"][i0:i1]
+            measured, _ = sensing_columns("motor_side_elasticity", torques, q, qd, qdd, spring)
+            alone, _ = sensing_columns("motor_side_elasticity", torques, q, qd, qdd, noise_spring)
+            stack = np.concatenate([measured, alone, window[i0:i1, :, None]], axis=2)
+            if filt is None:
+                add(stack)
+            else:
+                m = i1 - i0
+                for out in filt.push(np.concatenate([stack.reshape(m, -1), np.zeros((m, 1))], axis=1)):
+                    add(out[:, :-1].reshape(len(out), n, -1))
+            drop = max(0, e - halo - n0)
+            noise, n0 = noise[drop:], n0 + drop
+        if filt is not None:
+            for out in filt.finish():
+                add(out[:, :-1].reshape(len(out), n, -1))
+    return np.abs(num) / np.where(den > 0, den, np.inf)
 
 
 #: candidates whose coefficients are one per joint (the ones judged by :func:`undetermined`)
@@ -763,7 +1190,7 @@ def undetermined(blocks: dict, values: dict, std: dict, fitted: dict, negligible
     and standard deviations; ``fitted``: the values as fitted (the bounds apply to these);
     ``negligible``: coefficients whose own torque stays below :data:`MATTER` noise floors;
     ``elastic_bias``: per joint, the compliance the torque noise alone produces
-    (:meth:`_Rows.elasticity_noise_bias`).  A coefficient is undetermined when it sits at a
+    (:func:`elastic_noise_bias`).  A coefficient is undetermined when it sits at a
     finite bound of its physical range (the data pulls beyond it), or at 0 of a range [0, x]
     (nothing there, or not resolved), when its relative standard error exceeds
     :data:`REL_STD_MAX`, when it is a sensing coefficient that changes no torque above the
@@ -802,33 +1229,30 @@ def undetermined(blocks: dict, values: dict, std: dict, fitted: dict, negligible
     return out
 
 
-def _where(fit, floor, signals, factor, rounding) -> tuple[str, ...]:
+def _where(problem, fit, floor, factor, rounding) -> tuple[str, ...]:
     """Sentences on the joints whose residual stays above ``factor`` x floor (and above the
     rounding level ``rounding``, N m), and what it correlates with most (filtered signals of
     that joint)."""
     out = []
-    residual = fit["residual"]
     for j in np.flatnonzero((fit["heldout"] > factor * floor) & (fit["heldout"] > rounding)):
-        r = residual[:, j] - residual[:, j].mean()
-        corr = []
-        for k, label in enumerate(_Rows.SIGNALS):
-            x = signals[:, j, k] - signals[:, j, k].mean()
-            den = float(np.linalg.norm(r) * np.linalg.norm(x))
-            corr.append((abs(float(r @ x)) / den if den > 0 else 0.0, label))
-        c, label = max(corr)
+        c, label = max(problem.correlations(fit, j))
         out.append(f"joint {j + 1}: held-out RMS {fit['heldout'][j]:.3g} N m = {fit['heldout'][j] / max(floor[j], 1e-300):.3g} x "
                    f"its noise floor {floor[j]:.3g}; correlates most with its {label} (|r| = {c:.2f})")
     return tuple(out)
 
 
-def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequence[str] = CANDIDATES,
+def discover(model: RobotModel, segments: Sequence[Segment | Recording], candidates: Sequence[str] = CANDIDATES,
              folds: int = 5, progress: Callable[[str], None] | None = None, eps: float | None = None,
-             *, ripple_k: float = RIPPLE_K, stribeck_vs: Sequence[float] = STRIBECK_VS) -> Discovery:
+             *, ripple_k: float = RIPPLE_K, stribeck_vs: Sequence[float] = STRIBECK_VS,
+             chunk_rows: int = CHUNK_ROWS) -> Discovery:
     """Which of ``candidates`` does the nominal ``model`` miss on ``segments``?  See the module
     text for the rules.  ``segments``: one or more recordings' segments, each filtered on
-    its own (a segment with a ``low_pass`` is parallel-filtered here); ``eps``: Coulomb
-    smoothing (rad/s) of the Coulomb candidate (None: ``sign``); the description's own
-    declared effects are assumed absent (a note says so when it declares some)."""
+    its own (a segment with a ``low_pass`` is parallel-filtered here), as Segments in memory
+    or as :class:`Recording` (read piece by piece: logs of any length in bounded memory);
+    ``eps``: Coulomb smoothing (rad/s) of the Coulomb candidate (None: ``sign``); the
+    description's own declared effects are assumed absent (a note says so when it declares
+    some).  ``chunk_rows``: samples per window of the data pass (the result does not depend
+    on it, to rounding)."""
     progress = progress or (lambda text: None)
     candidates = tuple(dict.fromkeys(candidates))
     for c in candidates:
@@ -837,32 +1261,67 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     segments = tuple(segments)
     if not segments:
         raise ValueError("discover needs at least one segment")
+    recordings = tuple(s if isinstance(s, Recording) else in_memory([s])[0] for s in segments)
+    recordings = tuple(replace(r, index=i) for i, r in enumerate(recordings))
     if folds < 2:
         raise ValueError("folds must be at least 2")
     notes = []
     if model.effects:
         notes.append(f"the description declares {', '.join(model.effects)}: ignored here (rigid bodies only "
                      f"are the nominal prediction)")
-    progress("nominal prediction and candidate columns (parallel filtering)")
-    data = _Rows(model, segments, folds, eps, ripple_k, "motor_side_elasticity" in candidates)
-    N, n = data.tau.shape
-    if N < 10 * folds:
-        raise ValueError(f"{N} samples are too few for {folds} folds")
-    r = data.tau - data.nominal
-    floor = data.floor
-    scale = float(np.sqrt(np.mean(data.tau ** 2))) or 1.0
+    progress("nominal prediction and candidate columns (parallel filtering), folded chunk by chunk")
+    need_spring = "motor_side_elasticity" in candidates
     # one block of columns per candidate; the Stribeck candidate has one per velocity of the
     # grid, and at every step the velocity with the lowest held-out error stands for it
-    blocks, variants = {}, {}
+    specs, variants = {}, {}
     for c in candidates:
         for vs in (tuple(stribeck_vs) if c == "stribeck_friction" else (None,)):
             key = c if vs is None else f"{c}@{vs:g}"
-            blocks[key] = data.block(key)
+            specs[key] = (c, None if vs is None else float(vs))
             variants.setdefault(c, []).append(key)
-    details = {key: b[2] for key, b in blocks.items()}
-    problem = _Problem(blocks, r, data.fold_of, folds)
+
+    def data_pass(pass_specs, lags, peak=None, coef=None):
+        return _data_pass(model, recordings, pass_specs, eps, ripple_k, folds, chunk_rows, lags, need_spring,
+                          progress, peak, coef)
+
+    def problem_of(result, pass_specs):
+        keys = list(result.names)
+        return _Problem(result.moments, keys, result.widths, result.details, result.names,
+                        np.where(result.peak > 0, result.peak, 1.0) if result.peak is not None else None,
+                        pass_specs)
+
+    def n_eff_of(prob, fit) -> np.ndarray:
+        n_eff, exact = prob.effective_samples(fit)
+        if exact:
+            return n_eff
+        progress(f"the residual's autocorrelation reaches beyond lag {MAX_LAG}: one more pass for the residual")
+        keys = list(fit["names"])
+        again = data_pass({k: prob.specs[k] for k in keys}, 0, peak,
+                          coef=prob.raw(fit["idx"], fit["theta"])[fit["idx"]])
+        return effective_samples(again.residual)
+
+    main = data_pass(specs, MAX_LAG)
+    if main.moments is None:
+        raise ValueError("discover needs at least one sample")
+    N, n = main.moments.samples, model.n
+    if N < 10 * folds:
+        raise ValueError(f"{N} samples are too few for {folds} folds")
+    progress("the noise floor: the middle values of the binned second differences (a pass over the data)")
+    raw_floors = _median_pass(model, recordings, [f[0] for f in main.floors], chunk_rows)
+    w = np.array([f[2] for f in main.floors], float)[:, None]
+    floor = np.sqrt(np.sum(w * np.array([fl * f[1] for fl, f in zip(raw_floors, main.floors)]) ** 2, axis=0)
+                    / w.sum())
+    scale = math.sqrt(main.moments.sum_tau2 / (N * n)) or 1.0
+    problem = problem_of(main, specs)
+    peak = problem.peak
+    details = dict(problem.details)
+    block_names = problem.names
+
+    def natural(key, values):
+        """A block's fitted values in the candidate's own units (a peak deflection -> ce)."""
+        return values / peak if _public(key) == "motor_side_elasticity" else values
     extra_k = {"stribeck_friction": 1 if len(stribeck_vs) > 1 else 0}
-    A2 = problem.A.reshape(N * n, -1)
+    A2 = problem.root()
 
     def angle(key_a, key_b, base_keys) -> float:
         """Smallest principal angle (deg) between two blocks once ``base_keys``' columns are
@@ -890,13 +1349,13 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     current = problem.fit(())
     rms_before = current["heldout"].copy()
     chosen, steps, flagged = [], [], {}         # chosen: block keys; flagged: key -> alternatives
-    remaining = [c for c in candidates if any(np.any(problem.A[:, :, problem.slices[k]]) for k in variants[c])]
+    remaining = [c for c in candidates if any(problem.live(k) for k in variants[c])]
     for c in candidates:
         if c not in remaining:
             notes.append(f"{c}: its columns vanish on this motion (not tried)")
 
     def at_floor(fit) -> str | None:
-        if np.all(np.sqrt(np.mean(fit["residual"] ** 2, axis=0)) <= ROUNDING * scale):
+        if np.all(problem.residual_rms(fit) <= ROUNDING * scale):
             return "the residual is at rounding level"
         if np.all(fit["heldout"] <= NOISE_STOP * floor):
             return f"every joint's held-out RMS is within {NOISE_STOP}x its noise floor"
@@ -915,7 +1374,7 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         best = min(remaining, key=lambda c: trials[c]["mse"])
         best_key = key_of[best]
         fit = trials[best]
-        n_eff = effective_samples(fit["residual"])
+        n_eff = n_eff_of(problem, fit)
         n_eff_total = float(n_eff.sum())
         rows = N * n
         k_extra = extra_k.get(best, 0)
@@ -966,8 +1425,8 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
             flagged[best_key] = (tuple(alternatives), "; ".join(reasons))
             note = (note + "; " if note else "") + f"indistinguishable from {', '.join(alternatives)}: not named"
         steps.append(Step(effect=best, alternatives=tuple(alternatives),
-                          parameter_names=blocks[best_key][1], values=data.natural(best_key, values[own]),
-                          std=data.natural(best_key, std[own]),
+                          parameter_names=block_names[best_key], values=natural(best_key, values[own]),
+                          std=natural(best_key, std[own]),
                           rms_before=current["heldout"], rms_after=fit["heldout"],
                           criterion_before=crit_before, criterion_after=crit_after, improvement=improvement,
                           wald=(float(wald), wald_threshold), note=note))
@@ -1025,33 +1484,30 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     # the Stribeck velocity between the grid points: 1-D search of the final fit's RSS
     stribeck_key = next((k for k in chosen if k.startswith("stribeck")), None)
     vs_final = None
-    final_blocks = {k: blocks[k] for k in chosen}
+    final_problem = problem
     if stribeck_key is not None:
         from scipy.optimize import minimize_scalar
         grid = sorted(float(v) for v in stribeck_vs)
-        vs0 = float(stribeck_key.split("@")[1])
+        vs0 = specs[stribeck_key][1]
         i = grid.index(vs0)
         lo = grid[i - 1] if i > 0 else vs0 / 2
         hi = grid[i + 1] if i + 1 < len(grid) else vs0 * 2
-        others = {k: blocks[k] for k in chosen if k != stribeck_key}
+        others = {k: specs[k] for k in chosen if k != stribeck_key}
 
         def rss_at(log_vs):
-            trial = dict(others)
-            trial["stribeck_friction"] = data.block("stribeck_friction", math.exp(log_vs))
-            return problem_for(trial).fit(list(trial))["rss"]
-
-        def problem_for(bl):
-            return _Problem(bl, r, data.fold_of, folds)
+            # a pass over the data for each velocity tried (the columns of exp(-(qd/vs)^2))
+            trial = dict(others, stribeck_friction=("stribeck_friction", math.exp(log_vs)))
+            return problem_of(data_pass(trial, 0, peak), trial).fit(list(trial))["rss"]
+        progress("refining the Stribeck velocity (a pass over the data per velocity tried)")
         best_log = minimize_scalar(rss_at, bounds=(math.log(lo), math.log(hi)), method="bounded",
                                    options={"xatol": 1e-3}).x
         vs_final = float(math.exp(best_log))
-        final_blocks = {}
-        for k in chosen:
-            final_blocks[k] = (data.block("stribeck_friction", vs_final) if k == stribeck_key else blocks[k])
+        final_specs = {k: (("stribeck_friction", vs_final) if k == stribeck_key else specs[k]) for k in chosen}
+        final_problem = problem_of(data_pass(final_specs, MAX_LAG, peak), final_specs)
         details[stribeck_key] = f"vs = {vs_final:.3g} rad/s (refined between the grid points {lo:g} and {hi:g})"
-    final_problem = _Problem(final_blocks, r, data.fold_of, folds) if chosen else problem
-    final = final_problem.fit(list(final_blocks) if chosen else [])
-    if "payload" in final_blocks:
+        block_names = dict(block_names, **final_problem.names)
+    final = final_problem.fit(chosen)
+    if "payload" in chosen:
         physical = _physical_payload(final_problem, final)
         if physical is not None:
             final, text = physical
@@ -1060,22 +1516,22 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     # final values of every fitted candidate
     idx = final["idx"]
     rows = N * n
-    n_eff = effective_samples(final["residual"])
+    n_eff = n_eff_of(final_problem, final)
     s2 = final["rss"] / max(rows - final["rank"], 1)
     values = final["theta"] * final_problem.scale[idx] if len(idx) else np.zeros(0)
     std = (np.sqrt(np.maximum(np.diag(final["inv"]), 0) * s2 * rows / n_eff.sum()) * final_problem.scale[idx]
            if len(idx) else np.zeros(0))
-    names = [name for c in chosen for name in final_blocks[c][1]]
+    names = [name for c in chosen for name in block_names[c]]
     fitted_values = dict(zip(names, map(float, values)))      # as fitted (bounds apply to these)
-    natural = np.concatenate([data.natural(c, values[final_problem.slices[c]]) for c in chosen]) \
+    natural_values = np.concatenate([natural(c, values[np.isin(idx, final_problem.slices[c])]) for c in chosen]) \
         if chosen else np.zeros(0)
-    value_of = dict(zip(names, map(float, natural)))
+    value_of = dict(zip(names, map(float, natural_values)))
     for k in chosen:
         low, high = _bounds(_public(k))
         if not (math.isfinite(low) and math.isfinite(high)):
             continue
         edges = (low, high) if low < 0 else (high,)      # a coefficient at 0 of [0, x] is just absent
-        pinned = [nm for nm in final_blocks[k][1]
+        pinned = [nm for nm in block_names[k]
                   if any(abs(fitted_values[nm] - e) <= 1e-6 * (high - low) for e in edges)]
         if pinned:
             notes.append(f"{_public(k)}: {', '.join(pinned)} at the edge of the physical range [{low:g}, {high:g}]: "
@@ -1085,16 +1541,17 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
     # a joint's spring or gain that changes nothing above the noise stays ideal in model.yaml
     negligible = []
     for c in chosen:
-        for k, nm in zip(final_problem.slices[c], final_blocks[c][1]):
-            contribution = np.sqrt(np.mean((final_problem.A[:, :, k] * final["theta"][k]) ** 2, axis=0))
+        for k, nm in zip(final_problem.slices[c], block_names[c]):
+            contribution = final_problem.contribution_rms(final, k)
             if np.all(contribution < MATTER * np.maximum(floor, 1e-300)):
                 negligible.append(nm)
-    std_natural = np.concatenate([data.natural(c, std[final_problem.slices[c]]) for c in chosen]) \
+    std_natural = np.concatenate([natural(c, std[np.isin(idx, final_problem.slices[c])]) for c in chosen]) \
         if chosen else np.zeros(0)
     std_of = dict(zip(names, map(float, std_natural)))
-    bias = data.elasticity_noise_bias() if any(_public(k) == "motor_side_elasticity" for k in chosen) else None
+    bias = _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) \
+        if any(_public(k) == "motor_side_elasticity" for k in chosen) else None
     not_determined = undetermined(
-        {_public(k): final_blocks[k][1] for k in chosen}, value_of, std_of,
+        {_public(k): block_names[k] for k in chosen}, value_of, std_of,
         {nm: fitted_values[nm] for nm in names}, negligible, bias)
     payload = payload_mass = gravity = tilt = None
     fitted = tuple(_public(k) for k in chosen)
@@ -1121,11 +1578,11 @@ def discover(model: RobotModel, segments: Sequence[Segment], candidates: Sequenc
         roll = math.degrees(math.atan2(-gravity[1], -gravity[2]))
         pitch = math.degrees(math.atan2(gravity[0], -gravity[2]))
         tilt = (roll, pitch, total)
-    unexplained = _where(final, floor, data.signals, EXPLAINED_FACTOR, 1e3 * ROUNDING * scale)
+    unexplained = _where(final_problem, final, floor, EXPLAINED_FACTOR, 1e3 * ROUNDING * scale)
     return Discovery(effects=tuple(named), fitted=fitted, steps=tuple(steps), rms_before=rms_before,
                      rms_after=final["heldout"], noise_floor=floor, noise_method=NOISE_METHOD,
                      indistinguishable=tuple(groups), notes=tuple(notes), values=value_of, std=std_of,
                      payload=payload, payload_mass=payload_mass, gravity=gravity, tilt_deg=tilt, n_eff=n_eff,
                      samples=N, folds=folds, ripple_k=ripple_k, eps=eps,
                      stribeck_vs=vs_final, explained=not unexplained, unexplained=unexplained,
-                     filtering=data.low_pass, negligible=tuple(negligible), undetermined=not_determined)
+                     filtering=main.low_pass, negligible=tuple(negligible), undetermined=not_determined)

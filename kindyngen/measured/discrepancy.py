@@ -39,10 +39,12 @@ import yaml
 
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import links_from_barycentric
-from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover, predict_effects, spring_torque
+from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, Discovery, Recording, discover,
+                        in_memory, piece_windows, predict_effects, spring_torque)
 from .effect_columns import EFFECTS, coulomb_eps, effect_names
 from .log_formats import joint_names_of, read_any
-from .log_preparing import Preprocessing, filtered_rows, preprocess, split_time
+from .log_preparing import Preprocessing, Segment, preprocess, split_time
+from .streaming import NotStreamable, segment_pieces
 from .identified_model import model_yaml
 from .regressor_rows import description_torques
 from .identification_report import rms_table, torque_figure
@@ -63,6 +65,9 @@ class DiscrepancyRequest:
     base: str | None = None          # a URDF's chain: first and last link (kindyngen.readers.urdf)
     tip: str | None = None
     snap_angles: bool = True
+    #: samples per chunk of the streamed reading and of the data passes (the result does not
+    #: depend on it, to rounding)
+    chunk_rows: int = CHUNK_ROWS
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,26 +166,109 @@ def measured_prediction(model, segment) -> np.ndarray:
     return gain * description_torques(model, q, qd, qdd)
 
 
-def _heldout(model, written, d, segments):
-    """Per held-out segment, the measured torque and the nominal, fitted and model.yaml
-    predictions through the segment's parallel filter; stacked, with one time axis."""
-    out = {k: [] for k in ("t", "tau", "nominal", "fitted", "after", "q", "qd", "qdd")}
+def _heldout(model, written, d, recordings, chunk_rows=CHUNK_ROWS):
+    """Per held-out recording, the measured torque and the nominal, fitted and model.yaml
+    predictions through the recording's parallel filter (window by window, the chunked
+    filter); stacked, with one time axis.  The filtered (decimated) rows are kept: they are
+    what the figures and the motion phases show."""
+    from .streaming import ChunkedParallelFilter, overlap_rows
+    keys = ("nominal", "fitted", "after", "q", "qd", "qdd")
+    out = {k: [] for k in ("t", "tau") + keys}
     start = 0.0
+    n = model.n
     rigid = replace(model, joints=tuple(replace(j, friction=None, armature=None) for j in model.joints))
-    for seg in segments:
-        nominal = measured_prediction(rigid, seg)       # rigid bodies only, as discover assumes
-        spring = spring_torque(seg.tau, seg.dt)
-        fitted = description_torques(model, seg.q, seg.qd, seg.qdd, effects=False) + \
-            predict_effects(d, model, seg.q, seg.qd, seg.qdd, spring=spring)
-        after = measured_prediction(written, seg) if written is not None else nominal
-        motion = np.stack([nominal, fitted, after, seg.q, seg.qd, seg.qdd], axis=2)
-        t, F, tau = filtered_rows(seg, motion)
+    for rec in recordings:
+        filt, times, first_t = None, [], None
+
+        def add(F, tau):
+            out["tau"].append(tau)
+            for k, key in enumerate(keys):
+                out[key].append(F[:, :, k])
+        for seg, a, context, s, e in piece_windows(rec.pieces(), min(chunk_rows, WINDOW_ROWS), 2):
+            lp = seg.low_pass
+            if filt is None and lp is not None:
+                filt = ChunkedParallelFilter(lp, overlap_rows(Preprocessing(cutoff_hz=lp.cutoff_hz, order=lp.order),
+                                                              seg.dt), chunk_rows)
+            window = Segment(seg.source, context["t"], seg.dt, context["q"], context["qd"], context["qdd"],
+                             context["tau"], (), context["raw"] if lp is not None else None, lp)
+            i0, i1 = s - a, e - a
+            nominal = measured_prediction(rigid, window)       # rigid bodies only, as discover assumes
+            spring = spring_torque(window.tau, seg.dt)
+            fitted = description_torques(model, window.q, window.qd, window.qdd, effects=False) + \
+                predict_effects(d, model, window.q, window.qd, window.qdd, spring=spring)
+            after = measured_prediction(written, window) if written is not None else nominal
+            motion = np.stack([nominal, fitted, after, window.q, window.qd, window.qdd], axis=2)[i0:i1]
+            rows = np.arange(s, e)
+            step = 1 if lp is None else lp.decimate
+            times.append(context["t"][i0:i1][rows % step == 0])
+            if filt is None:
+                add(motion, context["tau"][i0:i1])
+            else:
+                m = i1 - i0
+                for F in filt.push(np.concatenate([motion.reshape(m, -1), context["raw"][i0:i1]], axis=1)):
+                    add(F[:, :-n].reshape(len(F), n, -1), F[:, -n:])
+        if filt is not None:
+            for F in filt.finish():
+                add(F[:, :-n].reshape(len(F), n, -1), F[:, -n:])
+        if not times:
+            continue
+        t = np.concatenate(times)
         out["t"].append(t - t[0] + start)
         start = out["t"][-1][-1] + (t[1] - t[0] if len(t) > 1 else seg.dt)
-        out["tau"].append(tau)
-        for k, key in enumerate(("nominal", "fitted", "after", "q", "qd", "qdd")):
-            out[key].append(F[:, :, k])
     return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def _rows(seg: Segment, a: int, b: int) -> Segment:
+    """Rows ``a:b`` of a piece, with its unfiltered torque and low-pass."""
+    unfiltered = None if seg.tau_unfiltered is None else seg.tau_unfiltered[a:b]
+    return Segment(seg.source, seg.t[a:b], seg.dt, seg.q[a:b], seg.qd[a:b], seg.qdd[a:b], seg.tau[a:b], (),
+                   unfiltered, seg.low_pass)
+
+
+def _part(path, model, settings, k0: int, k1: int, chunk_rows: int):
+    """Rows ``[k0, k1)`` of the (single) segment of a streamed log, piece by piece."""
+    def pieces():
+        row = 0
+        for _, piece in segment_pieces(path, model.n, settings, joint_names_of(model), chunk_rows):
+            m = len(piece.t)
+            a, b = max(k0 - row, 0), min(k1 - row, m)
+            if a < b:
+                yield piece if (a, b) == (0, m) else _rows(piece, a, b)
+            row += m
+            if row >= k1:
+                return
+    return Recording(k1 - k0, pieces)
+
+
+def _file_parts(path, model, request, progress):
+    """(training recordings, held-out recordings, preprocessing notes) of one log: the last
+    ``holdout`` fraction of its own time span held out (as
+    :func:`kindyngen.measured.log_preparing.split_time` cuts).  A log whose chunks preprocess
+    like the whole is streamed (a first pass reads its time stamps); any other log (gaps,
+    repeated rows, ``--rate`` resampling, or short) is preprocessed whole in memory."""
+    settings = request.preprocessing
+    notes, spans, times = [], [], []
+    try:
+        for index, piece in segment_pieces(path, model.n, settings, joint_names_of(model), request.chunk_rows,
+                                           notes=notes, spans=spans):
+            if spans:                          # preprocessed whole anyway (short, or resampled)
+                break
+            times.append(piece.t)
+    except NotStreamable as exc:
+        notes, spans = [f"preprocessed whole in memory ({exc})"], [None]
+    if spans:
+        segments = preprocess(read_any(path, model.n, joint_names_of(model)), settings)
+        notes = [note for note in notes if note.startswith("preprocessed whole")] + \
+            [note for s in segments for note in s.notes]
+        a, b = split_time(segments, 1.0 - request.holdout)
+        return in_memory(a), in_memory(b), notes
+    t = np.concatenate(times)
+    start, end = float(t[0]), float(t[-1])
+    cut = int(np.searchsorted(t, start + (1.0 - request.holdout) * (end - start), side="left"))
+    progress(f"{path}: {len(t)} samples, streamed (the first {cut} select, the rest is held out)")
+    train = (_part(path, model, settings, 0, cut, request.chunk_rows),) if cut > 0 else ()
+    held = (_part(path, model, settings, cut, len(t), request.chunk_rows),) if cut < len(t) else ()
+    return train, held, notes
 
 
 def run_discrepancy(request: DiscrepancyRequest,
@@ -190,17 +278,15 @@ def run_discrepancy(request: DiscrepancyRequest,
     # each file its own experiment, held-out part taken from each; in the order of the names
     for path in sorted(request.data, key=str):
         progress(f"reading {path}")
-        # every format identify reads (CSV, npz, Parquet, bags), read whole: discover is not streamed
-        segments = preprocess(read_any(path, model.n, joint_names_of(model)), request.preprocessing)
-        notes += [note for s in segments for note in s.notes]
-        a, b = split_time(segments, 1.0 - request.holdout)
+        a, b, file_notes = _file_parts(path, model, request, progress)
+        notes += file_notes
         train += a
         heldout += b
     eps = coulomb_eps(model)
-    d = discover(model, train, request.candidates, request.folds, progress, eps)
+    d = discover(model, train, request.candidates, request.folds, progress, eps, chunk_rows=request.chunk_rows)
     text, not_written, written_values = _model_text(request, model, d)
     written = parse_robot(yaml.safe_load(text), "model.yaml") if text is not None else None
-    h = _heldout(model, written, d, heldout)
+    h = _heldout(model, written, d, heldout, request.chunk_rows)
 
     def rms(pred):
         return np.sqrt(np.mean((h["tau"] - pred) ** 2, axis=0))

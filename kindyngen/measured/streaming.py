@@ -120,8 +120,11 @@ def overlap_rows(settings: Preprocessing, dt: float) -> int:
     return int(math.ceil((40.0 / decay + 1.0 / settings.cutoff_hz) / dt)) + 2
 
 
-class _NotStreamable(Exception):
+class NotStreamable(Exception):
     """A window that does not preprocess like the whole log (gap, repeated row, resampling)."""
+
+
+_NotStreamable = NotStreamable
 
 
 def _window_log(source: str, buf: dict, a: int, b: int) -> RawLog:
@@ -138,6 +141,16 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
     log's segments do).  ``notes`` (a list) receives what was done."""
     for _, piece in _segment_pieces(path, n, settings, joint_names, chunk_rows, notes):
         yield piece
+
+
+def segment_pieces(path, n: int, settings: Preprocessing = Preprocessing(), joint_names=None,
+                   chunk_rows: int = CHUNK_ROWS, notes: list | None = None,
+                   spans: list | None = None) -> Iterator[tuple[int, Segment]]:
+    """``(segment index, piece)`` of :func:`stream_segments`; raises :class:`NotStreamable` at
+    the first window that would not preprocess like the whole log (then read it whole).
+    ``spans`` receives the segments' exact (first, last) time when the log is preprocessed
+    whole anyway (short, or resampled)."""
+    return _segment_pieces(path, n, settings, joint_names, chunk_rows, notes, spans)
 
 
 def _segment_pieces(path, n: int, settings: Preprocessing, joint_names, chunk_rows: int, notes: list | None,

@@ -273,7 +273,7 @@ def test_semidefinite_program_from_the_factor_equals_the_stacked_one(ten_files):
 
 
 def test_discover_reads_parquet_like_the_csv(log, tmp_path, capsys):
-    """discover's data entry reads every format identify reads (whole: discover is not streamed)."""
+    """discover's data entry reads every format identify reads (through the streaming reader)."""
     import json
     from kindyngen.cli.main import main
     root, path, (t, q, qd, qdd, tau) = log

@@ -1,0 +1,116 @@
+"""`discover` streamed (issue 25): the data pass folds each window's filtered rows into moments
+(per fold Gram matrices and per-joint factors, lagged products for the effective sample count),
+so memory does not grow with the log.
+
+* the moments against plain numpy on random rows fed in uneven chunks: the fit (numpy
+  ``lstsq``), per-joint residual sums, out-of-fold residuals, and the effective sample count
+  (the FFT autocorrelation of the residual numpy computes);
+* a log read in chunks of 1500 samples (so streamed: several windows, chunked parallel
+  filter, chunked held-out predictions) against the same log in one chunk (preprocessed
+  whole): the same named set, values to 1e-9;
+* several files streamed against the same files each preprocessed whole in memory and cut by
+  ``split_time``, given to ``discover`` as segments.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from kindyngen.measured.discovery import _Moments, _Problem, discover, effective_samples
+from kindyngen.measured.effect_columns import coulomb_eps
+from kindyngen.measured.discrepancy import DiscrepancyRequest, run_discrepancy
+from kindyngen.measured.log_formats import joint_names_of, read_any
+from kindyngen.measured.log_preparing import preprocess, split_time
+from kindyngen.readers.yaml_description import load_robot
+from tests.measured.test_discover_issue24 import write_log
+
+
+def _rows(seed, m, n, p):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((m, n, p))
+    theta = rng.standard_normal(p)
+    # noise correlated over a few samples (a moving average): the lags matter
+    e = np.apply_along_axis(lambda x: np.convolve(x, np.ones(4) / 4, "same"), 0, rng.standard_normal((m, n)))
+    return A, A @ theta + 0.1 * e
+
+
+def test_moments_equal_plain_numpy():
+    m, n, p, folds = 2000, 3, 4, 5
+    A, r = _rows(0, m, n, p)
+    fold_of = np.minimum((np.arange(m) * folds) // m, folds - 1)
+    moments = _Moments(n, [p], [np.arange(p)] * n, folds, 32)
+    start = 0
+    for size in (7, 300, 1, 450, 33, 1209):            # uneven chunks, across fold boundaries
+        rows = slice(start, start + size)
+        signals = np.zeros((size, n, 5))
+        moments.add(fold_of[rows], A[rows], r[rows], signals, r[rows])
+        start += size
+    assert start == m
+    problem = _Problem(moments, ["torque_offset"], [p], {"torque_offset": ""},
+                       {"torque_offset": tuple(f"x{i}" for i in range(p))}, None, {})
+    fit = problem.fit(["torque_offset"])
+    # plain numpy: the stacked least squares, its residual, the out-of-fold residuals
+    A2, r2 = A.reshape(m * n, p), r.reshape(-1)
+    coef = np.linalg.lstsq(A2, r2, rcond=None)[0]
+    residual = r - A @ coef
+    np.testing.assert_allclose(problem.raw(fit["idx"], fit["theta"]), coef, rtol=1e-10)
+    np.testing.assert_allclose(fit["joint_rss"], np.sum(residual ** 2, axis=0), rtol=1e-10)
+    oof = np.empty_like(r)
+    for k in range(folds):
+        out = fold_of == k
+        c = np.linalg.lstsq(A[~out].reshape(-1, p), r[~out].reshape(-1), rcond=None)[0]
+        oof[out] = r[out] - A[out] @ c
+    np.testing.assert_allclose(fit["heldout"], np.sqrt(np.mean(oof ** 2, axis=0)), rtol=1e-10)
+    n_eff, exact = problem.effective_samples(fit)
+    assert exact
+    np.testing.assert_allclose(n_eff, effective_samples(residual), rtol=1e-9)
+    assert np.all(n_eff < 0.6 * m)                     # the moving average is seen
+
+
+def test_a_residual_correlated_beyond_the_folded_lags_is_flagged():
+    m, n, p = 3000, 2, 2
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((m, n, p))
+    r = np.cumsum(rng.standard_normal((m, n)), axis=0)          # a random walk: correlated for long
+    moments = _Moments(n, [p], [np.arange(p)] * n, 2, 32)
+    moments.add(np.minimum((np.arange(m) * 2) // m, 1), A, r, np.zeros((m, n, 5)), r)
+    problem = _Problem(moments, ["torque_offset"], [p], {"torque_offset": ""},
+                       {"torque_offset": ("a", "b")}, None, {})
+    _, exact = problem.effective_samples(problem.fit([]))
+    assert not exact
+
+
+def _close(a, b, rtol=1e-9):
+    assert a.effects == b.effects and a.fitted == b.fitted, (a.effects, b.effects)
+    assert a.values.keys() == b.values.keys()
+    for name in a.values:
+        assert abs(a.values[name] - b.values[name]) <= rtol * max(abs(b.values[name]), 1e-12), name
+    np.testing.assert_allclose(a.rms_after, b.rms_after, rtol=rtol)
+    np.testing.assert_allclose(a.noise_floor, b.noise_floor, rtol=rtol)
+    np.testing.assert_allclose(a.n_eff, b.n_eff, rtol=rtol)
+
+
+def test_small_chunks_give_the_result_of_one_chunk(tmp_path):
+    log = write_log(tmp_path / "log.npz", "lwr4", ("coulomb_friction", "viscous_friction"))
+    request = DiscrepancyRequest("robots/lwr4.yaml", (log,))
+    whole = run_discrepancy(request)
+    chunked = run_discrepancy(DiscrepancyRequest("robots/lwr4.yaml", (log,), chunk_rows=1500))
+    assert any("streamed in chunks of 1500" in note for note in chunked.preprocessing_notes)
+    assert not any("streamed" in note for note in whole.preprocessing_notes)
+    assert set(whole.discovery.effects) == {"coulomb_friction", "viscous_friction"}
+    _close(chunked.discovery, whole.discovery)
+    np.testing.assert_allclose(chunked.rms_after, whole.rms_after, rtol=1e-9)
+    np.testing.assert_allclose(chunked.rms_before, whole.rms_before, rtol=1e-9)
+    assert chunked.samples == whole.samples
+
+
+def test_files_streamed_equal_the_files_read_whole(tmp_path):
+    logs = [write_log(tmp_path / f"{k}.npz", "lwr4", ("viscous_friction",), seed=k) for k in (1, 2, 3)]
+    streamed = run_discrepancy(DiscrepancyRequest("robots/lwr4.yaml", tuple(logs), chunk_rows=1500)).discovery
+    model = load_robot("robots/lwr4.yaml")
+    train = []
+    for log in logs:
+        segments = preprocess(read_any(log, model.n, joint_names_of(model)))
+        train += split_time(segments, 0.7)[0]
+    whole = discover(model, train, eps=coulomb_eps(model))
+    assert streamed.effects == ("viscous_friction",)
+    _close(streamed, whole)
