@@ -42,8 +42,11 @@ SCALARS = ("double", "float")
 """C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
 
 KERNEL_LANES = 8
-"""Single calls run the sincos kernel over the angles padded with zeros to a multiple of this
-(AVX-512 lanes): the vectorised loop then covers them all, with no scalar remainder."""
+"""Single calls with half angles run the sincos kernel over the joint angles and those
+arguments, padded with zeros to a multiple of this (AVX-512 lanes), the arguments being
+computed into that array anyway. Joint angles alone are read in place from q, unpadded: the
+padded copy, stored in pieces and loaded back as one vector, cost more than the kernel's
+scalar remainder (lwr4 on Zen 5: jacobian 35.0 -> 31.8 ns, tau 82.6 -> 71.4; docs/latency.md)."""
 
 
 @dataclass(frozen=True)
@@ -74,7 +77,7 @@ class FunctionView:
     angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     arguments: tuple = ()         # C single calls: then these arguments affine in q (C text), e.g. half angles
-    lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
+    lanes: int = 0                # C with arguments: angles padded to a multiple of KERNEL_LANES
     block: int = 0                # C batch: configurations per block
     in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
     batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant

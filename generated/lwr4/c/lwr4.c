@@ -48,10 +48,10 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
 
 void lwr4_fk_hom(const double *restrict q, double *restrict T)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[6];
     const double t1 = cos_q[4];
     const double t2 = sin_q[0];
@@ -356,10 +356,10 @@ out_x[7][j] = t60 + t59;
 
 void lwr4_jacobian(const double *restrict q, double *restrict J)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[0];
     const double t1 = -t0;
     const double t2 = cos_q[1];
@@ -1787,10 +1787,10 @@ out_J[41][j] = t108;
 
 void lwr4_M(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[6];
     const double t1 = t0*t0;
     const double t2 = cos_q[6];
@@ -2254,10 +2254,10 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_g(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[3];
     const double t1 = cos_q[5];
     const double t2 = sin_q[6];
@@ -2363,10 +2363,10 @@ out_g[6][j] = -(0.000105*(t2*t24 + t3*t25) + 0.00014*(t3*t24 - t2*t25));
 
 void lwr4_c(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = t0*qd[0];
     const double t2 = t1*qd[1];
@@ -2932,10 +2932,10 @@ out_c[6][j] = t155;
 
 void lwr4_S(const double *restrict q, const double *restrict qd, double *restrict S)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = cos_q[2];
     const double t2 = cos_q[3];
@@ -4693,10 +4693,10 @@ out_S[48][j] = 0.0;
 
 void lwr4_tau(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = 9.81*t0;
     const double t2 = cos_q[1];
@@ -5286,10 +5286,10 @@ out_tau[6][j] = t164;
 
 void lwr4_fd(const double *restrict q, const double *restrict qd, const double *restrict tau, double *restrict qdd)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[6];
     const double t1 = sin_q[6];
     const double t2 = t1*t0;
@@ -6443,10 +6443,10 @@ out_qdd[6][j] = t559;
 
 void lwr4_tau_derivatives(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict dtau_dq, double *restrict dtau_dqd)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = sin_q[2];
     const double t2 = t1*t0;
@@ -10002,10 +10002,10 @@ out_dtau_dqd[48][j] = 0.0;
 
 void lwr4_fd_derivatives(const double *restrict q, const double *restrict qd, const double *restrict tau, double *restrict dqdd_dq, double *restrict dqdd_dqd, double *restrict Minv)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = sin_q[2];
     const double t2 = cos_q[3];
@@ -15871,10 +15871,10 @@ out_Minv[48][j] = t270;
 
 void lwr4_M_lagrange(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[3];
     const double t1 = cos_q[2];
     const double t2 = sin_q[1];
@@ -17922,10 +17922,10 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_g_lagrange(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = cos_q[2];
     const double t2 = sin_q[4];
@@ -18249,10 +18249,10 @@ out_g[6][j] = -(t142 - t79*t36);
 
 void lwr4_c_christoffel(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = cos_q[2];
     const double t2 = cos_q[3];
@@ -25019,10 +25019,10 @@ out_status[7][j] = (int)((0.5 < (t197 + ((8.803443431835879 < t182*t182 ? 1.0 : 
 
 void lwr4_Y_g(const double *restrict q, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = 9.81*cos_q[1];
     const double t1 = 9.81*sin_q[1];
     const double t2 = cos_q[2];
@@ -25314,10 +25314,10 @@ out_Y[83][j] = -(-t46*t19 - t42);
 
 void lwr4_Y_m(const double *restrict q, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = t0*t0;
     const double t2 = cos_q[1];
@@ -28226,10 +28226,10 @@ Y[1091*count + start + j] = 1.0;
 
 void lwr4_Y(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = 9.81*t0;
     const double t2 = cos_q[1];

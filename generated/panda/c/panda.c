@@ -48,10 +48,10 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
 
 void panda_fk_hom(const double *restrict q, double *restrict T)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[6];
     const double t1 = cos_q[4];
     const double t2 = sin_q[0];
@@ -408,10 +408,10 @@ out_x[7][j] = t78 - (0.088*t47 + t57*t35 + t1*t60);
 
 void panda_jacobian(const double *restrict q, double *restrict J)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[0];
     const double t1 = -t0;
     const double t2 = cos_q[0];
@@ -2039,10 +2039,10 @@ out_J[41][j] = t123;
 
 void panda_M(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[6];
     const double t1 = t0*t0;
     const double t2 = cos_q[6];
@@ -2612,10 +2612,10 @@ out_M[48][j] = 0.004909651967360946;
 
 void panda_g(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[3];
     const double t1 = cos_q[5];
     const double t2 = sin_q[6];
@@ -2723,10 +2723,10 @@ out_g[6][j] = -(0.003127439544*(t3*t25 - t2*t24) + 0.007735484874*(-t2*t25 - t3*
 
 void panda_c(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = t0*qd[0];
     const double t2 = -t1;
@@ -3346,10 +3346,10 @@ out_c[6][j] = t165;
 
 void panda_S(const double *restrict q, const double *restrict qd, double *restrict S)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[5];
     const double t1 = sin_q[3];
     const double t2 = sin_q[6];
@@ -5767,10 +5767,10 @@ out_S[48][j] = 0.0;
 
 void panda_tau(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = -9.81*t0;
     const double t2 = cos_q[1];
@@ -6426,10 +6426,10 @@ out_tau[6][j] = t174;
 
 void panda_fd(const double *restrict q, const double *restrict qd, const double *restrict tau, double *restrict qdd)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[6];
     const double t1 = sin_q[6];
     const double t2 = t1*t0;
@@ -7737,10 +7737,10 @@ out_qdd[6][j] = t587;
 
 void panda_tau_derivatives(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict dtau_dq, double *restrict dtau_dqd)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[2];
     const double t1 = cos_q[1];
     const double t2 = cos_q[3];
@@ -11788,10 +11788,10 @@ out_dtau_dqd[48][j] = 0.0;
 
 void panda_fd_derivatives(const double *restrict q, const double *restrict qd, const double *restrict tau, double *restrict dqdd_dq, double *restrict dqdd_dqd, double *restrict Minv)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = cos_q[2];
     const double t2 = cos_q[3];
@@ -18679,10 +18679,10 @@ out_Minv[48][j] = t320;
 
 void panda_M_lagrange(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[4];
     const double t1 = sin_q[2];
     const double t2 = sin_q[1];
@@ -20934,10 +20934,10 @@ out_M[48][j] = 0.004909651967360946;
 
 void panda_g_lagrange(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = cos_q[4];
     const double t2 = sin_q[3];
@@ -21251,10 +21251,10 @@ out_g[6][j] = -(t140 + t76*t35);
 
 void panda_c_christoffel(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = cos_q[2];
     const double t2 = cos_q[3];
@@ -28533,10 +28533,10 @@ Y[300*count + start + j] = t546;
 
 void panda_Y_g(const double *restrict q, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = 9.81*cos_q[1];
     const double t1 = 9.81*sin_q[1];
     const double t2 = cos_q[2];
@@ -28828,10 +28828,10 @@ out_Y[83][j] = -(t20*t37 - t46*t19);
 
 void panda_Y_m(const double *restrict q, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = t0*t0;
     const double t2 = cos_q[1];
@@ -31744,10 +31744,10 @@ Y[1091*count + start + j] = 1.0;
 
 void panda_Y(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {q[0], q[1], q[2], q[3], q[4], q[5], q[6], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
+       read back as one vector, which the store buffer cannot forward (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = -9.81*t0;
     const double t2 = cos_q[1];
