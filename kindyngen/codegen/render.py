@@ -42,8 +42,56 @@ SCALARS = ("double", "float")
 """C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
 
 KERNEL_LANES = 8
-"""Single calls run the sincos kernel over the angles padded with zeros to a multiple of this
-(AVX-512 lanes): the vectorised loop then covers them all, with no scalar remainder."""
+"""Single calls with half angles run the sincos kernel over the joint angles and those
+arguments, padded with zeros to a multiple of this (AVX-512 lanes), the arguments being
+computed into that array anyway. Joint angles alone are read in place from q, unpadded: the
+padded copy, stored in pieces and loaded back as one vector, cost more than the kernel's
+scalar remainder (lwr4 on Zen 5: jacobian 35.0 -> 31.8 ns, tau 82.6 -> 71.4; docs/latency.md)."""
+
+
+DEMAND_ORDER_OPERATIONS = 1000
+"""Single calls of more operations than this (after CSE) are printed in demand order
+(:func:`demand_order`). These are throughput-bound, and gcc keeps statements in the order
+printed, so temporaries computed long before their use and outputs stored only at the end
+fill the registers and spill. Measured in one head-to-head run (docs/latency.md; Zen 5, gcc
+12.2, minima): tau_derivatives 1.12x on lwr4 and panda, fd 1.04x / 1.11x, fd_derivatives
+1.03x / 1.05x; M, c, tau (300-650 operations) within 2 % either way, so they keep CSE's order."""
+
+
+def demand_order(assignments, outputs) -> list:
+    """Statements ``("t", index)`` and ``("out", port, entry)`` in demand order: every output
+    entry in turn, right after the temporaries it still needs, each of those right after its
+    own (post-order, operands in the order the expression lists them), so a temporary is
+    computed close to its first use and an output is stored as soon as it is known.
+
+    >>> import symengine as se
+    >>> x, t0, t1, t2 = se.symbols("x t0 t1 t2")
+    >>> demand_order([(t0, x + 1), (t1, 2 * x), (t2, t0 * t0)], [(t2 + 1, t1)])
+    [('t', 0), ('t', 2), ('out', 0, 0), ('t', 1), ('out', 0, 1)]
+    """
+    index = {sym: k for k, (sym, _) in enumerate(assignments)}
+    needs = [sorted(index[a] for a in e.free_symbols if a in index) for _, e in assignments]
+    done, order = set(), []
+
+    def visit(root):
+        stack = [(root, False)]
+        while stack:
+            k, expanded = stack.pop()
+            if k in done:
+                continue
+            if expanded:
+                done.add(k)
+                order.append(("t", k))
+                continue
+            stack.append((k, True))
+            stack.extend((j, False) for j in reversed(needs[k]) if j not in done)
+
+    for port, exprs in enumerate(outputs):
+        for entry, e in enumerate(exprs):
+            for k in sorted(index[a] for a in e.free_symbols if a in index):
+                visit(k)
+            order.append(("out", port, entry))
+    return order
 
 
 @dataclass(frozen=True)
@@ -74,10 +122,13 @@ class FunctionView:
     angles: int = 0               # C: entries of q whose sin/cos come from the sincos kernel ...
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     arguments: tuple = ()         # C single calls: then these arguments affine in q (C text), e.g. half angles
-    lanes: int = 0                # C: angles padded to a multiple of KERNEL_LANES
+    lanes: int = 0                # C with arguments: angles padded to a multiple of KERNEL_LANES
     block: int = 0                # C batch: configurations per block
     in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
     batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
+    # C single calls in demand order (DEMAND_ORDER_OPERATIONS): ("t", name, text) and
+    # ("out", port name, entry, text, dtype) in print order; empty: assignments, then outputs
+    statements: tuple = ()
 
 
 def _index(k: int, shape) -> str:
@@ -218,10 +269,12 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
             used_symbols |= e.free_symbols
     live = _live_beside_kernel(program, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
     assignments = []
+    printed = {}
     for sym, expr in program.assignments:
         names[sym] = str(sym)
         if live is None or sym in live:
             assignments.append((str(sym), dialect.expr(expr, names)))
+            printed[sym] = assignments[-1]
     inputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
                             p.unit, p.description,
                             used=any(s in used_symbols for s in syms))
@@ -230,6 +283,12 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
                              p.unit, p.description,
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
+    statements = ()
+    if dialect.name == "c" and not batch and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
+        kept = [(sym, e) for sym, e in program.assignments if sym in printed]
+        statements = tuple(("t", *printed[kept[k[1]][0]]) if k[0] == "t"
+                           else ("out", outputs[k[1]].name, k[2], outputs[k[1]].entries[k[2]][1], outputs[k[1]].dtype)
+                           for k in demand_order(kept, program.outputs))
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
     return FunctionView(
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
@@ -244,6 +303,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         block=block,
         in_place=in_place,
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
+        statements=statements,
     )
 
 
