@@ -6,7 +6,8 @@ derivation (symengine):
   differences of ``rnea``; ``fd_derivatives`` against ``computeABADerivatives`` and central
   differences of ``aba``; the catalog's ``fd_derivatives_no_minv`` of the LWR and the Panda
   (this route without ``Minv``) against ``computeABADerivatives``; the Christoffel form
-  ``dc/dqd`` (``coriolis_velocity_jacobian`` of ``mass_matrix_partials`` of M) against differences of Pinocchio's ``c = nle - g``;
+  ``dc/dqd`` (``coriolis_velocity_jacobian`` of ``mass_matrix_partials`` of M) against
+  differences of Pinocchio's ``c = nle - g``;
 * a URDF chain with a prismatic joint on a tilted axis, with viscous, smoothed Coulomb and
   offset friction and armature added: both functions and the catalog's
   ``fd_derivatives_no_minv`` against central differences of Pinocchio's rnea / aba plus those
