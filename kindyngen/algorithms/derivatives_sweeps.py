@@ -2,7 +2,8 @@
 
 * ``tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd`` (``dtau_dqdd`` is ``M``, the function
   ``M``);
-* ``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv``.
+* ``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` and ``fd_derivatives_no_minv(q,
+  qd, tau) -> dqdd_dq, dqdd_dqd`` (the same without ``M^-1``).
 
 Both follow the model of ``tau`` and ``fd`` exactly (same grouped bodies, joint frames, params
 mode, prismatic joints, friction and armature; any fixed-base tree, an arm being the tree
@@ -367,8 +368,11 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
     return _with_note(f, model)
 
 
-def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives") -> SymbolicFunction:
-    """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv`` of ``fd`` with its joint effects."""
+def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives",
+                   with_minv: bool = True) -> SymbolicFunction:
+    """``fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd[, Minv]`` of ``fd`` with its joint
+    effects (``Minv`` left out with ``with_minv=False``: its n columns through the factor are
+    then not formed)."""
     ts = _fixed_base_setup(model, params)
     q = ts.q
     n = model.n
@@ -384,19 +388,24 @@ def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_d
     dqd = coriolis_velocity_jacobian(dM, qd)
     dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
     ddq, ddqd = solve_columns(L, inv_d, dq), solve_columns(L, inv_d, dqd)
-    Minv = inverse_from_ldlt(L, inv_d)
+    ports = [Port("dqdd_dq", (n, n), "dqdd_i / dq_j (row-major)", _matrix_unit(model, ACCEL, ANGLE, "1/s^2")),
+             Port("dqdd_dqd", (n, n), "dqdd_i / dqd_j (row-major)", _matrix_unit(model, ACCEL, RATE, "1/s"))]
+    outputs = [flat(ddq), flat(ddqd)]
+    if with_minv:
+        ports.append(Port("Minv", (n, n), "inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major)",
+                          _matrix_unit(model, ACCEL, TORQUE, "1/(kg m^2)")))
+        outputs.append(flat(inverse_from_ldlt(L, inv_d)))
+        products, minv = "M^-1 and the products", "dqdd/dtau is Minv"
+    else:
+        products, minv = "the products", "dqdd/dtau is M^-1, not formed here (the function fd_derivatives has it)"
     f = dynamics_function(
         name, "Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd, effects "
         "included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c + g)/dq (one tangent "
         "sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2 S(q, qd) (Christoffel symbols) "
-        "plus the friction derivative, and M^-1 and the products from one unrolled LDL^T factorisation of M (no "
-        "square roots); dqdd/dtau is Minv.",
+        f"plus the friction derivative, and {products} from one unrolled LDL^T factorisation of M (no "
+        f"square roots); {minv}.",
         ts, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),
-        (Port("dqdd_dq", (n, n), "dqdd_i / dq_j (row-major)", _matrix_unit(model, ACCEL, ANGLE, "1/s^2")),
-         Port("dqdd_dqd", (n, n), "dqdd_i / dqd_j (row-major)", _matrix_unit(model, ACCEL, RATE, "1/s")),
-         Port("Minv", (n, n), "inverse joint-space inertia matrix M^-1 = dqdd/dtau (symmetric, row-major)",
-              _matrix_unit(model, ACCEL, TORQUE, "1/(kg m^2)"))),
-        (flat(ddq), flat(ddqd), flat(Minv)))
+        tuple(ports), tuple(outputs))
     return _with_note(f, model)
 
 

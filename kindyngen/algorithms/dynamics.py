@@ -565,12 +565,15 @@ def centre_of_mass_tree(model: RobotModel, params: str = "numeric", name: str = 
     ts, stages = setup(model, params), Stages()
     M, root_columns, whole = crba(ts, stages)
     com, jac, ag = centroidal(ts, root_columns, whole, M)
-    frame = "world" if model.floating_base else f"root link '{model.base_name}'"
+    # an arm read from DH rows has no base link name: its base is DH frame 0
+    frame = ("world frame" if model.floating_base else f"root link '{model.base_name}' frame" if model.base_name
+             else "DH frame 0" if model.is_dh else "base frame")
     counted = "" if model.floating_base else " (the fixed root link not counted, as in Pinocchio)"
     return dynamics_function(name, ROUTE + f"centre of mass{counted}, its Jacobian and the centroidal momentum matrix "
                              "(from the base rows of composite rigid bodies).", ts, (q_port(model),), (ts.q,),
-                             (Port("com", (3,), f"centre of mass in the {frame} frame", "m"),
-                          Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame} frame", "m per unit of qd"),
+                             (Port("com", (3,), f"centre of mass in the {frame}", "m"),
+                          Port("J_com", (3, model.nv), f"d com/dt = J_com qd, in the {frame}", "m per unit of qd"),
                           Port("A_g", (6, model.nv), "centroidal momentum matrix: h_G = A_g qd, linear then angular "
-                               f"momentum about the CoM, {frame} axes (Pinocchio's ccrba)", "kg m, kg m^2 per unit of qd")),
+                               f"momentum about the CoM, {frame.removesuffix(' frame')} axes (Pinocchio's ccrba)",
+                               "kg m, kg m^2 per unit of qd")),
                          (com, _flat(jac), _flat(ag)), stages)

@@ -57,18 +57,9 @@ def flange_only(build: Builder) -> Builder:
     return flange_build
 
 
-def tree_only(build: Builder) -> Builder:
-    """A function a model read as a tree gets besides an arm's (the centre of mass, fd's
-    derivatives without Minv): None for a model read as an arm, whose generated set is kept."""
-    def tree_build(model, params):
-        return build(model, params) if model.is_tree else None
-    tree_build.tree_only = True
-    return tree_build
-
-
 # every robot's functions, in output order; one builder per function, each written over the
 # tree (an arm is the tree whose parent of joint j is j - 1) or marked chain_only / flange_only
-# (by the model's structure) or tree_only (by how it was read)
+# (by the model's structure, never by how the file was read)
 BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("fk_hom", lambda model, params: fk_hom_tree(model)),
     ("fk_dq", flange_only(lambda model, params: fk_dq(model))),
@@ -83,7 +74,7 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("S", chain_only(lambda model, params: coriolis_matrix(model, params, "S"))),
     ("tau", lambda model, params: inverse_dynamics_tree(model, params, "tau")),
     ("fd", lambda model, params: forward_dynamics_routes(model, params, "fd")),
-    ("com", tree_only(lambda model, params: centre_of_mass_tree(model, params, "com"))),
+    ("com", lambda model, params: centre_of_mass_tree(model, params, "com")),
     # their partial derivatives, for optimal control: on a chain by the adjoint sweeps over the
     # Newton-Euler pass (kindyngen/algorithms/derivatives_sweeps.py; they carry the joint effects),
     # on a branched tree or a floating base by the world-frame formulation
@@ -93,9 +84,11 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
      else tau_derivatives_tree(model, "tau_derivatives", params)),
     ("fd_derivatives", lambda model, params: fd_derivatives(model, params, "fd_derivatives") if model.is_chain
      else fd_derivatives_tree(model, "fd_derivatives", params=params)),
-    # the same without Minv, for callers that do not need it (each column through the factor)
-    ("fd_derivatives_no_minv", tree_only(lambda model, params: fd_derivatives_tree(
-        model, "fd_derivatives_no_minv", with_minv=False, params=params))),
+    # the same without Minv, for callers that do not need it, by the same routes (on lwr4 the
+    # sweeps without Minv cost fewer operations than the world frame's and carry the effects)
+    ("fd_derivatives_no_minv", lambda model, params: fd_derivatives(
+        model, params, "fd_derivatives_no_minv", with_minv=False) if model.is_chain
+     else fd_derivatives_tree(model, "fd_derivatives_no_minv", with_minv=False, params=params)),
     ("M_lagrange", chain_only(lambda model, params: mass_matrix_lagrange(model, params, "M_lagrange"))),
     ("g_lagrange", chain_only(lambda model, params: gravity_lagrange(model, params, "g_lagrange"))),
     ("c_christoffel", chain_only(lambda model, params: coriolis_christoffel(model, params, "c_christoffel"))),

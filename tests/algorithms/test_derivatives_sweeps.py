@@ -4,11 +4,14 @@ derivation (symengine):
 
 * the LWR: ``tau_derivatives`` against Pinocchio's ``computeRNEADerivatives`` and central
   differences of ``rnea``; ``fd_derivatives`` against ``computeABADerivatives`` and central
-  differences of ``aba``; the Christoffel form ``dc/dqd`` (``coriolis_velocity_jacobian`` of
-  ``mass_matrix_partials`` of M) against differences of Pinocchio's ``c = nle - g``;
+  differences of ``aba``; the catalog's ``fd_derivatives_no_minv`` of the LWR and the Panda
+  (this route without ``Minv``) against ``computeABADerivatives``; the Christoffel form
+  ``dc/dqd`` (``coriolis_velocity_jacobian`` of ``mass_matrix_partials`` of M) against
+  differences of Pinocchio's ``c = nle - g``;
 * a URDF chain with a prismatic joint on a tilted axis, with viscous, smoothed Coulomb and
-  offset friction and armature added: both functions against central differences of
-  Pinocchio's rnea / aba plus those effects written out here with numpy;
+  offset friction and armature added: both functions and the catalog's
+  ``fd_derivatives_no_minv`` against central differences of Pinocchio's rnea / aba plus those
+  effects written out here with numpy;
 * the helpers: ``inverse_from_ldlt`` and ``solve_columns`` against numpy's inverse and solve,
   ``effect_velocity_derivatives`` against differences of the friction torque, ``with_diagonal``;
   a floating base is refused.
@@ -29,6 +32,7 @@ from kindyngen.algorithms.derivatives_sweeps import (coriolis_velocity_jacobian,
                                                      solve_columns, tau_derivatives, with_diagonal)
 from kindyngen.algorithms.dynamics import crba, setup
 from kindyngen.algorithms.ldlt import ldlt_factor
+from kindyngen.codegen.catalog import derive_all
 from kindyngen.model.robot_model import Friction
 from kindyngen.readers.urdf import parse_urdf
 from tests.harness import robot
@@ -130,6 +134,22 @@ def test_lwr_fd_derivatives_equal_pinocchio(lwr):
         assert _close(dqd, _jacobian(lambda x: pin.aba(pm, pd, q, x, tau), qd), DIFFERENCE)
 
 
+@pytest.mark.parametrize("name", ["lwr4", "panda"])
+def test_arm_fd_derivatives_no_minv_equal_pinocchio(name):
+    """An arm gets fd_derivatives_no_minv by these sweeps (fewer operations than the world
+    frame's route on both arms), dqdd/dq and dqdd/dqd only."""
+    model = robot(name)
+    pm, pd, _ = pinocchio_model(model)
+    (f,) = derive_all(model, only={"fd_derivatives_no_minv"})
+    assert [p.name for p in f.outputs] == ["dqdd_dq", "dqdd_dqd"] and "tangent sweep" in f.summary
+    rng = np.random.default_rng(15)
+    for q, qd, _ in _states(model, 5):
+        tau = rng.normal(scale=5.0, size=model.n)
+        dq, dqd = _evaluate(f, q, qd, tau)
+        ref_dq, ref_dqd, _ = (np.array(a) for a in pin.computeABADerivatives(pm, pd, q, qd, tau))
+        assert _close(dq, ref_dq, EXACT) and _close(dqd, ref_dqd, EXACT)
+
+
 def test_christoffel_velocity_jacobian_is_that_of_pinocchios_coriolis(lwr):
     model, pm, pd = lwr
     ts = setup(model, "numeric")
@@ -206,6 +226,12 @@ def test_chain_with_effects_fd_derivatives_equal_differences(chain):
         assert _close(dq, _jacobian(lambda x: fd(x, qd, tau), q), DIFFERENCE)
         assert _close(dqd, _jacobian(lambda x: fd(q, x, tau), qd), DIFFERENCE)
         assert _close(Minv, np.linalg.inv(_full(pin.crba(pm, pd, q)) + np.diag(ARMATURE)), EXACT)
+    (no_minv,) = derive_all(model, only={"fd_derivatives_no_minv"})
+    for q, qd, _ in _states(model, 3, seed=27):
+        qd, tau = qd * 0.1, rng.normal(scale=5.0, size=model.n)
+        dq, dqd = _evaluate(no_minv, q, qd, tau)
+        assert _close(dq, _jacobian(lambda x: fd(x, qd, tau), q), DIFFERENCE)
+        assert _close(dqd, _jacobian(lambda x: fd(q, x, tau), qd), DIFFERENCE)
 
 
 def test_effect_velocity_derivatives_are_the_friction_slopes(chain):

@@ -1,11 +1,14 @@
-"""Dynamics (M, g, c, S, tau, fd and the alternative routes) against Pinocchio, plus the
+"""Dynamics (M, g, c, S, tau, fd and the alternative routes, com) against Pinocchio, plus the
 structural properties: M symmetric positive definite, Mdot - 2 S skew-symmetric, both routes
 equal, symbolic parameters equal to the baked-in ones, energy conserved by fd."""
 from __future__ import annotations
 
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
+import sympy
 import pytest
 import symengine as se
 from scipy.integrate import solve_ivp
@@ -20,6 +23,8 @@ from kindyngen.codegen.catalog import forward_dynamics_routes
 from kindyngen.algorithms.dynamics import coriolis_tree, gravity_tree, inverse_dynamics_tree, mass_matrix_tree
 from kindyngen.model.inertial_parameters import parameter_symbols, parameter_vector
 from kindyngen.codegen.optimize import optimize
+from kindyngen.model.placement import Placement
+from kindyngen.model.robot_model import Link
 from kindyngen.readers.yaml_description import parse_robot
 
 ROBOTS = ("lwr4", "panda")
@@ -103,6 +108,40 @@ def test_inverse_dynamics(case, ref):
 def test_forward_dynamics(case, ref):
     name, _, _, q, qd, qdd = case
     close(evaluate_symbolic(name, "fd", q=q, qd=qd, tau=qdd)["qdd"], ref["fd"])
+
+
+def _centroidal(model, data, q):
+    return {"com": np.array([pin.centerOfMass(model, data, qi).copy() for qi in q]),
+            "J_com": np.array([pin.jacobianCenterOfMass(model, data, qi).copy() for qi in q]),
+            "A_g": np.array([pin.computeCentroidalMap(model, data, qi).copy() for qi in q])}
+
+
+def test_centre_of_mass(case):
+    """An arm gets com as a tree does: centre of mass, its Jacobian, the centroidal map."""
+    name, model, data, q, _, _ = case
+    ours, reference = evaluate_symbolic(name, "com", q=q), _centroidal(model, data, q)
+    for port in ("com", "J_com", "A_g"):
+        close(ours[port], reference[port])
+
+
+def test_centre_of_mass_carries_the_payload_not_the_tool(case):
+    """The payload is mass on the flange (the last link frame), so it moves com; the tool is a
+    frame only. Pinocchio gets the payload as a second body on the last joint."""
+    name, model, data, q, _, _ = case
+    arm = robot(name)
+    payload = Link(sympy.Rational("1.7"), (sympy.Rational("0.02"), sympy.Rational("-0.01"), sympy.Rational("0.09")),
+                   tuple(sympy.Rational(v) for v in ("0.004", "0.005", "0.003", "0.0002", "-0.0001", "0.0003")))
+    tool = Placement(((("trans", (sympy.Rational("0.1"), sympy.Integer(0), sympy.Rational("0.2")))),))
+    loaded = replace(arm, payload=payload, tool=tool)
+    f = derive_all(loaded, only={"com"})[0]
+    flange = model.frames[model.getFrameId("flange")].placement
+    heavier = model.copy()
+    heavier.appendBodyToJoint(model.njoints - 1, flange.act(pin.Inertia(
+        float(payload.mass), np.array(payload.com, float), payload.inertia_matrix())), pin.SE3.Identity())
+    reference = _centroidal(heavier, heavier.createData(), q[:20])
+    fn = se.Lambdify([s for syms in f.input_symbols for s in syms], [e for e in f.inlined_outputs()[0]], cse=True)
+    close(np.array([np.ravel(fn(qi)) for qi in q[:20]]), reference["com"])
+    assert not np.allclose(reference["com"], _centroidal(model, data, q[:20])["com"], atol=1e-3)
 
 
 # ----------------------------------------------------------------------------- structure

@@ -1,4 +1,5 @@
-"""The generated derivatives of the dynamics, tau_derivatives and fd_derivatives, in C, Python
+"""The generated derivatives of the dynamics, tau_derivatives and fd_derivatives (and on the LWR,
+the Panda and the LWR with effects fd_derivatives_no_minv, the same without Minv), in C, Python
 and CasADi, against Pinocchio's analytical derivatives (``computeRNEADerivatives``,
 ``computeABADerivatives`` with its ``Minv``) and against central finite differences of the
 generated tau and fd, at 1000 random states of the LWR and the Panda; plus the LWR with friction
@@ -37,6 +38,7 @@ TOLERANCE = 1e-9
 FD_TOLERANCE = 1e-7
 STEPS = {"q": 1e-5, "qd": 1e-3, "tau": 1e-1}
 NEW = ("tau_derivatives", "fd_derivatives")
+NO_MINV = "fd_derivatives_no_minv"
 
 
 def scaled_error(got, expected) -> float:
@@ -77,13 +79,21 @@ def states(n, lower, upper, seed, prismatic=None):
     return Q, rng.uniform(-2, 2, (N, n)) * scale, rng.uniform(-5, 5, (N, n)) * scale, rng.uniform(-20, 20, (N, n))
 
 
-def check(call, Q, QD, QDD, TAU, expected, label):
+def check(call, Q, QD, QDD, TAU, expected, label, no_minv=False):
+    """Both derivative functions (with ``no_minv`` fd_derivatives_no_minv too) against ``expected``."""
     got = call("tau_derivatives", {"q": Q, "qd": QD, "qdd": QDD})
     got.update(call("fd_derivatives", {"q": Q, "qd": QD, "tau": TAU}))
     for key, value in expected.items():
         error = scaled_error(got[key], value)
         print(f"{label} {key}: max scaled error {error:.2e}")
         assert error <= TOLERANCE, f"{label} {key}: max scaled error {error:.3e}"
+    if no_minv:
+        got = call(NO_MINV, {"q": Q, "qd": QD, "tau": TAU})
+        assert sorted(got) == ["dqdd_dq", "dqdd_dqd"]
+        for key, value in got.items():
+            error = scaled_error(value, expected[key])
+            print(f"{label} {NO_MINV} {key}: max scaled error {error:.2e}")
+            assert error <= TOLERANCE, f"{label} {NO_MINV} {key}: max scaled error {error:.3e}"
 
 
 # ----------------------------------------------------------------------------- LWR and Panda
@@ -100,7 +110,8 @@ def arm(request):
 @pytest.mark.parametrize("lang", LANGS)
 def test_derivatives_match_pinocchio(arm, lang):
     name, Q, QD, QDD, TAU, expected = arm
-    check(lambda f, inputs: evaluate(name, lang, f, **inputs), Q, QD, QDD, TAU, expected, f"{name} {lang}")
+    check(lambda f, inputs: evaluate(name, lang, f, **inputs), Q, QD, QDD, TAU, expected, f"{name} {lang}",
+          no_minv=True)
 
 
 def central_differences(function, inputs, wrt, output):
@@ -154,7 +165,8 @@ ARMATURE = [0.3, 0.3, 0.2, 0.2, 0.1, 0.1, 0.05]
 @pytest.fixture(scope="module", params=(None, 0.05), ids=("sign", "tanh"))
 def effects_arm(request, tmp_path_factory):
     """The LWR with friction (sign or smoothed Coulomb) and armature, generated in C, Python
-    and CasADi (only the functions tested here)."""
+    and CasADi (only the functions tested here: an arm with effects must get them in
+    fd_derivatives_no_minv too)."""
     smoothing = request.param
     data = yaml.safe_load((ROOT / "robots" / "lwr4.yaml").read_text())
     data["name"] = "lwr4_effects"
@@ -168,7 +180,7 @@ def effects_arm(request, tmp_path_factory):
     path = root / "lwr4_effects.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     model = load_robot(path)
-    folder = generate(model, root / "out", progress=False, only=set(NEW))
+    folder = generate(model, root / "out", progress=False, only=set(NEW) | {NO_MINV})
     return model, folder, smoothing
 
 
@@ -187,7 +199,8 @@ def test_effects_match_pinocchio(effects_arm, lang):
     friction = (fv * QD + fc * shape + f0, fv + fc * dshape)
     expected = pinocchio_derivatives(pmodel, pdata, Q, QD, QDD, TAU, friction)
     lib = load_generated(folder, lang)
-    check(lib.call, Q, QD, QDD, TAU, expected, f"effects ({'sign' if smoothing is None else 'tanh'}) {lang}")
+    check(lib.call, Q, QD, QDD, TAU, expected, f"effects ({'sign' if smoothing is None else 'tanh'}) {lang}",
+          no_minv=True)
     note = "fc sign(qd) contributes 0 to the qd derivatives"
     assert (note in lib.functions["fd_derivatives"]["conventions"]) == (smoothing is None)
 

@@ -1,8 +1,7 @@
 """The catalog decides by structure, not by how a file was read: a fixed-base unbranched
-chain read as a tree gets every function the same chain read as an arm gets (the
-dual-quaternion, Lagrange and regressor routes, S), with the same values, plus what a tree
-reading adds (com, fd_derivatives_no_minv); a branched tree or a floating base gets none of
-the chain-only routes.
+chain read as a tree gets exactly the functions the same chain read as an arm gets (the
+dual-quaternion, Lagrange and regressor routes, S, com, fd_derivatives_no_minv), with the same
+values; a branched tree or a floating base gets none of the chain-only routes.
 
 Robot: ``tests/data/urdf/slider_arm.urdf`` (a prismatic lift, a fixed sensor block inside the
 chain, a fixed tool link with mass), read as an arm (flange: the tool link) and as a tree with
@@ -22,7 +21,6 @@ from kindyngen.codegen.catalog import TREE_NAMES, derive_all
 from kindyngen.readers.urdf import load_urdf
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "urdf"
-TREE_EXTRAS = {"com", "fd_derivatives_no_minv"}
 
 
 def _values(function, inputs: dict) -> dict:
@@ -48,9 +46,10 @@ def test_chain_read_as_tree_gets_the_arm_functions_with_the_same_values():
     assert tree.is_tree and tree.is_chain and not arm.is_tree
     arm_functions = {f.name: f for f in derive_all(arm)}
     tree_functions = {f.name: f for f in derive_all(tree)}
-    assert set(tree_functions) == set(arm_functions) | TREE_EXTRAS
-    assert {"fk_dq", "S", "M_lagrange", "tau_dq", "Y_g", "Y_m", "Y_dq"} <= set(tree_functions)
-    for name in ("tau_derivatives", "fd_derivatives"):     # the chain's sweeps on both
+    assert set(tree_functions) == set(arm_functions)
+    assert {"fk_dq", "S", "M_lagrange", "tau_dq", "Y_g", "Y_m", "Y_dq", "com",
+            "fd_derivatives_no_minv"} <= set(tree_functions)
+    for name in ("tau_derivatives", "fd_derivatives", "fd_derivatives_no_minv"):     # the chain's sweeps on both
         assert tree_functions[name].summary == arm_functions[name].summary
     rng = np.random.default_rng(11)
     for _ in range(5):

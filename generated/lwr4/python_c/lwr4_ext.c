@@ -662,6 +662,63 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(kdg_d_com,
+    "com($module, q)\n"
+    "--\n"
+    "\n"
+    "Newton-Euler family over the tree (joint frames, grouped parameters): centre of mass\n"
+    "(the fixed root link not counted, as in Pinocchio), its Jacobian and the centroidal\n"
+    "momentum matrix (from the base rows of composite rigid bodies).\n"
+    "\n"
+    "Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of\n"
+    "motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in\n"
+    "the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm\n"
+    "against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial\n"
+    "parameters: the robot description's values, baked in.\n"
+    "\n"
+    "q: (7,) float64, joint angles, DH order [rad]\n"
+    "Returns com: (3,) float64, centre of mass in the DH frame 0 [m]\n"
+    "Returns J_com: (3, 7) float64, d com/dt = J_com qd, in the DH frame 0 [m per unit of qd]\n"
+    "Returns A_g: (6, 7) float64, centroidal momentum matrix: h_G = A_g qd, linear then\n"
+    "    angular momentum about the CoM, DH frame 0 axes (Pinocchio's ccrba) [kg m, kg m^2\n"
+    "    per unit of qd]\n"
+    "(a tuple: com, J_com, A_g)\n"
+    "Cost of the generated C: 243 add, 338 mul, 14 call.\n"
+    "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
+    "python/lwr4.py. Same as com(q) there.");
+
+static PyObject *kdg_w_com(PyObject *self, PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames)
+{
+    static const char *const names[] = {"q"};
+    static const npy_intp shape_q[] = {7};
+    npy_intp dims_com[] = {3};
+    npy_intp dims_J_com[] = {3, 7};
+    npy_intp dims_A_g[] = {6, 7};
+    PyObject *in[1], *hold[1] = {NULL};
+    PyObject *out[3] = {NULL, NULL, NULL};
+    const double *in_q;
+    PyObject *result = NULL;
+    (void)self;
+    if (kdg_arguments("com(q)", args, nargs, kwnames, names, 1, in) < 0)
+        return NULL;
+    if ((in_q = kdg_input(in[0], "com", "q", 1, shape_q, "(7,)", &hold[0])) == NULL)
+        goto done;
+    if ((out[0] = PyArray_SimpleNew(1, dims_com, NPY_DOUBLE)) == NULL)
+        goto done;
+    if ((out[1] = PyArray_SimpleNew(2, dims_J_com, NPY_DOUBLE)) == NULL)
+        goto done;
+    if ((out[2] = PyArray_SimpleNew(2, dims_A_g, NPY_DOUBLE)) == NULL)
+        goto done;
+    lwr4_com(in_q, (double *)PyArray_DATA((PyArrayObject *)out[0]), (double *)PyArray_DATA((PyArrayObject *)out[1]), (double *)PyArray_DATA((PyArrayObject *)out[2]));
+    result = PyTuple_Pack(3, out[0], out[1], out[2]);
+done:
+    Py_XDECREF(hold[0]);
+    Py_XDECREF(out[0]);
+    Py_XDECREF(out[1]);
+    Py_XDECREF(out[2]);
+    return result;
+}
+
 PyDoc_STRVAR(kdg_d_tau_derivatives,
     "tau_derivatives($module, q, qd, qdd)\n"
     "--\n"
@@ -794,6 +851,72 @@ done:
     Py_XDECREF(out[0]);
     Py_XDECREF(out[1]);
     Py_XDECREF(out[2]);
+    return result;
+}
+
+PyDoc_STRVAR(kdg_d_fd_derivatives_no_minv,
+    "fd_derivatives_no_minv($module, q, qd, tau)\n"
+    "--\n"
+    "\n"
+    "Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd,\n"
+    "effects included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c +\n"
+    "g)/dq (one tangent sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2\n"
+    "S(q, qd) (Christoffel symbols) plus the friction derivative, and the products from one\n"
+    "unrolled LDL^T factorisation of M (no square roots); dqdd/dtau is M^-1, not formed here\n"
+    "(the function fd_derivatives has it).\n"
+    "\n"
+    "Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of\n"
+    "motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in\n"
+    "the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm\n"
+    "against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial\n"
+    "parameters: the robot description's values, baked in. Matrices are row-major, row i the\n"
+    "output of joint i, column j the input of joint j (d out_i / d in_j).\n"
+    "\n"
+    "q: (7,) float64, joint angles, DH order [rad]\n"
+    "qd: (7,) float64, joint velocities, DH order [rad/s]\n"
+    "tau: (7,) float64, applied joint torques [N m]\n"
+    "Returns dqdd_dq: (7, 7) float64, dqdd_i / dq_j (row-major) [1/s^2]\n"
+    "Returns dqdd_dqd: (7, 7) float64, dqdd_i / dqd_j (row-major) [1/s]\n"
+    "(a tuple: dqdd_dq, dqdd_dqd)\n"
+    "Cost of the generated C: 2939 add, 3462 mul, 12 call.\n"
+    "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
+    "python/lwr4.py. Same as fd_derivatives_no_minv(q, qd, tau) there.");
+
+static PyObject *kdg_w_fd_derivatives_no_minv(PyObject *self, PyObject *const *args, Py_ssize_t nargs, PyObject *kwnames)
+{
+    static const char *const names[] = {"q", "qd", "tau"};
+    static const npy_intp shape_q[] = {7};
+    static const npy_intp shape_qd[] = {7};
+    static const npy_intp shape_tau[] = {7};
+    npy_intp dims_dqdd_dq[] = {7, 7};
+    npy_intp dims_dqdd_dqd[] = {7, 7};
+    PyObject *in[3], *hold[3] = {NULL, NULL, NULL};
+    PyObject *out[2] = {NULL, NULL};
+    const double *in_q;
+    const double *in_qd;
+    const double *in_tau;
+    PyObject *result = NULL;
+    (void)self;
+    if (kdg_arguments("fd_derivatives_no_minv(q, qd, tau)", args, nargs, kwnames, names, 3, in) < 0)
+        return NULL;
+    if ((in_q = kdg_input(in[0], "fd_derivatives_no_minv", "q", 1, shape_q, "(7,)", &hold[0])) == NULL)
+        goto done;
+    if ((in_qd = kdg_input(in[1], "fd_derivatives_no_minv", "qd", 1, shape_qd, "(7,)", &hold[1])) == NULL)
+        goto done;
+    if ((in_tau = kdg_input(in[2], "fd_derivatives_no_minv", "tau", 1, shape_tau, "(7,)", &hold[2])) == NULL)
+        goto done;
+    if ((out[0] = PyArray_SimpleNew(2, dims_dqdd_dq, NPY_DOUBLE)) == NULL)
+        goto done;
+    if ((out[1] = PyArray_SimpleNew(2, dims_dqdd_dqd, NPY_DOUBLE)) == NULL)
+        goto done;
+    lwr4_fd_derivatives_no_minv(in_q, in_qd, in_tau, (double *)PyArray_DATA((PyArrayObject *)out[0]), (double *)PyArray_DATA((PyArrayObject *)out[1]));
+    result = PyTuple_Pack(2, out[0], out[1]);
+done:
+    Py_XDECREF(hold[0]);
+    Py_XDECREF(hold[1]);
+    Py_XDECREF(hold[2]);
+    Py_XDECREF(out[0]);
+    Py_XDECREF(out[1]);
     return result;
 }
 
@@ -1580,8 +1703,10 @@ static PyMethodDef kdg_methods[] = {
     {"S", (PyCFunction)(void (*)(void))kdg_w_S, METH_FASTCALL | METH_KEYWORDS, kdg_d_S},
     {"tau", (PyCFunction)(void (*)(void))kdg_w_tau, METH_FASTCALL | METH_KEYWORDS, kdg_d_tau},
     {"fd", (PyCFunction)(void (*)(void))kdg_w_fd, METH_FASTCALL | METH_KEYWORDS, kdg_d_fd},
+    {"com", (PyCFunction)(void (*)(void))kdg_w_com, METH_FASTCALL | METH_KEYWORDS, kdg_d_com},
     {"tau_derivatives", (PyCFunction)(void (*)(void))kdg_w_tau_derivatives, METH_FASTCALL | METH_KEYWORDS, kdg_d_tau_derivatives},
     {"fd_derivatives", (PyCFunction)(void (*)(void))kdg_w_fd_derivatives, METH_FASTCALL | METH_KEYWORDS, kdg_d_fd_derivatives},
+    {"fd_derivatives_no_minv", (PyCFunction)(void (*)(void))kdg_w_fd_derivatives_no_minv, METH_FASTCALL | METH_KEYWORDS, kdg_d_fd_derivatives_no_minv},
     {"M_lagrange", (PyCFunction)(void (*)(void))kdg_w_M_lagrange, METH_FASTCALL | METH_KEYWORDS, kdg_d_M_lagrange},
     {"g_lagrange", (PyCFunction)(void (*)(void))kdg_w_g_lagrange, METH_FASTCALL | METH_KEYWORDS, kdg_d_g_lagrange},
     {"c_christoffel", (PyCFunction)(void (*)(void))kdg_w_c_christoffel, METH_FASTCALL | METH_KEYWORDS, kdg_d_c_christoffel},
@@ -1607,8 +1732,9 @@ PyDoc_STRVAR(kdg_module_doc,
     "numpy module python/lwr4.py, which remains the way to evaluate batches. Row-major\n"
     "arrays, angles in rad, lengths in m, SI units; gravity in the base frame (0.0, 0.0,\n"
     "-9.81) m/s^2. Functions: fk_hom, fk_dq, jacobian, pose_jacobian_dq, jacobian_dq, M, g,\n"
-    "c, S, tau, fd, tau_derivatives, fd_derivatives, M_lagrange, g_lagrange, c_christoffel,\n"
-    "M_dq, g_dq, c_dq, tau_dq, Y_dq, ik_hom, ik_dq, Y_g, Y_m, Y, ik_dls.");
+    "c, S, tau, fd, com, tau_derivatives, fd_derivatives, fd_derivatives_no_minv, M_lagrange,\n"
+    "g_lagrange, c_christoffel, M_dq, g_dq, c_dq, tau_dq, Y_dq, ik_hom, ik_dq, Y_g, Y_m, Y,\n"
+    "ik_dls.");
 
 static struct PyModuleDef kdg_module = {
     PyModuleDef_HEAD_INIT, "lwr4_ext", kdg_module_doc, 0, kdg_methods, NULL, NULL, NULL, NULL

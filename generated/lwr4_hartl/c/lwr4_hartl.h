@@ -260,6 +260,27 @@ void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double 
 void lwr4_hartl_fd_batch(long count, const double *q, const double *qd, const double *tau, double *qdd);
 
 /*
+ * com: Newton-Euler family over the tree (joint frames, grouped parameters): centre of mass (the fixed root link not counted, as in Pinocchio), its Jacobian and the centroidal momentum matrix (from the base rows of composite rigid bodies).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in.
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * out com[3]: 3 double, centre of mass in the DH frame 0 [m]
+ * out J_com[21]: 3 x 7 double, d com/dt = J_com qd, in the DH frame 0 [m per unit of qd]
+ * out A_g[42]: 6 x 7 double, centroidal momentum matrix: h_G = A_g qd, linear then angular momentum about the CoM, DH frame 0 axes (Pinocchio's ccrba) [kg m, kg m^2 per unit of qd]
+ *
+ * Cost: 243 add, 338 mul, 14 call
+ * (as derived, before CSE: 310 add, 514 mul, 353 call);
+ * critical path 129 cycles, 27 dependent operations.
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
+ */
+void lwr4_hartl_com(const double *q, double *com, double *J_com, double *A_g);
+void lwr4_hartl_com_batch(long count, const double *q, double *com, double *J_com, double *A_g);
+
+/*
  * tau_derivatives: Partial derivatives of the inverse dynamics tau(q, qd, qdd) (the function tau, effects included): dtau/dq and dtau/dqd by one adjoint (reverse) sweep per joint over the Newton-Euler pass (plus the friction derivative on the diagonal of dtau/dqd); dtau/dqdd is M.
  * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
  * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
@@ -305,6 +326,29 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  */
 void lwr4_hartl_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
 void lwr4_hartl_fd_derivatives_batch(long count, const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
+
+/*
+ * fd_derivatives_no_minv: Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd, effects included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c + g)/dq (one tangent sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2 S(q, qd) (Christoffel symbols) plus the friction derivative, and the products from one unrolled LDL^T factorisation of M (no square roots); dqdd/dtau is M^-1, not formed here (the function fd_derivatives has it).
+ * Joint space in DH order: q (rad), qd (rad/s), qdd (rad/s^2), tau (N m). Equation of
+ * motion: tau = M(q) qdd + c(q, qd) + g(q), with c = S(q, qd) qd. Gravity acceleration in
+ * the base frame (DH frame 0): (0, 0, -9.81) m/s^2; g(q) is the torque that holds the arm
+ * against it. Link i's inertial parameters are given in DH frame i (standard DH). Inertial
+ * parameters: the robot description's values, baked in. Matrices are row-major, row i the
+ * output of joint i, column j the input of joint j (d out_i / d in_j).
+ *
+ * in  q[7]: 7 double, joint angles, DH order [rad]
+ * in  qd[7]: 7 double, joint velocities, DH order [rad/s]
+ * in  tau[7]: 7 double, applied joint torques [N m]
+ * out dqdd_dq[49]: 7 x 7 double, dqdd_i / dq_j (row-major) [1/s^2]
+ * out dqdd_dqd[49]: 7 x 7 double, dqdd_i / dqd_j (row-major) [1/s]
+ *
+ * Cost: 2959 add, 3469 mul, 12 call
+ * (as derived, before CSE: 9576337901107 add, 15027826633860 mul, 11869802815751 call);
+ * critical path 472 cycles, 118 dependent operations.
+ * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
+ */
+void lwr4_hartl_fd_derivatives_no_minv(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);
+void lwr4_hartl_fd_derivatives_no_minv_batch(long count, const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);
 
 /*
  * M_lagrange: Lagrange route (the identification paper's method): velocities by moving frames, kinetic energy by Koenig's theorem, M = Hessian of T in qd.

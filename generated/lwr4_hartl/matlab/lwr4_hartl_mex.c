@@ -417,6 +417,56 @@ static void call_fd(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     }
 }
 
+static void call_com(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
+{
+    double in_q[7];
+    long n_q;
+    double out_com[3];
+    double *to_com;
+    double out_J_com[21];
+    double *to_J_com;
+    double out_A_g[42];
+    double *to_A_g;
+    long count = 1, i, k;
+    if (nrhs != 1)
+        mexErrMsgIdAndTxt("kindyngen:input", "com: expected 1 input(s) (q)");
+    if (nlhs > 3)
+        mexErrMsgIdAndTxt("kindyngen:output", "com: at most 3 output(s)");
+    n_q = configurations(prhs[0], 7, "com", "q");
+    if (n_q != 1 && count != 1 && n_q != count)
+        mexErrMsgIdAndTxt("kindyngen:input", "com: inputs disagree on the number of configurations");
+    if (n_q > count)
+        count = n_q;
+    {
+        mwSize dims[2] = {3, 0};
+        dims[1] = (mwSize)count;
+        plhs[0] = mxCreateNumericArray(2, dims, mxDOUBLE_CLASS, mxREAL);
+        to_com = (double *)mxGetData(plhs[0]);
+    }
+    {
+        mwSize dims[3] = {3, 7, 0};
+        dims[2] = (mwSize)count;
+        plhs[1] = mxCreateNumericArray(3, dims, mxDOUBLE_CLASS, mxREAL);
+        to_J_com = (double *)mxGetData(plhs[1]);
+    }
+    {
+        mwSize dims[3] = {6, 7, 0};
+        dims[2] = (mwSize)count;
+        plhs[2] = mxCreateNumericArray(3, dims, mxDOUBLE_CLASS, mxREAL);
+        to_A_g = (double *)mxGetData(plhs[2]);
+    }
+    for (i = 0; i < count; ++i) {
+        memcpy(in_q, mxGetPr(prhs[0]) + (n_q == 1 ? 0 : i*7), sizeof in_q);
+        lwr4_hartl_com(in_q, out_com, out_J_com, out_A_g);
+        for (k = 0; k < 3; ++k)
+            to_com[i*3 + k] = out_com[k];
+        for (k = 0; k < 21; ++k)   /* row-major entry k -> column-major (k % cols)*rows + k / cols */
+            to_J_com[i*21 + (k % 7)*3 + k / 7] = out_J_com[k];
+        for (k = 0; k < 42; ++k)   /* row-major entry k -> column-major (k % cols)*rows + k / cols */
+            to_A_g[i*42 + (k % 7)*6 + k / 7] = out_A_g[k];
+    }
+}
+
 static void call_tau_derivatives(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
 {
     double in_q[7];
@@ -536,6 +586,62 @@ static void call_fd_derivatives(int nlhs, mxArray *plhs[], int nrhs, const mxArr
             to_dqdd_dqd[i*49 + (k % 7)*7 + k / 7] = out_dqdd_dqd[k];
         for (k = 0; k < 49; ++k)   /* row-major entry k -> column-major (k % cols)*rows + k / cols */
             to_Minv[i*49 + (k % 7)*7 + k / 7] = out_Minv[k];
+    }
+}
+
+static void call_fd_derivatives_no_minv(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
+{
+    double in_q[7];
+    long n_q;
+    double in_qd[7];
+    long n_qd;
+    double in_tau[7];
+    long n_tau;
+    double out_dqdd_dq[49];
+    double *to_dqdd_dq;
+    double out_dqdd_dqd[49];
+    double *to_dqdd_dqd;
+    long count = 1, i, k;
+    if (nrhs != 3)
+        mexErrMsgIdAndTxt("kindyngen:input", "fd_derivatives_no_minv: expected 3 input(s) (q, qd, tau)");
+    if (nlhs > 2)
+        mexErrMsgIdAndTxt("kindyngen:output", "fd_derivatives_no_minv: at most 2 output(s)");
+    n_q = configurations(prhs[0], 7, "fd_derivatives_no_minv", "q");
+    if (n_q != 1 && count != 1 && n_q != count)
+        mexErrMsgIdAndTxt("kindyngen:input", "fd_derivatives_no_minv: inputs disagree on the number of configurations");
+    if (n_q > count)
+        count = n_q;
+    n_qd = configurations(prhs[1], 7, "fd_derivatives_no_minv", "qd");
+    if (n_qd != 1 && count != 1 && n_qd != count)
+        mexErrMsgIdAndTxt("kindyngen:input", "fd_derivatives_no_minv: inputs disagree on the number of configurations");
+    if (n_qd > count)
+        count = n_qd;
+    n_tau = configurations(prhs[2], 7, "fd_derivatives_no_minv", "tau");
+    if (n_tau != 1 && count != 1 && n_tau != count)
+        mexErrMsgIdAndTxt("kindyngen:input", "fd_derivatives_no_minv: inputs disagree on the number of configurations");
+    if (n_tau > count)
+        count = n_tau;
+    {
+        mwSize dims[3] = {7, 7, 0};
+        dims[2] = (mwSize)count;
+        plhs[0] = mxCreateNumericArray(3, dims, mxDOUBLE_CLASS, mxREAL);
+        to_dqdd_dq = (double *)mxGetData(plhs[0]);
+    }
+    {
+        mwSize dims[3] = {7, 7, 0};
+        dims[2] = (mwSize)count;
+        plhs[1] = mxCreateNumericArray(3, dims, mxDOUBLE_CLASS, mxREAL);
+        to_dqdd_dqd = (double *)mxGetData(plhs[1]);
+    }
+    for (i = 0; i < count; ++i) {
+        memcpy(in_q, mxGetPr(prhs[0]) + (n_q == 1 ? 0 : i*7), sizeof in_q);
+        memcpy(in_qd, mxGetPr(prhs[1]) + (n_qd == 1 ? 0 : i*7), sizeof in_qd);
+        memcpy(in_tau, mxGetPr(prhs[2]) + (n_tau == 1 ? 0 : i*7), sizeof in_tau);
+        lwr4_hartl_fd_derivatives_no_minv(in_q, in_qd, in_tau, out_dqdd_dq, out_dqdd_dqd);
+        for (k = 0; k < 49; ++k)   /* row-major entry k -> column-major (k % cols)*rows + k / cols */
+            to_dqdd_dq[i*49 + (k % 7)*7 + k / 7] = out_dqdd_dq[k];
+        for (k = 0; k < 49; ++k)   /* row-major entry k -> column-major (k % cols)*rows + k / cols */
+            to_dqdd_dqd[i*49 + (k % 7)*7 + k / 7] = out_dqdd_dqd[k];
     }
 }
 
@@ -1044,8 +1150,10 @@ static const struct {
     {"S", call_S},
     {"tau", call_tau},
     {"fd", call_fd},
+    {"com", call_com},
     {"tau_derivatives", call_tau_derivatives},
     {"fd_derivatives", call_fd_derivatives},
+    {"fd_derivatives_no_minv", call_fd_derivatives_no_minv},
     {"M_lagrange", call_M_lagrange},
     {"g_lagrange", call_g_lagrange},
     {"c_christoffel", call_c_christoffel},
@@ -1072,5 +1180,5 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
             FUNCTIONS[k].call(nlhs, plhs, nrhs - 1, prhs + 1);
             return;
         }
-    mexErrMsgIdAndTxt("kindyngen:input", "lwr4_hartl_mex: no function '%s'; available: fk_hom fk_dq jacobian pose_jacobian_dq jacobian_dq M g c S tau fd tau_derivatives fd_derivatives M_lagrange g_lagrange c_christoffel M_dq g_dq c_dq tau_dq Y_dq ik_hom ik_dq Y_g Y_m Y", name);
+    mexErrMsgIdAndTxt("kindyngen:input", "lwr4_hartl_mex: no function '%s'; available: fk_hom fk_dq jacobian pose_jacobian_dq jacobian_dq M g c S tau fd com tau_derivatives fd_derivatives fd_derivatives_no_minv M_lagrange g_lagrange c_christoffel M_dq g_dq c_dq tau_dq Y_dq ik_hom ik_dq Y_g Y_m Y", name);
 }
