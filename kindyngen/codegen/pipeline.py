@@ -25,7 +25,10 @@ LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
 class Progress:
     """One line per step on stderr, redrawn in place on a terminal, with elapsed time."""
 
-    def __init__(self, label: str, total: int, stream=sys.stderr):
+    def __init__(self, label: str, total: int, stream=None):
+        # sys.stderr looked up per instance, not bound at import: a redirected or replaced
+        # stderr (a caller's capture, a test's) is the one written to
+        stream = sys.stderr if stream is None else stream
         self.label, self.total, self.stream, self.done = label, total, stream, 0
         self.start = time.perf_counter()
         self.tty = stream.isatty()

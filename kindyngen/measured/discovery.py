@@ -129,6 +129,7 @@ from ..model.inertial_parameters import parameter_vector
 from ..model.robot_model import RobotModel
 from .effect_columns import effect_columns, effect_names
 from .log_preparing import Segment, filtered_rows, noise_gain, zero_phase_low_pass
+from .log_streaming import ChunkedParallelFilter, overlap_rows
 from .regressor_rows import description_torques, torque_regressor
 
 CANDIDATES = ("viscous_friction", "coulomb_friction", "torque_offset", "armature", "payload",
@@ -909,7 +910,6 @@ def _smoothing(rows: int, dt: float, low_pass):
     none: a segment filtered already, or too short) and the halo of rows it needs."""
     if low_pass is not None or rows < 60:
         return None, 2
-    from .streaming import overlap_rows
     from .log_preparing import Preprocessing
     cutoff = min(5.0, 0.2 / dt)
     return (1.0 / dt, cutoff, 4), overlap_rows(Preprocessing(cutoff_hz=cutoff), dt) + 2
@@ -978,7 +978,6 @@ def _data_pass(model, recordings, specs, eps, ripple_k, folds, chunk_rows, lags,
     as well (``residual``), for a fit whose autocorrelation reaches beyond the lags folded."""
     import time
 
-    from .streaming import ChunkedParallelFilter, overlap_rows
     from .log_preparing import Preprocessing
     n = model.n
     keys = list(specs)
@@ -1124,7 +1123,6 @@ def _elastic_noise_bias_pass(model, recordings, raw_floors, chunk_rows) -> np.nd
     recording drawn in order from its seed (the same numbers as drawn whole), smoothed and
     differentiated in windows with the smoothing's overlap, its columns and the measured
     torque's through the chunked parallel filter."""
-    from .streaming import ChunkedParallelFilter, overlap_rows
     from .log_preparing import Preprocessing
 
     def torques(*motion):

@@ -44,7 +44,7 @@ from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, D
 from .effect_columns import EFFECTS, coulomb_eps, effect_names
 from .log_formats import joint_names_of, read_any
 from .log_preparing import Preprocessing, Segment, preprocess, split_time
-from .streaming import NotStreamable, segment_pieces
+from .log_streaming import ChunkedParallelFilter, NotStreamable, overlap_rows, segment_pieces
 from .identified_model import model_yaml
 from .regressor_rows import description_torques
 from .identification_report import rms_table, torque_figure
@@ -171,14 +171,13 @@ def _heldout(model, written, d, recordings, chunk_rows=CHUNK_ROWS):
     predictions through the recording's parallel filter (window by window, the chunked
     filter); stacked, with one time axis.  The filtered (decimated) rows are kept: they are
     what the figures and the motion phases show."""
-    from .streaming import ChunkedParallelFilter, overlap_rows
     keys = ("nominal", "fitted", "after", "q", "qd", "qdd")
     out = {k: [] for k in ("t", "tau") + keys}
     start = 0.0
     n = model.n
     rigid = replace(model, joints=tuple(replace(j, friction=None, armature=None) for j in model.joints))
     for rec in recordings:
-        filt, times, first_t = None, [], None
+        filt, times = None, []
 
         def add(F, tau):
             out["tau"].append(tau)

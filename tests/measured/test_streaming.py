@@ -18,7 +18,8 @@ from kindyngen.measured.log_formats import joint_names_of, read_any, write_parqu
 from kindyngen.measured.log_reading import LogError, RawLog
 from kindyngen.measured.log_preparing import LowPass, Preprocessing, parallel_filter, preprocess
 from kindyngen.measured.ls_factor import LSFactor, combine, combine_in_order, least_squares_factor
-from kindyngen.measured.streaming import ChunkedParallelFilter, identify_streamed, stream_segments
+from kindyngen.measured.log_streaming import ChunkedParallelFilter, stream_segments
+from kindyngen.measured.streaming import identify_streamed
 from kindyngen.readers.yaml_description import load_robot
 from tests.reference import pinocchio_model
 
