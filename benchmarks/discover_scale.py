@@ -19,40 +19,21 @@ import argparse
 import json
 import os
 import platform
-import re
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from benchmarks.identify_scale import ROBOT, _period, write_csv
+from benchmarks.identify_scale import ROBOT, _period, measure, write_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 
 
 def run(label: str, log: Path, out: Path, candidates: str | None) -> dict:
-    argv = ["/usr/bin/time", "-v", sys.executable, "-m", "kindyngen", "discover", "--robot", str(ROBOT),
-            "--data", str(log), "--out", str(out)] + (["--candidates", candidates] if candidates else [])
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    print(f"[{label}] {' '.join(argv[2:])}", flush=True)
-    load_before = [round(x, 2) for x in os.getloadavg()]
-    started = time.perf_counter()
-    proc = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=ROOT)
-    wall = time.perf_counter() - started
-    peak_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
-    cpu_s = sum(float(re.search(rf"{kind} time \(seconds\): ([\d.]+)", proc.stderr).group(1))
-                for kind in ("User", "System"))
-    progress = [line for line in proc.stderr.splitlines() if line.startswith("discover:")]
-    record = {"label": label, "log": log.name, "log_bytes": log.stat().st_size, "exit_code": proc.returncode,
-              "wall_s": round(wall, 1), "cpu_s": round(cpu_s, 1), "peak_rss_gb": round(peak_kb / 1024 ** 2, 3),
-              "load_average_before": load_before, "load_average_after": [round(x, 2) for x in os.getloadavg()],
-              "stdout": proc.stdout.strip()[-400:], "progress_tail": progress[-6:]}
-    if proc.returncode != 0:
-        record["stderr_tail"] = proc.stderr.strip().splitlines()[-3:]
-    print(f"[{label}] exit {proc.returncode}, {wall:.1f} s, peak {peak_kb / 1024 ** 2:.2f} GB", flush=True)
-    return record
+    command = ["-m", "kindyngen", "discover", "--robot", str(ROBOT), "--data", str(log), "--out", str(out)] + (
+        ["--candidates", candidates] if candidates else [])
+    return measure(label, command, ROOT, log, "discover:", 6)
 
 
 def main(argv=None) -> int:

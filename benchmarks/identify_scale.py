@@ -125,6 +125,13 @@ def run(label: str, code_root: Path, log: Path, out: Path, extra=(), peer: bool 
     command = (["-m", "benchmarks.identify_scale", "--in-memory", str(log), str(out)] if peer else
                ["-m", "kindyngen", "identify", "--robot", str(ROBOT), "--data", str(log), "--split", "0.8",
                 "--out", str(out), *extra])
+    return measure(label, command, code_root, log, "identify:", 4)
+
+
+def measure(label: str, command: list, code_root: Path, log: Path, progress_prefix: str, tail: int) -> dict:
+    """Run ``python *command`` under ``/usr/bin/time -v`` from ``code_root``: wall and CPU time,
+    peak resident memory, the load average around it, the last ``tail`` progress lines (those
+    starting with ``progress_prefix``) and the output's end."""
     argv = ["/usr/bin/time", "-v", sys.executable, *command]
     env = dict(os.environ, PYTHONPATH=str(code_root))
     print(f"[{label}] {' '.join(argv[2:])}", flush=True)
@@ -136,13 +143,14 @@ def run(label: str, code_root: Path, log: Path, out: Path, extra=(), peer: bool 
     peak_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
     cpu_s = sum(float(re.search(rf"{kind} time \(seconds\): ([\d.]+)", proc.stderr).group(1))
                 for kind in ("User", "System"))
-    progress = [line for line in proc.stderr.splitlines() if line.startswith("identify:")]
+    progress = [line for line in proc.stderr.splitlines() if line.startswith(progress_prefix)]
     record = {"label": label, "log": log.name, "log_bytes": log.stat().st_size, "exit_code": proc.returncode,
               "wall_s": round(wall, 1), "cpu_s": round(cpu_s, 1), "peak_rss_gb": round(peak_kb / 1024 ** 2, 3),
               "load_average_before": load_before, "load_average_after": [round(x, 2) for x in os.getloadavg()],
-              "stdout": proc.stdout.strip()[-400:], "progress_tail": progress[-4:]}
+              "stdout": proc.stdout.strip()[-400:], "progress_tail": progress[-tail:]}
     if proc.returncode != 0:
-        record["stderr_tail"] = proc.stderr.strip().splitlines()[-3:]
+        # the command's own last lines, before /usr/bin/time's report
+        record["stderr_tail"] = proc.stderr.split("\tCommand being timed")[0].strip().splitlines()[-3:]
     print(f"[{label}] exit {proc.returncode}, {wall:.1f} s, peak {peak_kb / 1024 ** 2:.2f} GB", flush=True)
     return record
 

@@ -59,3 +59,23 @@ def panda_pair(folder: Path):
     from kindyngen.readers.yaml_description import load_robot, parse_robot
     urdf = load_robot(panda_arm_urdf(folder), tip="panda_link8")
     return urdf, parse_robot(panda_yaml_with_tool(), "robots/panda.yaml + tool")
+
+
+# a three-joint chain with a tilted prismatic joint between two revolute ones and off-axis,
+# rotated inertias: what a DH table cannot write and a URDF can (module-level tests of the
+# dual-quaternion dynamics and the derivative sweeps)
+SLIDER_CHAIN_URDF = """<robot name="slider_chain">
+  <link name="base"/>
+  <link name="l1"><inertial><mass value="3"/><origin xyz="0.01 -0.005 0.12" rpy="0.1 0 0.2"/>
+    <inertia ixx="0.054" ixy="0.0003" ixz="-0.0008" iyy="0.052" iyz="0.0019" izz="0.0073"/></inertial></link>
+  <link name="l2"><inertial><mass value="1.5"/><origin xyz="0.03 0.01 0.02"/>
+    <inertia ixx="0.0031" ixy="-0.0004" ixz="0.0005" iyy="0.0042" iyz="-0.0003" izz="0.0037"/></inertial></link>
+  <link name="l3"><inertial><mass value="0.9"/><origin xyz="0.1 0.005 -0.01" rpy="0 0.3 0"/>
+    <inertia ixx="0.002" ixy="0.0001" ixz="0" iyy="0.006" iyz="0.0002" izz="0.005"/></inertial></link>
+  <joint name="turret" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="1" velocity="1"/></joint>
+  <joint name="slide" type="prismatic"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.1 0.02 0.2" rpy="0.3 0 0"/><axis xyz="0 0.6 0.8"/><limit lower="-0.2" upper="0.3" effort="1" velocity="1"/></joint>
+  <joint name="elbow" type="revolute"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0.3 0 0.05" rpy="1.2 0.1 -0.4"/><axis xyz="1 0 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+</robot>"""

@@ -39,24 +39,10 @@ from tests.harness import robot
 
 pin = pytest.importorskip("pinocchio")
 from tests.reference import pinocchio_model  # noqa: E402
+from tests.robot_files import SLIDER_CHAIN_URDF
 
 EXACT, DIFFERENCE, STEP = 1e-10, 1e-6, 1e-6
 
-CHAIN = """<robot name="slider_chain">
-  <link name="base"/>
-  <link name="l1"><inertial><mass value="3"/><origin xyz="0.01 -0.005 0.12" rpy="0.1 0 0.2"/>
-    <inertia ixx="0.054" ixy="0.0003" ixz="-0.0008" iyy="0.052" iyz="0.0019" izz="0.0073"/></inertial></link>
-  <link name="l2"><inertial><mass value="1.5"/><origin xyz="0.03 0.01 0.02"/>
-    <inertia ixx="0.0031" ixy="-0.0004" ixz="0.0005" iyy="0.0042" iyz="-0.0003" izz="0.0037"/></inertial></link>
-  <link name="l3"><inertial><mass value="0.9"/><origin xyz="0.1 0.005 -0.01" rpy="0 0.3 0"/>
-    <inertia ixx="0.002" ixy="0.0001" ixz="0" iyy="0.006" iyz="0.0002" izz="0.005"/></inertial></link>
-  <joint name="turret" type="revolute"><parent link="base"/><child link="l1"/>
-    <origin xyz="0 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="1" velocity="1"/></joint>
-  <joint name="slide" type="prismatic"><parent link="l1"/><child link="l2"/>
-    <origin xyz="0.1 0.02 0.2" rpy="0.3 0 0"/><axis xyz="0 0.6 0.8"/><limit lower="-0.2" upper="0.3" effort="1" velocity="1"/></joint>
-  <joint name="elbow" type="revolute"><parent link="l2"/><child link="l3"/>
-    <origin xyz="0.3 0 0.05" rpy="1.2 0.1 -0.4"/><axis xyz="1 0 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
-</robot>"""
 # per joint: viscous, coulomb, offset, armature; tanh(qd / EPS) for the Coulomb sign
 EFFECTS = [(0.8, 1.2, 0.1, 0.3), (20.0, 5.0, -0.5, 2.5), (0.3, 0.4, 0.05, 0.1)]
 EPS = 0.05
@@ -179,12 +165,12 @@ def test_christoffel_velocity_jacobian_is_that_of_pinocchios_coriolis(lwr):
 
 @pytest.fixture(scope="module")
 def chain():
-    rigid = parse_urdf(CHAIN)
+    rigid = parse_urdf(SLIDER_CHAIN_URDF)
     joints = tuple(replace(j, friction=Friction(sympy.Rational(str(fv)), sympy.Rational(str(fc)), sympy.Rational(str(off))),
                            armature=sympy.Rational(str(arm)))
                    for j, (fv, fc, off, arm) in zip(rigid.joints, EFFECTS))
     model = replace(rigid, joints=joints, coulomb_smoothing=sympy.Rational(str(EPS)))
-    pm = pin.buildModelFromXML(CHAIN)
+    pm = pin.buildModelFromXML(SLIDER_CHAIN_URDF)
     assert [pm.names[k] for k in range(1, pm.njoints)] == [j.name for j in model.joints]
     return model, pm, pm.createData()
 
@@ -272,7 +258,7 @@ def test_with_diagonal_adds_on_the_diagonal_only():
 
 
 def test_floating_base_is_refused():
-    floating = parse_urdf(CHAIN, floating_base=True)
+    floating = parse_urdf(SLIDER_CHAIN_URDF, floating_base=True)
     with pytest.raises(ValueError, match="fixed base"):
         tau_derivatives(floating)
     with pytest.raises(ValueError, match="fixed base"):

@@ -25,26 +25,10 @@ from tests.harness import robot
 
 pin = pytest.importorskip("pinocchio")
 from tests.reference import pinocchio_model, random_configurations  # noqa: E402
+from tests.robot_files import SLIDER_CHAIN_URDF
 
 TOL = 1e-10
 STATES = 20
-
-CHAIN = """<robot name="slider_chain">
-  <link name="base"/>
-  <link name="l1"><inertial><mass value="3"/><origin xyz="0.01 -0.005 0.12" rpy="0.1 0 0.2"/>
-    <inertia ixx="0.054" ixy="0.0003" ixz="-0.0008" iyy="0.052" iyz="0.0019" izz="0.0073"/></inertial></link>
-  <link name="l2"><inertial><mass value="1.5"/><origin xyz="0.03 0.01 0.02"/>
-    <inertia ixx="0.0031" ixy="-0.0004" ixz="0.0005" iyy="0.0042" iyz="-0.0003" izz="0.0037"/></inertial></link>
-  <link name="l3"><inertial><mass value="0.9"/><origin xyz="0.1 0.005 -0.01" rpy="0 0.3 0"/>
-    <inertia ixx="0.002" ixy="0.0001" ixz="0" iyy="0.006" iyz="0.0002" izz="0.005"/></inertial></link>
-  <joint name="turret" type="revolute"><parent link="base"/><child link="l1"/>
-    <origin xyz="0 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="1" velocity="1"/></joint>
-  <joint name="slide" type="prismatic"><parent link="l1"/><child link="l2"/>
-    <origin xyz="0.1 0.02 0.2" rpy="0.3 0 0"/><axis xyz="0 0.6 0.8"/><limit lower="-0.2" upper="0.3" effort="1" velocity="1"/></joint>
-  <joint name="elbow" type="revolute"><parent link="l2"/><child link="l3"/>
-    <origin xyz="0.3 0 0.05" rpy="1.2 0.1 -0.4"/><axis xyz="1 0 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
-</robot>"""
-
 
 def _evaluate(f, *inputs):
     """Outputs of a SymbolicFunction at one point (Lambdify of the inlined outputs)."""
@@ -132,8 +116,8 @@ def _models():
         model = robot(name)
         pm, pd, _ = pinocchio_model(model)
         yield name, model, pm, pd
-    model = parse_urdf(CHAIN)
-    pm = pin.buildModelFromXML(CHAIN)
+    model = parse_urdf(SLIDER_CHAIN_URDF)
+    pm = pin.buildModelFromXML(SLIDER_CHAIN_URDF)
     assert [pm.names[k] for k in range(1, pm.njoints)] == [j.name for j in model.joints]
     yield "slider_chain", model, pm, pm.createData()
 
