@@ -62,3 +62,16 @@ def evaluate(robot_name: str, lang: str, function_name: str, **inputs):
         return evaluate_symbolic(robot_name, function_name, **inputs)
     from kindyngen.runtime.evaluate import load_generated
     return load_generated(GENERATED / robot_name, lang).call(function_name, inputs)
+
+
+def evaluate_function(f, *inputs):
+    """The outputs of SymbolicFunction ``f`` at the concatenated ``inputs`` (one symengine
+    Lambdify with CSE, no code generation), each reshaped to its port's shape."""
+    fn = se.Lambdify([s for syms in f.input_symbols for s in syms],
+                     [e for exprs in f.inlined_outputs() for e in exprs], cse=True)
+    out = np.ravel(fn(np.concatenate(inputs)))
+    result, start = [], 0
+    for port in f.outputs:
+        result.append(out[start:start + port.size].reshape(port.shape))
+        start += port.size
+    return result

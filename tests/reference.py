@@ -97,3 +97,17 @@ def pinocchio_model(robot: RobotModel):
 def random_configurations(robot: RobotModel, count: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return rng.uniform(robot.lower, robot.upper, size=(count, robot.n))
+
+
+def random_tree_state(tree: RobotModel, rng: np.random.Generator, spread: float = 3.0):
+    """(q, qd, qdd, tau) at random for a tree: joint angles uniform within the joint limits
+    clipped to +-pi; for a floating base, a position in [-1, 1]^3 and a uniformly random unit
+    quaternion (x, y, z, w) first, as Pinocchio orders q; speeds, accelerations and torques
+    uniform in +-``spread``."""
+    qj = rng.uniform([max(j.lower, -np.pi) for j in tree.joints], [min(j.upper, np.pi) for j in tree.joints])
+    if tree.floating_base:
+        quat = rng.standard_normal(4)
+        q = np.r_[rng.uniform(-1, 1, 3), quat / np.linalg.norm(quat), qj]
+    else:
+        q = qj
+    return (q,) + tuple(rng.uniform(-spread, spread, tree.nv) for _ in range(3))

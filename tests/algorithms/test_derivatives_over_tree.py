@@ -5,10 +5,10 @@ Pinocchio's ``computeRNEADerivatives`` and ``computeABADerivatives``."""
 import numpy as np
 import pinocchio as pin
 import pytest
-import symengine as se
 
 from kindyngen.algorithms.derivatives_sweeps import fd_derivatives, tau_derivatives
 from kindyngen.readers.urdf import parse_urdf
+from tests.harness import evaluate_function
 
 BRANCHED = """<robot name="branched">
   <link name="body"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial></link>
@@ -31,17 +31,6 @@ BRANCHED = """<robot name="branched">
 </robot>"""
 
 
-def _evaluate(f, *inputs):
-    fn = se.Lambdify([s for syms in f.input_symbols for s in syms],
-                     [e for exprs in f.inlined_outputs() for e in exprs], cse=True)
-    out = np.ravel(fn(np.concatenate(inputs)))
-    result, start = [], 0
-    for port in f.outputs:
-        result.append(out[start:start + port.size].reshape(port.shape))
-        start += port.size
-    return result
-
-
 @pytest.fixture(scope="module")
 def models():
     tree = parse_urdf(BRANCHED, tree=True)
@@ -57,7 +46,7 @@ def test_tau_derivatives_on_a_tree_equal_pinocchio(models):
     rng = np.random.default_rng(26)
     for _ in range(5):
         q, v, a = rng.uniform(-1, 1, 4), rng.normal(size=4), rng.normal(size=4)
-        dq, dv = _evaluate(f, q, v, a)
+        dq, dv = evaluate_function(f, q, v, a)
         pin.computeRNEADerivatives(model, data, q, v, a)
         np.testing.assert_allclose(dq, data.dtau_dq, atol=1e-10)
         np.testing.assert_allclose(dv, data.dtau_dv, atol=1e-10)
@@ -69,7 +58,7 @@ def test_fd_derivatives_on_a_tree_equal_pinocchio(models):
     rng = np.random.default_rng(27)
     for _ in range(5):
         q, v, tau = rng.uniform(-1, 1, 4), rng.normal(size=4), rng.normal(size=4)
-        dq, dv, minv = _evaluate(f, q, v, tau)
+        dq, dv, minv = evaluate_function(f, q, v, tau)
         pin.computeABADerivatives(model, data, q, v, tau)
         np.testing.assert_allclose(dq, data.ddq_dq, atol=1e-9)
         np.testing.assert_allclose(dv, data.ddq_dv, atol=1e-9)

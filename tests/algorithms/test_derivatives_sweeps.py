@@ -35,7 +35,7 @@ from kindyngen.algorithms.ldlt import ldlt_factor
 from kindyngen.codegen.catalog import derive_all
 from kindyngen.model.robot_model import Friction
 from kindyngen.readers.urdf import parse_urdf
-from tests.harness import robot
+from tests.harness import evaluate_function, robot
 
 pin = pytest.importorskip("pinocchio")
 from tests.reference import pinocchio_model  # noqa: E402
@@ -46,17 +46,6 @@ EXACT, DIFFERENCE, STEP = 1e-10, 1e-6, 1e-6
 # per joint: viscous, coulomb, offset, armature; tanh(qd / EPS) for the Coulomb sign
 EFFECTS = [(0.8, 1.2, 0.1, 0.3), (20.0, 5.0, -0.5, 2.5), (0.3, 0.4, 0.05, 0.1)]
 EPS = 0.05
-
-
-def _evaluate(f, *inputs):
-    fn = se.Lambdify([s for syms in f.input_symbols for s in syms],
-                     [e for exprs in f.inlined_outputs() for e in exprs], cse=True)
-    out = np.ravel(fn(np.concatenate(inputs)))
-    result, start = [], 0
-    for port in f.outputs:
-        result.append(out[start:start + port.size].reshape(port.shape))
-        start += port.size
-    return result
 
 
 def _close(ours, reference, tol):
@@ -98,7 +87,7 @@ def test_lwr_tau_derivatives_equal_pinocchio(lwr):
     f = tau_derivatives(model)
     assert [p.name for p in f.outputs] == ["dtau_dq", "dtau_dqd"]
     for q, qd, qdd in _states(model, 5):
-        dq, dqd = _evaluate(f, q, qd, qdd)
+        dq, dqd = evaluate_function(f, q, qd, qdd)
         ref_dq, ref_dqd, _ = (np.array(a) for a in pin.computeRNEADerivatives(pm, pd, q, qd, qdd))
         assert _close(dq, ref_dq, EXACT) and _close(dqd, ref_dqd, EXACT)
         assert _close(dq, _jacobian(lambda x: pin.rnea(pm, pd, x, qd, qdd), q), DIFFERENCE)
@@ -112,7 +101,7 @@ def test_lwr_fd_derivatives_equal_pinocchio(lwr):
     rng = np.random.default_rng(5)
     for q, qd, _ in _states(model, 5):
         tau = rng.normal(scale=5.0, size=model.n)
-        dq, dqd, Minv = _evaluate(f, q, qd, tau)
+        dq, dqd, Minv = evaluate_function(f, q, qd, tau)
         ref_dq, ref_dqd, ref_Minv = (np.array(a) for a in pin.computeABADerivatives(pm, pd, q, qd, tau))
         assert _close(dq, ref_dq, EXACT) and _close(dqd, ref_dqd, EXACT)
         assert _close(Minv, _full(ref_Minv), EXACT)
@@ -131,7 +120,7 @@ def test_arm_fd_derivatives_no_minv_equal_pinocchio(name):
     rng = np.random.default_rng(15)
     for q, qd, _ in _states(model, 5):
         tau = rng.normal(scale=5.0, size=model.n)
-        dq, dqd = _evaluate(f, q, qd, tau)
+        dq, dqd = evaluate_function(f, q, qd, tau)
         ref_dq, ref_dqd, _ = (np.array(a) for a in pin.computeABADerivatives(pm, pd, q, qd, tau))
         assert _close(dq, ref_dq, EXACT) and _close(dqd, ref_dqd, EXACT)
 
@@ -192,7 +181,7 @@ def test_chain_with_effects_tau_derivatives_equal_differences(chain):
     f = tau_derivatives(model)
     for q, qd, qdd in _states(model, 5):
         qd = qd * 0.1            # inside tanh's bend too (|qd| ~ eps)
-        dq, dqd = _evaluate(f, q, qd, qdd)
+        dq, dqd = evaluate_function(f, q, qd, qdd)
         assert _close(dq, _jacobian(lambda x: tau(x, qd, qdd), q), DIFFERENCE)
         assert _close(dqd, _jacobian(lambda x: tau(q, x, qdd), qd), DIFFERENCE)
 
@@ -208,14 +197,14 @@ def test_chain_with_effects_fd_derivatives_equal_differences(chain):
     rng = np.random.default_rng(6)
     for q, qd, _ in _states(model, 5):
         qd, tau = qd * 0.1, rng.normal(scale=5.0, size=model.n)
-        dq, dqd, Minv = _evaluate(f, q, qd, tau)
+        dq, dqd, Minv = evaluate_function(f, q, qd, tau)
         assert _close(dq, _jacobian(lambda x: fd(x, qd, tau), q), DIFFERENCE)
         assert _close(dqd, _jacobian(lambda x: fd(q, x, tau), qd), DIFFERENCE)
         assert _close(Minv, np.linalg.inv(_full(pin.crba(pm, pd, q)) + np.diag(ARMATURE)), EXACT)
     (no_minv,) = derive_all(model, only={"fd_derivatives_no_minv"})
     for q, qd, _ in _states(model, 3, seed=27):
         qd, tau = qd * 0.1, rng.normal(scale=5.0, size=model.n)
-        dq, dqd = _evaluate(no_minv, q, qd, tau)
+        dq, dqd = evaluate_function(no_minv, q, qd, tau)
         assert _close(dq, _jacobian(lambda x: fd(x, qd, tau), q), DIFFERENCE)
         assert _close(dqd, _jacobian(lambda x: fd(q, x, tau), qd), DIFFERENCE)
 

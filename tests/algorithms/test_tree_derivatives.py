@@ -29,6 +29,8 @@ from kindyngen.readers.urdf import load_urdf
 
 pin = pytest.importorskip("pinocchio")
 
+from tests.reference import random_tree_state  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1].parent
 N, TOLERANCE = 50, 1e-9
 
@@ -113,17 +115,9 @@ def test_tree_derivatives_equal_pinocchio(key, floating, lang, tmp_path):
     model = pinocchio_tree(tree)
     data = model.createData()
     rng = np.random.default_rng(30)
-    base = 7 if floating else 0
     errors = {}
     for _ in range(N):
-        qj = rng.uniform(-np.pi, np.pi, tree.n)
-        qj = np.clip(qj, [max(j.lower, -np.pi) for j in tree.joints], [min(j.upper, np.pi) for j in tree.joints])
-        if floating:
-            quat = rng.standard_normal(4)
-            q = np.r_[rng.uniform(-1, 1, 3), quat / np.linalg.norm(quat), qj]
-        else:
-            q = qj
-        qd, qdd, tau = (rng.uniform(-3, 3, tree.nv) for _ in range(3))
+        q, qd, qdd, tau = random_tree_state(tree, rng)
         pq = q.copy()
         pin.computeRNEADerivatives(model, data, pq, qd, qdd)
         expected = {"tau_derivatives": {"dtau_dq": data.dtau_dq.copy(), "dtau_dqd": data.dtau_dv.copy()}}

@@ -27,6 +27,8 @@ from tests.algorithms.test_tree_derivatives import _se3, pinocchio_tree
 
 pin = pytest.importorskip("pinocchio")
 
+from tests.reference import random_tree_state  # noqa: E402
+
 TREE = Path(__file__).resolve().parents[1] / "data" / "urdf" / "mobile_slider_tree.urdf"
 N, TOLERANCE = 20, 1e-9
 FUNCTIONS = ("M", "g", "c", "tau", "fd", "com", "tau_derivatives", "fd_derivatives")
@@ -104,13 +106,7 @@ def test_symbolic_parameters_equal_pinocchio(floating):
     fns["fd_aba"], functions["fd_aba"] = _lambdified(fd_aba), fd_aba
     errors = {}
     for _ in range(N):
-        qj = rng.uniform([max(j.lower, -np.pi) for j in tree.joints], [min(j.upper, np.pi) for j in tree.joints])
-        if floating:
-            quat = rng.standard_normal(4)
-            q = np.r_[rng.uniform(-1, 1, 3), quat / np.linalg.norm(quat), qj]
-        else:
-            q = qj
-        qd, qdd, tau = (rng.uniform(-3, 3, tree.nv) for _ in range(3))
+        q, qd, qdd, tau = random_tree_state(tree, rng)
         expected = pinocchio_values(model, data, q, qd, qdd, tau)
         expected["fd_aba"] = expected["fd"]
         inputs = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "p": p}

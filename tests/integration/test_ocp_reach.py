@@ -72,18 +72,23 @@ def stages(reach):
     return s.setup, res, ocp_reach.check(s.setup, res, funcs)
 
 
-def test_compiled_stages_reach(stages, reach):
+def _assert_at_goal_within_limits(setup, res, sim):
+    """Pinocchio puts the plan's last node at the goal, at rest; the limits hold at the nodes."""
     import pinocchio as pin
     from tests.reference import pinocchio_model
-    setup, res, sim = stages
-    assert res["success"], res["status"]
-    assert sim["plan_step_error"] < 1e-6
     model, data, flange = pinocchio_model(setup["robot"])
     pin.framesForwardKinematics(model, data, res["q"][-1])
     assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
     assert np.abs(res["qd"][-1]).max() < 1e-6
     lim = sim["limit_excess"]
     assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+
+
+def test_compiled_stages_reach(stages, reach):
+    setup, res, sim = stages
+    assert res["success"], res["status"]
+    assert sim["plan_step_error"] < 1e-6
+    _assert_at_goal_within_limits(setup, res, sim)
     assert abs(res["objective"] - reach[1]["objective"]) < 1e-6 * reach[1]["objective"]
 
 
@@ -92,20 +97,13 @@ def test_fatrop_on_compiled_stages_reach(stages):
     by hand) on the same compiled functions reaches the KKT point IPOPT reaches, checked by
     Pinocchio like the others."""
     import ocp_fatrop
-    import pinocchio as pin
-    from tests.reference import pinocchio_model
     fr = ocp_fatrop.FatropReach(20)
     res = fr.solve()
     setup = fr.s.setup
     sim = ocp_reach.check(setup, res, fr.s.funcs)
     assert res["success"], (res["status"], res["fatrop_return_flag"])
     assert sim["plan_step_error"] < 1e-6
-    model, data, flange = pinocchio_model(setup["robot"])
-    pin.framesForwardKinematics(model, data, res["q"][-1])
-    assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
-    assert np.abs(res["qd"][-1]).max() < 1e-6
-    lim = sim["limit_excess"]
-    assert lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6 and lim["qd_nodes"] < 1e-6
+    _assert_at_goal_within_limits(setup, res, sim)
     assert abs(res["objective"] - stages[1]["objective"]) < 1e-6 * stages[1]["objective"]
 
 
