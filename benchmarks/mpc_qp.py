@@ -16,7 +16,6 @@ reference with the measured state's speeds perturbed (seeded).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time

@@ -15,7 +15,6 @@ compare on a shared machine; wall time is recorded too.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import subprocess

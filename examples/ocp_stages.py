@@ -216,7 +216,7 @@ class StageReach:
         """Every stage one interval earlier; the appended interval holds the last node (at
         rest at the goal) with its gravity torque and zero accelerations, which satisfies its
         constraints exactly (repeating the last interval's decelerations would not)."""
-        st, N, nx, n = self.st, self.N, self.nx, self.n
+        st, N, n = self.st, self.N, self.n
         xN = z[N * st:]
         g = np.array(self.funcs["tau"](xN[:n], np.zeros(n), np.zeros(n))).ravel()
         return np.concatenate([z[st:N * st], xN, g, np.zeros(4 * n), xN])

@@ -281,7 +281,6 @@ def split_pio2_float():
     """pi/2 as four floats, three of 14 significant bits, then the rest rounded; and 2/pi
     rounded; as C literals."""
     import mpmath as mp
-    from fractions import Fraction
     from .float32 import c_float
     with mp.workdps(60):
         rest, parts = mp.pi / 2, []

@@ -49,7 +49,7 @@ def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joi
     ~1e-15 relative) the segments of ``preprocess(read_any(path))``; at most about ``2 chunk_rows``
     samples each, each carrying its unfiltered torque and low-pass when filtered (as the whole
     log's segments do).  ``notes`` (a list) receives what was done."""
-    for _, piece in _segment_pieces(path, n, settings, joint_names, chunk_rows, notes):
+    for _, piece in segment_pieces(path, n, settings, joint_names, chunk_rows, notes):
         yield piece
 
 
@@ -58,16 +58,10 @@ def segment_pieces(path, n: int, settings: Preprocessing = Preprocessing(), join
                    spans: list | None = None) -> Iterator[tuple[int, Segment]]:
     """``(segment index, piece)`` of :func:`stream_segments`; raises :class:`NotStreamable` at
     the first window that would not preprocess like the whole log (then read it whole).
-    ``spans`` receives the segments' exact (first, last) time when the log is preprocessed
-    whole anyway (short, or resampled)."""
-    return _segment_pieces(path, n, settings, joint_names, chunk_rows, notes, spans)
-
-
-def _segment_pieces(path, n: int, settings: Preprocessing, joint_names, chunk_rows: int, notes: list | None,
-                    spans: list | None = None) -> Iterator[tuple[int, Segment]]:
-    """``(segment index, piece)`` of :func:`stream_segments`.  When the log is preprocessed
-    whole (short, or resampled), ``spans`` (a list) receives the exact (first, last) time of its
-    segments before the first piece, as :func:`kindyngen.measured.log_preparing.split_time` takes them."""
+    ``notes`` (a list) receives what was done; when the log is preprocessed whole anyway
+    (short, or resampled), ``spans`` (a list) receives the exact (first, last) time of its
+    segments before the first piece, as :func:`kindyngen.measured.log_preparing.split_time`
+    takes them."""
     source = str(path)
     notes = notes if notes is not None else []
     spans = spans if spans is not None else []
