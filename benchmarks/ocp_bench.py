@@ -133,19 +133,47 @@ def warm_resolve(funcs, repeats=5):
             "median_ms": 1e3 * float(np.median(times))}
 
 
-def crocoddyl_row(venv: Path):
-    """benchmarks/crocoddyl_reach.py in its own virtual environment (see its docstring)."""
+CROCODDYL_FORMULATION = {"csqp": "crocoddyl hard (ours)", "csqp tol=1e-2": "crocoddyl hard (ours)",
+                         "boxfddp": "crocoddyl penalty (softer)"}
+
+
+def crocoddyl_peer(venv: Path, funcs: dict, setup: dict, base_s=None):
+    """benchmarks/crocoddyl_reach.py in its own virtual environment (see its docstring), given
+    this problem's numbers; each returned plan checked by Pinocchio here like every other row.
+    Returns (summary for doc["crocoddyl"]: versions and the rows without the trajectories,
+    rows for doc["rows"])."""
     from dh_to_urdf import write_urdf
-    funcs = ocp_reach.load()
-    urdf = write_urdf(funcs["robot"], ROOT / "examples" / "results" / "urdf" / "lwr4.urdf")
+    urdf = write_urdf(funcs["robot"], ROOT / "examples" / "results" / "urdf" / f"{funcs['robot'].name}.urdf")
     py = venv / "bin" / "python"
     if not py.exists():
-        return {"error": f"no Crocoddyl environment at {venv}"}
-    r = subprocess.run([str(py), str(ROOT / "benchmarks" / "crocoddyl_reach.py"), "--urdf", str(urdf)],
-                       capture_output=True, text=True)
+        return {"error": f"no Crocoddyl environment at {venv}"}, []
+    problem = {k: setup[k].tolist() for k in ("q0", "goal", "tau_max", "qd_max", "q_lo", "q_hi")}
+    problem.update(N=setup["N"], T=setup["T"], frame="flange")
+    # -X faulthandler: a crash (the segfault of newer version sets) says where in the last line
+    r = subprocess.run([str(py), "-X", "faulthandler", str(ROOT / "benchmarks" / "crocoddyl_reach.py"),
+                        "--urdf", str(urdf), "--problem", json.dumps(problem)], capture_output=True, text=True)
     if r.returncode != 0:
-        return {"error": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"exit {r.returncode}"}
-    return json.loads(r.stdout.strip().splitlines()[-1])
+        lines = [line for line in r.stderr.strip().splitlines() if line.strip()]
+        return {"error": " | ".join(lines[-3:]) if lines else f"exit {r.returncode}"}, []
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    rows = []
+    for c in out["rows"]:
+        res = {k: c[k] for k in ("status", "success", "iterations", "solve_s", "solve_cpu_s", "objective")}
+        res.update(formulation=CROCODDYL_FORMULATION[c["solver"]], solver=f"{c['solver']} (mim-solvers {out['versions']['mim-solvers']})"
+                   if c["solver"].startswith("csqp") else c["solver"], substeps=1, build_s=0.0, N=setup["N"], T=setup["T"],
+                   q=np.array(c["q"]), qd=np.array(c["qd"]), tau=np.array(c["tau"]))
+        row = _row(f"crocoddyl {c['solver']}", "crocoddyl", res, setup, funcs, base_s)
+        row.update({k: c[k] for k in ("solve_cpu_s_runs", "kkt", "crocoddyl_cost", "goal_error_m", "final_speed",
+                                      "warm_resolve_cpu_s", "warm_iterations")})
+        row["limit_excess_own_plan"] = c["limit_excess"]
+        rows.append(row)
+    # the earlier interface's top-level fields, now of the hard-constrained CSQP row; every
+    # row in doc["rows"] under the names in "row_variants"
+    summary = {k: v for k, v in out.items() if k != "rows"}
+    summary.update({k: rows[0][k] for k in ("formulation", "solver", "status", "iterations", "solve_s", "solve_cpu_s",
+                                            "objective", "goal_error_m", "final_speed", "kkt")},
+                   row_variants=[row["variant"] for row in rows])
+    return summary, rows
 
 
 def plot(doc, path):
@@ -172,20 +200,29 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5,
                     help="solves of the baseline and of the compiled rows, median CPU time used (default 5)")
     ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"),
-                    help="virtual environment with crocoddyl==3.0.1 pin==3.4.0 (default .venv-crocoddyl)")
+                    help="virtual environment with crocoddyl==3.0.1.1 pin==3.7.0 mim-solvers==0.1.1 "
+                         "(benchmarks/crocoddyl_reach.py says how to make it; default .venv-crocoddyl)")
     ap.add_argument("--only-crocoddyl", action="store_true",
-                    help="run only the Crocoddyl row and add it to an existing --out file")
+                    help="run only the Crocoddyl rows and put them into --out (an existing file: its other rows kept)")
     args = ap.parse_args(argv)
     if args.only_crocoddyl:
-        doc = json.loads(Path(args.out).read_text())
-        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
-        Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
-        print(doc["crocoddyl"])
+        out = Path(args.out)
+        doc = json.loads(out.read_text()) if out.exists() else {
+            "machine": _machine(), "cores": len(os.sched_getaffinity(0)), "rows": [], "versions": {}}
+        funcs = ocp_reach.load()
+        # no ratio to the baseline: that was solved in another run, under another load
+        summary, rows = crocoddyl_peer(Path(args.crocoddyl_venv), funcs, ocp_reach.setup_dict(funcs))
+        doc["crocoddyl"] = dict(summary, loadavg=list(os.getloadavg()))
+        doc.setdefault("versions", {})["crocoddyl_venv"] = summary.get("versions", {"error": summary.get("error")})
+        doc["rows"] = [r for r in doc["rows"] if r.get("dynamics") != "crocoddyl"] + rows
+        out.write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"crocoddyl: {summary.get('versions', summary)}")
         return
     funcs = ocp_reach.load()
     doc = {"machine": _machine(), "cores": len(os.sched_getaffinity(0)), "casadi": ca.__version__,
            "python": platform.python_version(),
-           "versions": {d: _version(d) for d in ("casadi", "pin", "adam-robotics", "urdf2casadi")},
+           # the peers' versions: adam's and urdf2casadi's here, Crocoddyl's environment's below
+           "versions": {d: _version(d) for d in ("casadi", "pin", "adam-robotics", "liecasadi", "urdf2casadi")},
            "problem": "lwr4_reach N = 20, T = 1 s, data-sheet qd limits (examples/ocp_reach.py)",
            "note": "wall times on a shared 2-core machine; compare rows of this run only",
            "rows": [], "peer_failures": [], "loadavg_start": list(os.getloadavg())}
@@ -236,11 +273,12 @@ def main(argv=None):
                 row["fd_max_abs_diff"] = err
                 doc["rows"].append(row)
                 out.write_text(json.dumps(doc, indent=1) + "\n")
-        doc["crocoddyl"] = crocoddyl_row(Path(args.crocoddyl_venv))
-        if "error" in doc["crocoddyl"] and old_crocoddyl and "error" not in old_crocoddyl:
-            doc["crocoddyl"] = dict(old_crocoddyl, carried_over_from_earlier_run=True,
-                                    this_run_error=doc["crocoddyl"]["error"])
-        print(f"crocoddyl: {doc['crocoddyl']}", flush=True)
+        summary, rows = crocoddyl_peer(Path(args.crocoddyl_venv), funcs, setup, base_s)
+        doc["crocoddyl"], doc["rows"] = summary, doc["rows"] + rows
+        if "error" in summary and old_crocoddyl and "error" not in old_crocoddyl:
+            doc["crocoddyl"] = dict(old_crocoddyl, carried_over_from_earlier_run=True, this_run_error=summary["error"])
+        doc["versions"]["crocoddyl_venv"] = doc["crocoddyl"].get("versions", {"error": summary.get("error")})
+        print(f"crocoddyl: {doc['versions']['crocoddyl_venv']}", flush=True)
     doc["warm_resolve"] = warm_resolve(funcs)
     print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
     doc["warm_resolve_stages"] = warm_resolve_stages(funcs)
