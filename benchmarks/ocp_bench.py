@@ -17,6 +17,15 @@ distance from the goal after re-simulation. Also the warm re-solve of id_rk4 + I
 solution shifted by one interval (what examples/mpc.py does at each step).
 Writes the JSON and a bar chart (ocp.png) beside it. Wall times on a shared machine: compare
 rows of one run only.
+
+The Crocoddyl rows (benchmarks/crocoddyl_reach.py: the same reach with mim-solvers' CSQP, and a
+softer BoxFDDP problem) need their own environment, by default .venv-crocoddyl here:
+
+    python3 -m venv .venv-crocoddyl
+    .venv-crocoddyl/bin/pip install crocoddyl==3.0.1.1 pin==3.7.0 mim-solvers==0.1.1 "cmeel-urdfdom<5" "cmeel-tinyxml2<11"
+
+(elsewhere: --crocoddyl-venv DIR); without it the run goes on and says so in the JSON. Every
+peer's version is recorded under "versions" (the Crocoddyl environment's under "crocoddyl_venv").
 """
 from __future__ import annotations
 
