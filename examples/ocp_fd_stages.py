@@ -17,8 +17,8 @@ so the Hessian over w = (x, u) of mu' F(x, u) is
 
 with dy_i/dw chained forward from the analytic `fd_derivatives` (da/dq, da/dqd, M^-1) and lam by
 back substitution through the block lower-triangular R_a (diagonal blocks the mass matrices,
-inverted by fd_derivatives' M^-1; off-diagonal blocks from `tau_derivatives` times the RK4
-coefficients). The constraint Jacobian blocks (-A, -B, I) come from the same forward chain
+inverted by fd_derivatives' M^-1; the off-diagonal blocks, the inverse dynamics' Jacobians
+times RK4 coefficients, are -M da/dq and -M da/dqd, so fd_derivatives serves them too). The constraint Jacobian blocks (-A, -B, I) come from the same forward chain
 (examples/mpc_sqp.rk4_step_with_jacobians).
 
 The NLP, its variable and constraint order and its assembly are examples/ocp_stages.py's
@@ -44,7 +44,7 @@ import ocp_reach
 import ocp_stages
 
 
-def rk4_lagrangian_hessian(fd, fd_derivatives, tau, tau_derivatives, n: int, h: float, w: ca.MX,
+def rk4_lagrangian_hessian(fd, fd_derivatives, tau, n: int, h: float, w: ca.MX,
                            mu: ca.MX) -> ca.MX:
     """Hessian over w = (x, u) of mu' F(w), F the classic RK4 step of xdot = (qd, fd(q, qd, u))
     over h, from the inverse dynamics' Hessian (module docstring). MX over the generated
@@ -54,7 +54,7 @@ def rk4_lagrangian_hessian(fd, fd_derivatives, tau, tau_derivatives, n: int, h: 
     Iw = ca.MX.eye(nw)
     Q, V = Iw[:n, :], Iw[n:2 * n, :]
     Eu = Iw[2 * n:, :]
-    qs, vs, acc, dQ, dV, dA, minv = [], [], [], [], [], [], []
+    qs, vs, acc, dQ, dV, dA, minv, Dqs, Dvs = [], [], [], [], [], [], [], [], []
     coef = (0.0, h / 2, h / 2, h)
     for i in range(4):
         if i == 0:
@@ -72,24 +72,27 @@ def rk4_lagrangian_hessian(fd, fd_derivatives, tau, tau_derivatives, n: int, h: 
         dV.append(Vi)
         dA.append(Dq @ Qi + Dv @ Vi + Mi @ Eu)
         minv.append(Mi)
-    # back substitution R_a' lam = b = -F_a' mu; R_a[i][j] = d r_i / d a_j (j < i) through
-    # q_i, v_i: v_i depends on a_{i-1} (c_i), q_3 on a_1 (h^2 / 4), q_4 on a_2 (h^2 / 2)
+        Dqs.append(Dq)
+        Dvs.append(Dv)
+    # back substitution R_a' lam = b = -F_a' mu, R_a[i][j] = d r_i / d a_j: M_i on the diagonal,
+    # below it (j < i) through q_i, v_i: v_i depends on a_{i-1} (c_i), q_3 on a_1 (h^2 / 4) and
+    # q_4 on a_2 (h^2 / 2). With dtau/dq = -M da/dq, dtau/dqd = -M da/dqd at each stage and
+    # rho_j = M_j lam_j, R_a[j][i]' lam_j = -(d q_j/d a_i) Dq_j' rho_j - (d v_j/d a_i) Dv_j' rho_j:
+    # no inverse dynamics' Jacobian is needed
     mq, mv = mu[:n], mu[n:]
     b = [-(h ** 2 / 6 * mq + h / 6 * mv), -(h ** 2 / 6 * mq + h / 3 * mv), -(h ** 2 / 6 * mq + h / 3 * mv),
          -(h / 6 * mv)]
-    Jq, Jv = [], []
-    for i in range(4):
-        a_, b_ = tau_derivatives(qs[i], vs[i], acc[i])
-        Jq.append(a_)
-        Jv.append(b_)
-    R = {(1, 0): coef[1] * Jv[1], (2, 0): h ** 2 / 4 * Jq[2], (2, 1): coef[2] * Jv[2],
-         (3, 1): h ** 2 / 2 * Jq[3], (3, 2): coef[3] * Jv[3]}
-    lam = [None] * 4
+    dq_da = {(2, 0): h ** 2 / 4, (3, 1): h ** 2 / 2}                 # d q_j / d a_i
+    dv_da = {(1, 0): coef[1], (2, 1): coef[2], (3, 2): coef[3]}     # d v_j / d a_i
+    rho, lam = [None] * 4, [None] * 4
     for i in range(3, -1, -1):
         rhs = b[i]
         for j in range(i + 1, 4):
-            if (j, i) in R:
-                rhs = rhs - R[(j, i)].T @ lam[j]
+            if (j, i) in dq_da:
+                rhs = rhs + dq_da[(j, i)] * (Dqs[j].T @ rho[j])
+            if (j, i) in dv_da:
+                rhs = rhs + dv_da[(j, i)] * (Dvs[j].T @ rho[j])
+        rho[i] = rhs
         lam[i] = minv[i] @ rhs
     y, m = ca.SX.sym("y", nw), ca.SX.sym("m", n)
     hid = ca.Function("id_hessian", [y, m], [ca.hessian(ca.dot(m, tau(y[:n], y[n:2 * n], y[2 * n:])), y)[0]])
@@ -109,9 +112,8 @@ class FdStageReach(ocp_stages.StageReach):
         t0 = time.perf_counter()
         self.funcs = funcs or ocp_reach.load()
         folder = Path(ocp_reach.ROOT) / "generated" / self.funcs["robot"].name / "casadi"
-        for name in ("fd_derivatives", "tau_derivatives"):
-            if name not in self.funcs:
-                self.funcs[name] = ca.Function.load(str(folder / f"{name}.casadi"))
+        if "fd_derivatives" not in self.funcs:
+            self.funcs["fd_derivatives"] = ca.Function.load(str(folder / "fd_derivatives.casadi"))
         self.setup = ocp_reach.setup_dict(self.funcs, N)
         n = self.n = self.setup["n"]
         self.N, self.h = N, self.setup["T"] / N
@@ -126,7 +128,7 @@ class FdStageReach(ocp_stages.StageReach):
         jc = ca.horzcat(-A, -B, ca.MX.eye(nx))
         w, lam, sigma = ca.MX.sym("w", self.st), ca.MX.sym("lam", nx), ca.MX.sym("sigma")
         # lam multiplies x_{k+1} - F: the Hessian of -lam' F, i.e. mu = -lam in the derivation
-        H = rk4_lagrangian_hessian(f["fd"], f["fd_derivatives"], f["tau"], f["tau_derivatives"], n, self.h, w, -lam)
+        H = rk4_lagrangian_hessian(f["fd"], f["fd_derivatives"], f["tau"], n, self.h, w, -lam)
         H = H + ca.diagcat(ca.MX(nx, nx), 2 * self.h * sigma * ca.MX.eye(n))
         xN, goal, lamT = ca.SX.sym("xN", nx), ca.SX.sym("goal", 3), ca.SX.sym("lamT", 3 + n)
         term = ca.vertcat(f["fk_hom"](xN[:n])[:3, 3] - goal, xN[n:])
