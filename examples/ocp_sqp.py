@@ -2,7 +2,8 @@
 on a condensed dense QP solved by DAQP; measured by benchmarks/reach_sqp.py and
 docs/optimal_control.md ("Exact-Hessian SQP"). **It converges from near a solution, not from
 the issue's cold start**, and it is not faster than IPOPT on the compiled stages: it is kept
-for the exact Hessian of the RK4 step of `fd` (below), which nothing else here provides.
+for the exact Hessian of the RK4 step of `fd` (below), checked here against finite differences;
+examples/ocp_fd_stages.py writes the same derivation in MX and compiles it for IPOPT.
 
 The problem is fd_rk4's (one explicit RK4 step of the forward dynamics per interval, so its
 KKT points are those of the `baseline` and `fd_rk4` NLPs): unknowns the nodes x_1..x_N and
