@@ -47,11 +47,15 @@ import ocp_reach  # noqa: E402
 
 VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
             ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1),
-            ("id_rk4", "fatrop_stages", 1)]
+            ("id_rk4", "stages mu_strategy=adaptive", 1), ("id_rk4", "fatrop_stages", 1), ("fd_rk4", "fd_stages", 1)]
 # "stages": examples/ocp_stages.py, the per-interval functions compiled to C and IPOPT given the
 # assembled Jacobian and Hessian; "mu_init=1e-2" starts IPOPT's barrier lower (the default 0.1);
-# "fatrop_stages": examples/ocp_fatrop.py, fatrop on the same compiled functions
-STAGE_OPTIONS = {"stages": {}, "stages mu_init=1e-2": {"ipopt.mu_init": 1e-2}}
+# "mu_strategy=adaptive": IPOPT's adaptive barrier (it ends at the baseline's KKT point, 716.66;
+# benchmarks/reach_sqp.py);
+# "fatrop_stages": examples/ocp_fatrop.py, fatrop on the same compiled functions; "fd_stages":
+# examples/ocp_fd_stages.py, the fd_rk4 interval (nu = 7) and its exact Hessian compiled, IPOPT
+STAGE_OPTIONS = {"stages": {}, "stages mu_init=1e-2": {"ipopt.mu_init": 1e-2},
+                 "stages mu_strategy=adaptive": {"ipopt.mu_strategy": "adaptive"}}
 
 
 def _version(dist):
@@ -252,6 +256,11 @@ def main(argv=None):
         elif solver == "fatrop_stages":
             import ocp_fatrop
             solve = ocp_fatrop.FatropReach(20, funcs).solve
+        elif solver == "fd_stages":
+            import ocp_fd_stages
+            fd_stages = ocp_fd_stages.FdStageReach(20, funcs)
+            fd_built = fd_stages.ipopt()
+            solve = lambda: dict(fd_stages.solve_ipopt(fd_built), solver="ipopt (compiled fd_rk4 stages)")   # noqa: E731
         elif solver in STAGE_OPTIONS:
             import ocp_stages
             stages = ocp_stages.StageReach(20, funcs)

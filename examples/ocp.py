@@ -24,7 +24,7 @@ Problems:
             configurations.
   lwr4_reach  the LWR reach of examples/ocp_reach.py (fixed T = 1 s, flange position goal,
             min integral |tau|^2), with --formulation (baseline, fd_rk4, id_rk4) and
-            --solver (ipopt, fatrop, sqp, stages, fatrop_stages); its RK4 steps per interval are --substeps
+            --solver (ipopt, fatrop, sqp, stages, fatrop_stages, fd_stages); its RK4 steps per interval are --substeps
             (default 1).
 
 Output in --out: ocp.json (status, iterations, solve_s, T, t, q, qd, tau, max_defect,
@@ -495,6 +495,15 @@ def run_reach(args, out: Path) -> int:
             return 2
         res = ocp_reach.solve_baseline(args.N or 20, funcs, args.verbose, M)
         setup = ocp_reach.setup_dict(funcs, args.N or 20)
+    elif args.solver == "fd_stages":
+        if args.formulation != "fd_rk4" or M != 1:
+            print("error: --solver fd_stages compiles the fd_rk4 interval with one RK4 step; --formulation must be "
+                  "fd_rk4 and --substeps 1", file=sys.stderr)
+            return 2
+        import ocp_fd_stages
+        nlp = ocp_fd_stages.FdStageReach(args.N or 20, funcs)
+        res, setup = nlp.solve_ipopt(nlp.ipopt({"ipopt.print_level": 5} if args.verbose else None)), nlp.setup
+        res["solver"] = "ipopt (compiled fd_rk4 stages)"
     elif args.solver in ("stages", "fatrop_stages"):
         if args.formulation != "id_rk4" or M != 1:
             print(f"error: --solver {args.solver} compiles the id_rk4 interval with one RK4 step; --formulation must be "
@@ -549,10 +558,13 @@ def main(argv=None) -> int:
     ap.add_argument("--verbose", action="store_true", help="IPOPT's iteration log")
     ap.add_argument("--formulation", choices=("baseline", "fd_rk4", "id_rk4"), default="id_rk4",
                     help="lwr4_reach only: how the dynamics enter (default id_rk4)")
-    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages"), default="ipopt",
+    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages", "fd_stages"),
+                    default="ipopt",
                     help="lwr4_reach only (default ipopt); stages: IPOPT with the id_rk4 interval compiled to C "
                          "(examples/ocp_stages.py; the first run compiles, later runs load the cache); "
-                         "fatrop_stages: fatrop on the same compiled functions (examples/ocp_fatrop.py)")
+                         "fatrop_stages: fatrop on the same compiled functions (examples/ocp_fatrop.py); "
+                         "fd_stages: IPOPT with the fd_rk4 interval and its exact Hessian compiled to C "
+                         "(examples/ocp_fd_stages.py; --formulation fd_rk4)")
     args = ap.parse_args(argv)
     if args.N is not None and args.N < 1:
         ap.error(f"--N {args.N}: must be at least 1")
