@@ -27,6 +27,9 @@ Problems:
             --solver (ipopt, fatrop, sqp, stages, fatrop_stages, fd_stages); its RK4 steps per interval are --substeps
             (default 1).
 
+--solver stages (lwr4, panda): the same NLP, IPOPT given its constraint Jacobian and Lagrangian
+Hessian assembled from per-interval functions compiled to C once (examples/ocp_time_stages.py).
+
 Output in --out: ocp.json (status, iterations, solve_s, T, t, q, qd, tau, max_defect,
 resim_error, limit checks), joints.png, torques.png.
 """
@@ -308,17 +311,17 @@ def solve(setup: dict, fd: ca.Function, N: int, mode: str = DEFAULT_MODE, subste
     solver = ca.nlpsol("ocp", "ipopt", nlp, opts)
     build_s = time.perf_counter() - t0
     lbx, ubx, guess = bounds_and_guess(setup, N)
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     sol = solver(x0=guess, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-    solve_s = time.perf_counter() - t1
+    solve_s, solve_cpu_s = time.perf_counter() - t1, time.process_time() - c1
     stats = solver.stats()
     v = np.array(sol["x"]).ravel()
     T = float(v[0])
     X = v[1:1 + nx * (N + 1)].reshape((nx, N + 1), order="F")
     U = v[1 + nx * (N + 1):].reshape((nu, N), order="F")
     return {"status": stats["return_status"], "success": bool(stats["success"]),
-            "iterations": int(stats["iter_count"]), "solve_s": solve_s, "build_s": build_s,
-            "T": T, "N": N, "mode": mode, "substeps": substeps,
+            "iterations": int(stats["iter_count"]), "solve_s": solve_s, "solve_cpu_s": solve_cpu_s,
+            "build_s": build_s, "T": T, "N": N, "mode": mode, "substeps": substeps,
             "t": np.linspace(0, T, N + 1), "q": X[:n].T, "qd": X[n:2 * n].T, "tau": U[:n].T,
             "s": X[2 * n:].T, "sdot": U[n:].T,
             "objective": float(sol["f"]), "max_defect": float(np.abs(np.array(sol["g"])[:N * nx]).max())}
@@ -448,21 +451,32 @@ def plot(setup: dict, res: dict, sim: dict, out: Path) -> list[str]:
 
 
 def run(problem: str, N: int, mode: str = DEFAULT_MODE, substeps: int = 1, resim_substeps: int = 20,
-        verbose: bool = False, workdir: str | None = None) -> tuple[dict, dict, dict]:
+        verbose: bool = False, workdir: str | None = None, solver: str = "ipopt") -> tuple[dict, dict, dict]:
+    """Solve and check. solver 'ipopt': the NLP of build_nlp in `mode`; 'stages': the same NLP
+    with its derivatives assembled from compiled per-interval functions
+    (examples/ocp_time_stages.py; p2p problems only; `mode` does not apply)."""
     funcs = load_functions(problem, workdir)
     setup = problem_setup(problem, funcs)
-    res = solve(setup, funcs["fd"], N, mode, substeps, verbose=verbose, fk_hom=funcs["fk_hom"])
+    if solver == "stages":
+        import ocp_time_stages
+        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, substeps)
+        res = nlp.solve({"ipopt.print_level": 5} if verbose else None)
+    else:
+        res = solve(setup, funcs["fd"], N, mode, substeps, verbose=verbose, fk_hom=funcs["fk_hom"])
     sim = resimulate(setup, res, resim_substeps)
     res["rk4_error_estimate"] = rk4_error_estimate(setup, res, funcs["fd"])
     return setup, res, sim
 
 
 def to_json(setup: dict, res: dict, sim: dict) -> dict:
-    doc = {k: res[k] for k in ("status", "success", "iterations", "solve_s", "build_s", "T", "N", "mode",
-                                "substeps", "objective", "max_defect", "rk4_error_estimate")}
+    doc = {k: res[k] for k in ("status", "success", "iterations", "solve_s", "solve_cpu_s", "build_s", "T", "N",
+                                "mode", "substeps", "objective", "max_defect", "rk4_error_estimate")}
+    if "compile_s" in res:
+        doc["compile_s"] = res["compile_s"]
     doc.update({k: sim[k] for k in ("resim_error", "resim_final_error", "resim_substeps", "limit_excess",
                                     "resim_path_deviation") if k in sim})
     doc["time_per_iteration_s"] = res["solve_s"] / max(res["iterations"], 1)
+    doc["cpu_per_iteration_s"] = res["solve_cpu_s"] / max(res["iterations"], 1)
     doc["problem"] = setup["problem"]
     doc["limits"] = {"q_lower": setup["q_lo"].tolist(), "q_upper": setup["q_hi"].tolist(),
                      "qd_max": [None if not np.isfinite(v) else float(v) for v in setup["qd_max"]],
@@ -560,11 +574,14 @@ def main(argv=None) -> int:
                     help="lwr4_reach only: how the dynamics enter (default id_rk4)")
     ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages", "fd_stages"),
                     default="ipopt",
-                    help="lwr4_reach only (default ipopt); stages: IPOPT with the id_rk4 interval compiled to C "
+                    help="default ipopt. lwr4_reach: stages: IPOPT with the id_rk4 interval compiled to C "
                          "(examples/ocp_stages.py; the first run compiles, later runs load the cache); "
                          "fatrop_stages: fatrop on the same compiled functions (examples/ocp_fatrop.py); "
                          "fd_stages: IPOPT with the fd_rk4 interval and its exact Hessian compiled to C "
-                         "(examples/ocp_fd_stages.py; --formulation fd_rk4)")
+                         "(examples/ocp_fd_stages.py; --formulation fd_rk4). lwr4, "
+                         "panda (ipopt or stages): stages solves the same time-optimal NLP with IPOPT given its "
+                         "Jacobian and Hessian assembled from per-interval functions compiled to C "
+                         "(examples/ocp_time_stages.py; --mode does not apply; the first run compiles ~1-2 min)")
     args = ap.parse_args(argv)
     if args.N is not None and args.N < 1:
         ap.error(f"--N {args.N}: must be at least 1")
@@ -574,18 +591,22 @@ def main(argv=None) -> int:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         return run_reach(args, out)
+    if args.solver not in ("ipopt", "stages") or (args.solver == "stages" and args.problem == "two_link"):
+        ap.error(f"--solver {args.solver}: --problem {args.problem} takes ipopt"
+                 + ("" if args.problem == "two_link" else " or stages"))
     N = args.N or (100 if args.problem == "two_link" else 20)
     args.substeps = args.substeps or (1 if args.problem == "two_link" else 4)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    setup, res, sim = run(args.problem, N, args.mode, args.substeps, args.resim_substeps, args.verbose)
+    setup, res, sim = run(args.problem, N, args.mode, args.substeps, args.resim_substeps, args.verbose,
+                          solver=args.solver)
     doc = to_json(setup, res, sim)
     doc["plots"] = plot(setup, res, sim, out)
     (out / "ocp.json").write_text(json.dumps(doc, indent=1) + "\n")
     lim = sim["limit_excess"]
     print(f"{args.problem}: {res['status']}, T = {res['T']:.9f} s, N = {N}, {res['iterations']} iterations, "
-          f"solve {res['solve_s']:.3f} s ({1e3 * doc['time_per_iteration_s']:.2f} ms/iteration), "
-          f"build {res['build_s']:.2f} s")
+          f"solve {res['solve_s']:.3f} s wall, {res['solve_cpu_s']:.3f} s CPU "
+          f"({1e3 * doc['cpu_per_iteration_s']:.2f} ms CPU/iteration), build {res['build_s']:.2f} s")
     print(f"  max defect {res['max_defect']:.2e}, re-simulation error {sim['resim_error']:.2e} "
           f"(RK4 error estimate {res['rk4_error_estimate']:.2e}), limit excess "
           + ", ".join(f"{k} {v:.1e}" for k, v in lim.items()))

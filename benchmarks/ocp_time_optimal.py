@@ -1,0 +1,133 @@
+"""Time-optimal point-to-point motions (examples/ocp.py): today's formulation (mx_map: one SX
+RK4-step Function mapped over the intervals, IPOPT's exact derivatives through CasADi's
+virtual machine) against the same NLP with its Jacobian and Hessian assembled from compiled
+per-interval functions (examples/ocp_time_stages.py, `--solver stages`), in one run.
+
+    .venv/bin/python benchmarks/ocp_time_optimal.py            # Panda N = 40 and LWR N = 20
+    .venv/bin/python benchmarks/ocp_time_optimal.py --problems panda --repeats 2
+
+Per problem and formulation: IPOPT's status, iterations, CPU and wall time of the solve
+(process time: the machine is shared), T, and Pinocchio's checks (examples/ocp.py's resimulate:
+20 RK4 steps per interval of ABA; the tolerance of tests/integration/test_ocp.py: node error
+below 10x the planner's RK4 error estimate + 1e-6 and below 2e-2, limits passed by no more
+than that error). The compiled library is built into a fresh cache first, so its C size and
+gcc's CPU time (-O1) are measured, not a cached load. Writes
+benchmarks/results/ocp_time_optimal.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "examples"))
+import ocp  # noqa: E402
+import ocp_stages  # noqa: E402
+import ocp_time_stages  # noqa: E402
+
+DEFAULT_N = {"panda": 40, "lwr4": 20}
+SUBSTEPS = 4                        # examples/ocp.py's default for the 7-joint arms
+
+
+def machine() -> dict:
+    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                if line.startswith("model name")), platform.processor())
+    gcc = subprocess.run(["gcc", "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    import pinocchio
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "casadi": ca.__version__,
+            "numpy": np.__version__, "pinocchio": pinocchio.__version__, "gcc": gcc}
+
+
+def checks(setup: dict, res: dict, fd: ca.Function) -> dict:
+    sim = ocp.resimulate(setup, res, 20)
+    est = ocp.rk4_error_estimate(setup, res, fd)
+    err = sim["resim_error"]
+    lim = sim["limit_excess"]
+    ok = (err < 10 * est + 1e-6 and err < 2e-2 and lim["tau"] == 0.0 and lim["q_nodes"] < 1e-6
+          and lim["qd_nodes"] < 1e-6 and lim["q_resim"] <= err and lim["qd_resim"] <= err)
+    return {"resim_error": err, "rk4_error_estimate": est, "limit_excess": lim, "within_tolerance": bool(ok)}
+
+
+def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict) -> dict:
+    c0 = time.process_time()
+    children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    if solver == "mx_map":
+        res = ocp.solve(setup, funcs["fd"], N, "mx_map", SUBSTEPS)
+        extra = {}
+    else:
+        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, SUBSTEPS)
+        children1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        res = nlp.solve()
+        src = sorted(ocp_stages.CACHE.glob(f"topt_{problem}_M{SUBSTEPS}_*.c"))
+        extra = {"compile_wall_s": nlp.compile_s,
+                 "compile_gcc_cpu_s": (children1.ru_utime + children1.ru_stime)
+                 - (children0.ru_utime + children0.ru_stime),
+                 "c_source_bytes": src[-1].stat().st_size if src else None,
+                 "cflags": " ".join(ocp_stages.CFLAGS)}
+    total_wall, total_cpu = time.perf_counter() - t0, time.process_time() - c0
+    chk = checks(setup, res, funcs["fd"])
+    row = {"problem": problem, "N": N, "substeps": SUBSTEPS, "formulation": solver, "status": res["status"],
+           "success": res["success"], "iterations": res["iterations"], "solve_cpu_s": res["solve_cpu_s"],
+           "solve_wall_s": res["solve_s"], "cpu_per_iteration_s": res["solve_cpu_s"] / max(res["iterations"], 1),
+           "build_wall_s": res["build_s"], "total_cpu_s": total_cpu, "total_wall_s": total_wall, "T": res["T"],
+           "objective": res["objective"], "max_defect": res["max_defect"], "pinocchio": chk, **extra}
+    print(f"  {problem} N={N} {solver:7s}: {res['status']}, {res['iterations']} it, solve {res['solve_cpu_s']:.2f} s CPU "
+          f"({res['solve_s']:.2f} s wall), T = {res['T']:.9f}, Pinocchio ok: {chk['within_tolerance']}", flush=True)
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--problems", nargs="+", choices=sorted(DEFAULT_N), default=["panda", "lwr4"])
+    ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats of each pair (default 1)")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp_time_optimal.json"))
+    args = ap.parse_args(argv)
+    if args.repeats < 1:
+        print(f"error: --repeats {args.repeats}: must be at least 1", file=sys.stderr)
+        return 2
+    # a fresh cache: the first stages build compiles (C size and gcc time measured), the
+    # repeats load it
+    ocp_stages.CACHE = Path(tempfile.mkdtemp(prefix="kindyngen_topt_bench_"))
+    doc = {"machine": machine(), "load_before": os.getloadavg(), "started_utc": time.strftime("%Y-%m-%d %H:%M:%S",
+                                                                                                 time.gmtime()),
+           "note": "CPU time (process_time) of the solve; the machine is shared, so wall times are not speeds. "
+                   "speed-up = CPU time of mx_map's solve / CPU time of stages' solve, within this run.",
+           "rows": [], "summary": {}}
+    for problem in args.problems:
+        funcs = ocp.load_functions(problem)
+        setup = ocp.problem_setup(problem, funcs)
+        N = DEFAULT_N[problem]
+        pairs = []
+        for _ in range(args.repeats):
+            pair = {s: run_one(problem, N, s, funcs, setup) for s in ("stages", "mx_map")}
+            doc["rows"].extend(pair.values())
+            pairs.append(pair)
+        sp = [p["mx_map"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]
+        spi = [p["mx_map"]["cpu_per_iteration_s"] / p["stages"]["cpu_per_iteration_s"] for p in pairs]
+        doc["summary"][problem] = {
+            "N": N, "speedup_solve_cpu": sp, "speedup_cpu_per_iteration": spi,
+            "T_difference": [abs(p["mx_map"]["T"] - p["stages"]["T"]) for p in pairs],
+            "iterations": [[p["mx_map"]["iterations"], p["stages"]["iterations"]] for p in pairs]}
+        print(f"  {problem}: speed-up (solve CPU) {', '.join(f'{v:.1f}x' for v in sp)}; per iteration "
+              f"{', '.join(f'{v:.1f}x' for v in spi)}", flush=True)
+    doc["load_after"] = os.getloadavg()
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {args.out} (load {doc['load_before'][0]:.1f} -> {doc['load_after'][0]:.1f})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
