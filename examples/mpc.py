@@ -21,16 +21,20 @@ minimum-jerk joint motion), Gauss-Newton SQP with full steps on the condensed de
 N * 7 torques (DAQP), warm-started from the shifted nodes, torques and working set, iterated
 to tol 1e-4 (rti: one iteration per step); the plant carries a payload the MPC does not know
 (--payload, default 1 kg at the flange) and the MPC estimates a constant torque disturbance
-from each interval's prediction error (--no-estimate to switch off). mpc.json then also has
-the iterations per step, reference_rms (plant vs the reference) and the disturbance.
+from each interval's prediction error (--no-estimate to switch off). The speed limits: the LWR
+plan keeps --backoff (0.3) of each data-sheet speed free at its nodes, the MPC imposes the
+limit at the nodes and at the RK4 substep ends inside each interval (--no-inner-speed: nodes
+only), tightened by --speed-margin (default 0). mpc.json then also has the iterations per
+step, reference_rms (plant vs the reference), the disturbance, and the plant's largest speed
+per joint as a fraction of qd_max (speed_peak_fraction) and its largest excess in rad/s.
 
     .venv/bin/python examples/mpc.py --problem lwr4 --solver sqp --out /tmp/mpc_lwr4_sqp
     .venv/bin/python examples/mpc.py --problem panda --solver rti --out /tmp/mpc_panda_rti
 
 Output in --out: mpc.json (solve_ms per step, its median, 95th percentile and worst,
 iterations, tracking_rms = RMS over steps of |plant state - the plan's predicted next node|
-(rad, rad/s), goal error of the flange over time, violations = plant samples beyond a joint,
-speed or torque limit plus failed solves), mpc.png.
+(rad, rad/s), goal error of the flange over time, violations = 1 kHz plant samples beyond a
+data-sheet joint, speed or torque limit by more than 1e-6 plus failed solves), mpc.png.
 """
 from __future__ import annotations
 
@@ -191,11 +195,19 @@ def machine() -> dict:
 
 
 PAYLOAD_KG = 1.0          # the plant's unmodelled payload at the flange (--solver sqp | rti)
+# chosen by measurement (docs/optimal_control.md, the MPC section; LWR, 1 kg payload): the
+# payload moves the light wrist up to ~0.22 qd_max past the plan within an interval, so the
+# reference plan keeps 0.3 qd_max free (0.1: 159 speed samples over, 0.2: 45, 0.3: none, its
+# peak 0.93 qd_max); tightening the MPC's rows instead (0.1, 0.2 with the plan at the limit)
+# leaves 260 and 30 samples over, makes the SQP take up to 10 iterations and tracks worse
+SPEED_MARGIN = 0.0        # fraction of qd_max the MPC's speed rows keep free (--solver sqp | rti)
+REFERENCE_BACKOFF = 0.3   # fraction of qd_max the LWR reference plan keeps free at its nodes
 
 
 def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool = False, rti: bool = False,
             substeps: int = 2, payload_kg: float = PAYLOAD_KG, tol: float = 1e-4, max_iter: int = 10,
-            estimate: bool = True) -> dict:
+            estimate: bool = True, speed_margin: float = SPEED_MARGIN, backoff: float = REFERENCE_BACKOFF,
+            inner_speed: bool = True) -> dict:
     """The closed loop with examples/mpc_sqp.py's tracking MPC (Gauss-Newton SQP, condensed QP,
     DAQP): at every control step the SQP from the shifted torques of the previous step, to
     `tol` (or one iteration with rti=True: the real-time iteration), the plant carrying a
@@ -203,10 +215,10 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
     disturbance from each interval's prediction error (offset-free MPC, timed with the solve)."""
     import mpc_sqp
     funcs = mpc_sqp.load(problem)
-    ref = mpc_sqp.reference(problem, N, substeps, funcs)
+    ref = mpc_sqp.reference(problem, N, substeps, funcs, backoff)
     lim, h, n = ref["limits"], ref["h"], funcs["robot"].n
     ctl = mpc_sqp.TrackingMPC(funcs, lim, ref["X"], ref["U"], h, N, substeps=substeps, tol=tol,
-                              max_iter=1 if rti else max_iter)
+                              max_iter=1 if rti else max_iter, speed_margin=speed_margin, inner_speed=inner_speed)
     step, tip = plant(funcs["robot"], payload_kg)
     x = ref["x0"].copy()
     X, U = ctl.initial_guess(0)
@@ -215,6 +227,8 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
            "reference_error": [], "goal_error_m": [], "tau": [], "t": []}
     violations = {"q": 0, "qd": 0, "tau": 0, "failed_solves": 0}
     tol_lim = 1e-6
+    # the plant's largest speed per joint over all 1 kHz samples, as a fraction of qd_max
+    qd_peak = np.zeros(n)
     Nr = len(ref["U"])
     x_prev = u_prev = None
     for i in range(steps):
@@ -242,6 +256,7 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
         violations["q"] += int(np.sum(np.any((samples[:, :n] > lim["q_hi"] + tol_lim) |
                                              (samples[:, :n] < lim["q_lo"] - tol_lim), axis=1)))
         violations["qd"] += int(np.sum(np.any(np.abs(samples[:, n:]) > lim["qd_max"] + tol_lim, axis=1)))
+        qd_peak = np.maximum(qd_peak, np.abs(samples[:, n:]).max(axis=0) / lim["qd_max"])
         log["tracking"].append(float(np.linalg.norm(x - pred)))
         log["reference_error"].append(float(np.linalg.norm(x - ref["X"][min(i + 1, Nr)])))
         log["goal_error_m"].append(float(np.linalg.norm(tip(x[:n]) - ref["goal"])))
@@ -278,7 +293,13 @@ def run_sqp(problem: str = "lwr4", steps: int = 30, N: int = 20, verbose: bool =
             "tracking_rms": float(np.sqrt(np.mean(tr ** 2))),
             "reference_rms": float(np.sqrt(np.mean(re ** 2))),
             "goal_error_final_m": log["goal_error_m"][-1],
-            "violations": int(sum(violations.values())), "violations_by_kind": violations}
+            "violations": int(sum(violations.values())), "violations_by_kind": violations,
+            "violation_tolerance": f"a plant sample counts when past a data-sheet limit by more than {tol_lim:g} "
+                                   "(rad, rad/s, N m)",
+            "speed_peak_fraction": qd_peak.tolist(),
+            "speed_excess_max_rad_s": float(np.max((qd_peak - 1.0) * lim["qd_max"])),
+            "speed_margin": speed_margin, "reference_backoff": backoff if problem == "lwr4" else None,
+            "inner_speed_rows": bool(inner_speed and substeps > 1)}
 
 
 def plot(doc, out: Path) -> str:
@@ -330,6 +351,15 @@ def main(argv=None) -> int:
                     help=f"sqp, rti: the plant's payload at the flange in kg, unknown to the MPC (default {PAYLOAD_KG:g})")
     ap.add_argument("--no-estimate", action="store_true",
                     help="sqp, rti: no disturbance estimate (default: the MPC estimates a constant torque offset)")
+    ap.add_argument("--speed-margin", type=float, default=SPEED_MARGIN,
+                    help="sqp, rti: fraction of each speed limit the MPC's speed rows (nodes and inner substeps) "
+                         f"keep free (default {SPEED_MARGIN:g})")
+    ap.add_argument("--backoff", type=float, default=REFERENCE_BACKOFF,
+                    help="sqp, rti, lwr4: fraction of each speed limit the reference reach plan keeps free at its "
+                         f"nodes (default {REFERENCE_BACKOFF:g})")
+    ap.add_argument("--no-inner-speed", action="store_true",
+                    help="sqp, rti: speed rows at the nodes only (default: also at the RK4 substep ends inside "
+                         "each interval)")
     ap.add_argument("--substeps", type=int, default=2,
                     help="sqp, rti: RK4 steps per interval in the MPC's prediction and the reference (default 2)")
     ap.add_argument("--max-iter", type=int, default=None,
@@ -347,6 +377,9 @@ def main(argv=None) -> int:
         ap.error(f"--solver {args.solver}: the reach re-solve exists for --problem lwr4 only (panda: sqp or rti)")
     if args.payload < 0:
         ap.error(f"--payload {args.payload}: must be at least 0")
+    for name in ("speed_margin", "backoff"):
+        if not 0 <= getattr(args, name) < 1:
+            ap.error(f"--{name.replace('_', '-')} {getattr(args, name)}: must be in [0, 1)")
     if args.substeps < 1:
         ap.error(f"--substeps {args.substeps}: must be at least 1")
     out = Path(args.out)
@@ -354,7 +387,8 @@ def main(argv=None) -> int:
     if args.solver in ("sqp", "rti"):
         doc = run_sqp(args.problem, args.steps, args.N, args.verbose, args.solver == "rti", args.substeps,
                       args.payload, max_iter=10 if args.max_iter is None else args.max_iter,
-                      estimate=not args.no_estimate)
+                      estimate=not args.no_estimate, speed_margin=args.speed_margin, backoff=args.backoff,
+                      inner_speed=not args.no_inner_speed)
     else:
         doc = run(args.steps, args.N, args.verbose, args.solver,
                   None if args.max_iter is None else {"ipopt.max_iter": args.max_iter})

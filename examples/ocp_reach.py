@@ -185,8 +185,11 @@ class ReachNLP:
 
 
 def reach_problem(formulation: str = "id_rk4", solver: str = "ipopt", N: int = 20, funcs: dict | None = None,
-                  options: dict | None = None, verbose: bool = False, substeps: int = 1) -> ReachNLP:
-    """Build the reach NLP (stage-ordered, SX) for formulation fd_rk4 or id_rk4."""
+                  options: dict | None = None, verbose: bool = False, substeps: int = 1,
+                  qd_bound: np.ndarray | None = None) -> ReachNLP:
+    """Build the reach NLP (stage-ordered, SX) for formulation fd_rk4 or id_rk4; `qd_bound`:
+    the speed bound at the nodes (default QD_MAX, the data sheet; examples/mpc_sqp.py plans
+    below it so that its tracking MPC has room under the limit)."""
     if formulation not in ("fd_rk4", "id_rk4"):
         raise ValueError(f"formulation {formulation!r}: reach_problem builds fd_rk4 or id_rk4 (baseline: solve_baseline)")
     if solver not in SOLVERS:
@@ -229,7 +232,8 @@ def reach_problem(formulation: str = "id_rk4", solver: str = "ipopt", N: int = 2
     lbg.append(np.zeros(3 + n))
     lbg = np.concatenate(lbg)
     J = h * sum(ca.sumsqr(U[k][:n]) for k in range(N))
-    xlo, xhi = np.concatenate([setup["q_lo"], -QD_MAX]), np.concatenate([setup["q_hi"], QD_MAX])
+    vb = QD_MAX if qd_bound is None else np.asarray(qd_bound, float)
+    xlo, xhi = np.concatenate([setup["q_lo"], -vb]), np.concatenate([setup["q_hi"], vb])
     ulo = np.concatenate([-TAU_MAX, np.full(nu - n, -np.inf)])
     uhi = np.concatenate([TAU_MAX, np.full(nu - n, np.inf)])
     # node 0 is the measured state (fixed by the constraint x0 = p): no bounds there, so that

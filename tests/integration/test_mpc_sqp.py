@@ -10,6 +10,11 @@ independent computations:
   sparse multiple-shooting KKT system written here in numpy (states and torques as unknowns,
   the linearised dynamics with their gaps as equality rows): unconstrained, and with DAQP's
   active set made equality rows;
+- the speed rows inside the intervals (the joint speeds at the RK4 substep ends): their values
+  equal Pinocchio's ABA integrated by a numpy RK4 over the first substep, their Jacobians Av,
+  Bv central finite differences of the compiled values, and the condensed rows Gv dU + cv the
+  linearised speeds propagated interval by interval in a plain loop here; the QP's step keeps
+  them within the tightened bound (1 - speed_margin) qd_max;
 - a short closed loop (sqp, lwr4 and panda) writes the documented fields with no failed solve.
 """
 from __future__ import annotations
@@ -53,7 +58,7 @@ def _perturbed(ctl, ref, seed=0):
 def test_step_jacobians_by_finite_differences(lwr):
     _, ref, ctl = lwr
     x0, X, U = _perturbed(ctl, ref)
-    F, A, B = ctl.linearise(x0, X, U)
+    F, A, B = ctl.linearise(x0, X, U)[:3]
     eps = 1e-6
     for k in (0, 7, 19):
         xk = x0 if k == 0 else X[k - 1]
@@ -74,7 +79,7 @@ def test_prediction_matches_plant_first_step(lwr):
     funcs, ref, ctl = lwr
     step, _ = mpc.plant(funcs["robot"], 0.0)
     X, U = ctl.initial_guess(0)
-    F, _, _ = ctl.linearise(ref["x0"], X, U)
+    F = ctl.linearise(ref["x0"], X, U)[0]
     x1, _ = step(ref["x0"], U[0], ref["h"])
     assert np.abs(x1 - F[0]).max() < 1e-3
     # from a state off the reference, the converged SQP's node 1 against the plant
@@ -85,10 +90,77 @@ def test_prediction_matches_plant_first_step(lwr):
     assert np.abs(x1 - r["X"][0]).max() < 1e-3
 
 
+def test_inner_speed_rows(lwr):
+    """The speed rows between the nodes: values, Jacobians and condensing, each against an
+    independent computation."""
+    import pinocchio as pin
+    from reference import pinocchio_model
+    funcs, ref, ctl = lwr
+    n, N = ctl.n, ctl.N
+    assert ctl.nv == n          # 2 RK4 substeps per interval: one inner state, its n speeds
+    x0, X, U = _perturbed(ctl, ref, seed=1)
+    F, A, B, V, Av, Bv = ctl.linearise(x0, X, U)
+    # values: one RK4 substep (h / 2) of Pinocchio's ABA from the interval's start node
+    model, data, _ = pinocchio_model(funcs["robot"])
+    hs = ref["h"] / 2
+    def f(x, u):
+        return np.concatenate([x[n:], pin.aba(model, data, x[:n], x[n:], u)])
+    for k in (0, 9, 19):
+        x = x0 if k == 0 else X[k - 1]
+        k1 = f(x, U[k]); k2 = f(x + hs / 2 * k1, U[k]); k3 = f(x + hs / 2 * k2, U[k]); k4 = f(x + hs * k3, U[k])
+        v_pin = (x + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4))[n:]
+        assert np.abs(V[k] - v_pin).max() < 1e-8 * max(1.0, np.abs(v_pin).max())
+    # Jacobians: central finite differences of the compiled inner speeds
+    eps = 1e-6
+    for k in (0, 12):
+        xk = x0 if k == 0 else X[k - 1]
+        def v(x, u):
+            XX, UU = X.copy(), U.copy()
+            UU[k] = u
+            if k == 0:
+                return ctl.linearise(x, XX, UU)[3][0]
+            XX[k - 1] = x
+            return ctl.linearise(x0, XX, UU)[3][k]
+        Afd = np.array([(v(xk + eps * e, U[k]) - v(xk - eps * e, U[k])) / (2 * eps) for e in np.eye(2 * n)]).T
+        Bfd = np.array([(v(xk, U[k] + eps * e) - v(xk, U[k] - eps * e)) / (2 * eps) for e in np.eye(n)]).T
+        assert np.abs(Av[k] - Afd).max() < 1e-5 * max(1.0, np.abs(Afd).max())
+        assert np.abs(Bv[k] - Bfd).max() < 1e-5 * max(1.0, np.abs(Bfd).max())
+        # the inner speed rows are the speed rows of the chained A, B halfway (a wrong slice
+        # of the chain, e.g. the node's own rows, differs by the second substep's change)
+        assert np.abs(Av[k] - A[k][n:]).max() > 1e-3
+    # condensing: dv_k = Av_k dx_k + Bv_k du_k, dx_{k+1} = A_k dx_k + B_k du_k + d_k, dx_0 = 0
+    q = ctl.qp(x0, X, U, 0)
+    dU = 0.3 * np.random.default_rng(2).standard_normal((N, n))
+    dx, dv = np.zeros(2 * n), []
+    for k in range(N):
+        dv.append(Av[k] @ dx + Bv[k] @ dU[k])
+        dx = A[k] @ dx + B[k] @ dU[k] + q["d"][k]
+    assert np.abs(q["Gv"] @ dU.ravel() + q["cv"] - np.concatenate(dv)).max() < 1e-9 * max(1.0, np.abs(dv).max())
+
+
+def test_qp_step_keeps_inner_speeds_in_margin(lwr):
+    """With a 10 % margin the QP's step keeps the linearised inner speeds (and the node speeds)
+    within 0.9 qd_max, up to DAQP's soft-row slack, from the reference plan at its limits."""
+    funcs, ref, _ = lwr
+    ctl = mpc_sqp.TrackingMPC(funcs, ref["limits"], ref["X"], ref["U"], ref["h"], 20, substeps=2, speed_margin=0.1)
+    assert np.allclose(ctl.xhi[7:], 0.9 * np.asarray(ref["limits"]["qd_max"]))
+    X, U = ctl.initial_guess(0)
+    q = ctl.qp(ref["x0"], X, U, 0)
+    assert (q["v_hi"] < 0).any() or (q["v_lo"] > 0).any(), "the plan at its limits should pass 0.9 qd_max inside"
+    du, flag, _, _ = ctl.solve_qp(q)
+    assert flag in (1, 2), flag         # 2: optimal with soft rows relaxed (by DAQP's slack, ~1e-6 here)
+    v = (q["V"].ravel() + q["cv"] + q["Gv"] @ du).reshape(ctl.N, 7)
+    qd = (X.ravel() + q["c"] + q["G"] @ du).reshape(ctl.N, 14)[:, 7:]
+    vmax = 0.9 * np.asarray(ref["limits"]["qd_max"])
+    assert np.all(np.abs(v) <= vmax * (1 + 1e-3)), np.max(np.abs(v) / vmax)
+    assert np.all(np.abs(qd) <= vmax * (1 + 1e-3)), np.max(np.abs(qd) / vmax)
+
+
 def _sparse_kkt(ctl, x0, X, U, q, active_rows=()):
     """The Gauss-Newton QP in (dx_1..dx_N, du_0..du_N-1) with the dynamics as equality rows
     dx_{k+1} - A_k dx_k - B_k du_k = F_k - x_{k+1} (dx_0 = 0) and the given active bound rows
-    (index into [box on du; rows on dx], value) as equalities; solved by one numpy KKT solve."""
+    (index into [box on du; rows on dx; inner speed rows], value) as equalities, an inner row of
+    interval k being Av_k dx_k + Bv_k du_k; solved by one numpy KKT solve."""
     N, n, nx = ctl.N, ctl.n, ctl.nx
     nX, nU = N * nx, N * n
     Xr, Ur = q["Xr"], q["Ur"]
@@ -107,8 +179,13 @@ def _sparse_kkt(ctl, x0, X, U, q, active_rows=()):
         r = np.zeros(nX + nU)
         if idx < nU:
             r[nX + idx] = 1.0
-        else:
+        elif idx < nU + nX:
             r[idx - nU] = 1.0
+        else:
+            k, j = divmod(idx - nU - nX, ctl.nv)
+            if k > 0:
+                r[(k - 1) * nx:k * nx] = q["Av"][k][j]
+            r[nX + k * n:nX + (k + 1) * n] = q["Bv"][k][j]
         rows.append(r)
         vals.append(val)
     C = np.vstack([E] + ([np.array(rows)] if rows else []))
@@ -133,13 +210,14 @@ def test_condensed_qp_equals_sparse_kkt(lwr):
     assert np.abs(q["G"] @ du_c + q["c"] - dx_s).max() < rel * max(1.0, np.abs(dx_s).max())
     # with the bounds: DAQP's solution equals the KKT solution with its active set as equalities
     du_d, flag, _, active = ctl.solve_qp(q)
-    assert flag == 1, flag
+    assert flag in (1, 2), flag
     nU = ctl.N * ctl.n
-    lo = np.concatenate([q["box_lo"], q["row_lo"]])
-    hi = np.concatenate([q["box_hi"], q["row_hi"]])
+    lo = np.concatenate([q["box_lo"], q["row_lo"], q["v_lo"]])
+    hi = np.concatenate([q["box_hi"], q["row_hi"], q["v_hi"]])
     act = [(i, hi[i] if active[i] > 0 else lo[i]) for i in np.flatnonzero(active)]
-    # the rows' targets are on dx = G du + c: move c to the right-hand side
-    act = [(i, v if i < nU else v + q["c"][i - nU]) for i, v in act]
+    # the rows' targets are on dx = G du + c and dv = Gv du + cv: move c, cv to the right-hand side
+    offset = np.concatenate([np.zeros(nU), q["c"], q["cv"]])
+    act = [(i, v + offset[i]) for i, v in act]
     assert act, "the perturbed point should make some bound active"
     du_a, _ = _sparse_kkt(ctl, x0, X, U, q, act)
     assert np.abs(du_d - du_a).max() < rel * max(1.0, np.abs(du_a).max())
@@ -163,7 +241,8 @@ def test_mpc_sqp_short_run(tmp_path, problem):
 
 @pytest.mark.parametrize("args", [["--problem", "panda", "--solver", "stages"],
                                   ["--problem", "lwr4", "--solver", "sqp", "--payload", "-1"],
-                                  ["--problem", "lwr4", "--solver", "sqp", "--substeps", "0"]])
+                                  ["--problem", "lwr4", "--solver", "sqp", "--substeps", "0"],
+                                  ["--problem", "lwr4", "--solver", "sqp", "--speed-margin", "1.5"]])
 def test_bad_sqp_arguments(args, tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "mpc.py"), *args, "--out", "x"], capture_output=True,
                        text=True, cwd=tmp_path)
