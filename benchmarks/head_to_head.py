@@ -87,7 +87,7 @@ def robot_run(robot: str, names: list, candidates: dict, rounds: int, K: int, ta
     load_after = os.getloadavg()
     notes = {}
     if PEER in pooled:
-        # the median over all repetitions picks the derivative candidate, as in make bench
+        # the minimum over all repetitions picks the derivative candidate, as in make bench
         pooled[PEER], outputs[PEER], notes = pinocchio_casadi.keep_faster(pooled[PEER], outputs[PEER])
     rows = {}
     for name in names:
