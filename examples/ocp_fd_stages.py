@@ -123,7 +123,7 @@ class FdStageReach(ocp_stages.StageReach):
         f = self.funcs
         step = mpc_sqp.rk4_step_with_jacobians(f["fd"], f["fd_derivatives"], n, self.h)
         v = ca.MX.sym("v", self.st + nx)           # (x_k, u_k, x_{k+1})
-        xn, A, B = step(v[:nx], v[nx:self.st])
+        xn, A, B = step(v[:nx], v[nx:self.st])[:3]   # the inner-substep speed outputs are the MPC's
         c = v[self.st:] - xn
         jc = ca.horzcat(-A, -B, ca.MX.eye(nx))
         w, lam, sigma = ca.MX.sym("w", self.st), ca.MX.sym("lam", nx), ca.MX.sym("sigma")
