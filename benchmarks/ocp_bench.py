@@ -43,17 +43,22 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
+import ocp_fd_options  # noqa: E402
 import ocp_reach  # noqa: E402
 
 VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
             ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1),
-            ("id_rk4", "stages mu_strategy=adaptive", 1), ("id_rk4", "fatrop_stages", 1), ("fd_rk4", "fd_stages", 1)]
+            ("id_rk4", "stages mu_strategy=adaptive", 1), ("id_rk4", "fatrop_stages", 1), ("fd_rk4", "fd_stages", 1),
+            ("fd_rk4", "fd_stages adaptive", 1), ("baseline", "ipopt adaptive", 1)]
 # "stages": examples/ocp_stages.py, the per-interval functions compiled to C and IPOPT given the
 # assembled Jacobian and Hessian; "mu_init=1e-2" starts IPOPT's barrier lower (the default 0.1);
 # "mu_strategy=adaptive": IPOPT's adaptive barrier (it ends at the baseline's KKT point, 716.66;
 # benchmarks/reach_sqp.py);
 # "fatrop_stages": examples/ocp_fatrop.py, fatrop on the same compiled functions; "fd_stages":
-# examples/ocp_fd_stages.py, the fd_rk4 interval (nu = 7) and its exact Hessian compiled, IPOPT
+# examples/ocp_fd_stages.py, the fd_rk4 interval (nu = 7) and its exact Hessian compiled, IPOPT;
+# "fd_stages adaptive": the same with examples/ocp_fd_options.FAST (IPOPT's adaptive barrier, affine
+# corrector; same tol and termination options), and "baseline ipopt adaptive" the Opti baseline with
+# the same options, for a like-for-like ratio (the speedups stay relative to the plain baseline)
 STAGE_OPTIONS = {"stages": {}, "stages mu_init=1e-2": {"ipopt.mu_init": 1e-2},
                  "stages mu_strategy=adaptive": {"ipopt.mu_strategy": "adaptive"}}
 
@@ -217,7 +222,18 @@ def main(argv=None):
                          "(benchmarks/crocoddyl_reach.py says how to make it; default .venv-crocoddyl)")
     ap.add_argument("--only-crocoddyl", action="store_true",
                     help="run only the Crocoddyl rows and put them into --out (an existing file: its other rows kept)")
+    ap.add_argument("--rows", nargs="+", metavar="ROW",
+                    help='only these rows of VARIANTS, named "formulation solver" (e.g. "baseline ipopt" '
+                         '"fd_rk4 fd_stages adaptive"), without the warm re-solves; the plain baseline is run '
+                         'first whether named or not (the ratios are to it)')
     args = ap.parse_args(argv)
+    variants = VARIANTS
+    if args.rows:
+        known = {f"{f} {s}": (f, s, m) for f, s, m in VARIANTS}
+        unknown = [r for r in args.rows if r not in known]
+        if unknown:
+            ap.error(f"unknown rows {unknown}; known: {list(known)}")
+        variants = [VARIANTS[0]] + [known[r] for r in args.rows if known[r] != VARIANTS[0]]
     if args.only_crocoddyl:
         out = Path(args.out)
         doc = json.loads(out.read_text()) if out.exists() else {
@@ -246,21 +262,23 @@ def main(argv=None):
     old_crocoddyl = json.loads(out.read_text()).get("crocoddyl", {}) if out.exists() else {}
     base_s = None
     setup = ocp_reach.setup_dict(funcs)
-    for form, solver, M in VARIANTS:
+    for form, solver, M in variants:
         name = f"{form} {solver} M={M}"
         # the baseline and the sub-second compiled rows are solved --repeats times (same built
         # solver, same start) and their median CPU time is used: a single sub-second solve on
         # the shared machine swings by up to 1.7x with the other jobs' load
         if form == "baseline":
-            solve = lambda: ocp_reach.solve_baseline(funcs=funcs, substeps=M)   # noqa: E731
+            extra = ocp_fd_options.FAST if solver == "ipopt adaptive" else None
+            solve = lambda: ocp_reach.solve_baseline(funcs=funcs, substeps=M, ipopt_options=extra)   # noqa: E731
         elif solver == "fatrop_stages":
             import ocp_fatrop
             solve = ocp_fatrop.FatropReach(20, funcs).solve
-        elif solver == "fd_stages":
+        elif solver in ("fd_stages", "fd_stages adaptive"):
             import ocp_fd_stages
             fd_stages = ocp_fd_stages.FdStageReach(20, funcs)
-            fd_built = fd_stages.ipopt()
-            solve = lambda: dict(fd_stages.solve_ipopt(fd_built), solver="ipopt (compiled fd_rk4 stages)")   # noqa: E731
+            fd_built = fd_stages.ipopt(ocp_fd_options.FAST if solver == "fd_stages adaptive" else None)
+            label = "ipopt (compiled fd_rk4 stages" + (", adaptive barrier)" if solver == "fd_stages adaptive" else ")")
+            solve = lambda: dict(fd_stages.solve_ipopt(fd_built), solver=label)   # noqa: E731
         elif solver in STAGE_OPTIONS:
             import ocp_stages
             stages = ocp_stages.StageReach(20, funcs)
@@ -276,7 +294,7 @@ def main(argv=None):
         res["solve_s"] = float(np.median([r["solve_s"] for r in runs]))
         doc["rows"].append(_row(name, "generated", res, setup, funcs, base_s))
         doc["rows"][-1]["solve_cpu_s_runs"] = res["solve_cpu_s_runs"]
-        if form == "baseline":
+        if form == "baseline" and solver == "ipopt":
             base_s = res["solve_cpu_s"]
         out.write_text(json.dumps(doc, indent=1) + "\n")
     if not args.no_peers:
@@ -297,11 +315,12 @@ def main(argv=None):
             doc["crocoddyl"] = dict(old_crocoddyl, carried_over_from_earlier_run=True, this_run_error=summary["error"])
         doc["versions"]["crocoddyl_venv"] = doc["crocoddyl"].get("versions", {"error": summary.get("error")})
         print(f"crocoddyl: {doc['versions']['crocoddyl_venv']}", flush=True)
-    doc["warm_resolve"] = warm_resolve(funcs)
-    print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
-    doc["warm_resolve_stages"] = warm_resolve_stages(funcs)
-    print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
-          f"iterations {doc['warm_resolve_stages']['iterations']}")
+    if not args.rows:
+        doc["warm_resolve"] = warm_resolve(funcs)
+        print(f"warm re-solve: median {doc['warm_resolve']['median_ms']:.1f} ms, iterations {doc['warm_resolve']['iterations']}")
+        doc["warm_resolve_stages"] = warm_resolve_stages(funcs)
+        print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
+              f"iterations {doc['warm_resolve_stages']['iterations']}")
     doc["loadavg_end"] = list(os.getloadavg())
     out.write_text(json.dumps(doc, indent=1) + "\n")
     plot(doc, out.with_suffix(".png"))

@@ -24,7 +24,8 @@ Problems:
             configurations.
   lwr4_reach  the LWR reach of examples/ocp_reach.py (fixed T = 1 s, flange position goal,
             min integral |tau|^2), with --formulation (baseline, fd_rk4, id_rk4) and
-            --solver (ipopt, fatrop, sqp, stages, fatrop_stages, fd_stages); its RK4 steps per interval are --substeps
+            --solver (ipopt, fatrop, sqp, stages, fatrop_stages, fd_stages, fd_stages_adaptive); its RK4
+            steps per interval are --substeps
             (default 1).
 
 --solver stages (lwr4, panda): the same NLP, IPOPT given its constraint Jacobian and Lagrangian
@@ -509,15 +510,20 @@ def run_reach(args, out: Path) -> int:
             return 2
         res = ocp_reach.solve_baseline(args.N or 20, funcs, args.verbose, M)
         setup = ocp_reach.setup_dict(funcs, args.N or 20)
-    elif args.solver == "fd_stages":
+    elif args.solver in ("fd_stages", "fd_stages_adaptive"):
         if args.formulation != "fd_rk4" or M != 1:
-            print("error: --solver fd_stages compiles the fd_rk4 interval with one RK4 step; --formulation must be "
+            print(f"error: --solver {args.solver} compiles the fd_rk4 interval with one RK4 step; --formulation must be "
                   "fd_rk4 and --substeps 1", file=sys.stderr)
             return 2
         import ocp_fd_stages
         nlp = ocp_fd_stages.FdStageReach(args.N or 20, funcs)
-        res, setup = nlp.solve_ipopt(nlp.ipopt({"ipopt.print_level": 5} if args.verbose else None)), nlp.setup
-        res["solver"] = "ipopt (compiled fd_rk4 stages)"
+        opts = {"ipopt.print_level": 5} if args.verbose else {}
+        if args.solver == "fd_stages_adaptive":
+            import ocp_fd_options
+            opts.update(ocp_fd_options.FAST)
+        res, setup = nlp.solve_ipopt(nlp.ipopt(opts)), nlp.setup
+        res["solver"] = "ipopt (compiled fd_rk4 stages" + (", adaptive barrier)" if args.solver == "fd_stages_adaptive"
+                                                          else ")")
     elif args.solver in ("stages", "fatrop_stages"):
         if args.formulation != "id_rk4" or M != 1:
             print(f"error: --solver {args.solver} compiles the id_rk4 interval with one RK4 step; --formulation must be "
@@ -572,13 +578,16 @@ def main(argv=None) -> int:
     ap.add_argument("--verbose", action="store_true", help="IPOPT's iteration log")
     ap.add_argument("--formulation", choices=("baseline", "fd_rk4", "id_rk4"), default="id_rk4",
                     help="lwr4_reach only: how the dynamics enter (default id_rk4)")
-    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages", "fd_stages"),
+    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages", "fd_stages",
+                                         "fd_stages_adaptive"),
                     default="ipopt",
                     help="default ipopt. lwr4_reach: stages: IPOPT with the id_rk4 interval compiled to C "
                          "(examples/ocp_stages.py; the first run compiles, later runs load the cache); "
                          "fatrop_stages: fatrop on the same compiled functions (examples/ocp_fatrop.py); "
                          "fd_stages: IPOPT with the fd_rk4 interval and its exact Hessian compiled to C "
-                         "(examples/ocp_fd_stages.py; --formulation fd_rk4). lwr4, "
+                         "(examples/ocp_fd_stages.py; --formulation fd_rk4); fd_stages_adaptive: the same with "
+                         "IPOPT's adaptive barrier (examples/ocp_fd_options.FAST: 23 iterations instead of 45, "
+                         "same optimum). lwr4, "
                          "panda (ipopt or stages): stages solves the same time-optimal NLP with IPOPT given its "
                          "Jacobian and Hessian assembled from per-interval functions compiled to C "
                          "(examples/ocp_time_stages.py; --mode does not apply; the first run compiles ~1-2 min)")

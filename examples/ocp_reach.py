@@ -264,9 +264,12 @@ def reach_problem(formulation: str = "id_rk4", solver: str = "ipopt", N: int = 2
     return ReachNLP(setup, formulation, solver, built, nu, lbx, ubx, lbg, lbg.copy(), time.perf_counter() - t0, M)
 
 
-def solve_baseline(N: int = 20, funcs: dict | None = None, verbose: bool = False, substeps: int = 1) -> dict:
+def solve_baseline(N: int = 20, funcs: dict | None = None, verbose: bool = False, substeps: int = 1,
+                   ipopt_options: dict | None = None) -> dict:
     """The issue's reference: Opti + IPOPT (exact Hessian, MUMPS), fd called on MX symbols in
-    an explicit RK4 step per interval, constraints in the order a user writes them."""
+    an explicit RK4 step per interval, constraints in the order a user writes them.
+    ipopt_options (keys with or without "ipopt."): added to IPOPT's, e.g. examples/ocp_fd_options.FAST
+    to compare like with like; the issue's baseline is without."""
     t0 = time.perf_counter()
     funcs = funcs or load()
     setup = setup_dict(funcs, N)
@@ -289,8 +292,9 @@ def solve_baseline(N: int = 20, funcs: dict | None = None, verbose: bool = False
     opti.minimize(h * ca.sumsqr(U))
     opti.set_initial(X, np.tile(np.concatenate([setup["q0"], np.zeros(n)])[:, None], (1, N + 1)))
     opti.set_initial(U, np.tile(setup["gravity_torque"][:, None], (1, N)))
-    opti.solver("ipopt", {"print_time": False}, {"print_level": 5 if verbose else 0, "tol": 1e-8, "max_iter": 1000,
-                                                 "sb": "yes"})
+    ipopt = {"print_level": 5 if verbose else 0, "tol": 1e-8, "max_iter": 1000, "sb": "yes"}
+    ipopt.update({k[len("ipopt."):] if k.startswith("ipopt.") else k: v for k, v in (ipopt_options or {}).items()})
+    opti.solver("ipopt", {"print_time": False}, ipopt)
     build_s = time.perf_counter() - t0
     t1, c1 = time.perf_counter(), time.process_time()
     try:

@@ -6,7 +6,9 @@ from the inverse dynamics' Hessian, compiled to C), checked by independent compu
   equal AD's, at random points;
 - the solve converges to the optimum of IPOPT on fd_rk4's SX graph (1e-6 relative), and its
   plan satisfies its RK4 steps of Pinocchio's ABA (tests/reference.py's model) to 1e-8, the
-  flange (Pinocchio's forward kinematics) at the goal within 1e-6 m, at rest.
+  flange (Pinocchio's forward kinematics) at the goal within 1e-6 m, at rest;
+- examples/ocp_fd_options.FAST (the adaptive barrier) ends at the default options' optimum in
+  fewer iterations.
 (The first run compiles the library, about a minute of gcc; later runs load the cache.)
 """
 from __future__ import annotations
@@ -71,3 +73,20 @@ def test_reach_optimum_and_pinocchio(stages):
     assert np.linalg.norm(data.oMf[flange].translation - setup["goal"]) < 1e-6
     assert np.abs(res["qd"][-1]).max() < 1e-6
     assert np.all(np.abs(res["tau"]) <= setup["tau_max"] + 1e-9)
+
+
+def test_adaptive_barrier_options_same_optimum_fewer_iterations(stages):
+    """examples/ocp_fd_options.FAST (IPOPT's adaptive barrier, same tol): the same KKT point as
+    the default options (objective 1e-8 relative, variables 1e-3 absolute, torques up to ~100 N m)
+    in fewer iterations, its plan on Pinocchio's RK4 steps to 1e-8, at the goal, inside the limits."""
+    import ocp_fd_options
+    ref = stages.solve_ipopt()
+    res = stages.solve_ipopt(stages.ipopt(ocp_fd_options.FAST))
+    assert res["success"], res["status"]
+    assert abs(res["objective"] - ref["objective"]) < 1e-8 * ref["objective"]
+    assert np.abs(res["z"] - ref["z"]).max() < 1e-3
+    assert res["iterations"] < ref["iterations"]
+    sim = ocp_reach.check(stages.setup, res, stages.funcs)
+    assert sim["plan_step_error"] < 1e-8
+    assert res["max_constraint_violation"] < 1e-8
+    assert np.all(np.abs(res["tau"]) <= stages.setup["tau_max"] + 1e-9)
