@@ -2,10 +2,11 @@
 fewer iterations on the same NLP (same cost, constraints, N, initial guess, tol 1e-8 and every
 other termination option at IPOPT's defaults, as the Opti baseline), the same optimum.
 
-The default (monotone Fiacco-McCormick barrier from mu = 0.1) spends its first ~23 of 45
+The default (monotone Fiacco-McCormick barrier from mu = 0.1) spends its first 24 of 45
 iterations at mu = 0.1, with a restoration phase at iteration 6, before the barrier starts to
-fall. IPOPT's adaptive barrier (mu_strategy adaptive: mu chosen at every iteration by the
-quality function of the affine-scaling step, Nocedal, Waechter and Waltz 2009) with the
+fall. IPOPT's adaptive barrier (mu_strategy adaptive: mu chosen anew at every iteration, the
+centring parameter minimising a quality function of the linearised KKT error; Nocedal,
+Waechter and Waltz 2009) with the
 affine-scaling corrector and at most 4 golden-section steps of the quality function search
 (default 8) reaches the same KKT point (objective 716.662, |z - z_default| 2e-4) in 23
 iterations, at ~0.4 ms more per iteration (the corrector's and the quality function's extra
@@ -14,9 +15,9 @@ back to the monotone mode when the adaptive one stops making progress) is IPOPT'
 
 On 10 goals around the reach's (+-0.1 m, `--goals`), this option set converged on all 10 in 317
 iterations in total against 1040 for the default (which stopped infeasible on one goal), ending
-at an equal or lower local optimum on every goal but one. What did not pay (docs/optimal_control.md
-has the table): MUMPS's options (pivot tolerance, orderings, scalings), NLP scaling none,
-bound_push, mu_init, barrier_tol_factor, the penalty line searches, least-squares duals,
+at an equal or lower local optimum on every goal. What did not pay (docs/optimal_control.md
+has the tables): MUMPS's options (pivot tolerance, orderings, scalings), SPRAL, NLP scaling
+none, bound_push, mu_init, barrier_tol_factor, the cg-penalty line search, least-squares duals,
 mehrotra_algorithm.
 
     PYTHONPATH=. python examples/ocp_fd_options.py [--rounds 3] [--goals 10]
