@@ -1,15 +1,18 @@
 """examples/ocp_fd_stages.py (IPOPT on the fd_rk4 reach with the interval's exact Hessian built
 from the inverse dynamics' Hessian, compiled to C), checked by independent computations:
 
-- the compiled interval Hessian equals CasADi's AD Hessian of the same Lagrangian term on the
-  SX graph of the explicit RK4 step of `fd` (1e-8 relative), and the compiled Jacobian blocks
-  equal AD's, at random points;
+- the native library's (examples/fd_stages_nlp.c over the generated C) constraints, Jacobian and
+  Hessian of the Lagrangian equal CasADi's AD on the SX graph of the whole NLP (the explicit RK4
+  step of `fd` per interval, the terminal rows from fk_hom; 1e-8 relative) at random points and
+  multipliers, also after a call at another point (the forward chain is cached per point);
+- the MX derivation it implements (rk4_lagrangian_hessian, the non-native path) equals AD
+  per interval;
 - the solve converges to the optimum of IPOPT on fd_rk4's SX graph (1e-6 relative), and its
   plan satisfies its RK4 steps of Pinocchio's ABA (tests/reference.py's model) to 1e-8, the
   flange (Pinocchio's forward kinematics) at the goal within 1e-6 m, at rest;
 - examples/ocp_fd_options.FAST (the adaptive barrier) ends at the default options' optimum in
   fewer iterations.
-(The first run compiles the library, about a minute of gcc; later runs load the cache.)
+(The first run compiles the library, 15-35 s of clang; later runs load the cache.)
 """
 from __future__ import annotations
 
@@ -34,6 +37,37 @@ N = 20
 @pytest.fixture(scope="module")
 def stages():
     return ocp_fd_stages.FdStageReach(N, ocp_reach.load())
+
+
+def test_native_nlp_derivatives_against_ad(stages):
+    s, n, nx, st, N = stages, stages.n, stages.nx, stages.st, stages.N
+    Z, P = ca.SX.sym("z", s.nz), ca.SX.sym("p", nx + 3)
+    step = ocp_reach._rk4_fd(s.funcs["fd"], n, s.h)
+    gaps = [Z[(k + 1) * st:(k + 1) * st + nx] - step(Z[k * st:k * st + nx], Z[k * st + nx:(k + 1) * st])
+            for k in range(N)]
+    xN = Z[N * st:]
+    term = ca.vertcat(s.funcs["fk_hom"](xN[:n])[:3, 3] - P[nx:], xN[n:])
+    g = ca.vertcat(gaps[0], Z[:nx] - P[:nx], *gaps[1:], term)
+    f = s.h * sum(ca.sumsqr(Z[k * st + nx:(k + 1) * st]) for k in range(N))
+    lf, lg = ca.SX.sym("lf"), ca.SX.sym("lg", g.numel())
+    ad = ca.Function("ad", [Z, P, lf, lg], [g, ca.jacobian(g, Z), ca.triu(ca.hessian(lf * f + ca.dot(lg, g), Z)[0])])
+    rng = np.random.default_rng(0)
+    zs = [s.guess() + 0.3 * rng.standard_normal(s.nz) for _ in range(3)]
+    for i, z in enumerate(zs):
+        p = s.p() + 0.05 * rng.standard_normal(nx + 3)
+        lgv, lfv = 100 * rng.standard_normal(s.ng), 0.5 + rng.random()
+        g_ad, J_ad, H_ad = (np.array(ca.densify(m)) for m in ad(z, p, lfv, lgv))
+        s.f_jac_g(zs[i - 1], p)          # another point first: the cache must follow z
+        g_c, J_c = s.f_jac_g(z, p)
+        H_c = np.array(ca.densify(s.f_hess(z, p, lfv, lgv)))
+        assert np.abs(np.array(s.f_g(z, p)).ravel() - g_ad.ravel()).max() < 1e-10 * np.abs(g_ad).max()
+        assert np.abs(np.array(g_c).ravel() - g_ad.ravel()).max() < 1e-10 * np.abs(g_ad).max()
+        assert np.abs(np.array(ca.densify(J_c)) - J_ad).max() < 1e-9 * np.abs(J_ad).max()
+        assert np.abs(H_c - H_ad).max() < 1e-8 * np.abs(H_ad).max()
+        s.f_hess(zs[i - 1], p, lfv, lgv)  # the Hessian at a point the Jacobian was not called at
+        H_other = ad(zs[i - 1], p, lfv, lgv)[2]
+        assert np.abs(np.array(ca.densify(s.f_hess(zs[i - 1], p, lfv, lgv))) - np.array(ca.densify(H_other))).max() \
+            < 1e-8 * np.abs(np.array(ca.densify(H_other))).max()
 
 
 def test_interval_hessian_and_jacobian_against_ad(stages):
