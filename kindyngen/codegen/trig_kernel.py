@@ -3,7 +3,7 @@
 Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by arithmetic
 (seven sincos pairs took 76 ns of lwr4's fk_hom, all its arithmetic 11 ns). The sines and
 cosines of the joint angles are therefore computed together, at the start of a function,
-by one loop of plain C99 that compilers vectorise:
+in blocks of eight lanes of plain C99 that compilers vectorise:
 
 * range reduction x = k pi/2 + d + tail, k the integer nearest x 2/pi, by Cody-Waite: pi/2
   split into four parts, the first three with 33 significant bits so that k times each is
@@ -16,13 +16,25 @@ by one loop of plain C99 that compilers vectorise:
   1-ulp aim (its fit error is about 2^-50); what is cut is the latency, the kernel's chain of
   dependent operations being what a single call waits for (:func:`kernel_latency`): the
   polynomials start from d while the tail is summed, which enters to first order
-  (sin(d + tail) = sin d + tail cos d), and are evaluated by Estrin's scheme (three dependent
-  steps after z^4 instead of Horner's ten). The chain went from 84 to 51 cycles of
-  :data:`kindyngen.codegen.opcount.LATENCY`; measured alone (``python -m benchmarks.latency``,
-  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 65 cycles (FMA build; 73
-  strict, 1.43x the bound);
-* the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
-* |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
+  (sin(d + tail) = sin d + tail cos d), are evaluated by Estrin's scheme, and their terms are
+  summed as balanced trees in the order they become ready. The chain went from 84 to 51 and
+  then 47 cycles of :data:`kindyngen.codegen.opcount.LATENCY` (39 with Zen 5's 2-cycle
+  addition);
+* the quadrant q = k mod 4 in 0..3 picks (+-sin r, +-cos r) by selects, not branches, each
+  from one compare (q odd, q >= 2, q in {1, 2}), so that gcc keeps the AVX-512 masks in mask
+  registers instead of combining them in general ones; the tail is carried negated, which
+  makes sin(-0) = -0 come out of the arithmetic (no select for tiny arguments);
+* blocks of eight lanes (:data:`LANES`): eight consecutive arguments (one AVX-512 vector), or
+  x[0..3] and x[n-4..n-1] for 4 <= n < 8 (two AVX2 vectors; for seven angles one lane is
+  computed twice) instead of a loop over n, whose scalar remainder for n = 7 took half the
+  kernel's time;
+* |x| > BOUND, infinities and NaN are computed by libm afterwards, in a loop entered only if a
+  block's one range test saw one.
+
+Measured alone (``python -m benchmarks.latency --no-functions``, docs/latency.md; AMD EPYC
+Zen 5, gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average 1.7): the latency of a
+call on seven angles in place (as lwr4's and panda's single calls make it) fell from 130 to
+76 cycles net (33.2 to 19.1 ns), on eight from 63 to 60 cycles (the bound: 47).
 
 Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
 practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
