@@ -233,10 +233,12 @@ def kernel_latency(latency=None) -> int:
     return max(ready["sin_r"], ready["cos_r"], quadrant) + SELECTS * lat["select"]
 
 
-LANES = 8
-"""Lanes of one kernel block. Eight doubles are one AVX-512 vector or two AVX2 ones; a block is
-a loop of fixed count, which compilers vectorise whole, without the scalar remainder a loop over
-n = 7 has (measured: the remainder took half the kernel's time, docs/latency.md)."""
+LANES = (8, 4)
+"""Lanes of the kernel's blocks: eight doubles are one AVX-512 vector, four one AVX2 vector. A
+block is a loop of fixed count over consecutive arguments, which compilers vectorise whole,
+without the scalar remainder a loop over n = 7 has (measured: with AVX-512 the remainder took
+half the kernel's time, docs/latency.md); seven angles are two blocks of four, x[0..3] and
+x[3..6], lane 3 computed twice to the same value."""
 
 
 def _quadrant(s: str, c: str) -> str:
@@ -253,14 +255,14 @@ def _quadrant(s: str, c: str) -> str:
 
 def kernel_c(name: str = "kdg_sincos") -> str:
     """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
-    for i < n. The arrays must not overlap. Its work is done in blocks of :data:`LANES` lanes:
-    ``name``8 on eight consecutive arguments (n >= 8), ``name``44 on x[0..3] and x[h..h+3]
-    (4 <= n < 8, h = n - 4; n < 4 through a zero-padded copy)."""
+    for i < n. The arrays must not overlap. Its work is done in blocks of consecutive
+    arguments: ``name``8 on eight (n >= 8; the last block overlaps the one before), ``name``4
+    on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy)."""
     bound = repr(BOUND)
     body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
     flag = "    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;"
     return f"""\
-/* The blocks of {name} (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
+/* The blocks of {name} (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
  * nonzero if some |x[i]| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and {name} replaces them by libm. codegen/trig_kernel.py's
  * _steps explains each step. {name}8: i = 0..7. */
@@ -276,25 +278,17 @@ static int {name}8(const double *restrict x, double *restrict s, double *restric
 {flag}
 }}
 
-/* {name}44: i = 0..3 and h..h+3 (h <= 4; a lane read twice is computed twice, to the same value) */
-static int {name}44(const double *restrict x, double *restrict s, double *restrict c, long h)
+/* {name}4: i = 0..3 */
+static int {name}4(const double *restrict x, double *restrict s, double *restrict c)
 {{
-    double sv[8], cv[8], out[8];
+    double out[4];
     int j;
-    for (j = 0; j < 8; ++j) {{
-        const double xi = x[j < 4 ? j : h + j - 4];
+    for (j = 0; j < 4; ++j) {{
+        const double xi = x[j];
 {body}
-{_quadrant("sv[j]", "cv[j]")}
+{_quadrant("s[j]", "c[j]")}
     }}
-    for (j = 0; j < 4; ++j) {{
-        s[j] = sv[j];
-        c[j] = cv[j];
-    }}
-    for (j = 0; j < 4; ++j) {{
-        s[h + j] = sv[4 + j];
-        c[h + j] = cv[4 + j];
-    }}
-{flag}
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }}
 
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
@@ -312,12 +306,13 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
         if (i < n)
             out |= {name}8(x + n - 8, s + n - 8, c + n - 8);
     }} else if (n >= 4) {{
-        out = {name}44(x, s, c, n - 4);
+        out = {name}4(x, s, c);
+        out |= {name}4(x + n - 4, s + n - 4, c + n - 4);
     }} else if (n > 0) {{
         double xb[4] = {{0.0, 0.0, 0.0, 0.0}}, sb[4], cb[4];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = {name}44(xb, sb, cb, 0);
+        out = {name}4(xb, sb, cb);
         for (i = 0; i < n; ++i) {{
             s[i] = sb[i];
             c[i] = cb[i];
