@@ -4,7 +4,7 @@
 
 #include "lwr4_hartl.h"
 
-/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
+/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
  * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
  * _steps explains each step. kdg_sincos8: i = 0..7. */
@@ -42,13 +42,13 @@ static int kdg_sincos8(const double *restrict x, double *restrict s, double *res
     return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
 }
 
-/* kdg_sincos44: i = 0..3 and h..h+3 (h <= 4; a lane read twice is computed twice, to the same value) */
-static int kdg_sincos44(const double *restrict x, double *restrict s, double *restrict c, long h)
+/* kdg_sincos4: i = 0..3 */
+static int kdg_sincos4(const double *restrict x, double *restrict s, double *restrict c)
 {
-    double sv[8], cv[8], out[8];
+    double out[4];
     int j;
-    for (j = 0; j < 8; ++j) {
-        const double xi = x[j < 4 ? j : h + j - 4];
+    for (j = 0; j < 4; ++j) {
+        const double xi = x[j];
         const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
         const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
         const double a = xi - k*1.5707963267341256;
@@ -70,19 +70,11 @@ static int kdg_sincos44(const double *restrict x, double *restrict s, double *re
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
         const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
         const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        sv[j] = q >= 2.0 ? -sin_q : sin_q;
-        cv[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
         out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
     }
-    for (j = 0; j < 4; ++j) {
-        s[j] = sv[j];
-        c[j] = cv[j];
-    }
-    for (j = 0; j < 4; ++j) {
-        s[h + j] = sv[4 + j];
-        c[h + j] = cv[4 + j];
-    }
-    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
@@ -100,12 +92,13 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
         if (i < n)
             out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
     } else if (n >= 4) {
-        out = kdg_sincos44(x, s, c, n - 4);
+        out = kdg_sincos4(x, s, c);
+        out |= kdg_sincos4(x + n - 4, s + n - 4, c + n - 4);
     } else if (n > 0) {
         double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = kdg_sincos44(xb, sb, cb, 0);
+        out = kdg_sincos4(xb, sb, cb);
         for (i = 0; i < n; ++i) {
             s[i] = sb[i];
             c[i] = cb[i];
