@@ -3,7 +3,7 @@
 Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by arithmetic
 (seven sincos pairs took 76 ns of lwr4's fk_hom, all its arithmetic 11 ns). The sines and
 cosines of the joint angles are therefore computed together, at the start of a function,
-in blocks of eight lanes of plain C99 that compilers vectorise:
+in blocks of four or eight lanes of plain C99 that compilers vectorise:
 
 * range reduction x = k pi/2 + d + tail, k the integer nearest x 2/pi, by Cody-Waite: pi/2
   split into four parts, the first three with 33 significant bits so that k times each is
@@ -24,17 +24,19 @@ in blocks of eight lanes of plain C99 that compilers vectorise:
   from one compare (q odd, q >= 2, q in {1, 2}), so that gcc keeps the AVX-512 masks in mask
   registers instead of combining them in general ones; the tail is carried negated, which
   makes sin(-0) = -0 come out of the arithmetic (no select for tiny arguments);
-* blocks of eight lanes (:data:`LANES`): eight consecutive arguments (one AVX-512 vector), or
-  x[0..3] and x[n-4..n-1] for 4 <= n < 8 (two AVX2 vectors; for seven angles one lane is
-  computed twice) instead of a loop over n, whose scalar remainder for n = 7 took half the
-  kernel's time;
+* blocks (:data:`LANES`) of eight consecutive arguments (one AVX-512 vector) for n >= 8, of
+  four (one AVX2 vector) twice for 4 <= n < 8, x[0..3] and x[n-4..n-1] (for seven angles one
+  lane is computed twice), instead of a loop over n, whose remainder for n = 7 took half the
+  kernel's time with AVX-512;
 * |x| > BOUND, infinities and NaN are computed by libm afterwards, in a loop entered only if a
   block's one range test saw one.
 
-Measured alone (``python -m benchmarks.latency --no-functions``, docs/latency.md; AMD EPYC
-Zen 5, gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average 1.7): the latency of a
-call on seven angles in place (as lwr4's and panda's single calls make it) fell from 130 to
-76 cycles net (33.2 to 19.1 ns), on eight from 63 to 60 cycles (the bound: 47).
+Measured alone (the harness of ``python -m benchmarks.latency``, old and new kernel alternated,
+docs/latency.md; AMD EPYC Zen 5, gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average
+5.6-6.0): the latency of a call on seven angles in place (as lwr4's and panda's single calls
+make it) fell from 134 to 92 cycles net (34.5 to 24.0 ns; FMA build 115 to 76), on eight from
+62 to 60 cycles; the bound is 47 (39 with Zen 5's 2-cycle addition): 1.3x for eight lanes,
+2.0x for seven.
 
 Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
 practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
@@ -292,8 +294,8 @@ static int {name}4(const double *restrict x, double *restrict s, double *restric
 }}
 
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight lanes without a
- * branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
  * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
  * as C99 specifies it: no -ffast-math. */
 static void {name}(long n, const double *restrict x, double *restrict s, double *restrict c)
