@@ -78,8 +78,8 @@ static int kdg_sincos4(const double *restrict x, double *restrict s, double *res
 }
 
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight lanes without a
- * branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
  * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
  * as C99 specifies it: no -ffast-math. */
 static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
