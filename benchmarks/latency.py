@@ -11,10 +11,13 @@ alone against its latency bound, and what FMA contraction buys; results/latency.
 * ``correlation``: Pearson's r over the functions of a robot between the strict single-call
   time and (a) the critical path in cycles, (b) add + mul + call after CSE, and the
   least-squares fit time = a * cycles + b * operations + c with its r.
-* ``kernel``: kdg_sincos on 8 angles, as the generated code calls it, alone: latency (the next
-  call's angles depend on this call's results) and throughput (independent calls), both net
-  of the same harness around an empty kernel, in cycles of this core (calibrated by a chain of
-  dependent additions, 3 cycles each on Zen 4), against :func:`kindyngen.codegen.trig_kernel.kernel_latency`.
+* ``kernel``: kdg_sincos alone on 8 angles (n passed at run time, as the batch and half-angle
+  calls do) and on 7 (``n7``: n a constant, as lwr4's and panda's single calls do): latency (the
+  next call's angles depend on this call's results) and throughput (independent calls), both
+  net of the same harness around an empty kernel, in cycles of this core (calibrated by a chain
+  of dependent multiplications, 3 cycles each on Zen 2-5; a chain of additions is not: 3 cycles
+  on Zen 4, 2 on Zen 5), against :func:`kindyngen.codegen.trig_kernel.kernel_latency` with the
+  stated table and with Zen 5's 2-cycle addition.
 
 Times are medians over interleaved rounds; CPU-time noise from other processes is reduced by
 taking the minimum over repetitions for the kernel. Nothing here asserts on a time.
@@ -121,10 +124,13 @@ __attribute__((noinline)) static void empty(long n, const double *restrict x, do
 { long i; for (i = 0; i < n; ++i) { s[i] = x[i]; c[i] = x[i]; } }
 __attribute__((noinline)) static void kernel(long n, const double *restrict x, double *restrict s, double *restrict c)
 { kdg_sincos(n, x, s, c); }
+/* as a single call of lwr4's or panda's functions calls it: seven angles read in place, n a constant */
+__attribute__((noinline)) static void kernel7(long n, const double *restrict x, double *restrict s, double *restrict c)
+{ (void)n; kdg_sincos(7, x, s, c); }
 static double now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec*1e9 + t.tv_nsec; }
 static volatile double sink;
 __attribute__((noinline)) static double chain(long n, double d)
-{ double x = 0.0; long i; for (i = 0; i < n; ++i) { x = x + d; x = x + d; x = x + d; x = x + d; } return x; }
+{ double x = 1.0; long i; for (i = 0; i < n; ++i) { x = x * d; x = x * d; x = x * d; x = x * d; } return x; }
 typedef void (*kern)(long, const double *restrict, double *restrict, double *restrict);
 /* the next call's angles depend on this call's sines and cosines (0*v: kept in IEEE arithmetic) */
 __attribute__((noinline)) static double latency(kern f, long N)
@@ -150,20 +156,25 @@ int main(int argc, char **argv)
 {
     const long N = 20000;
     const int R = argc > 1 ? atoi(argv[1]) : 300;
-    kern ks[2] = {kernel, empty};
-    double lat[2] = {1e9, 1e9}, thr[2] = {1e9, 1e9}, add = 1e9, t0, t;
+    kern ks[3] = {kernel, empty, kernel7};
+    double lat[3] = {1e9, 1e9, 1e9}, thr[3] = {1e9, 1e9, 1e9}, mul = 1e9, t0, t;
     int r, k;
     for (r = 0; r < R; ++r) {
-        t0 = now(); sink = chain(N, 1e-9); t = (now() - t0)/(4.0*N); if (t < add) add = t;
-        for (k = 0; k < 2; ++k) {
+        t0 = now(); sink = chain(N, 1.0000001); t = (now() - t0)/(4.0*N); if (t < mul) mul = t;
+        for (k = 0; k < 3; ++k) {
             t = latency(ks[k], N); if (t < lat[k]) lat[k] = t;
             t = throughput(ks[k], N); if (t < thr[k]) thr[k] = t;
         }
     }
-    printf("%.5f %.4f %.4f %.4f %.4f\n", add, lat[0], lat[1], thr[0], thr[1]);
+    printf("%.5f %.4f %.4f %.4f %.4f %.4f %.4f\n", mul, lat[0], lat[1], thr[0], thr[1], lat[2], thr[2]);
     return 0;
 }
 """
+
+
+ZEN5 = {"add": 2}
+"""Zen 5's double addition takes 2 cycles (Zen 4's 3; multiplication 3 on both): the kernel's
+bound with it beside the bound of the stated table."""
 
 
 def time_kernel(workdir: Path, repeats: int) -> dict:
@@ -175,16 +186,21 @@ def time_kernel(workdir: Path, repeats: int) -> dict:
         built = build(f"sincos_kernel_{variant}", "gcc", [workdir / "kernel_driver.c"],
                       ["-std=c99", *flags, f"-I{workdir}"], libs=("-lm",), extra=(workdir / "kernel.h",))
         text = subprocess.run([str(built.path), str(repeats)], capture_output=True, text=True, check=True).stdout
-        add, lat, lat0, thr, thr0 = (float(v) for v in text.split())
-        cycle = add / 3.0                     # a dependent double addition: 3 cycles on Zen 4
+        mul, lat, lat0, thr, thr0, lat7, thr7 = (float(v) for v in text.split())
+        cycle = mul / 3.0                     # a dependent double multiplication: 3 cycles on Zen 2-5
         out[variant] = {"cycle_ns": cycle, "ghz": 1.0 / cycle,
                         "latency_ns": lat, "latency_empty_ns": lat0,
                         "latency_cycles_net": (lat - lat0) / cycle,
                         "throughput_ns": thr, "throughput_empty_ns": thr0,
-                        "throughput_cycles_net": (thr - thr0) / cycle}
+                        "throughput_cycles_net": (thr - thr0) / cycle,
+                        "n7": {"latency_ns": lat7, "latency_cycles_net": (lat7 - lat0) / cycle,
+                               "throughput_ns": thr7, "throughput_cycles_net": (thr7 - thr0) / cycle}}
     bound = trig_kernel.kernel_latency()
     out["bound_cycles"] = bound
-    out["strict"]["ratio_to_bound"] = out["strict"]["latency_cycles_net"] / bound
+    out["bound_cycles_zen5"] = trig_kernel.kernel_latency(ZEN5)
+    for key, cycles in (("ratio_to_bound", bound), ("ratio_to_bound_zen5", out["bound_cycles_zen5"])):
+        out["strict"][key] = out["strict"]["latency_cycles_net"] / cycles
+        out["strict"]["n7"][key] = out["strict"]["n7"]["latency_cycles_net"] / cycles
     return out
 
 

@@ -3,7 +3,7 @@
 Measured: the generated kinematics are bound by libm's ``sin``/``cos``, not by arithmetic
 (seven sincos pairs took 76 ns of lwr4's fk_hom, all its arithmetic 11 ns). The sines and
 cosines of the joint angles are therefore computed together, at the start of a function,
-by one loop of plain C99 that compilers vectorise:
+in blocks of four or eight lanes of plain C99 that compilers vectorise:
 
 * range reduction x = k pi/2 + d + tail, k the integer nearest x 2/pi, by Cody-Waite: pi/2
   split into four parts, the first three with 33 significant bits so that k times each is
@@ -16,13 +16,27 @@ by one loop of plain C99 that compilers vectorise:
   1-ulp aim (its fit error is about 2^-50); what is cut is the latency, the kernel's chain of
   dependent operations being what a single call waits for (:func:`kernel_latency`): the
   polynomials start from d while the tail is summed, which enters to first order
-  (sin(d + tail) = sin d + tail cos d), and are evaluated by Estrin's scheme (three dependent
-  steps after z^4 instead of Horner's ten). The chain went from 84 to 51 cycles of
-  :data:`kindyngen.codegen.opcount.LATENCY`; measured alone (``python -m benchmarks.latency``,
-  docs/latency.md) the kernel's latency for 8 lanes fell from 80 to 65 cycles (FMA build; 73
-  strict, 1.43x the bound);
-* the quadrant k mod 4 picks (+-sin r, +-cos r) by selects, not branches;
-* |x| > BOUND, infinities and NaN are computed by libm afterwards (a second, scalar loop).
+  (sin(d + tail) = sin d + tail cos d), are evaluated by Estrin's scheme, and their terms are
+  summed as balanced trees in the order they become ready. The chain went from 84 to 51 and
+  then 47 cycles of :data:`kindyngen.codegen.opcount.LATENCY` (39 with Zen 5's 2-cycle
+  addition);
+* the quadrant q = k mod 4 in 0..3 picks (+-sin r, +-cos r) by selects, not branches, each
+  from one compare (q odd, q >= 2, q in {1, 2}), so that gcc keeps the AVX-512 masks in mask
+  registers instead of combining them in general ones; the tail is carried negated, which
+  makes sin(-0) = -0 come out of the arithmetic (no select for tiny arguments);
+* blocks (:data:`LANES`) of eight consecutive arguments (one AVX-512 vector) for n >= 8, of
+  four (one AVX2 vector) twice for 4 <= n < 8, x[0..3] and x[n-4..n-1] (for seven angles one
+  lane is computed twice), instead of a loop over n, whose remainder for n = 7 took half the
+  kernel's time with AVX-512;
+* |x| > BOUND, infinities and NaN are computed by libm afterwards, in a loop entered only if a
+  block's one range test saw one.
+
+Measured alone (the harness of ``python -m benchmarks.latency``, old and new kernel alternated,
+docs/latency.md; AMD EPYC Zen 5, gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average
+5.6-6.0): the latency of a call on seven angles in place (as lwr4's and panda's single calls
+make it) fell from 134 to 92 cycles net (34.5 to 24.0 ns; FMA build 115 to 76), on eight from
+62 to 60 cycles; the bound is 47 (39 with Zen 5's 2-cycle addition): 1.3x for eight lanes,
+2.0x for seven.
 
 Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
 practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
@@ -57,8 +71,6 @@ the nearest quadrant for x within a few ulp of an odd multiple of pi/4."""
 SHIFTER = 6755399441055744.0
 """1.5 * 2^52: y + SHIFTER - SHIFTER rounds y (|y| < 2^51) to an integer in IEEE double."""
 
-TINY = 1.4901161193847656e-08
-"""2^-26: below it sin x = x and cos x = 1 after rounding; returning x keeps the sign of -0."""
 
 
 def split_pio2():
@@ -141,11 +153,11 @@ def fit_coefficients():
             float(sin_error), float(cos_error))
 
 
-def _estrin(coeffs, z: str, z2: str, z4: str) -> str:
-    """c0 + c1 z + ... + c5 z^5 as (c0 + c1 z) + z2 (c2 + c3 z) + z4 (c4 + c5 z): three
-    dependent steps after z4 where Horner's scheme has ten."""
-    pairs = [f"({coeffs[j]!r} + {coeffs[j + 1]!r}*{z})" for j in range(0, len(coeffs), 2)]
-    return f"{pairs[0]} + {z2}*{pairs[1]} + {z4}*{pairs[2]}"
+def _pairs(coeffs, z: str):
+    """The pairs (c0 + c1 z), (c2 + c3 z), (c4 + c5 z) of Estrin's scheme as C text: c0 + c1 z +
+    ... + c5 z^5 = (c0 + c1 z) + z^2 (c2 + c3 z) + z^4 (c4 + c5 z), three dependent steps after
+    z^4 where Horner's scheme has ten."""
+    return [f"({coeffs[j]!r} + {coeffs[j + 1]!r}*{z})" for j in range(0, len(coeffs), 2)]
 
 
 def _steps() -> tuple[tuple[str, str], ...]:
@@ -154,36 +166,43 @@ def _steps() -> tuple[tuple[str, str], ...]:
     :func:`kernel_latency` reads. The quadrant selects follow in :func:`kernel_c`."""
     p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
     shifter = repr(SHIFTER)
+    s0, s1, s2 = _pairs(SIN_COEFFS, "z")
+    c0, c1, c2 = _pairs(COS_COEFFS, "z")
     return (
         # k = xi*2/pi rounded to an integer by the shifter 1.5*2^52
         ("k", f"(xi*{TWO_OVER_PI!r} + {shifter}) - {shifter}"),
-        # k mod 4 as m = k - 4 round(k/4) in -2..2, exact
-        ("m", f"k - 4.0*((0.25*k + {shifter}) - {shifter})"),
-        # d + tail = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
-        # two subtractions recovered exactly (Fast2Sum)
+        # the quadrant q = k mod 4 in 0..3, exact: floor(k/4) = round(k/4 - 3/8) for integer k
+        ("q", f"k - 4.0*(((0.25*k - 0.375) + {shifter}) - {shifter})"),
+        # d - ntail = xi - k*pi/2: k*part exact for the first three parts, the roundings of the
+        # two subtractions recovered exactly (Fast2Sum); the tail is kept negated (ntail = +0
+        # for xi = +-0, so that sin(-0) comes out -0 below without a select)
         ("a", f"xi - k*{p1}"),
         ("b", f"a - k*{p2}"),
         ("b_err", f"(a - b) - k*{p2}"),
         ("d", f"b - k*{p3}"),
         ("d_err", f"(b - d) - k*{p3}"),
-        ("tail", f"(b_err + d_err) - k*{p4}"),
+        ("ntail", f"k*{p4} - (b_err + d_err)"),
         # the polynomials start from d while the tail is still being summed: it enters to
         # first order, sin(d + tail) = sin d + tail cos d, cos(d + tail) = cos d - tail sin d
         ("z", "d*d"),
         ("z2", "z*z"),
         ("z4", "z2*z2"),
+        ("u", "d*z"),
         ("half_z", "0.5*z"),
         ("w", "1.0 - half_z"),
-        # sin(d + tail) = d + d^3 S(z) + tail (1 - z/2)
-        ("sin_r", f"d + (d*z*({_estrin(SIN_COEFFS, 'z', 'z2', 'z4')}) + tail*w)"),
-        # cos(d + tail) = (1 - z/2) + z^2 C(z) - d tail, the rounding of 1 - z/2 added back
-        ("cos_r", f"w + (z2*({_estrin(COS_COEFFS, 'z', 'z2', 'z4')}) + (((1.0 - w) - half_z) - d*tail))"),
+        # sin(d + tail) = d + d^3 S(z) + tail (1 - z/2) = d - nsin, S(z) in Estrin's pairs, the
+        # terms summed as a balanced tree in the order they become ready (a zero xi gives
+        # nsin = +0, so d - nsin = d keeps the sign of -0)
+        ("nsin", f"(ntail*w - (u*z4)*{s2}) - (u*{s0} + (u*z2)*{s1})"),
+        ("sin_r", "d - nsin"),
+        # cos(d + tail) = (1 - z/2) + z^2 C(z) + d ntail, the rounding of 1 - z/2 added back
+        ("cos_r", f"w + (((z2*{c0} + z4*{c1}) + (z2*z4)*{c2}) + (((1.0 - w) - half_z) + d*ntail))"),
     )
 
 
-SELECTS = 3
-"""Dependent selects after the polynomials: the quadrant's (sin, cos) swap, its sign, the tiny
-argument."""
+SELECTS = 2
+"""Dependent selects after the polynomials: the quadrant's (sin, cos) swap, then its sign (the
+negation itself is a sign flip, counted 0)."""
 
 
 def kernel_latency(latency=None) -> int:
@@ -192,7 +211,7 @@ def kernel_latency(latency=None) -> int:
     of one call. Read from the very expressions :func:`kernel_c` prints.
 
     >>> kernel_latency()
-    51
+    47
     """
     import ast
     from .opcount import LATENCY
@@ -212,42 +231,101 @@ def kernel_latency(latency=None) -> int:
 
     for name, expr in _steps():
         ready[name] = visit(ast.parse(expr, mode="eval").body)
-    quadrant = ready["m"] + lat["add"]          # fabs(m) == 1.0: a compare
+    quadrant = ready["q"] + 2 * lat["add"]      # fabs(q - 2.0) == 1.0: a subtraction, a compare
     return max(ready["sin_r"], ready["cos_r"], quadrant) + SELECTS * lat["select"]
+
+
+LANES = (8, 4)
+"""Lanes of the kernel's blocks: eight doubles are one AVX-512 vector, four one AVX2 vector. A
+block is a loop of fixed count over consecutive arguments, which compilers vectorise whole,
+without the scalar remainder a loop over n = 7 has (measured: with AVX-512 the remainder took
+half the kernel's time, docs/latency.md); seven angles are two blocks of four, x[0..3] and
+x[3..6], lane 3 computed twice to the same value."""
+
+
+def _quadrant(s: str, c: str) -> str:
+    """The quadrant selects and the range flag of lane j, storing to ``s`` and ``c``."""
+    return f"""\
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        {s} = q >= 2.0 ? -sin_q : sin_q;
+        {c} = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= {BOUND!r} ? 0.0 : 1.0;"""
 
 
 def kernel_c(name: str = "kdg_sincos") -> str:
     """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
-    for i < n. The arrays must not overlap."""
+    for i < n. The arrays must not overlap. Its work is done in blocks of consecutive
+    arguments: ``name``8 on eight (n >= 8; the last block overlaps the one before), ``name``4
+    on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy)."""
     bound = repr(BOUND)
     body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
+    flag = "    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;"
     return f"""\
+/* The blocks of {name} (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
+ * nonzero if some |x[i]| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
+ * undefined behaviour: all in double) and {name} replaces them by libm. codegen/trig_kernel.py's
+ * _steps explains each step. {name}8: i = 0..7. */
+static int {name}8(const double *restrict x, double *restrict s, double *restrict c)
+{{
+    double out[8];
+    int j;
+    for (j = 0; j < 8; ++j) {{
+        const double xi = x[j];
+{body}
+{_quadrant("s[j]", "c[j]")}
+    }}
+{flag}
+}}
+
+/* {name}4: i = 0..3 */
+static int {name}4(const double *restrict x, double *restrict s, double *restrict c)
+{{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {{
+        const double xi = x[j];
+{body}
+{_quadrant("s[j]", "c[j]")}
+    }}
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}}
+
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from). The first loop has no branch and no
- * call, so compilers vectorise it; arguments beyond +-{BOUND:g}, infinities and NaN take libm in
- * the second. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
+ * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
+ * as C99 specifies it: no -ffast-math. */
 static void {name}(long n, const double *restrict x, double *restrict s, double *restrict c)
 {{
     long i;
-    for (i = 0; i < n; ++i) {{
-        /* arguments out of range give garbage here (no undefined behaviour: all in double),
-           replaced in the second loop; codegen/trig_kernel.py's _steps explains each step */
-        const double xi = x[i];
-{body}
-        /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s */
-        const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(m) == 1.0 ? sin_r : cos_r;
-        const int tiny = fabs(xi) < {TINY!r};
-        s[i] = tiny ? xi : ((m == 2.0 || m == -2.0 || m == -1.0) ? -sin_q : sin_q);
-        c[i] = tiny ? 1.0 : ((m == 2.0 || m == -2.0 || m == 1.0) ? -cos_q : cos_q);
-    }}
-    for (i = 0; i < n; ++i) {{
-        if (!(fabs(x[i]) <= {bound})) {{
-            s[i] = sin(x[i]);
-            c[i] = cos(x[i]);
+    int out = 0;
+    if (n >= 8) {{
+        for (i = 0; i + 8 <= n; i += 8)
+            out |= {name}8(x + i, s + i, c + i);
+        if (i < n)
+            out |= {name}8(x + n - 8, s + n - 8, c + n - 8);
+    }} else if (n >= 4) {{
+        out = {name}4(x, s, c);
+        out |= {name}4(x + n - 4, s + n - 4, c + n - 4);
+    }} else if (n > 0) {{
+        double xb[4] = {{0.0, 0.0, 0.0, 0.0}}, sb[4], cb[4];
+        for (i = 0; i < n; ++i)
+            xb[i] = x[i];
+        out = {name}4(xb, sb, cb);
+        for (i = 0; i < n; ++i) {{
+            s[i] = sb[i];
+            c[i] = cb[i];
         }}
     }}
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(x[i]) <= {bound})) {{
+                s[i] = sin(x[i]);
+                c[i] = cos(x[i]);
+            }}
 }}
 """
 

@@ -138,7 +138,7 @@ def test_kernel_latency_is_its_printed_chain():
         m = re.match(r"\s*const double (\w+) = (.*);$", line)
         if m and "?" not in m.group(2) and m.group(1) != "xi":
             ready[m.group(1)] = c_ready(m.group(2), ready, 0)
-    chain = max(ready["sin_r"], ready["cos_r"], ready["m"] + LATENCY["add"])
+    chain = max(ready["sin_r"], ready["cos_r"], ready["q"] + 2 * LATENCY["add"])
     assert trig_kernel.kernel_latency() == chain + trig_kernel.SELECTS * LATENCY["select"]
 
 

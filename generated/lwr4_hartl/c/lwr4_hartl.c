@@ -4,46 +4,112 @@
 
 #include "lwr4_hartl.h"
 
-/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from). The first loop has no branch and no
- * call, so compilers vectorise it; arguments beyond +-1.04858e+06, infinities and NaN take libm in
- * the second. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
-static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
+/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
+ * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
+ * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
+ * _steps explains each step. kdg_sincos8: i = 0..7. */
+static int kdg_sincos8(const double *restrict x, double *restrict s, double *restrict c)
 {
-    long i;
-    for (i = 0; i < n; ++i) {
-        /* arguments out of range give garbage here (no undefined behaviour: all in double),
-           replaced in the second loop; codegen/trig_kernel.py's _steps explains each step */
-        const double xi = x[i];
+    double out[8];
+    int j;
+    for (j = 0; j < 8; ++j) {
+        const double xi = x[j];
         const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double m = k - 4.0*((0.25*k + 6755399441055744.0) - 6755399441055744.0);
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
         const double a = xi - k*1.5707963267341256;
         const double b = a - k*6.077100506303966e-11;
         const double b_err = (a - b) - k*6.077100506303966e-11;
         const double d = b - k*2.0222662487111665e-21;
         const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double tail = (b_err + d_err) - k*8.4784276603689e-32;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
         const double z = d*d;
         const double z2 = z*z;
         const double z4 = z2*z2;
+        const double u = d*z;
         const double half_z = 0.5*z;
         const double w = 1.0 - half_z;
-        const double sin_r = d + (d*z*((-0.16666666666666632 + 0.008333333333322424*z) + z2*(-0.0001984126982981672 + 2.7557313695144572e-06*z) + z4*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) + tail*w);
-        const double cos_r = w + (z2*((0.0416666666666666 + -0.0013888888888874138*z) + z2*(2.4801587289491644e-05 + -2.755731435518579e-07*z) + z4*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) - d*tail));
-        /* x = r + k pi/2: quadrants m = 0, 1, +-2, -1 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s */
-        const double sin_q = fabs(m) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(m) == 1.0 ? sin_r : cos_r;
-        const int tiny = fabs(xi) < 1.4901161193847656e-08;
-        s[i] = tiny ? xi : ((m == 2.0 || m == -2.0 || m == -1.0) ? -sin_q : sin_q);
-        c[i] = tiny ? 1.0 : ((m == 2.0 || m == -2.0 || m == 1.0) ? -cos_q : cos_q);
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
     }
-    for (i = 0; i < n; ++i) {
-        if (!(fabs(x[i]) <= 1048576.0)) {
-            s[i] = sin(x[i]);
-            c[i] = cos(x[i]);
+    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
+}
+
+/* kdg_sincos4: i = 0..3 */
+static int kdg_sincos4(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {
+        const double xi = x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}
+
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
+ * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
+ * as C99 specifies it: no -ffast-math. */
+static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    int out = 0;
+    if (n >= 8) {
+        for (i = 0; i + 8 <= n; i += 8)
+            out |= kdg_sincos8(x + i, s + i, c + i);
+        if (i < n)
+            out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
+    } else if (n >= 4) {
+        out = kdg_sincos4(x, s, c);
+        out |= kdg_sincos4(x + n - 4, s + n - 4, c + n - 4);
+    } else if (n > 0) {
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        for (i = 0; i < n; ++i)
+            xb[i] = x[i];
+        out = kdg_sincos4(xb, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i];
+            c[i] = cb[i];
         }
     }
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(x[i]) <= 1048576.0)) {
+                s[i] = sin(x[i]);
+                c[i] = cos(x[i]);
+            }
 }
 
 void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)

@@ -38,7 +38,7 @@
  * call = sin, cos, sqrt, atan2, ... (rule in the project README), after CSE. Critical path:
  * the longest chain of dependent operations of the code as written, in cycles of AMD Zen 4
  * latencies (add 3, mul 3, div 13, sqrt 20, a libm call 40, sin/cos of q by the kernel
- * 51: opcounts.md); a single call takes at least that long on such a core.
+ * 47: opcounts.md); a single call takes at least that long on such a core.
  */
 #ifndef LWR4_HARTL_KINDYNGEN_H
 #define LWR4_HARTL_KINDYNGEN_H
@@ -59,7 +59,7 @@ extern "C" {
  *
  * Cost: 31 add, 67 mul, 14 call
  * (as derived, before CSE: 88 add, 238 mul, 332 call);
- * critical path 84 cycles, 12 dependent operations.
+ * critical path 80 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fk_hom(const double *q, double *T);
@@ -76,7 +76,7 @@ void lwr4_hartl_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 36 add, 70 mul, 14 call
  * (as derived, before CSE: 184 add, 560 mul, 304 call);
- * critical path 84 cycles, 10 dependent operations.
+ * critical path 80 cycles, 10 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -94,7 +94,7 @@ void lwr4_hartl_fk_dq_batch(long count, const double *q, double *x);
  *
  * Cost: 35 add, 72 mul, 12 call
  * (as derived, before CSE: 53 add, 102 mul, 68 call);
- * critical path 81 cycles, 11 dependent operations.
+ * critical path 77 cycles, 11 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_jacobian(const double *q, double *J);
@@ -112,7 +112,7 @@ void lwr4_hartl_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 228 add, 357 mul, 14 call
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call);
- * critical path 96 cycles, 15 dependent operations.
+ * critical path 92 cycles, 15 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -132,7 +132,7 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 142 add, 259 mul, 14 call
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call);
- * critical path 114 cycles, 21 dependent operations.
+ * critical path 110 cycles, 21 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -152,7 +152,7 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
  *
  * Cost: 137 add, 161 mul, 12 call
  * (as derived, before CSE: 270 add, 411 mul, 353 call);
- * critical path 123 cycles, 25 dependent operations.
+ * critical path 119 cycles, 25 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_M(const double *q, double *M);
@@ -171,7 +171,7 @@ void lwr4_hartl_M_batch(long count, const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
- * critical path 90 cycles, 14 dependent operations.
+ * critical path 86 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_g(const double *q, double *g);
@@ -191,7 +191,7 @@ void lwr4_hartl_g_batch(long count, const double *q, double *g);
  *
  * Cost: 241 add, 311 mul, 12 call
  * (as derived, before CSE: 329 add, 466 mul, 130 call);
- * critical path 150 cycles, 34 dependent operations.
+ * critical path 146 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_c(const double *q, const double *qd, double *c);
@@ -211,7 +211,7 @@ void lwr4_hartl_c_batch(long count, const double *q, const double *qd, double *c
  *
  * Cost: 786 add, 868 mul, 12 call
  * (as derived, before CSE: 55151 add, 91314 mul, 68639 call);
- * critical path 138 cycles, 30 dependent operations.
+ * critical path 134 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_S(const double *q, const double *qd, double *S);
@@ -232,7 +232,7 @@ void lwr4_hartl_S_batch(long count, const double *q, const double *qd, double *S
  *
  * Cost: 263 add, 329 mul, 12 call
  * (as derived, before CSE: 361 add, 487 mul, 138 call);
- * critical path 150 cycles, 34 dependent operations.
+ * critical path 146 cycles, 34 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -253,7 +253,7 @@ void lwr4_hartl_tau_batch(long count, const double *q, const double *qd, const d
  *
  * Cost: 492 add, 620 mul, 12 call
  * (as derived, before CSE: 717 add, 1045 mul, 487 call);
- * critical path 231 cycles, 41 dependent operations.
+ * critical path 227 cycles, 41 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -274,7 +274,7 @@ void lwr4_hartl_fd_batch(long count, const double *q, const double *qd, const do
  *
  * Cost: 243 add, 338 mul, 14 call
  * (as derived, before CSE: 310 add, 514 mul, 353 call);
- * critical path 129 cycles, 27 dependent operations.
+ * critical path 125 cycles, 27 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_com(const double *q, double *com, double *J_com, double *A_g);
@@ -297,7 +297,7 @@ void lwr4_hartl_com_batch(long count, const double *q, double *com, double *J_co
  *
  * Cost: 1806 add, 2309 mul, 12 call
  * (as derived, before CSE: 434960 add, 832852 mul, 833128 call);
- * critical path 162 cycles, 38 dependent operations.
+ * critical path 158 cycles, 38 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
@@ -321,7 +321,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  *
  * Cost: 3050 add, 3584 mul, 12 call
  * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call);
- * critical path 454 cycles, 112 dependent operations.
+ * critical path 450 cycles, 112 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -344,7 +344,7 @@ void lwr4_hartl_fd_derivatives_batch(long count, const double *q, const double *
  *
  * Cost: 2959 add, 3469 mul, 12 call
  * (as derived, before CSE: 9576337901107 add, 15027826633860 mul, 11869802815751 call);
- * critical path 472 cycles, 118 dependent operations.
+ * critical path 468 cycles, 118 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives_no_minv(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);
@@ -363,7 +363,7 @@ void lwr4_hartl_fd_derivatives_no_minv_batch(long count, const double *q, const 
  *
  * Cost: 753 add, 1044 mul, 12 call
  * (as derived, before CSE: 5133 add, 14904 mul, 16343 call);
- * critical path 99 cycles, 17 dependent operations.
+ * critical path 95 cycles, 17 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_M_lagrange(const double *q, double *M);
@@ -382,7 +382,7 @@ void lwr4_hartl_M_lagrange_batch(long count, const double *q, double *M);
  *
  * Cost: 81 add, 131 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call);
- * critical path 84 cycles, 12 dependent operations.
+ * critical path 80 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_g_lagrange(const double *q, double *g);
@@ -402,7 +402,7 @@ void lwr4_hartl_g_lagrange_batch(long count, const double *q, double *g);
  *
  * Cost: 827 add, 918 mul, 12 call
  * (as derived, before CSE: 55193 add, 91363 mul, 68639 call);
- * critical path 144 cycles, 32 dependent operations.
+ * critical path 140 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_c_christoffel(const double *q, const double *qd, double *c);
@@ -421,7 +421,7 @@ void lwr4_hartl_c_christoffel_batch(long count, const double *q, const double *q
  *
  * Cost: 167 add, 244 mul, 12 call
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call);
- * critical path 138 cycles, 29 dependent operations.
+ * critical path 134 cycles, 29 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -441,7 +441,7 @@ void lwr4_hartl_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 129 cycles, 26 dependent operations.
+ * critical path 125 cycles, 26 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -462,7 +462,7 @@ void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 290 add, 420 mul, 12 call
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call);
- * critical path 159 cycles, 36 dependent operations.
+ * critical path 155 cycles, 36 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -484,7 +484,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double
  *
  * Cost: 313 add, 440 mul, 12 call
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call);
- * critical path 162 cycles, 37 dependent operations.
+ * critical path 158 cycles, 37 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -508,7 +508,7 @@ void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, cons
  *
  * Cost: 691 add, 858 mul, 12 call
  * (as derived, before CSE: 116775 add, 503492 mul, 169711 call);
- * critical path 144 cycles, 31 dependent operations.
+ * critical path 140 cycles, 31 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -596,7 +596,7 @@ void lwr4_hartl_ik_dq_batch(long count, const double *x, const double *theta3, d
  *
  * Cost: 32 add, 70 mul, 12 call
  * (as derived, before CSE: 110 add, 500 mul, 500 call);
- * critical path 81 cycles, 11 dependent operations.
+ * critical path 77 cycles, 11 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_Y_g(const double *q, double *Y);
@@ -618,7 +618,7 @@ void lwr4_hartl_Y_g_batch(long count, const double *q, double *Y);
  *
  * Cost: 331 add, 778 mul, 12 call
  * (as derived, before CSE: 2089 add, 6947 mul, 8479 call);
- * critical path 87 cycles, 13 dependent operations.
+ * critical path 83 cycles, 13 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_Y_m(const double *q, double *Y);
@@ -641,7 +641,7 @@ void lwr4_hartl_Y_m_batch(long count, const double *q, double *Y);
  *
  * Cost: 441 add, 695 mul, 12 call
  * (as derived, before CSE: 774 add, 1450 mul, 1058 call);
- * critical path 135 cycles, 29 dependent operations.
+ * critical path 131 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_Y(const double *q, const double *qd, const double *qdd, double *Y);

@@ -38,7 +38,7 @@
  * call = sin, cos, sqrt, atan2, ... (rule in the project README), after CSE. Critical path:
  * the longest chain of dependent operations of the code as written, in cycles of AMD Zen 4
  * latencies (add 3, mul 3, div 13, sqrt 20, a libm call 40, sin/cos of q by the kernel
- * 51: opcounts.md); a single call takes at least that long on such a core.
+ * 47: opcounts.md); a single call takes at least that long on such a core.
  */
 #ifndef PANDA_KINDYNGEN_H
 #define PANDA_KINDYNGEN_H
@@ -59,7 +59,7 @@ extern "C" {
  *
  * Cost: 41 add, 76 mul, 14 call
  * (as derived, before CSE: 123 add, 318 mul, 437 call);
- * critical path 84 cycles, 12 dependent operations.
+ * critical path 80 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fk_hom(const double *q, double *T);
@@ -76,7 +76,7 @@ void panda_fk_hom_batch(long count, const double *q, double *T);
  *
  * Cost: 52 add, 93 mul, 14 call
  * (as derived, before CSE: 664 add, 2332 mul, 1284 call);
- * critical path 96 cycles, 14 dependent operations.
+ * critical path 92 cycles, 14 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -94,7 +94,7 @@ void panda_fk_dq_batch(long count, const double *q, double *x);
  *
  * Cost: 64 add, 99 mul, 12 call
  * (as derived, before CSE: 115 add, 145 mul, 68 call);
- * critical path 93 cycles, 15 dependent operations.
+ * critical path 89 cycles, 15 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_jacobian(const double *q, double *J);
@@ -112,7 +112,7 @@ void panda_jacobian_batch(long count, const double *q, double *J);
  *
  * Cost: 286 add, 427 mul, 14 call
  * (as derived, before CSE: 3672 add, 26272 mul, 13432 call);
- * critical path 102 cycles, 17 dependent operations.
+ * critical path 98 cycles, 17 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -132,7 +132,7 @@ void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  *
  * Cost: 188 add, 313 mul, 14 call
  * (as derived, before CSE: 27455 add, 193768 mul, 107648 call);
- * critical path 123 cycles, 24 dependent operations.
+ * critical path 119 cycles, 24 dependent operations.
  * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -152,7 +152,7 @@ void panda_jacobian_dq_batch(long count, const double *q, double *J);
  *
  * Cost: 180 add, 209 mul, 12 call
  * (as derived, before CSE: 354 add, 535 mul, 429 call);
- * critical path 123 cycles, 25 dependent operations.
+ * critical path 119 cycles, 25 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_M(const double *q, double *M);
@@ -171,7 +171,7 @@ void panda_M_batch(long count, const double *q, double *M);
  *
  * Cost: 32 add, 50 mul, 12 call
  * (as derived, before CSE: 114 add, 212 mul, 200 call);
- * critical path 90 cycles, 14 dependent operations.
+ * critical path 86 cycles, 14 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_g(const double *q, double *g);
@@ -191,7 +191,7 @@ void panda_g_batch(long count, const double *q, double *g);
  *
  * Cost: 270 add, 349 mul, 12 call
  * (as derived, before CSE: 361 add, 505 mul, 144 call);
- * critical path 153 cycles, 35 dependent operations.
+ * critical path 149 cycles, 35 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_c(const double *q, const double *qd, double *c);
@@ -211,7 +211,7 @@ void panda_c_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 1018 add, 1004 mul, 12 call
  * (as derived, before CSE: 77815 add, 122234 mul, 93654 call);
- * critical path 138 cycles, 30 dependent operations.
+ * critical path 134 cycles, 30 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_S(const double *q, const double *qd, double *S);
@@ -232,7 +232,7 @@ void panda_S_batch(long count, const double *q, const double *qd, double *S);
  *
  * Cost: 288 add, 361 mul, 12 call
  * (as derived, before CSE: 387 add, 520 mul, 150 call);
- * critical path 156 cycles, 36 dependent operations.
+ * critical path 152 cycles, 36 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_tau(const double *q, const double *qd, const double *qdd, double *tau);
@@ -253,7 +253,7 @@ void panda_tau_batch(long count, const double *q, const double *qd, const double
  *
  * Cost: 559 add, 700 mul, 12 call
  * (as derived, before CSE: 827 add, 1202 mul, 575 call);
- * critical path 231 cycles, 41 dependent operations.
+ * critical path 227 cycles, 41 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd(const double *q, const double *qd, const double *tau, double *qdd);
@@ -274,7 +274,7 @@ void panda_fd_batch(long count, const double *q, const double *qd, const double 
  *
  * Cost: 287 add, 377 mul, 14 call
  * (as derived, before CSE: 394 add, 638 mul, 429 call);
- * critical path 135 cycles, 29 dependent operations.
+ * critical path 131 cycles, 29 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_com(const double *q, double *com, double *J_com, double *A_g);
@@ -297,7 +297,7 @@ void panda_com_batch(long count, const double *q, double *com, double *J_com, do
  *
  * Cost: 2094 add, 2627 mul, 12 call
  * (as derived, before CSE: 570628 add, 1088662 mul, 1081938 call);
- * critical path 162 cycles, 38 dependent operations.
+ * critical path 158 cycles, 38 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_tau_derivatives(const double *q, const double *qd, const double *qdd, double *dtau_dq, double *dtau_dqd);
@@ -321,7 +321,7 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  *
  * Cost: 3398 add, 3875 mul, 12 call
  * (as derived, before CSE: 12664599226860 add, 19495258176161 mul, 15412087385897 call);
- * critical path 442 cycles, 108 dependent operations.
+ * critical path 438 cycles, 108 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -344,7 +344,7 @@ void panda_fd_derivatives_batch(long count, const double *q, const double *qd, c
  *
  * Cost: 3307 add, 3759 mul, 12 call
  * (as derived, before CSE: 12663744872259 add, 19494071046986 mul, 15411187668300 call);
- * critical path 472 cycles, 118 dependent operations.
+ * critical path 468 cycles, 118 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives_no_minv(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);
@@ -363,7 +363,7 @@ void panda_fd_derivatives_no_minv_batch(long count, const double *q, const doubl
  *
  * Cost: 838 add, 1126 mul, 12 call
  * (as derived, before CSE: 6812 add, 18193 mul, 19610 call);
- * critical path 99 cycles, 17 dependent operations.
+ * critical path 95 cycles, 17 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_M_lagrange(const double *q, double *M);
@@ -382,7 +382,7 @@ void panda_M_lagrange_batch(long count, const double *q, double *M);
  *
  * Cost: 81 add, 133 mul, 12 call
  * (as derived, before CSE: 146 add, 544 mul, 500 call);
- * critical path 84 cycles, 12 dependent operations.
+ * critical path 80 cycles, 12 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_g_lagrange(const double *q, double *g);
@@ -402,7 +402,7 @@ void panda_g_lagrange_batch(long count, const double *q, double *g);
  *
  * Cost: 1058 add, 1047 mul, 12 call
  * (as derived, before CSE: 77857 add, 122283 mul, 93654 call);
- * critical path 144 cycles, 32 dependent operations.
+ * critical path 140 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_c_christoffel(const double *q, const double *qd, double *c);
@@ -421,7 +421,7 @@ void panda_c_christoffel_batch(long count, const double *q, const double *qd, do
  *
  * Cost: 219 add, 303 mul, 12 call
  * (as derived, before CSE: 14791 add, 48807 mul, 16807 call);
- * critical path 144 cycles, 31 dependent operations.
+ * critical path 140 cycles, 31 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -441,7 +441,7 @@ void panda_M_dq_batch(long count, const double *q, double *M);
  *
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
- * critical path 129 cycles, 26 dependent operations.
+ * critical path 125 cycles, 26 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -462,7 +462,7 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  *
  * Cost: 332 add, 468 mul, 12 call
  * (as derived, before CSE: 148676 add, 646792 mul, 215417 call);
- * critical path 162 cycles, 37 dependent operations.
+ * critical path 158 cycles, 37 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -484,7 +484,7 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  *
  * Cost: 353 add, 484 mul, 12 call
  * (as derived, before CSE: 164689 add, 688748 mul, 229617 call);
- * critical path 165 cycles, 38 dependent operations.
+ * critical path 161 cycles, 38 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -508,7 +508,7 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  *
  * Cost: 842 add, 963 mul, 12 call
  * (as derived, before CSE: 179060 add, 753806 mul, 252381 call);
- * critical path 150 cycles, 33 dependent operations.
+ * critical path 146 cycles, 33 dependent operations.
  * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
  * sincos kernel over those arguments.
  */
@@ -530,7 +530,7 @@ void panda_Y_dq_batch(long count, const double *q, const double *qd, const doubl
  *
  * Cost: 31 add, 70 mul, 12 call
  * (as derived, before CSE: 110 add, 500 mul, 500 call);
- * critical path 81 cycles, 11 dependent operations.
+ * critical path 77 cycles, 11 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y_g(const double *q, double *Y);
@@ -552,7 +552,7 @@ void panda_Y_g_batch(long count, const double *q, double *Y);
  *
  * Cost: 330 add, 756 mul, 12 call
  * (as derived, before CSE: 2904 add, 8254 mul, 9675 call);
- * critical path 93 cycles, 15 dependent operations.
+ * critical path 89 cycles, 15 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y_m(const double *q, double *Y);
@@ -575,7 +575,7 @@ void panda_Y_m_batch(long count, const double *q, double *Y);
  *
  * Cost: 496 add, 771 mul, 12 call
  * (as derived, before CSE: 865 add, 1563 mul, 1172 call);
- * critical path 144 cycles, 32 dependent operations.
+ * critical path 140 cycles, 32 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
