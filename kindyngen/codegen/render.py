@@ -18,6 +18,7 @@ from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_U
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
 from .optimize import Program, kernel_arguments
+from .schedule import pressure_order
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
 from ..model.robot_model import RobotModel
@@ -56,6 +57,21 @@ printed, so temporaries computed long before their use and outputs stored only a
 fill the registers and spill. Measured in one head-to-head run (docs/latency.md; Zen 5, gcc
 12.2, minima): tau_derivatives 1.12x on lwr4 and panda, fd 1.04x / 1.11x, fd_derivatives
 1.03x / 1.05x; M, c, tau (300-650 operations) within 2 % either way, so they keep CSE's order."""
+
+PRESSURE_ORDER_OPERATIONS = 3000
+"""Single calls of more operations than this are printed in register-pressure order
+(:func:`kindyngen.codegen.schedule.pressure_order`) instead of demand order: at each step the
+ready statement that frees the most live temporaries. Of lwr4's and panda's functions that
+is tau_derivatives and fd_derivatives_no_minv (4100-7100 operations; the next
+largest, c_christoffel and S, have at most 2105). Measured in head-to-head runs against demand
+order (docs/latency.md, "Register-pressure order for the derivatives"): fd (1100-1300
+operations) did not move (0.97-1.01x); tau_derivatives gained (1.0-1.25x) and
+fd_derivatives_no_minv (1.02-1.28x); fd_derivatives moved either way in three runs (lwr4
+1.09x, 1.00x, 0.67x; panda 0.85x, 1.06x, 1.05x), so it keeps demand order
+(PRESSURE_ORDER_EXCLUDED)."""
+
+PRESSURE_ORDER_EXCLUDED = ("fd_derivatives",)
+"""Functions kept in demand order whatever their size: measured slower in a run (above)."""
 
 
 def demand_order(assignments, outputs) -> list:
@@ -129,6 +145,7 @@ class FunctionView:
     # C single calls in demand order (DEMAND_ORDER_OPERATIONS): ("t", name, text) and
     # ("out", port name, entry, text, dtype) in print order; empty: assignments, then outputs
     statements: tuple = ()
+    pressure: bool = False        # C single calls: those statements in pressure order (PRESSURE_ORDER_OPERATIONS)
 
 
 def _index(k: int, shape) -> str:
@@ -284,11 +301,14 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
     statements = ()
+    pressure = False
     if dialect.name == "c" and not batch and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
         kept = [(sym, e) for sym, e in program.assignments if sym in printed]
+        pressure = (program.after.add + program.after.mul > PRESSURE_ORDER_OPERATIONS
+                    and f.name not in PRESSURE_ORDER_EXCLUDED)
         statements = tuple(("t", *printed[kept[k[1]][0]]) if k[0] == "t"
                            else ("out", outputs[k[1]].name, k[2], outputs[k[1]].entries[k[2]][1], outputs[k[1]].dtype)
-                           for k in demand_order(kept, program.outputs))
+                           for k in (pressure_order if pressure else demand_order)(kept, program.outputs))
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
     return FunctionView(
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
@@ -304,6 +324,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         in_place=in_place,
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
         statements=statements,
+        pressure=pressure,
     )
 
 

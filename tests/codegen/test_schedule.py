@@ -1,0 +1,85 @@
+"""The register-pressure order of the large functions (kindyngen/codegen/schedule.py): a
+permutation of every statement that respects every dependence, fewer temporaries live at
+once than demand order on lwr4's derivatives, and the threshold rule of the C renderer
+(render.PRESSURE_ORDER_OPERATIONS). The values of the reordered C are checked against
+Pinocchio by tests/algorithms/test_dynamics_derivatives.py (the committed generated/ C)."""
+from __future__ import annotations
+
+import pytest
+import symengine as se
+
+from kindyngen.codegen import render
+from kindyngen.codegen.pipeline import build_programs
+from kindyngen.codegen.render import PRESSURE_ORDER_EXCLUDED, PRESSURE_ORDER_OPERATIONS, demand_order, function_view
+from kindyngen.codegen.schedule import graph, max_live, pressure_order
+from tests.harness import ROOT
+from kindyngen.readers.yaml_description import load_robot
+
+NAMES = ("fd", "tau_derivatives", "fd_derivatives", "fd_derivatives_no_minv")
+
+
+@pytest.fixture(scope="module")
+def programs():
+    model = load_robot(ROOT / "robots" / "lwr4.yaml")
+    return model, {p.function.name: p for p in build_programs(model, only=list(NAMES), progress=False)}
+
+
+def check_topological(order, assignments, outputs):
+    reads_t, reads_o, keys = graph(assignments, outputs)
+    expected = [("t", k) for k in range(len(assignments))] + keys
+    assert sorted(order, key=str) == sorted(expected, key=str)
+    assert len(set(order)) == len(order)
+    position = {s: i for i, s in enumerate(order)}
+    for k, reads in enumerate(reads_t):
+        assert all(position[("t", j)] < position[("t", k)] for j in reads)
+    for key, reads in zip(keys, reads_o):
+        assert all(position[("t", j)] < position[key] for j in reads)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_pressure_order_is_a_topological_order_with_fewer_live(programs, name):
+    _, found = programs
+    p = found[name]
+    order = pressure_order(p.assignments, p.outputs)
+    check_topological(order, p.assignments, p.outputs)
+    peak, mean = max_live(order, p.assignments, p.outputs)
+    demand_peak, demand_mean = max_live(demand_order(p.assignments, p.outputs), p.assignments, p.outputs)
+    print(f"{name}: live peak/mean pressure {peak}/{mean:.1f}, demand {demand_peak}/{demand_mean:.1f}")
+    assert mean < demand_mean
+    if name != "fd":
+        assert peak < demand_peak
+
+
+def test_small_example_frees_early():
+    x, y, t0, t1, t2 = se.symbols("x y t0 t1 t2")
+    a = [(t0, x + 1), (t1, 2 * y), (t2, t0 * t1)]
+    outputs = [(t2, t0 + 1)]
+    order = pressure_order(a, outputs)
+    check_topological(order, a, outputs)
+    # t0's other reader (output entry 1) is printed before t1 is computed
+    assert order.index(("out", 0, 1)) < order.index(("t", 1))
+    assert max_live(order, a, outputs)[0] == 2 and max_live(demand_order(a, outputs), a, outputs)[0] == 2
+    assert max_live(order, a, outputs)[1] < max_live(demand_order(a, outputs), a, outputs)[1]
+
+
+def test_renderer_uses_pressure_order_above_the_threshold(programs):
+    _, found = programs
+    for name, p in found.items():
+        view = function_view(p, render.C, "lwr4", "kernel")
+        big = p.after.add + p.after.mul > PRESSURE_ORDER_OPERATIONS and name not in PRESSURE_ORDER_EXCLUDED
+        assert view.pressure is big, name
+        assert view.statements, name          # both are above DEMAND_ORDER_OPERATIONS
+        again = function_view(p, render.C, "lwr4", "kernel")
+        assert again.statements == view.statements      # deterministic
+    assert found["tau_derivatives"].after.add + found["tau_derivatives"].after.mul > PRESSURE_ORDER_OPERATIONS
+    assert found["fd"].after.add + found["fd"].after.mul <= PRESSURE_ORDER_OPERATIONS
+
+
+def test_committed_c_is_in_pressure_order():
+    text = (ROOT / "generated" / "lwr4" / "c" / "lwr4.c").read_text()
+    body = text[text.index("void lwr4_tau_derivatives("):]
+    body = body[:body.index("\n}\n")]
+    assert "in register-pressure order" in body
+    body = text[text.index("void lwr4_fd_derivatives("):]
+    body = body[:body.index("\n}\n")]
+    assert "in demand order" in body and "register-pressure" not in body
