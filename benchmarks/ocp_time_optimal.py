@@ -11,7 +11,8 @@ Per problem and formulation: IPOPT's status, iterations, CPU and wall time of th
 20 RK4 steps per interval of ABA; the tolerance of tests/integration/test_ocp.py: node error
 below 10x the planner's RK4 error estimate + 1e-6 and below 2e-2, limits passed by no more
 than that error). The compiled library is built into a fresh cache first, so its C size and
-gcc's CPU time (-O1) are measured, not a cached load. Writes
+the compiler's CPU time are measured, not a cached load (--cache DIR reuses a cache instead;
+--cc and --cflags choose the compiler, default gcc -O1). Writes
 benchmarks/results/ocp_time_optimal.json.
 """
 from __future__ import annotations
@@ -59,7 +60,8 @@ def checks(setup: dict, res: dict, fd: ca.Function) -> dict:
     return {"resim_error": err, "rk4_error_estimate": est, "limit_excess": lim, "within_tolerance": bool(ok)}
 
 
-def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict) -> dict:
+def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, cc: str = "gcc",
+            cflags: tuple[str, ...] | None = None) -> dict:
     c0 = time.process_time()
     children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -67,7 +69,7 @@ def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict) -> dict
         res = ocp.solve(setup, funcs["fd"], N, "mx_map", SUBSTEPS)
         extra = {}
     else:
-        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, SUBSTEPS)
+        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, SUBSTEPS, cc=cc, cflags=cflags)
         children1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         res = nlp.solve()
         src = sorted(ocp_stages.CACHE.glob(f"topt_{problem}_M{SUBSTEPS}_*.c"))
@@ -75,7 +77,7 @@ def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict) -> dict
                  "compile_gcc_cpu_s": (children1.ru_utime + children1.ru_stime)
                  - (children0.ru_utime + children0.ru_stime),
                  "c_source_bytes": src[-1].stat().st_size if src else None,
-                 "cflags": " ".join(ocp_stages.CFLAGS)}
+                 "cc": cc, "cflags": " ".join(ocp_stages.CFLAGS if cflags is None else cflags)}
     total_wall, total_cpu = time.perf_counter() - t0, time.process_time() - c0
     chk = checks(setup, res, funcs["fd"])
     row = {"problem": problem, "N": N, "substeps": SUBSTEPS, "formulation": solver, "status": res["status"],
@@ -93,17 +95,24 @@ def main(argv=None) -> int:
     ap.add_argument("--problems", nargs="+", choices=sorted(DEFAULT_N), default=["panda", "lwr4"])
     ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats of each pair (default 1)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp_time_optimal.json"))
+    ap.add_argument("--cc", default="gcc", help="C compiler of the stages library (default gcc)")
+    ap.add_argument("--cflags", default=None,
+                    help=f"its flags, one string (default '{' '.join(ocp_stages.CFLAGS)}'), e.g. '-O2 -shared -fPIC'")
+    ap.add_argument("--cache", default=None,
+                    help="library cache to reuse (default: a fresh one, so that the compile is measured)")
     args = ap.parse_args(argv)
     if args.repeats < 1:
         print(f"error: --repeats {args.repeats}: must be at least 1", file=sys.stderr)
         return 2
     # a fresh cache: the first stages build compiles (C size and gcc time measured), the
     # repeats load it
-    ocp_stages.CACHE = Path(tempfile.mkdtemp(prefix="kindyngen_topt_bench_"))
+    ocp_stages.CACHE = Path(args.cache) if args.cache else Path(tempfile.mkdtemp(prefix="kindyngen_topt_bench_"))
+    cflags = tuple(args.cflags.split()) if args.cflags else None
     doc = {"machine": machine(), "load_before": os.getloadavg(), "started_utc": time.strftime("%Y-%m-%d %H:%M:%S",
                                                                                                  time.gmtime()),
            "note": "CPU time (process_time) of the solve; the machine is shared, so wall times are not speeds. "
                    "speed-up = CPU time of mx_map's solve / CPU time of stages' solve, within this run.",
+           "stages_library": {"cc": args.cc, "cflags": args.cflags, "cache_reused": bool(args.cache)},
            "rows": [], "summary": {}}
     for problem in args.problems:
         funcs = ocp.load_functions(problem)
@@ -111,7 +120,7 @@ def main(argv=None) -> int:
         N = DEFAULT_N[problem]
         pairs = []
         for _ in range(args.repeats):
-            pair = {s: run_one(problem, N, s, funcs, setup) for s in ("stages", "mx_map")}
+            pair = {s: run_one(problem, N, s, funcs, setup, args.cc, cflags) for s in ("stages", "mx_map")}
             doc["rows"].extend(pair.values())
             pairs.append(pair)
         sp = [p["mx_map"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]

@@ -50,21 +50,25 @@ CACHE = Path(os.environ.get("KINDYNGEN_OCP_CACHE", Path(tempfile.gettempdir()) /
 CFLAGS = ("-O1", "-shared", "-fPIC")
 
 
-def compile_library(functions: list[ca.Function], stem: str) -> str:
+def compile_library(functions: list[ca.Function], stem: str, cc: str = "gcc",
+                    cflags: tuple[str, ...] | None = None) -> str:
     """C code of `functions` (CasADi CodeGenerator) in one file, compiled by gcc -O1 into a
-    shared library cached under CACHE by the hash of the source and flags; returns its path."""
+    shared library cached under CACHE by the hash of the source, compiler and flags; returns
+    its path. cc, cflags: another compiler or flags (default gcc and CFLAGS)."""
+    flags = CFLAGS if cflags is None else tuple(cflags)
     cg = ca.CodeGenerator(f"{stem}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
     src = cg.dump()
-    key = hashlib.sha256((src + " ".join(CFLAGS)).encode()).hexdigest()[:16]
+    tag = " ".join(flags) if cc == "gcc" else " ".join((cc, *flags))   # gcc keeps the old cache keys
+    key = hashlib.sha256((src + tag).encode()).hexdigest()[:16]
     CACHE.mkdir(parents=True, exist_ok=True)
     so = CACHE / f"{stem}_{key}.so"
     if not so.exists():
         c = CACHE / f"{stem}_{key}.c"
         c.write_text(src)
         tmp = so.with_suffix(f".{os.getpid()}.tmp")
-        subprocess.run(["gcc", *CFLAGS, "-o", str(tmp), str(c), "-lm"], check=True)
+        subprocess.run([cc, *flags, "-o", str(tmp), str(c), "-lm"], check=True)
         tmp.replace(so)        # atomic: a parallel run never loads a half-written library
     return str(so)
 

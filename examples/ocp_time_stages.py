@@ -84,7 +84,8 @@ class TimeOptimalStages:
     objective and guess) with IPOPT's jac_g and hess_lag assembled from compiled per-interval
     functions. compile_stages=False keeps the SX/MX originals (no gcc: for tests)."""
 
-    def __init__(self, setup: dict, funcs: dict, N: int, substeps: int = 4, compile_stages: bool = True):
+    def __init__(self, setup: dict, funcs: dict, N: int, substeps: int = 4, compile_stages: bool = True,
+                 cc: str = "gcc", cflags: tuple[str, ...] | None = None):
         if setup["kind"] != "p2p":
             raise ValueError(f"problem {setup['problem']}: the compiled route serves the p2p problems (lwr4, panda)")
         t0 = time.perf_counter()
@@ -102,7 +103,7 @@ class TimeOptimalStages:
         if compile_stages:
             fs = list(self.pieces.values())
             t1 = time.perf_counter()
-            so = ocp_stages.compile_library(fs, f"topt_{setup['problem']}_M{substeps}")
+            so = ocp_stages.compile_library(fs, f"topt_{setup['problem']}_M{substeps}", cc, cflags)
             self.compile_s = time.perf_counter() - t1
             self.fns = {f.name(): ca.external(f.name(), so) for f in fs if not f.name().startswith("jac_")}
         else:
