@@ -61,17 +61,17 @@ def checks(setup: dict, res: dict, fd: ca.Function) -> dict:
 
 
 def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, cc: str = "gcc",
-            cflags: tuple[str, ...] | None = None) -> dict:
+            cflags: tuple[str, ...] | None = None, ipopt: dict | None = None) -> dict:
     c0 = time.process_time()
     children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     if solver == "mx_map":
-        res = ocp.solve(setup, funcs["fd"], N, "mx_map", SUBSTEPS)
+        res = ocp.solve(setup, funcs["fd"], N, "mx_map", SUBSTEPS, ipopt=ipopt)
         extra = {}
     else:
         nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, SUBSTEPS, cc=cc, cflags=cflags)
         children1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        res = nlp.solve()
+        res = nlp.solve(ipopt)
         src = sorted(ocp_stages.CACHE.glob(f"topt_{problem}_M{SUBSTEPS}_*.c"))
         extra = {"compile_wall_s": nlp.compile_s,
                  "compile_gcc_cpu_s": (children1.ru_utime + children1.ru_stime)
@@ -84,10 +84,28 @@ def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, cc: str
            "success": res["success"], "iterations": res["iterations"], "solve_cpu_s": res["solve_cpu_s"],
            "solve_wall_s": res["solve_s"], "cpu_per_iteration_s": res["solve_cpu_s"] / max(res["iterations"], 1),
            "build_wall_s": res["build_s"], "total_cpu_s": total_cpu, "total_wall_s": total_wall, "T": res["T"],
-           "objective": res["objective"], "max_defect": res["max_defect"], "pinocchio": chk, **extra}
+           "objective": res["objective"], "max_defect": res["max_defect"], "pinocchio": chk,
+           "ipopt_options": dict(ipopt or {}), **extra}
     print(f"  {problem} N={N} {solver:7s}: {res['status']}, {res['iterations']} it, solve {res['solve_cpu_s']:.2f} s CPU "
           f"({res['solve_s']:.2f} s wall), T = {res['T']:.9f}, Pinocchio ok: {chk['within_tolerance']}", flush=True)
     return row
+
+
+def _ipopt_option(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` as CasADi's ``ipopt.KEY`` with VALUE an int, a float or a string.
+
+    >>> _ipopt_option("mu_linear_decrease_factor=0.1")
+    ('ipopt.mu_linear_decrease_factor', 0.1)
+    """
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise ValueError(f"{text!r}: expected KEY=VALUE")
+    for kind in (int, float):
+        try:
+            return f"ipopt.{key}", kind(value)
+        except ValueError:
+            pass
+    return f"ipopt.{key}", value
 
 
 def main(argv=None) -> int:
@@ -100,7 +118,16 @@ def main(argv=None) -> int:
                     help=f"its flags, one string (default '{' '.join(ocp_stages.CFLAGS)}'), e.g. '-O2 -shared -fPIC'")
     ap.add_argument("--cache", default=None,
                     help="library cache to reuse (default: a fresh one, so that the compile is measured)")
+    ap.add_argument("--ipopt", action="append", default=[], metavar="KEY=VALUE",
+                    help="an IPOPT option for the stages solve (repeatable), e.g. mu_linear_decrease_factor=0.1; "
+                         "the baseline is then also solved with the same options (row mx_map_same_options), "
+                         "the headline speed-up staying against the plain baseline")
     args = ap.parse_args(argv)
+    try:
+        ipopt = dict(_ipopt_option(text) for text in args.ipopt)
+    except ValueError as exc:
+        print(f"error: --ipopt {exc}", file=sys.stderr)
+        return 2
     if args.repeats < 1:
         print(f"error: --repeats {args.repeats}: must be at least 1", file=sys.stderr)
         return 2
@@ -113,6 +140,7 @@ def main(argv=None) -> int:
            "note": "CPU time (process_time) of the solve; the machine is shared, so wall times are not speeds. "
                    "speed-up = CPU time of mx_map's solve / CPU time of stages' solve, within this run.",
            "stages_library": {"cc": args.cc, "cflags": args.cflags, "cache_reused": bool(args.cache)},
+           "stages_ipopt_options": ipopt,
            "rows": [], "summary": {}}
     for problem in args.problems:
         funcs = ocp.load_functions(problem)
@@ -120,7 +148,11 @@ def main(argv=None) -> int:
         N = DEFAULT_N[problem]
         pairs = []
         for _ in range(args.repeats):
-            pair = {s: run_one(problem, N, s, funcs, setup, args.cc, cflags) for s in ("stages", "mx_map")}
+            pair = {"stages": run_one(problem, N, "stages", funcs, setup, args.cc, cflags, ipopt),
+                    "mx_map": run_one(problem, N, "mx_map", funcs, setup)}
+            if ipopt:
+                pair["mx_map_same_options"] = run_one(problem, N, "mx_map", funcs, setup, ipopt=ipopt)
+                pair["mx_map_same_options"]["formulation"] = "mx_map_same_options"
             doc["rows"].extend(pair.values())
             pairs.append(pair)
         sp = [p["mx_map"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]
@@ -129,6 +161,10 @@ def main(argv=None) -> int:
             "N": N, "speedup_solve_cpu": sp, "speedup_cpu_per_iteration": spi,
             "T_difference": [abs(p["mx_map"]["T"] - p["stages"]["T"]) for p in pairs],
             "iterations": [[p["mx_map"]["iterations"], p["stages"]["iterations"]] for p in pairs]}
+        if ipopt:
+            doc["summary"][problem]["speedup_like_for_like"] = [
+                p["mx_map_same_options"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]
+            doc["summary"][problem]["iterations_same_options"] = [p["mx_map_same_options"]["iterations"] for p in pairs]
         print(f"  {problem}: speed-up (solve CPU) {', '.join(f'{v:.1f}x' for v in sp)}; per iteration "
               f"{', '.join(f'{v:.1f}x' for v in spi)}", flush=True)
     doc["load_after"] = os.getloadavg()
