@@ -124,9 +124,7 @@ def compile_native(funcs: dict, n: int, N: int, h: float) -> dict:
     code of its small helpers, compiled into one library (cached by the hash of the sources and
     flags, like ocp_stages.compile_library); {name: external Function} for fdnlp_g,
     fdnlp_jac_g, fdnlp_hess."""
-    import hashlib
     import os
-    import subprocess
     name = funcs["robot"].name
     cdir = Path(ocp_reach.ROOT) / "generated" / name / "c"
     y, m = ca.SX.sym("y", 3 * n), ca.SX.sym("m", n)
@@ -156,16 +154,7 @@ def compile_native(funcs: dict, n: int, N: int, h: float) -> dict:
     import shutil
     cc = [*(NATIVE_CC if shutil.which(NATIVE_CC[0]) else ("gcc",) + NATIVE_CC[1:]),
           *os.environ.get("KINDYNGEN_FDNLP_CFLAGS", "").split()]
-    key = hashlib.sha256((src + " ".join(cc)).encode()).hexdigest()[:16]
-    cache = ocp_stages.CACHE
-    cache.mkdir(parents=True, exist_ok=True)
-    so = cache / f"fdnlp_{name}_N{N}_{key}.so"
-    if not so.exists():
-        c = cache / f"fdnlp_{name}_N{N}_{key}.c"
-        c.write_text(glue)
-        tmp = so.with_suffix(f".{os.getpid()}.tmp")
-        subprocess.run([*cc, f"-I{cdir}", "-o", str(tmp), str(c), "-lm"], check=True)
-        tmp.replace(so)
+    so = ocp_stages.cached_library(f"fdnlp_{name}_N{N}", glue, src + " ".join(cc), [*cc, f"-I{cdir}"])
     return {f: ca.external(f, str(so)) for f in ("fdnlp_g", "fdnlp_jac_g", "fdnlp_hess")}
 
 

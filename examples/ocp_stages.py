@@ -61,16 +61,23 @@ def compile_library(functions: list[ca.Function], stem: str, cc: str = "gcc",
         cg.add(f)
     src = cg.dump()
     tag = " ".join(flags) if cc == "gcc" else " ".join((cc, *flags))   # gcc keeps the old cache keys
-    key = hashlib.sha256((src + tag).encode()).hexdigest()[:16]
+    return str(cached_library(stem, src, src + tag, [cc, *flags]))
+
+
+def cached_library(stem: str, text: str, key_text: str, command: list[str]) -> Path:
+    """CACHE/<stem>_<hash of key_text>.so, compiled from ``text`` (written beside it as .c) by
+    ``command + ["-o", so, c, "-lm"]`` unless it exists. key_text holds everything that decides
+    the library (the source, with what it includes, and the command)."""
+    key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
     CACHE.mkdir(parents=True, exist_ok=True)
     so = CACHE / f"{stem}_{key}.so"
     if not so.exists():
         c = CACHE / f"{stem}_{key}.c"
-        c.write_text(src)
+        c.write_text(text)
         tmp = so.with_suffix(f".{os.getpid()}.tmp")
-        subprocess.run([cc, *flags, "-o", str(tmp), str(c), "-lm"], check=True)
+        subprocess.run([*command, "-o", str(tmp), str(c), "-lm"], check=True)
         tmp.replace(so)        # atomic: a parallel run never loads a half-written library
-    return str(so)
+    return so
 
 
 def compile_functions(functions: list[ca.Function], stem: str) -> dict:

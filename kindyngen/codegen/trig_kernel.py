@@ -255,6 +255,26 @@ def _quadrant(s: str, c: str) -> str:
         out[j] = fabs(xi) <= {BOUND!r} ? 0.0 : 1.0;"""
 
 
+def _block(name: str, lanes: int, body: str) -> str:
+    """The C of ``name``<lanes>: the kernel's steps on ``lanes`` consecutive arguments, returning
+    nonzero if a lane needs libm (its range flags summed as a balanced tree)."""
+    flags = [f"out[{j}]" for j in range(lanes)]
+    while len(flags) > 1:
+        flags = [f"({a} + {b})" for a, b in zip(flags[0::2], flags[1::2])]
+    return f"""static int {name}{lanes}(const double *restrict x, double *restrict s, double *restrict c)
+{{
+    double out[{lanes}];
+    int j;
+    for (j = 0; j < {lanes}; ++j) {{
+        const double xi = x[j];
+{body}
+{_quadrant("s[j]", "c[j]")}
+    }}
+    return {flags[0][1:-1]} != 0.0;
+}}
+"""
+
+
 def kernel_c(name: str = "kdg_sincos") -> str:
     """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
     for i < n. The arrays must not overlap. Its work is done in blocks of consecutive
@@ -262,37 +282,14 @@ def kernel_c(name: str = "kdg_sincos") -> str:
     on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy)."""
     bound = repr(BOUND)
     body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
-    flag = "    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;"
     return f"""\
 /* The blocks of {name} (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
  * nonzero if some |x[i]| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and {name} replaces them by libm. codegen/trig_kernel.py's
  * _steps explains each step. {name}8: i = 0..7. */
-static int {name}8(const double *restrict x, double *restrict s, double *restrict c)
-{{
-    double out[8];
-    int j;
-    for (j = 0; j < 8; ++j) {{
-        const double xi = x[j];
-{body}
-{_quadrant("s[j]", "c[j]")}
-    }}
-{flag}
-}}
-
+{_block(name, 8, body)}
 /* {name}4: i = 0..3 */
-static int {name}4(const double *restrict x, double *restrict s, double *restrict c)
-{{
-    double out[4];
-    int j;
-    for (j = 0; j < 4; ++j) {{
-        const double xi = x[j];
-{body}
-{_quadrant("s[j]", "c[j]")}
-    }}
-    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
-}}
-
+{_block(name, 4, body)}
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
  * explains the method and where its constants come from): blocks of eight or four lanes
  * without a branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
