@@ -138,20 +138,18 @@ def jacobian_tree(model: RobotModel, name: str = "jacobian") -> SymbolicFunction
     q = port_symbols("q", (model.nq,))
     stages = Stages()
     root, links, axes = link_poses(model, q, stages)
-    poses = [compose(links[f.body] if f.body >= 0 else root, constant_transform(f.placement))
-             for f in model.frames_of_interest]
     base = FREE_FLYER_NV if model.floating_base else 0
     out = []
-    for frame, (_, p) in zip(model.frames_of_interest, poses):
+    for frame in model.frames_of_interest:
         J = se.zeros(6, model.nv)
+        levers = _levers(model, q, root, links, frame, stages)
         if model.floating_base:
-            R, pb = root
+            R = root[0]
             d = levers[-1]
             dx = se.Matrix([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
             J[0:3, 0:3] = R
             J[0:3, 3:6] = -dx * R
             J[3:6, 3:6] = R
-        levers = _levers(model, q, root, links, frame, stages)
         for j in model.ancestors(frame.body):
             z, _ = axes[j]
             if model.joints[j].prismatic:
@@ -162,7 +160,7 @@ def jacobian_tree(model: RobotModel, name: str = "jacobian") -> SymbolicFunction
                                               z[0] * d[1] - z[1] * d[0]])
                 J[3:6, base + j] = z
         out.extend(flatten(J))
-    k = len(poses)
+    k = len(model.frames_of_interest)
     if model.is_tree:
         summary = f"Geometric Jacobians of the {k} requested frames."
         port = Port("J", (k, 6, model.nv), f"Jacobians of {_frame_text(model)}: rows linear velocity of the frame "
