@@ -60,6 +60,52 @@ def frame_poses(model: RobotModel, q, stages: Stages | None = None):
     return poses, root, axes
 
 
+def _levers(model: RobotModel, q, root, links, frame, stages: Stages) -> dict:
+    """The lever arms ``p_f - o_j`` from each joint origin on the frame's branch to the frame
+    origin (key -1: from the root origin), summed from the frame down: ``d_j = d_c + (o_c -
+    o_j)`` with c the joint below j, where ``o_c - o_j`` is the rotated constant offsets of
+    joint j's motion and after-placement and of joint c's before-placement. Each offset is a
+    product the link poses share; the origins ``o_j`` and the frame position are never formed,
+    so that each lever is one vector addition after the one below it."""
+    joint_q = q[7:] if model.floating_base else q
+
+    def rotated(R, t):
+        return None if t is None else R * t
+
+    def plus(a, b):
+        return b if a is None else a if b is None else a + b
+
+    def offset_in_link(j):
+        """p_link_j - o_j: the rotated translations of joint j's motion and after-placement."""
+        joint, parent = model.joints[j], model.parents[j]
+        above = links[parent] if parent >= 0 else root
+        R_frame = compose(above, constant_transform(joint.before))[0]
+        R_motion, t_motion = motion(joint, joint_q[j])
+        after = constant_transform(joint.after)
+        out = rotated(R_frame, t_motion) if joint.prismatic else None
+        return plus(out, None if after is None else (R_frame * R_motion) * after[1])
+
+    def before_offset(j):
+        """o_j - p_parent: joint j's before-translation in its parent link's axes."""
+        parent = model.parents[j]
+        above = links[parent] if parent >= 0 else root
+        before = constant_transform(model.joints[j].before)
+        return None if before is None else above[0] * before[1]
+
+    placement = constant_transform(frame.placement)
+    d = None
+    if placement is not None:
+        d = (links[frame.body] if frame.body >= 0 else root)[0] * placement[1]
+    levers = {}
+    for j in model.ancestors(frame.body):
+        d = plus(d, offset_in_link(j))
+        d = se.zeros(3, 1) if d is None else se.Matrix(3, 1, stages.cut_all(list(d)))
+        levers[j] = d
+        d = plus(d, before_offset(j))
+    levers[-1] = se.zeros(3, 1) if d is None else d
+    return levers
+
+
 def _frame_text(model: RobotModel) -> str:
     names = ", ".join(f.name for f in model.frames_of_interest)
     where = "world" if model.floating_base else f"root link '{model.base_name}'"
@@ -91,29 +137,30 @@ def jacobian_tree(model: RobotModel, name: str = "jacobian") -> SymbolicFunction
     its flange's, 6 x n)."""
     q = port_symbols("q", (model.nq,))
     stages = Stages()
-    poses, root, axes = frame_poses(model, q, stages)
+    root, links, axes = link_poses(model, q, stages)
     base = FREE_FLYER_NV if model.floating_base else 0
     out = []
-    for frame, (_, p) in zip(model.frames_of_interest, poses):
+    for frame in model.frames_of_interest:
         J = se.zeros(6, model.nv)
+        levers = _levers(model, q, root, links, frame, stages)
         if model.floating_base:
-            R, pb = root
-            d = p - pb
+            R = root[0]
+            d = levers[-1]
             dx = se.Matrix([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
             J[0:3, 0:3] = R
             J[0:3, 3:6] = -dx * R
             J[3:6, 3:6] = R
         for j in model.ancestors(frame.body):
-            z, o = axes[j]
+            z, _ = axes[j]
             if model.joints[j].prismatic:
                 J[0:3, base + j] = z
             else:
-                d = p - o
+                d = levers[j]
                 J[0:3, base + j] = se.Matrix([z[1] * d[2] - z[2] * d[1], z[2] * d[0] - z[0] * d[2],
                                               z[0] * d[1] - z[1] * d[0]])
                 J[3:6, base + j] = z
         out.extend(flatten(J))
-    k = len(poses)
+    k = len(model.frames_of_interest)
     if model.is_tree:
         summary = f"Geometric Jacobians of the {k} requested frames."
         port = Port("J", (k, 6, model.nv), f"Jacobians of {_frame_text(model)}: rows linear velocity of the frame "

@@ -258,4 +258,11 @@ def test_symbolic_lengths_are_passed_through(symbolic_lengths_lwr, lang):
     got = lib.call("ik_dls", {"T": T[:30], "q0": starts["random"][:30], "lengths": np.tile([0.40, 0.39], (30, 1))})
     want = evaluate("lwr4", lang, "ik_dls", T=T[:30], q0=starts["random"][:30])
     np.testing.assert_array_equal(got["status"], want["status"])
-    np.testing.assert_allclose(got["q"], want["q"], atol=1e-6)
+    # the two robots' jacobians round differently (symbolic lengths stay in the code), and over
+    # many iterations q may drift along the redundant arm's self-motion (as between languages,
+    # test_languages_agree): the converged poses must agree, q for most targets to 1e-9
+    model = robot("lwr4")
+    for k in np.flatnonzero(want["status"].ravel() == 0):
+        assert np.abs(fk_numpy(model, got["q"][k]) - T[k]).max() < 2e-9, k
+    close = np.abs(got["q"] - want["q"]).max(axis=1) < 1e-9
+    assert close.mean() > 0.9, close.mean()

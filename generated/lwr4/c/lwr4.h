@@ -92,9 +92,9 @@ void lwr4_fk_dq_batch(long count, const double *q, double *x);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
  *
- * Cost: 35 add, 72 mul, 12 call
- * (as derived, before CSE: 53 add, 102 mul, 68 call);
- * critical path 77 cycles, 11 dependent operations.
+ * Cost: 29 add, 66 mul, 12 call
+ * (as derived, before CSE: 41 add, 96 mul, 68 call);
+ * critical path 74 cycles, 10 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_jacobian(const double *q, double *J);
@@ -680,9 +680,9 @@ void lwr4_Y_batch(long count, const double *q, const double *qd, const double *q
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (31 add, 67 mul, 14 call) + jacobian (35 add, 72 mul, 12 call, only after
+ * fk_hom (31 add, 67 mul, 14 call) + jacobian (29 add, 66 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 339 add, 471 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 333 add, 465 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void lwr4_ik_dls(const double *T, const double *q0, double *q, int *status);

@@ -179,7 +179,7 @@ def jacobian():
 
     in  q: 7, joint angles, DH order [rad]
     out J: 6 x 7, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
-    Cost: 35 add, 72 mul, 12 call.
+    Cost: 29 add, 66 mul, 12 call.
     """
     q = ca.SX.sym("q", 7)
     t0 = ca.cos(q[0])
@@ -216,21 +216,18 @@ def jacobian():
     t31 = -(t27*t15 - t22*t26)
     t32 = t26*t17 + t24*t27
     t33 = -(t27*t17 - t24*t26)
-    t34 = 0.4*t5
-    t35 = 0.39*t21 + t34
-    t36 = 0.4*t8
-    t37 = 0.39*t23 + t36
-    t38 = 0.4*t9
-    t39 = 0.39*t25 + t38
-    t40 = ca.sin(q[5])
-    t41 = ca.cos(q[5])
-    t43 = -(t41*t21 - t40*t28)
-    t45 = -(t41*t23 - t40*t30)
-    t47 = -(t41*t25 - t40*t32)
-    t56 = t37 - t36
-    t57 = t39 - t38
-    t58 = t35 - t34
-    out_J = _matrix([-t37, t1*t39, t8*t39 - t9*t37, t57*t15 - t56*t17, t57*t23 - t56*t25, 0.0, 0.0, t35, -t6*t39, t9*t35 - t5*t39, t58*t17 - t57*t13, t58*t25 - t57*t21, 0.0, 0.0, 0.0, t6*t37 - t1*t35, t5*t37 - t8*t35, t56*t13 - t58*t15, t56*t21 - t58*t23, 0.0, 0.0, 0.0, t6, t5, t13, t21, t29, t43, 0.0, t1, t8, t15, t23, t31, t45, 1.0, 0.0, t9, t17, t25, t33, t47], 6, 7)
+    t34 = ca.sin(q[5])
+    t35 = ca.cos(q[5])
+    t37 = -(t21*t35 - t28*t34)
+    t39 = -(t23*t35 - t34*t30)
+    t41 = -(t25*t35 - t34*t32)
+    t50 = 0.39*t21
+    t51 = t50 + 0.4*t5
+    t52 = 0.39*t23
+    t53 = t52 + 0.4*t8
+    t54 = 0.39*t25
+    t55 = t54 + 0.4*t9
+    out_J = _matrix([-t53, t1*t55, t8*t55 - t9*t53, t54*t15 - t52*t17, 0.0, 0.0, 0.0, t51, -t6*t55, t9*t51 - t5*t55, t50*t17 - t54*t13, 0.0, 0.0, 0.0, 0.0, t6*t53 - t1*t51, t5*t53 - t8*t51, t52*t13 - t50*t15, 0.0, 0.0, 0.0, 0.0, t6, t5, t13, t21, t29, t37, 0.0, t1, t8, t15, t23, t31, t39, 1.0, 0.0, t9, t17, t25, t33, t41], 6, 7)
     return ca.Function("jacobian", [q], [out_J],
                        ["q"], ["J"])
 

@@ -237,7 +237,7 @@ PyDoc_STRVAR(kdg_d_jacobian,
     "Returns J: (6, 7) float64, rows 0-2: linear velocity of the flange origin, rows 3-5:\n"
     "    angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows\n"
     "    3-5)]\n"
-    "Cost of the generated C: 35 add, 72 mul, 12 call.\n"
+    "Cost of the generated C: 29 add, 66 mul, 12 call.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/lwr4_hartl.py. Same as jacobian(q) there.");
 
@@ -1656,7 +1656,7 @@ PyDoc_STRVAR(kdg_d_ik_dls,
     "    (smallest |e|^2)\n"
     "status 3: invalid input (non-finite T or q0, or T's rotation not orthonormal to\n"
     "    ORTHONORMAL_TOL or a reflection); q = q0 clamped to the limits where finite, else 0\n"
-    "Cost of the generated C per iteration: 339 add, 471 mul, 34 call; at most 200\n"
+    "Cost of the generated C per iteration: 333 add, 465 mul, 34 call; at most 200\n"
     "iterations.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/lwr4_hartl.py. Same as ik_dls(T, q0) there.");

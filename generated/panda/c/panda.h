@@ -92,9 +92,9 @@ void panda_fk_dq_batch(long count, const double *q, double *x);
  * in  q[7]: 7 double, joint angles, DH order [rad]
  * out J[42]: 6 x 7 double, rows 0-2: linear velocity of the flange origin, rows 3-5: angular velocity; both in base-frame axes (row-major) [m/rad (rows 0-2), 1 (rows 3-5)]
  *
- * Cost: 64 add, 99 mul, 12 call
- * (as derived, before CSE: 115 add, 145 mul, 68 call);
- * critical path 89 cycles, 15 dependent operations.
+ * Cost: 47 add, 93 mul, 12 call
+ * (as derived, before CSE: 66 add, 132 mul, 68 call);
+ * critical path 92 cycles, 16 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_jacobian(const double *q, double *J);
@@ -623,9 +623,9 @@ void panda_Y_batch(long count, const double *q, const double *qd, const double *
  * Restarts start from a fixed table of 25 configurations uniform within the limits.
  *
  * Cost per iteration: one fk_hom + one jacobian + a 6x6 solve, that is
- * fk_hom (41 add, 76 mul, 14 call) + jacobian (64 add, 99 mul, 12 call, only after
+ * fk_hom (41 add, 76 mul, 14 call) + jacobian (47 add, 93 mul, 12 call, only after
  * an accepted step) + the 6x6 solve (239 add, 288 mul, 6 call; twice when a joint at a limit is
- * released) + the pose error (34 add, 44 mul, 2 call), in all at most 378 add, 507 mul, 34 call;
+ * released) + the pose error (34 add, 44 mul, 2 call), in all at most 361 add, 501 mul, 34 call;
  * at most MAX_ITERATIONS = 200 iterations. Iterative: op counts before/after CSE do not apply.
  */
 void panda_ik_dls(const double *T, const double *q0, double *q, int *status);
