@@ -8,9 +8,13 @@ alone against its latency bound, and what FMA contraction buys; results/latency.
   strict (``-ffp-contract=off``, the code exactly as the critical-path count reads it) and
   contracted (``-ffp-contract=fast``, gcc's default outside ISO mode). Beside each time, the
   function's critical path and operation count from ``generated/<robot>/opcounts.json``.
+* ``machine_code``: per function, the strict build's object code as gcc emits it (bytes,
+  instructions, and instructions with a memory operand: loads and stores of inputs, outputs,
+  sin/cos arrays and register spills; x86-64 only, read with objdump).
 * ``correlation``: Pearson's r over the functions of a robot between the strict single-call
-  time and (a) the critical path in cycles, (b) add + mul + call after CSE, and the
-  least-squares fit time = a * cycles + b * operations + c with its r.
+  time and (a) the critical path in cycles, (b) add + mul + call after CSE, (c) each figure of
+  ``machine_code``, and the least-squares fits time = a * cycles + b * operations + c and
+  time = a * cycles + b * memory operands + c with their r.
 * ``kernel``: kdg_sincos alone on 8 angles (n passed at run time, as the batch and half-angle
   calls do) and on 7 (``n7``: n a constant, as lwr4's and panda's single calls do): latency (the
   next call's angles depend on this call's results) and throughput (independent calls), both
@@ -26,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -79,6 +84,7 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
     pooled, _ = compiled.interleave(timers, 3 * rounds, rounds, 5e6,
                                     lambda impl, exc: log(f"{robot} {impl} failed: {exc}"))
     counts = json.loads((robot_dir / "opcounts.json").read_text())
+    shape = machine_code(robot_dir / "c" / f"{robot}.c", robot, VARIANTS["strict"], workdir / "shape")
     rows = {}
     for f in functions:
         name = f["name"]
@@ -88,8 +94,48 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
         rows[name] = {"critical_path_cycles": c["critical_path"]["cycles"],
                       "critical_path_operations": c["critical_path"]["operations"],
                       "operations": sum(c["after"].values()),
+                      **({"machine_code": shape[name]} if name in shape else {}),
                       **{variant: summary(pooled[variant][name]) for variant in VARIANTS if name in pooled[variant]}}
     return rows
+
+
+def machine_code(source: Path, robot: str, flags: list, workdir: Path) -> dict:
+    r"""``{function: {"bytes", "instructions", "memory_operands"}}`` of the single-call functions
+    of a generated C file compiled by gcc with ``flags``; ``{}`` where objdump cannot read the
+    object or it is not x86-64 (a memory operand is told by AT&T syntax, ``disp(%reg)``).
+
+    >>> text = "0 <r_f>:\n   0:\tvmulsd 0x8(%rdi),%xmm0,%xmm1\n   5:\tvaddsd %xmm1,%xmm1,%xmm0\n"
+    >>> _bodies(text)
+    {'r_f': {'instructions': 2, 'memory_operands': 1}}
+    """
+    workdir.mkdir(parents=True, exist_ok=True)
+    obj = workdir / f"{robot}.o"
+    try:
+        subprocess.run(["gcc", "-std=c99", *flags, "-c", str(source), "-o", str(obj)], check=True, capture_output=True)
+        dis = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(obj)], check=True, capture_output=True, text=True).stdout
+        table = subprocess.run(["nm", "-S", str(obj)], check=True, capture_output=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError) as exc:
+        log(f"{robot}: machine code not read ({exc})")
+        return {}
+    if "x86-64" not in subprocess.run(["objdump", "-f", str(obj)], capture_output=True, text=True).stdout:
+        return {}
+    sizes = {p[3]: int(p[1], 16) for p in (line.split() for line in table.splitlines()) if len(p) == 4}
+    prefix = f"{robot}_"
+    return {sym[len(prefix):]: {"bytes": sizes.get(sym), **body} for sym, body in _bodies(dis).items()
+            if sym.startswith(prefix) and not sym.endswith("_batch")}
+
+
+def _bodies(disassembly: str) -> dict:
+    """``{symbol: {"instructions", "memory_operands"}}`` of ``objdump -d --no-show-raw-insn`` text."""
+    out, current = {}, None
+    for line in disassembly.splitlines():
+        head = re.match(r"^[0-9a-f]+ <([^>]+)>:$", line)
+        if head:
+            current = out.setdefault(head.group(1), {"instructions": 0, "memory_operands": 0})
+        elif current is not None and re.match(r"^\s+[0-9a-f]+:\t", line):
+            current["instructions"] += 1
+            current["memory_operands"] += "(%" in line
+    return out
 
 
 SMALL = 700
@@ -108,9 +154,14 @@ def _correlation(rows: dict) -> dict:
     t = [rows[n]["strict"]["median_ns"] for n in names]
     cycles = [rows[n]["critical_path_cycles"] for n in names]
     ops = [rows[n]["operations"] for n in names]
-    return {"functions": len(names), "r_time_critical_path": pearson(cycles, t),
-            "r_time_operations": pearson(ops, t),
-            "fit_time_ns_on_cycles_operations": fit([cycles, ops], t)}
+    out = {"functions": len(names), "r_time_critical_path": pearson(cycles, t),
+           "r_time_operations": pearson(ops, t),
+           "fit_time_ns_on_cycles_operations": fit([cycles, ops], t)}
+    if names and all("machine_code" in rows[n] for n in names):
+        code = {k: [rows[n]["machine_code"][k] for n in names] for k in ("bytes", "instructions", "memory_operands")}
+        out.update({f"r_time_{k}": pearson(v, t) for k, v in code.items()})
+        out["fit_time_ns_on_cycles_memory_operands"] = fit([cycles, code["memory_operands"]], t)
+    return out
 
 
 KERNEL_DRIVER = r"""
