@@ -126,13 +126,16 @@ def machine_code(source: Path, robot: str, flags: list, workdir: Path) -> dict:
 
 
 def _bodies(disassembly: str) -> dict:
-    """``{symbol: {"instructions", "memory_operands"}}`` of ``objdump -d --no-show-raw-insn`` text."""
+    """``{symbol: {"instructions", "memory_operands"}}`` of ``objdump -d --no-show-raw-insn`` text,
+    the padding between functions (nop, int3) left out."""
     out, current = {}, None
     for line in disassembly.splitlines():
         head = re.match(r"^[0-9a-f]+ <([^>]+)>:$", line)
         if head:
             current = out.setdefault(head.group(1), {"instructions": 0, "memory_operands": 0})
         elif current is not None and re.match(r"^\s+[0-9a-f]+:\t", line):
+            if "nop" in line or "int3" in line:      # alignment padding after the function's ret
+                continue
             current["instructions"] += 1
             current["memory_operands"] += "(%" in line
     return out

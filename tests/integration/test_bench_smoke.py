@@ -47,3 +47,23 @@ def test_bench_quick_and_report(tmp_path):
         assert (tmp_path / name).stat().st_size > 0, name
     report = (tmp_path / "report.md").read_text()
     assert "Table II" in report and "40 / 87 / 14" in report
+
+
+def test_machine_code_reads_each_function(tmp_path):
+    """benchmarks.latency.machine_code against a C file whose functions' memory traffic is
+    known: one load-free register function, one with two loads and a store; batch variants are
+    left out."""
+    import platform
+    import shutil
+    from benchmarks.latency import machine_code
+    if platform.machine() not in ("x86_64", "AMD64") or not (shutil.which("gcc") and shutil.which("objdump")):
+        pytest.skip("machine_code reads x86-64 objects with gcc and objdump")
+    source = tmp_path / "r.c"
+    source.write_text("double r_sq(double x) { return x * x; }\n"
+                      "void r_mul(const double *x, double *y) { y[0] = x[0] * x[1]; }\n"
+                      "void r_mul_batch(const double *x, double *y) { y[0] = x[0] + x[1]; }\n")
+    shape = machine_code(source, "r", ["-O2"], tmp_path / "obj")
+    assert set(shape) == {"sq", "mul"}
+    assert shape["sq"]["memory_operands"] == 0 and shape["sq"]["instructions"] >= 2     # mulsd, ret
+    assert shape["mul"]["memory_operands"] == 3 and shape["mul"]["instructions"] >= 4   # 2 loads, 1 store
+    assert all(0 < s["bytes"] for s in shape.values())
