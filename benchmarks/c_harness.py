@@ -151,6 +151,12 @@ class Prepared:
     built: Built
 
 
+C_STD = "-std=gnu99"
+"""The language mode every C implementation of the benchmarks is built in, ours and the peers'
+alike. In GNU mode gcc contracts products into sums (``-ffp-contract=fast``) unless the flags
+say otherwise, so the timings include fused multiply-adds on both sides (docs/latency.md)."""
+
+
 def prepare(name: str, functions: list[CFunction], prelude: str, sources: list[Path], flags: list[str],
             workdir: Path) -> Prepared:
     """Write and build the driver for ``functions`` with ``sources`` and ``flags``, and
@@ -159,7 +165,7 @@ def prepare(name: str, functions: list[CFunction], prelude: str, sources: list[P
     driver = workdir / f"{name}_driver.c"
     driver.write_text(driver_source(functions, prelude))
     include = sorted({f"-I{Path(s).parent}" for s in sources})
-    built = build(name, "gcc", [driver, *sources], ["-std=gnu99", *flags, *include], libs=("-lm",),
+    built = build(name, "gcc", [driver, *sources], [C_STD, *flags, *include], libs=("-lm",),
                   extra=tuple(p for s in sources for p in Path(s).parent.glob("*.h")))
     K = functions[0].inputs[0].shape[0] if functions and functions[0].inputs else 1
     data = workdir / f"{name}_inputs"

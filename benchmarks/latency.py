@@ -40,7 +40,7 @@ import numpy as np
 from kindyngen.codegen import trig_kernel
 from kindyngen.readers.yaml_description import load_robot
 
-from . import compiled, inputs
+from . import c_harness, compiled, inputs
 from .build import BUILD, build
 from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
 
@@ -100,18 +100,13 @@ def time_functions(robot: str, generated: Path, rounds: int, K: int, workdir: Pa
 
 
 def machine_code(source: Path, robot: str, flags: list, workdir: Path) -> dict:
-    r"""``{function: {"bytes", "instructions", "memory_operands"}}`` of the single-call functions
-    of a generated C file compiled by gcc with ``flags``; ``{}`` where objdump cannot read the
-    object or it is not x86-64 (a memory operand is told by AT&T syntax, ``disp(%reg)``).
-
-    >>> text = "0 <r_f>:\n   0:\tvmulsd 0x8(%rdi),%xmm0,%xmm1\n   5:\tvaddsd %xmm1,%xmm1,%xmm0\n"
-    >>> _bodies(text)
-    {'r_f': {'instructions': 2, 'memory_operands': 1}}
-    """
+    """``{function: {"bytes", "instructions", "memory_operands"}}`` of the single-call functions
+    of a generated C file compiled by gcc with ``flags`` in the harness's language mode (the
+    object the timings run); ``{}`` where objdump cannot read the object or it is not x86-64."""
     workdir.mkdir(parents=True, exist_ok=True)
     obj = workdir / f"{robot}.o"
     try:
-        subprocess.run(["gcc", "-std=c99", *flags, "-c", str(source), "-o", str(obj)], check=True, capture_output=True)
+        subprocess.run(["gcc", c_harness.C_STD, *flags, "-c", str(source), "-o", str(obj)], check=True, capture_output=True)
         dis = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(obj)], check=True, capture_output=True, text=True).stdout
         table = subprocess.run(["nm", "-S", str(obj)], check=True, capture_output=True, text=True).stdout
     except (OSError, subprocess.CalledProcessError) as exc:
@@ -126,18 +121,26 @@ def machine_code(source: Path, robot: str, flags: list, workdir: Path) -> dict:
 
 
 def _bodies(disassembly: str) -> dict:
-    """``{symbol: {"instructions", "memory_operands"}}`` of ``objdump -d --no-show-raw-insn`` text,
-    the padding between functions (nop, int3) left out."""
+    r"""``{symbol: {"instructions", "memory_operands"}}`` of ``objdump -d --no-show-raw-insn`` text
+    (AT&T syntax: a memory operand is ``disp(%reg)``), the padding between functions (nop,
+    int3) left out.
+
+    >>> text = ("0 <r_f>:\n   0:\tvmulsd 0x8(%rdi),%xmm0,%xmm1\n   5:\tret\n"
+    ...         "   6:\tnopw 0x0(%rax,%rax,1)\n")
+    >>> _bodies(text)
+    {'r_f': {'instructions': 2, 'memory_operands': 1}}
+    """
     out, current = {}, None
     for line in disassembly.splitlines():
         head = re.match(r"^[0-9a-f]+ <([^>]+)>:$", line)
         if head:
             current = out.setdefault(head.group(1), {"instructions": 0, "memory_operands": 0})
-        elif current is not None and re.match(r"^\s+[0-9a-f]+:\t", line):
-            if "nop" in line or "int3" in line:      # alignment padding after the function's ret
-                continue
-            current["instructions"] += 1
-            current["memory_operands"] += "(%" in line
+            continue
+        insn = re.match(r"^\s+[0-9a-f]+:\t(?:data16 |cs )*(\S+)", line)
+        if current is None or not insn or insn.group(1).startswith("nop") or insn.group(1) == "int3":
+            continue
+        current["instructions"] += 1
+        current["memory_operands"] += "(%" in line
     return out
 
 

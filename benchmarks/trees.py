@@ -188,7 +188,7 @@ def pinocchio_timer(binary: Path, model_file: Path, frames: list, pin_data: dict
 # --- CasADi-traced Pinocchio ----------------------------------------------------------------
 def _compile_object(name: str, source: Path, limit_s: float) -> Path:
     """``source`` compiled to an object (cached like build()); TimeoutExpired past limit_s."""
-    flags = ["-c", "-std=gnu99", *compiled.C_FLAGS[pinocchio_casadi.IMPL]]
+    flags = ["-c", c_harness.C_STD, *compiled.C_FLAGS[pinocchio_casadi.IMPL]]
     out = target(name, "gcc", [source], flags)
     if not out.exists():
         BUILD.mkdir(parents=True, exist_ok=True)
