@@ -56,6 +56,9 @@ class SymbolicFunction:
     # other derivations of the same function (routes, named by metadata["route"]):
     # optimisation keeps the one with the fewest operations after CSE
     alternatives: tuple["SymbolicFunction", ...] = ()
+    # the same outputs as one program run once per lane (the C prints it as a loop over
+    # lanes that compilers vectorise); None: scalar code only
+    lanes: "LaneSweep | None" = None
 
     def inlined_outputs(self) -> tuple[tuple[se.Basic, ...], ...]:
         """``output_exprs`` with the named intermediates substituted: expressions of the
@@ -79,6 +82,45 @@ class SymbolicFunction:
             assert len(syms) == port.size, f"{self.name}: input {port.name} has {len(syms)} symbols"
         for port, exprs in zip(self.outputs, self.output_exprs):
             assert len(exprs) == port.size, f"{self.name}: output {port.name} has {len(exprs)} entries"
+
+
+@dataclass(frozen=True)
+class LaneSweep:
+    """Outputs that are one program evaluated in lanes l = 0, 1, ... which differ only in the
+    values of its ``seeds``: lane l reads seed k as ``values[l][k]`` (an expression of the inputs
+    and ``stages``; code that pads the lanes to a vector width gives the extra lanes 0 and
+    discards them) and its ``exprs[m]`` is
+    output entry ``offset + l * stride`` of port ``port`` for ``places[m] = (port, offset,
+    stride)``. Outputs of ports no place names are computed once, outside the lanes, from the
+    function's ``output_exprs``. ``stages``: named intermediates (symbol, expression) that
+    seed values and lane expressions read, computed once before the lanes.
+
+    The adjoint sweeps of the dynamics' derivatives are such a program: the seeds are the
+    weights of the joint torques whose gradient a lane carries (a row of the identity for
+    ``tau_derivatives``, a row of ``-M^-1`` for ``fd_derivatives``), so one lane gives one row
+    of the Jacobian, and every lane does the same arithmetic.
+
+    >>> import symengine as se
+    >>> x, s = se.symbols("x s")
+    >>> sweep = LaneSweep(seeds=(s,), values=((1,), (x,)), exprs=(s * x,), places=((0, 0, 1),))
+    >>> [sweep.lane_value(0, l) for l in range(2)]
+    [x, x**2]
+    """
+
+    seeds: tuple
+    values: tuple
+    exprs: tuple
+    places: tuple
+    stages: tuple = ()
+
+    def lane_value(self, m: int, lane: int):
+        """Lane expression m in lane ``lane``, seeds and stages substituted."""
+        values = dict(zip(self.seeds, (se.sympify(v) for v in self.values[lane])))
+        staged: dict = {}
+        for symbol, expr in self.stages:
+            staged[symbol] = expr.xreplace(staged) if staged else expr
+        values = {k: v.xreplace(staged) for k, v in values.items()}
+        return self.exprs[m].xreplace(values).xreplace(staged)
 
 
 class Stages:

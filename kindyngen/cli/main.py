@@ -106,7 +106,7 @@ def _cmd_generate(args) -> int:
     for path in args.robots:
         model = load(path, args)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                       only=only, scalar=args.scalar, batch=not args.no_batch)
+                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
@@ -491,6 +491,9 @@ def parser() -> argparse.ArgumentParser:
                    help="generate only these functions, e.g. fk_hom,jacobian,tau (default: all that apply)")
     g.add_argument("--no-batch", action="store_true",
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
+    g.add_argument("--no-lanes", action="store_true",
+                   help="C: print the derivatives' single calls as their scalar program instead of a loop over "
+                        "lanes (fewer operations; for cores without vector units, e.g. Cortex-M)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
     g.set_defaults(run=_cmd_generate)
 

@@ -20,11 +20,14 @@ def opcounts_json(programs: list[Program], float_error: dict | None = None) -> d
     """``{name: {"before": {add, mul, call}, "after": {...}}}`` in generation order; a function
     chosen among routes also has ``"route"`` (the chosen one) and ``"routes"`` (each one's
     count after CSE); ``"critical_path"``: cycles and operations of the longest chain of
-    dependent operations (:func:`kindyngen.codegen.opcount.program_critical_path`); with ``--scalar float``
+    dependent operations (:func:`kindyngen.codegen.opcount.program_critical_path`); a function
+    whose C single call is a lane program has ``"c_lanes"`` (:meth:`kindyngen.codegen.optimize.LaneProgram.to_json`:
+    lanes, the counts once and per lane, those executed, its critical path); with ``--scalar float``
     each measured function has ``"float_error"`` (kindyngen/runtime/float_accuracy.py)."""
     float_error = float_error or {}
     return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(),
                               "critical_path": p.critical.to_json(), **_routes_json(p),
+                              **({"c_lanes": p.lanes.to_json()} if p.lanes is not None else {}),
                               **({"float_error": float_error[p.function.name].to_json()}
                                  if p.function.name in float_error else {})}
             for p in programs}
@@ -71,6 +74,22 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
         b, a = p.before, p.after
         lines.append(f"| {p.function.name} | {_row([b.add, b.mul, b.call, a.add, a.mul, a.call])} |")
     lines += _critical_markdown(programs)
+    laned = [p for p in programs if p.lanes is not None]
+    if laned:
+        lines += ["", "## Lane programs (C single calls)", "",
+                  "These functions' C single calls run one pass over the model once, then one program per "
+                  "lane, in a loop that compilers vectorise across lanes (lane l carries the gradient of the "
+                  "joint torques weighted by its seeds and gives row l of the result); lanes are padded to a "
+                  "multiple of four. More operations are executed than by the scalar program above, fewer "
+                  "instructions: four or eight lanes per vector instruction (docs/latency.md). "
+                  "`generate --no-lanes` prints the scalar program instead.", "",
+                  "| function | once (add / mul / call) | per lane (add / mul) | lanes (kept) | executed (add / mul) "
+                  "| critical path cycles |", "|---|---|---|---|---|---|"]
+        for p in laned:
+            lp = p.lanes
+            lines.append(f"| {p.function.name} | {lp.uniform.add} / {lp.uniform.mul} / {lp.uniform.call} | "
+                         f"{lp.lane.add} / {lp.lane.mul} | {lp.count} ({lp.used}) | "
+                         f"{lp.executed.add} / {lp.executed.mul} | {lp.critical.cycles} |")
     chosen = [p for p in programs if p.routes]
     if chosen:
         lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "

@@ -10,11 +10,12 @@ from .optimize import Program
 
 
 def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
-             scalar: str = "double", batch: bool = True) -> dict:
+             scalar: str = "double", batch: bool = True, lanes: bool = True) -> dict:
     """The interface document. A C library generated with ``--scalar float`` says so
     ("c_scalar": "float": every C port is float; Python and CasADi stay double) and has no
-    ik_dls in C; ``--no-batch`` adds "c_batch": false. Default (double, batch) documents carry
-    neither key."""
+    ik_dls in C; ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false. Default
+    (double, batch, lanes) documents carry none of these keys. A function whose C single call
+    is a lane program has its cost in "opcount": "c_lanes"."""
     dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
     if scalar == "float":
         for entry in dls:
@@ -31,6 +32,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
         "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/codegen/trig_kernel.py)
         **({"c_scalar": scalar} if scalar != "double" else {}),
         **({"c_batch": False} if not batch else {}),
+        **({"c_lanes": False} if not lanes else {}),
         "functions": [{
             "name": p.function.name,
             "summary": p.function.summary,
@@ -38,6 +40,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "c_symbol": f"{model.identifier}_{p.function.name}",
             "inputs": [port.to_json() for port in p.function.inputs],
             "outputs": [port.to_json() for port in p.function.outputs],
-            "opcount": {"before": p.before.to_json(), "after": p.after.to_json()},
+            "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
+                        **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
         } for p in programs] + dls,
     }

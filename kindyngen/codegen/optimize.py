@@ -55,6 +55,48 @@ class Program:
     routes: tuple[tuple[str, OpCount], ...] = ()
     # longest chain of dependent operations of the C as printed, sin/cos of q from the kernel
     critical: CriticalPath = CriticalPath(0, 0)
+    # the C single call's lane program (function.lanes), or None: the C prints this program
+    lanes: "LaneProgram | None" = None
+
+
+LANE_WIDTH = 4
+"""Lanes of a lane program are padded to a multiple of this: four doubles fill an AVX2 vector
+(two SSE2 or NEON vectors, half an AVX-512 one), so the loop over lanes vectorises without a
+scalar remainder; lwr4's and panda's seven joints give eight lanes, the eighth discarded."""
+
+
+@dataclass(frozen=True)
+class LaneProgram:
+    """A :class:`kindyngen.algorithms.symbolic.LaneSweep` as code: ``assignments`` and the
+    ``outputs`` of the ports no lane fills (None for the ports the lanes fill) computed once,
+    then the seed ``values[l][k]`` of the ``used`` lanes (reduced expressions), then, per lane,
+    ``lane_assignments`` and ``lane_outputs`` (``places[m]`` says where lane output m goes).
+    ``count``: lanes printed, ``used`` padded to :data:`LANE_WIDTH`. Operations executed:
+    ``uniform + count * lane``."""
+
+    count: int
+    used: int
+    assignments: tuple
+    outputs: tuple
+    seeds: tuple
+    values: tuple
+    lane_assignments: tuple
+    lane_outputs: tuple
+    places: tuple
+    uniform: OpCount
+    lane: OpCount
+    critical: CriticalPath
+
+    @property
+    def executed(self) -> OpCount:
+        """Operations a call executes, padding lanes included."""
+        return OpCount(self.uniform.add + self.count * self.lane.add, self.uniform.mul + self.count * self.lane.mul,
+                       self.uniform.call + self.count * self.lane.call)
+
+    def to_json(self) -> dict:
+        return {"lanes": self.count, "used": self.used, "uniform": self.uniform.to_json(),
+                "per_lane": self.lane.to_json(), "executed": self.executed.to_json(),
+                "critical_path": self.critical.to_json()}
 
 
 def optimize(function: SymbolicFunction) -> Program:
@@ -91,7 +133,67 @@ def optimize(function: SymbolicFunction) -> Program:
         before=tree_count(staged + flat),
         after=program_count(assignments, reduced),
         critical=critical_path(function, assignments, reduced),
+        lanes=optimize_lanes(function) if function.lanes is not None else None,
     )
+
+
+def optimize_lanes(function: SymbolicFunction) -> LaneProgram:
+    """CSE over the lane sweep's stages, the outputs outside the lanes, the seed values and the
+    lane expressions together; every temporary that reads a seed (or such a temporary) is a
+    lane temporary, the rest are computed once. The critical path is the longest over the used
+    lanes, each lane's seeds assigned their values.
+
+    >>> from kindyngen.algorithms.symbolic import LaneSweep, Port, port_symbols
+    >>> x, s = port_symbols("x", (1,)), se.Symbol("s")
+    >>> sweep = LaneSweep(seeds=(s,), values=((x[0] + 1,), (2,)), exprs=(s * (x[0] + 1) ** 2,), places=((0, 0, 1),))
+    >>> f = SymbolicFunction("f", "", (Port("x", (1,), ""),), (Port("y", (2,), ""),), (x,),
+    ...                      (((x[0] + 1) ** 3, 2 * (x[0] + 1) ** 2),), lanes=sweep)
+    >>> p = optimize_lanes(f)
+    >>> p.count, p.used, p.assignments, p.values, p.lane_outputs
+    (4, 2, ((t0, 1 + x_0),), ((t0,), (2,)), (s*t0**2,))
+    """
+    sweep = function.lanes
+    n_seeds, used = len(sweep.seeds), len(sweep.values)
+    filled = {port for port, _, _ in sweep.places}
+    uniform_exprs = [e for p, port in enumerate(function.output_exprs) if p not in filled for e in port]
+    seed_exprs = [se.sympify(v) for row in sweep.values for v in row]
+    flat = uniform_exprs + seed_exprs + list(sweep.exprs)
+    if sweep.stages:
+        replacements, reduced = _cse([e for _, e in sweep.stages] + flat)
+        replacements, reduced = _merged(replacements, sweep.stages, reduced)
+    else:
+        replacements, reduced = se.cse(flat)
+    rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
+    assignments = tuple((rename[sym], _renamed(expr, rename)) for sym, expr in replacements)
+    reduced = [_renamed(e, rename) for e in reduced]
+    assignments, reduced = _hoist_power_bases(assignments, reduced)
+    assignments = _live(assignments, reduced)
+    varying = set(sweep.seeds)
+    for sym, expr in assignments:
+        if expr.free_symbols & varying:
+            varying.add(sym)
+    once = tuple((sym, e) for sym, e in assignments if sym not in varying)
+    per_lane = tuple((sym, e) for sym, e in assignments if sym in varying)
+    n_uniform, n_seed_values = len(uniform_exprs), len(seed_exprs)
+    uniform_out, seed_out = reduced[:n_uniform], reduced[n_uniform:n_uniform + n_seed_values]
+    lane_out = tuple(reduced[n_uniform + n_seed_values:])
+    outputs, start = [], 0
+    for p, port in enumerate(function.outputs):
+        if p in filled:
+            outputs.append(None)
+        else:
+            outputs.append(tuple(uniform_out[start:start + port.size]))
+            start += port.size
+    values = tuple(tuple(seed_out[l * n_seeds:(l + 1) * n_seeds]) for l in range(used))
+    critical = max((critical_path(function, once + tuple(zip(sweep.seeds, values[l])) + per_lane,
+                                  list(uniform_out) + list(lane_out)) for l in range(used)),
+                   key=lambda c: (c.cycles, c.operations))
+    return LaneProgram(
+        count=-(-used // LANE_WIDTH) * LANE_WIDTH, used=used, assignments=once, outputs=tuple(outputs),
+        seeds=tuple(sweep.seeds), values=values, lane_assignments=per_lane, lane_outputs=lane_out,
+        places=tuple(sweep.places),
+        uniform=program_count(once, list(uniform_out) + [v for v in seed_out if not v.is_Number]),
+        lane=program_count(per_lane, lane_out), critical=critical)
 
 
 def _served(function: SymbolicFunction) -> set:

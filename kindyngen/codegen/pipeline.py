@@ -74,14 +74,14 @@ def save_casadi_functions(module_source: str, directory: Path) -> None:
         build().save(str(directory / f"{name}.casadi"))
 
 
-def measure_float_error(model, programs, document: dict, trig: str) -> dict:
+def measure_float_error(model, programs, document: dict, trig: str, lanes: bool = True) -> dict:
     """Float C against double C (kindyngen/runtime/float_accuracy.py): ``{name: FloatError}``, or
     ``{}`` with a note when no host C compiler can build them."""
     from ..runtime.evaluate import EvaluationError
     from ..runtime.float_accuracy import measure
     from .render import render_c
-    double = render_c(model, programs, trig, "double", batch=False)
-    single = render_c(model, programs, trig, "float", batch=False)
+    double = render_c(model, programs, trig, "double", batch=False, lanes=lanes)
+    single = render_c(model, programs, trig, "float", batch=False, lanes=lanes)
     try:
         return measure(model, double, single, document)
     except (EvaluationError, OSError) as exc:
@@ -92,25 +92,27 @@ def measure_float_error(model, programs, document: dict, trig: str) -> dict:
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True) -> Path:
+             batch: bool = True, lanes: bool = True) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
-    (the C's type, render.SCALARS) and ``batch`` (C batch variants): see render.render_c."""
+    (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
+    of lane programs as loops over lanes): see render.render_c."""
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
-    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch)
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
     _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
-    float_error = measure_float_error(model, programs, document, trig) if scalar == "float" and "c" in languages else None
+    float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None
     _write(out / "opcounts.json", json.dumps(opcounts_json(programs, float_error), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
                                                   float_error))
     for lang in languages:
-        options = {"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error} if lang == "c" else {}
+        options = ({"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error, "lanes": lanes}
+                   if lang == "c" else {})
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
             if lang == "casadi":

@@ -7,7 +7,7 @@ expressions.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import jinja2
@@ -71,7 +71,10 @@ fd_derivatives_no_minv (1.02-1.28x); fd_derivatives moved either way in three ru
 (PRESSURE_ORDER_EXCLUDED)."""
 
 PRESSURE_ORDER_EXCLUDED = ("fd_derivatives",)
-"""Functions kept in demand order whatever their size: measured slower in a run (above)."""
+"""Functions kept in demand order whatever their size: measured slower in a run (above).
+
+Both orders apply to scalar programs: the derivatives' single calls print their lane programs
+(:class:`LaneView`) unless generated with ``--no-lanes``."""
 
 
 def demand_order(assignments, outputs) -> list:
@@ -146,6 +149,26 @@ class FunctionView:
     # ("out", port name, entry, text, dtype) in print order; empty: assignments, then outputs
     statements: tuple = ()
     pressure: bool = False        # C single calls: those statements in pressure order (PRESSURE_ORDER_OPERATIONS)
+    lane: "LaneView | None" = None  # C single calls of a lane program: printed instead of the statements
+
+
+@dataclass(frozen=True)
+class LaneView:
+    """What the C template prints of a :class:`kindyngen.codegen.optimize.LaneProgram`."""
+
+    count: int                    # lanes of the loop
+    used: int                     # lanes whose results are stored
+    seeds: int                    # seeds per lane
+    statements: tuple             # once: ("t", name, text), ("out", port, entry, text, dtype)
+    seed_table: tuple             # all seeds numbers: rows (per seed) of lane texts; else ()
+    seed_statements: tuple        # else: (seed, lane, text), padding lanes 0
+    lane_statements: tuple        # per lane, in print order: ("t", name, text), ("out", m, text): lane output m
+    lane_outputs: int             # lane outputs per lane
+    copies: tuple                 # (port, m, offset, stride): port[offset + lane*stride] = out[m][lane]
+    uniform: dict
+    per_lane: dict
+    executed: dict
+    critical: dict
 
 
 def _index(k: int, shape) -> str:
@@ -248,7 +271,7 @@ def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
 
 
 def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "libm",
-                  batch: bool = False) -> FunctionView:
+                  batch: bool = False, lanes: bool = True) -> FunctionView:
     """What the templates print of one function. C: ``trig="kernel"`` reads sin/cos of joint
     angles from the arrays sin_q/cos_q the kernel fills; ``batch`` prints inputs and outputs of
     configuration start + j of a structure-of-arrays batch (entry k at ``port[k*count + start + j]``,
@@ -265,16 +288,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         for k, sym in enumerate(q[first:]):
             where = f"[{k}][j]" if batch else f"[{k}]"
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
-    # arguments affine in q (half angles) take the kernel's lanes after q's
-    arguments = []
-    if trig == "kernel":
-        lane: dict = {}
-        for call, argument in kernel_arguments(f, program.assignments, [e for p in program.outputs for e in p]).items():
-            if argument not in lane:
-                lane[argument] = angles + len(arguments)
-                arguments.append(dialect.expr(argument, names))
-            where = f"[{lane[argument]}][j]" if batch else f"[{lane[argument]}]"
-            names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where}"
+    arguments = _kernel_argument_names(program, dialect, names, angles, batch) if trig == "kernel" else []
     # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
     block, in_place = (_batch_block(angles + len(arguments), sum(p.size for p in f.outputs) + len(arguments))
                        if batch else (0, False))
@@ -309,6 +323,9 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         statements = tuple(("t", *printed[kept[k[1]][0]]) if k[0] == "t"
                            else ("out", outputs[k[1]].name, k[2], outputs[k[1]].entries[k[2]][1], outputs[k[1]].dtype)
                            for k in (pressure_order if pressure else demand_order)(kept, program.outputs))
+    lane = None
+    if dialect.name == "c" and not batch and lanes and program.lanes is not None:
+        lane, first, angles, arguments = _lane_view(program, dialect, trig)
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
     return FunctionView(
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
@@ -325,10 +342,78 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
         statements=statements,
         pressure=pressure,
+        lane=lane,
     )
 
 
-def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") -> dict:
+def _kernel_argument_names(program: Program, dialect: Dialect, names: dict, angles: int, batch: bool) -> list:
+    """The C texts of the program's sin/cos arguments affine in q (half angles, joint offsets),
+    which take the kernel's lanes after the ``angles`` joint angles; ``names`` learns where each
+    such sin/cos is read."""
+    arguments, lane = [], {}
+    for call, argument in kernel_arguments(program.function, program.assignments,
+                                           [e for p in program.outputs for e in p]).items():
+        if argument not in lane:
+            lane[argument] = angles + len(arguments)
+            arguments.append(dialect.expr(argument, names))
+        where = f"[{lane[argument]}][j]" if batch else f"[{lane[argument]}]"
+        names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where}"
+    return arguments
+
+
+def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
+    """(LaneView, first kernel angle, kernel angles, kernel arguments) of the program's lane program: seed k of
+    the current lane reads ``kdg_seed[k][kdg_lane]``, lane output m is stored in
+    ``kdg_lane_out[m][kdg_lane]``."""
+    lp = program.lanes
+    f = program.function
+    names = input_names(program, dialect)
+    everything = replace(program, assignments=lp.assignments + lp.lane_assignments,
+                         outputs=(tuple(e for port in lp.outputs if port is not None for e in port)
+                                  + tuple(v for row in lp.values for v in row) + lp.lane_outputs,))
+    first, angles = kernel_angles(everything) if trig == "kernel" else (0, 0)
+    if angles:
+        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+        for k, sym in enumerate(q[first:]):
+            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q[{k}]", f"cos_q[{k}]"
+    arguments = _kernel_argument_names(everything, dialect, names, angles, False) if trig == "kernel" else []
+    live = _live_beside_kernel(everything, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    for k, seed in enumerate(lp.seeds):
+        names[seed] = f"kdg_seed[{k}][kdg_lane]"
+    printed = {}
+    for sym, expr in lp.assignments:
+        names[sym] = str(sym)
+        if live is None or sym in live:
+            printed[sym] = ("t", str(sym), dialect.expr(expr, names))
+    # the statements once in CSE's order: demand and pressure order measured no faster there
+    # (docs/latency.md, "Lane programs")
+    statements = list(printed.values()) + [("out", port.name, entry, dialect.expr(e, names), port.dtype)
+                                           for port, exprs in zip(f.outputs, lp.outputs)
+                                           for entry, e in enumerate(exprs or ())]
+    values = [[lp.values[l][k] if l < lp.used else se.Integer(0) for l in range(lp.count)] for k in range(len(lp.seeds))]
+    numeric = all(v.is_Number for row in values for v in row)
+    seed_table = tuple(tuple(dialect.expr(v, names) for v in row) for row in values) if numeric else ()
+    seed_statements = () if numeric else tuple((k, l, dialect.expr(v, names)) for k, row in enumerate(values)
+                                               for l, v in enumerate(row))
+    texts = []
+    for sym, expr in lp.lane_assignments:
+        names[sym] = str(sym)
+        texts.append((str(sym), dialect.expr(expr, names)))
+    stores = [(m, dialect.expr(e, names)) for m, e in enumerate(lp.lane_outputs)]
+    # the loop's body in register-pressure order (schedule.pressure_order): 3-8 % faster than
+    # CSE's order (docs/latency.md, "Lane programs")
+    order = pressure_order(list(lp.lane_assignments), [lp.lane_outputs])
+    lane_statements = tuple(("t", *texts[k[1]]) if k[0] == "t" else ("out", *stores[k[2]]) for k in order)
+    view = LaneView(
+        count=lp.count, used=lp.used, seeds=len(lp.seeds), statements=tuple(statements), seed_table=seed_table,
+        seed_statements=seed_statements, lane_statements=lane_statements, lane_outputs=len(stores),
+        copies=tuple((f.outputs[port].name, m, offset, stride) for m, (port, offset, stride) in enumerate(lp.places)),
+        uniform=lp.uniform.to_json(), per_lane=lp.lane.to_json(), executed=lp.executed.to_json(),
+        critical=lp.critical.to_json())
+    return view, first, angles, arguments
+
+
+def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", lanes: bool = True) -> dict:
     return {
         "robot": model.identifier,
         "robot_name": model.name,
@@ -339,7 +424,7 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
         "structure": model.structure_text,       # a tree says what it is; an arm: None
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
-        "functions": [function_view(p, dialect, model.identifier, trig) for p in programs],
+        "functions": [function_view(p, dialect, model.identifier, trig, lanes=lanes) for p in programs],
         "trig": trig,
         "trig_bound": TRIG_BOUND,
         "trig_max_ulp": TRIG_MAX_ULP,
@@ -351,12 +436,14 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm") 
 
 
 def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, float_error: dict | None = None) -> dict[str, str]:
+             batch: bool = True, float_error: dict | None = None, lanes: bool = True) -> dict[str, str]:
     """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/codegen/trig_kernel.py;
     ``scalar``: one of SCALARS (float: no ik_dls, whose tolerances are double's); ``batch``:
-    whether the <name>_batch variants are written."""
+    whether the <name>_batch variants are written; ``lanes``: single calls of functions with a
+    lane program print it (a loop over lanes that compilers vectorise), else their scalar
+    program (fewer operations, for targets without vector units)."""
     single = scalar == "float"
-    env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig)
+    env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig, lanes)
     ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
                sincos="kdg_sincosf" if single else "kdg_sincos",
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",

@@ -1,8 +1,10 @@
 """The register-pressure order of the large functions (kindyngen/codegen/schedule.py): a
 permutation of every statement that respects every dependence, fewer temporaries live at
 once than demand order on lwr4's derivatives, and the threshold rule of the C renderer
-(render.PRESSURE_ORDER_OPERATIONS). The values of the reordered C are checked against
-Pinocchio by tests/algorithms/test_dynamics_derivatives.py (the committed generated/ C)."""
+(render.PRESSURE_ORDER_OPERATIONS). The values of the reordered C (the derivatives' scalar
+programs, generate --no-lanes) are checked against their lane programs by
+tests/codegen/test_lane_programs.py, those against Pinocchio by
+tests/algorithms/test_dynamics_derivatives.py (the committed generated/ C)."""
 from __future__ import annotations
 
 import pytest
@@ -10,7 +12,8 @@ import symengine as se
 
 from kindyngen.codegen import render
 from kindyngen.codegen.pipeline import build_programs
-from kindyngen.codegen.render import PRESSURE_ORDER_EXCLUDED, PRESSURE_ORDER_OPERATIONS, demand_order, function_view
+from kindyngen.codegen.render import (PRESSURE_ORDER_EXCLUDED, PRESSURE_ORDER_OPERATIONS, demand_order, function_view,
+                                      render_c)
 from kindyngen.codegen.schedule import graph, max_live, pressure_order
 from tests.harness import ROOT
 from kindyngen.readers.yaml_description import load_robot
@@ -75,11 +78,20 @@ def test_renderer_uses_pressure_order_above_the_threshold(programs):
     assert found["fd"].after.add + found["fd"].after.mul <= PRESSURE_ORDER_OPERATIONS
 
 
-def test_committed_c_is_in_pressure_order():
-    text = (ROOT / "generated" / "lwr4" / "c" / "lwr4.c").read_text()
+def test_scalar_derivatives_print_in_pressure_and_demand_order():
+    """The derivatives' scalar programs (generate --no-lanes; the committed C runs their lane
+    programs, tests/codegen/test_lane_programs.py): tau_derivatives in pressure order,
+    fd_derivatives in demand order (render.PRESSURE_ORDER_EXCLUDED)."""
+    model = load_robot(ROOT / "robots" / "lwr4.yaml")
+    programs = build_programs(model, only={"tau_derivatives", "fd_derivatives"}, progress=False)
+    text = render_c(model, programs, batch=False, lanes=False)["lwr4.c"]
     body = text[text.index("void lwr4_tau_derivatives("):]
     body = body[:body.index("\n}\n")]
-    assert "in register-pressure order" in body
+    assert "in register-pressure order" in body and "kdg_lane" not in body
     body = text[text.index("void lwr4_fd_derivatives("):]
     body = body[:body.index("\n}\n")]
     assert "in demand order" in body and "register-pressure" not in body
+    committed = (ROOT / "generated" / "lwr4" / "c" / "lwr4.c").read_text()
+    for name in ("tau_derivatives", "fd_derivatives"):
+        body = committed[committed.index(f"void lwr4_{name}("):]
+        assert "for (kdg_lane = 0; kdg_lane < 8; ++kdg_lane) {" in body[:body.index("\n}\n")], name
