@@ -80,8 +80,8 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
                   "These functions' C single calls run one pass over the model once, then one program per "
                   "lane, in a loop that compilers vectorise across lanes (lane l carries the gradient of the "
                   "joint torques weighted by its seeds and gives row l of the result); lanes are padded to a "
-                  "multiple of four. More operations are executed than by the scalar program above, fewer "
-                  "instructions: four or eight lanes per vector instruction (docs/latency.md). "
+                  "multiple of four. More operations are executed than by the scalar program above, in fewer "
+                  "instructions (four lanes per AVX2 instruction; measured in docs/latency.md, \"Lane programs\"). "
                   "`generate --no-lanes` prints the scalar program instead.", "",
                   "| function | once (add / mul / call) | per lane (add / mul) | lanes (kept) | executed (add / mul) "
                   "| critical path cycles |", "|---|---|---|---|---|---|"]
