@@ -25,10 +25,12 @@ expressions that CSE cannot match with ``Rz x``; here the rotated vector itself 
   the identity gives row i (its zeros fold away links outside i's subtree).
 * the C single calls run that weighted sweep as a lane program
   (:class:`kindyngen.algorithms.symbolic.LaneSweep`): the quantities of the Newton-Euler pass
-  once, then one lane per row, seeded with a row of the identity (``tau_derivatives``) or of
-  ``-M^-1`` at ``qdd = fd`` (``fd_derivatives``: row l of ``dqdd/dx = -M^-1 dtau/dx`` is the
-  sweep weighted by row l of ``-M^-1``, no product with ``M^-1`` afterwards), every lane the
-  same arithmetic in one loop that compilers vectorise across lanes. It executes more
+  once, then one lane per row, each seeded with a row of the identity (a constant table),
+  weighting the sweep by that row (``tau_derivatives``) or, at ``qdd = fd``, by the row of
+  ``-M^-1`` it first solves from M's factor (``fd_derivatives``: row l of ``dqdd/dx = -M^-1
+  dtau/dx`` is the sweep weighted by row l of ``-M^-1``; no product with ``M^-1`` afterwards,
+  and that row is also row l of the ``Minv`` output), every lane the same arithmetic in one
+  loop that compilers vectorise across lanes. It executes more
   operations than the scalar programs below (each lane covers the whole chain), in fewer
   instructions: lwr4 on AVX2, tau_derivatives 1.4x and fd_derivatives 1.6x faster
   (docs/latency.md, "Lane programs").
@@ -373,7 +375,7 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
     rows = [ne.adjoint(_unit(i, n)) for i in range(n)]
     dq, dqd = [row[0] for row in rows], [row[1] for row in rows]
     dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
-    lanes = _lane_sweep(model, ne, tuple(_unit(i, n) for i in range(n)))
+    lanes = _lane_sweep(model, ne)
     f = dynamics_function(
         name, "Partial derivatives of the inverse dynamics tau(q, qd, qdd) (the function tau, effects included): "
         "dtau/dq and dtau/dqd by one adjoint (reverse) sweep per joint over the Newton-Euler pass (plus the "
@@ -389,17 +391,26 @@ def _unit(i: int, n: int) -> tuple:
     return tuple(se.Integer(1 if k == i else 0) for k in range(n))
 
 
-def _lane_sweep(model: RobotModel, ne: "_NewtonEuler", values, stages=()) -> LaneSweep:
-    """:meth:`_NewtonEuler.adjoint` with symbolic seeds (and the friction derivative, ``seed_k
-    dfriction_k/dqd_k``, on column k of dtau/dqd) as a lane program: lane l, seeded with
-    ``values[l]``, gives row l of the ports dq (0) and dqd (1)."""
+def _lane_sweep(model: RobotModel, ne: "_NewtonEuler", stages=(), factor=None, minv_port=None) -> LaneSweep:
+    """:meth:`_NewtonEuler.adjoint` weighted by lane as a lane program: lane l, seeded with row
+    l of the identity, gives row l of the ports dq (0) and dqd (1), the friction derivative
+    ``weight_k dfriction_k/dqd_k`` on column k of dtau/dqd. With ``factor`` (the ``(L,
+    inv_d)`` of :func:`kindyngen.algorithms.ldlt.ldlt_factor`) the weights are row l of
+    ``-M^-1``, solved from the factor in the lane itself, and ``minv_port`` (if given) gets
+    row l of ``M^-1``: the seeds stay a constant table, which compilers vectorise the loop
+    over (clang 14 does not when the seeds are a table filled at run time)."""
     n = model.n
     seeds = tuple(se.Symbol(f"_seed{k}") for k in range(n))
-    dq, dqd = ne.adjoint(seeds)
+    weights = seeds if factor is None else tuple(-x for x in ldlt_substitute(*factor, list(seeds)))
+    dq, dqd = ne.adjoint(weights)
     friction = effect_velocity_derivatives(model, ne.qd)
-    dqd = [d + seeds[k] * friction[k] if friction[k] != 0 else d for k, d in enumerate(dqd)]
-    return LaneSweep(seeds=seeds, values=tuple(values), exprs=tuple(dq) + tuple(dqd),
-                     places=tuple((0, k, n) for k in range(n)) + tuple((1, k, n) for k in range(n)),
+    dqd = [d + weights[k] * friction[k] if friction[k] != 0 else d for k, d in enumerate(dqd)]
+    exprs = tuple(dq) + tuple(dqd)
+    places = tuple((0, k, n) for k in range(n)) + tuple((1, k, n) for k in range(n))
+    if minv_port is not None:
+        exprs += tuple(-w for w in weights)
+        places += tuple((minv_port, k, n) for k in range(n))
+    return LaneSweep(seeds=seeds, values=tuple(_unit(i, n) for i in range(n)), exprs=exprs, places=places,
                      stages=tuple(stages))
 
 
@@ -434,11 +445,11 @@ def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_d
         products, minv = "M^-1 and the products", "dqdd/dtau is Minv"
     else:
         products, minv = "the products", "dqdd/dtau is M^-1, not formed here (the function fd_derivatives has it)"
-    # the lanes: row l of dqdd/dx = -(row l of M^-1) dtau/dx is the adjoint sweep seeded with
+    # the lanes: row l of dqdd/dx = -(row l of M^-1) dtau/dx is the adjoint sweep weighted by
     # that row, at qdd = fd named once (a sweep through fd's expression is too deep for CSE)
     named = tuple(se.Symbol(f"_qdd{k}") for k in range(n))
-    lanes = _lane_sweep(model, _NewtonEuler(ts, qd, named), tuple(tuple(-m_inv[l][k] for k in range(n)) for l in range(n)),
-                        tuple(zip(named, qdd)))
+    lanes = _lane_sweep(model, _NewtonEuler(ts, qd, named), tuple(zip(named, qdd)), (L, inv_d),
+                        2 if with_minv else None)
     f = dynamics_function(
         name, "Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd, effects "
         "included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c + g)/dq (one tangent "

@@ -87,18 +87,19 @@ class SymbolicFunction:
 @dataclass(frozen=True)
 class LaneSweep:
     """Outputs that are one program evaluated in lanes l = 0, 1, ... which differ only in the
-    values of its ``seeds``: lane l reads seed k as ``values[l][k]`` (an expression of the inputs
-    and ``stages``; code that pads the lanes to a vector width gives the extra lanes 0 and
+    values of its ``seeds``: lane l reads seed k as ``values[l][k]`` (the C prints numbers only,
+    as a constant table; code that pads the lanes to a vector width gives the extra lanes 0 and
     discards them) and its ``exprs[m]`` is
     output entry ``offset + l * stride`` of port ``port`` for ``places[m] = (port, offset,
     stride)``. Outputs of ports no place names are computed once, outside the lanes, from the
     function's ``output_exprs``. ``stages``: named intermediates (symbol, expression) that
     seed values and lane expressions read, computed once before the lanes.
 
-    The adjoint sweeps of the dynamics' derivatives are such a program: the seeds are the
-    weights of the joint torques whose gradient a lane carries (a row of the identity for
-    ``tau_derivatives``, a row of ``-M^-1`` for ``fd_derivatives``), so one lane gives one row
-    of the Jacobian, and every lane does the same arithmetic.
+    The adjoint sweeps of the dynamics' derivatives are such a program: seeded with a row of
+    the identity, a lane carries the gradient of the joint torques weighted by that row
+    (``tau_derivatives``) or by the row of ``-M^-1`` it solves from M's factor first
+    (``fd_derivatives``), so one lane gives one row of the Jacobian, and every lane does the
+    same arithmetic.
 
     >>> import symengine as se
     >>> x, s = se.symbols("x s")

@@ -160,8 +160,7 @@ class LaneView:
     used: int                     # lanes whose results are stored
     seeds: int                    # seeds per lane
     statements: tuple             # once: ("t", name, text), ("out", port, entry, text, dtype)
-    seed_table: tuple             # all seeds numbers: rows (per seed) of lane texts; else ()
-    seed_statements: tuple        # else: (seed, lane, text), padding lanes 0
+    seed_table: tuple             # rows (per seed) of lane texts, padding lanes 0
     lane_statements: tuple        # per lane, in print order: ("t", name, text), ("out", m, text): lane output m
     lane_outputs: int             # lane outputs per lane
     copies: tuple                 # (port, m, offset, stride): port[offset + lane*stride] = out[m][lane]
@@ -391,10 +390,10 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
                                            for port, exprs in zip(f.outputs, lp.outputs)
                                            for entry, e in enumerate(exprs or ())]
     values = [[lp.values[l][k] if l < lp.used else se.Integer(0) for l in range(lp.count)] for k in range(len(lp.seeds))]
-    numeric = all(v.is_Number for row in values for v in row)
-    seed_table = tuple(tuple(dialect.expr(v, names) for v in row) for row in values) if numeric else ()
-    seed_statements = () if numeric else tuple((k, l, dialect.expr(v, names)) for k, row in enumerate(values)
-                                               for l, v in enumerate(row))
+    if not all(v.is_Number for row in values for v in row):
+        # clang 14 does not vectorise the loop over a seed table filled at run time
+        raise ValueError(f"{f.name}: the C prints lane programs with constant seeds only")
+    seed_table = tuple(tuple(dialect.expr(v, names) for v in row) for row in values)
     texts = []
     for sym, expr in lp.lane_assignments:
         names[sym] = str(sym)
@@ -406,7 +405,7 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     lane_statements = tuple(("t", *texts[k[1]]) if k[0] == "t" else ("out", *stores[k[2]]) for k in order)
     view = LaneView(
         count=lp.count, used=lp.used, seeds=len(lp.seeds), statements=tuple(statements), seed_table=seed_table,
-        seed_statements=seed_statements, lane_statements=lane_statements, lane_outputs=len(stores),
+        lane_statements=lane_statements, lane_outputs=len(stores),
         copies=tuple((f.outputs[port].name, m, offset, stride) for m, (port, offset, stride) in enumerate(lp.places)),
         uniform=lp.uniform.to_json(), per_lane=lp.lane.to_json(), executed=lp.executed.to_json(),
         critical=lp.critical.to_json())

@@ -63,13 +63,18 @@ def c_function_body(source: str, name: str) -> str:
     return match.group(1)
 
 
-@pytest.fixture(scope="module")
-def report():
+def two_joint_report(functions) -> tuple:
+    """(model, programs, C source, opcounts.json) of ``functions`` of the two-joint ARM."""
     model = parse_robot(ARM)
-    programs = build_programs(model, only=set(FUNCTIONS), progress=False)
+    programs = build_programs(model, only=set(functions), progress=False)
     files = RENDERERS["c"](model, programs)
     source = next(text for filename, text in files.items() if filename.endswith(".c"))
     return model, programs, source, opcounts_json(programs)
+
+
+@pytest.fixture(scope="module")
+def report():
+    return two_joint_report(FUNCTIONS)
 
 
 def test_counts_after_cse_equal_the_operators_of_the_generated_c(report):

@@ -14,12 +14,10 @@ import re
 import numpy as np
 import pytest
 
-from kindyngen.codegen.count_report import opcounts_json
-from kindyngen.codegen.pipeline import build_programs, generate
-from kindyngen.codegen.render import RENDERERS
-from kindyngen.readers.yaml_description import load_robot, parse_robot
+from kindyngen.codegen.pipeline import generate
+from kindyngen.readers.yaml_description import load_robot
 from kindyngen.runtime.evaluate import compile_shared_library
-from tests.codegen.test_count_report import ARM, c_function_body, count_c_operations
+from tests.codegen.test_count_report import c_function_body, count_c_operations, two_joint_report
 from tests.harness import ROOT
 
 FUNCTIONS = ("tau_derivatives", "fd_derivatives", "fd_derivatives_no_minv")
@@ -35,11 +33,8 @@ def split_body(body: str) -> tuple[str, str, int]:
 
 @pytest.fixture(scope="module")
 def two_joints():
-    model = parse_robot(ARM)
-    programs = build_programs(model, only=set(FUNCTIONS), progress=False)
-    files = RENDERERS["c"](model, programs)
-    source = next(text for name, text in files.items() if name.endswith(".c"))
-    return model, source, opcounts_json(programs)
+    model, _, source, counts = two_joint_report(FUNCTIONS)
+    return model, source, counts
 
 
 def test_lane_counts_equal_the_operators_of_the_generated_c(two_joints):

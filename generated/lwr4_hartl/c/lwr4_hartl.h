@@ -328,10 +328,10 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *q, const double 
  * (as derived, before CSE: 9577020296971 add, 15028823661446 mul, 11870559419403 call);
  * critical path 450 cycles, 112 dependent operations: the scalar program,
  * which the batch variant, the other languages and generate --no-lanes print. This single call
- * runs a lane program instead: 770 add, 912 mul, 12 call once, then 8 lanes (7 kept)
- * of 381 add, 471 mul each in one loop that compilers vectorise across lanes
- * (3818 add, 4680 mul executed, in fewer instructions); critical path 600 cycles,
- * 162 dependent operations.
+ * runs a lane program instead: 679 add, 799 mul, 12 call once, then 8 lanes (7 kept)
+ * of 423 add, 519 mul each in one loop that compilers vectorise across lanes
+ * (4063 add, 4951 mul executed, in fewer instructions); critical path 603 cycles,
+ * 163 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -356,10 +356,10 @@ void lwr4_hartl_fd_derivatives_batch(long count, const double *q, const double *
  * (as derived, before CSE: 9576337901107 add, 15027826633860 mul, 11869802815751 call);
  * critical path 468 cycles, 118 dependent operations: the scalar program,
  * which the batch variant, the other languages and generate --no-lanes print. This single call
- * runs a lane program instead: 770 add, 912 mul, 12 call once, then 8 lanes (7 kept)
- * of 381 add, 471 mul each in one loop that compilers vectorise across lanes
- * (3818 add, 4680 mul executed, in fewer instructions); critical path 585 cycles,
- * 157 dependent operations.
+ * runs a lane program instead: 679 add, 799 mul, 12 call once, then 8 lanes (7 kept)
+ * of 423 add, 519 mul each in one loop that compilers vectorise across lanes
+ * (4063 add, 4951 mul executed, in fewer instructions); critical path 603 cycles,
+ * 163 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void lwr4_hartl_fd_derivatives_no_minv(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);

@@ -328,10 +328,10 @@ void panda_tau_derivatives_batch(long count, const double *q, const double *qd, 
  * (as derived, before CSE: 12664599226860 add, 19495258176161 mul, 15412087385897 call);
  * critical path 438 cycles, 108 dependent operations: the scalar program,
  * which the batch variant, the other languages and generate --no-lanes print. This single call
- * runs a lane program instead: 858 add, 1009 mul, 12 call once, then 8 lanes (7 kept)
- * of 433 add, 530 mul each in one loop that compilers vectorise across lanes
- * (4322 add, 5249 mul executed, in fewer instructions); critical path 581 cycles,
- * 159 dependent operations.
+ * runs a lane program instead: 764 add, 892 mul, 12 call once, then 8 lanes (7 kept)
+ * of 475 add, 581 mul each in one loop that compilers vectorise across lanes
+ * (4564 add, 5540 mul executed, in fewer instructions); critical path 615 cycles,
+ * 167 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd, double *Minv);
@@ -356,10 +356,10 @@ void panda_fd_derivatives_batch(long count, const double *q, const double *qd, c
  * (as derived, before CSE: 12663744872259 add, 19494071046986 mul, 15411187668300 call);
  * critical path 468 cycles, 118 dependent operations: the scalar program,
  * which the batch variant, the other languages and generate --no-lanes print. This single call
- * runs a lane program instead: 858 add, 1009 mul, 12 call once, then 8 lanes (7 kept)
- * of 433 add, 530 mul each in one loop that compilers vectorise across lanes
- * (4322 add, 5249 mul executed, in fewer instructions); critical path 587 cycles,
- * 161 dependent operations.
+ * runs a lane program instead: 764 add, 892 mul, 12 call once, then 8 lanes (7 kept)
+ * of 475 add, 581 mul each in one loop that compilers vectorise across lanes
+ * (4564 add, 5540 mul executed, in fewer instructions); critical path 615 cycles,
+ * 167 dependent operations.
  * The calls sin(q[k]) and cos(q[k]) are served by one run of the sincos kernel over q.
  */
 void panda_fd_derivatives_no_minv(const double *q, const double *qd, const double *tau, double *dqdd_dq, double *dqdd_dqd);
