@@ -71,7 +71,7 @@ class LaneProgram:
     ``outputs`` of the ports no lane fills (None for the ports the lanes fill) computed once,
     then the seed ``values[l][k]`` of the ``used`` lanes (reduced expressions), then, per lane,
     ``lane_assignments`` and ``lane_outputs`` (``places[m]`` says where lane output m goes).
-    ``count``: lanes printed, ``used`` padded to :data:`LANE_WIDTH`. Operations executed:
+    ``count``: lanes printed, ``used`` (the lanes kept) padded to :data:`LANE_WIDTH`. Operations executed:
     ``uniform + count * lane``."""
 
     count: int

@@ -313,18 +313,19 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
                              p.unit, p.description,
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
+    lane = None
+    if dialect.name == "c" and not batch and lanes and program.lanes is not None:
+        lane, first, angles, arguments = _lane_view(program, dialect, trig)
     statements = ()
     pressure = False
-    if dialect.name == "c" and not batch and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
+    # the scalar program's print order, for single calls that do not print a lane program
+    if dialect.name == "c" and not batch and lane is None and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
         kept = [(sym, e) for sym, e in program.assignments if sym in printed]
         pressure = (program.after.add + program.after.mul > PRESSURE_ORDER_OPERATIONS
                     and f.name not in PRESSURE_ORDER_EXCLUDED)
         statements = tuple(("t", *printed[kept[k[1]][0]]) if k[0] == "t"
                            else ("out", outputs[k[1]].name, k[2], outputs[k[1]].entries[k[2]][1], outputs[k[1]].dtype)
                            for k in (pressure_order if pressure else demand_order)(kept, program.outputs))
-    lane = None
-    if dialect.name == "c" and not batch and lanes and program.lanes is not None:
-        lane, first, angles, arguments = _lane_view(program, dialect, trig)
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
     return FunctionView(
         name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
