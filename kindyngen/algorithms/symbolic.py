@@ -60,6 +60,13 @@ class SymbolicFunction:
     # lanes that compilers vectorise); None: scalar code only
     lanes: "LaneSweep | None" = None
 
+    def __repr__(self) -> str:
+        # the generated repr prints every expression as a tree: a DAG's shared nodes once per
+        # use, gigabytes for the derivatives (a failing test's report once ran out of memory)
+        ports = lambda ports: ", ".join(f"{p.name}{list(p.shape)}" for p in ports)
+        return (f"SymbolicFunction({self.name!r}: ({ports(self.inputs)}) -> ({ports(self.outputs)}), "
+                f"{len(self.stages)} stages, {len(self.alternatives)} alternatives, lanes={self.lanes is not None})")
+
     def inlined_outputs(self) -> tuple[tuple[se.Basic, ...], ...]:
         """``output_exprs`` with the named intermediates substituted: expressions of the
         inputs only, to evaluate or differentiate directly (a DAG: nothing is expanded).
@@ -113,6 +120,11 @@ class LaneSweep:
     exprs: tuple
     places: tuple
     stages: tuple = ()
+
+    def __repr__(self) -> str:
+        # expressions stay out of the repr: see SymbolicFunction.__repr__
+        return (f"LaneSweep({len(self.values)} lanes, {len(self.seeds)} seeds, {len(self.exprs)} expressions, "
+                f"{len(self.stages)} stages)")
 
     def lane_value(self, m: int, lane: int):
         """Lane expression m in lane ``lane``, seeds and stages substituted."""

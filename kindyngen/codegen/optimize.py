@@ -58,6 +58,11 @@ class Program:
     # the C single call's lane program (function.lanes), or None: the C prints this program
     lanes: "LaneProgram | None" = None
 
+    def __repr__(self) -> str:
+        # expressions stay out of the repr (see SymbolicFunction.__repr__)
+        return (f"Program({self.function.name!r}: {len(self.assignments)} temporaries, after CSE {self.after.add} add "
+                f"{self.after.mul} mul {self.after.call} call, lanes={self.lanes!r})")
+
 
 LANE_WIDTH = 4
 """Lanes of a lane program are padded to a multiple of this: four doubles fill an AVX2 vector
@@ -86,6 +91,11 @@ class LaneProgram:
     uniform: OpCount
     lane: OpCount
     critical: CriticalPath
+
+    def __repr__(self) -> str:
+        # expressions stay out of the repr (see SymbolicFunction.__repr__)
+        return (f"LaneProgram({self.count} lanes ({self.used} used), {len(self.assignments)} temporaries once, "
+                f"{len(self.lane_assignments)} per lane)")
 
     @property
     def executed(self) -> OpCount:

@@ -68,12 +68,19 @@ def test_small_example_frees_early():
 def test_renderer_uses_pressure_order_above_the_threshold(programs):
     _, found = programs
     for name, p in found.items():
-        view = function_view(p, render.C, "lwr4", "kernel")
+        # the scalar programs (generate --no-lanes)
+        view = function_view(p, render.C, "lwr4", "kernel", lanes=False)
         big = p.after.add + p.after.mul > PRESSURE_ORDER_OPERATIONS and name not in PRESSURE_ORDER_EXCLUDED
         assert view.pressure is big, name
         assert view.statements, name          # both are above DEMAND_ORDER_OPERATIONS
-        again = function_view(p, render.C, "lwr4", "kernel")
+        again = function_view(p, render.C, "lwr4", "kernel", lanes=False)
         assert again.statements == view.statements      # deterministic
+        # a function printed as a lane program does not order its unused scalar statements
+        laned = function_view(p, render.C, "lwr4", "kernel")
+        assert (laned.lane is not None) is (p.lanes is not None), name
+        if p.lanes is not None:
+            assert not laned.pressure and not laned.statements, name
+    assert found["tau_derivatives"].lanes is not None and found["fd"].lanes is None
     assert found["tau_derivatives"].after.add + found["tau_derivatives"].after.mul > PRESSURE_ORDER_OPERATIONS
     assert found["fd"].after.add + found["fd"].after.mul <= PRESSURE_ORDER_OPERATIONS
 
