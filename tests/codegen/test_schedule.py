@@ -102,3 +102,13 @@ def test_scalar_derivatives_print_in_pressure_and_demand_order():
     for name in ("tau_derivatives", "fd_derivatives"):
         body = committed[committed.index(f"void lwr4_{name}("):]
         assert "for (kdg_lane = 0; kdg_lane < 8; ++kdg_lane) {" in body[:body.index("\n}\n")], name
+
+
+def test_reprs_stay_short(programs):
+    """pytest prints a failing test's arguments: the dataclasses' generated repr printed every
+    expression as a tree (a DAG's shared nodes once per use), gigabytes for the derivatives."""
+    _, found = programs
+    p = found["tau_derivatives"]
+    for obj in (p, p.function, p.function.lanes, p.lanes, found):
+        assert len(repr(obj)) < 1000, type(obj).__name__
+    assert "tau_derivatives" in repr(p) and "lanes" in repr(p.function)
