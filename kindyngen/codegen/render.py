@@ -43,11 +43,16 @@ SCALARS = ("double", "float")
 """C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
 
 KERNEL_LANES = 8
-"""Single calls with half angles run the sincos kernel over the joint angles and those
-arguments, padded with zeros to a multiple of this (AVX-512 lanes), the arguments being
-computed into that array anyway. Joint angles alone are read in place from q, unpadded: the
+"""Single calls with arguments affine in q other than the half joint angles q[k]/2 (those: the
+half-angle kernel over q in place, :func:`half_angles`), e.g. lwr4's fk_dq with 0.5*(q[0] + q[2]),
+run the sincos kernel over the joint angles and those arguments, padded with zeros to a
+multiple of this (AVX-512 lanes), the arguments being computed into that array anyway. Joint angles alone are read in place from q, unpadded: the
 padded copy, stored in pieces and loaded back as one vector, cost more than the kernel's
 scalar remainder (lwr4 on Zen 5: jacobian 35.0 -> 31.8 ns, tau 82.6 -> 71.4; docs/latency.md)."""
+
+
+HALF_KERNEL = "kdg_sincos_half"
+"""The C name of the half-angle kernel (sin and cos of x[i]/2), printed where a single call uses it."""
 
 
 DEMAND_ORDER_OPERATIONS = 1000
@@ -142,6 +147,8 @@ class FunctionView:
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     arguments: tuple = ()         # C single calls: then these arguments affine in q (C text), e.g. half angles
     lanes: int = 0                # C with arguments: angles padded to a multiple of KERNEL_LANES
+    half: int = 0                 # C single calls whose kernel arguments are all half joint angles: the
+                                  # half-angle kernel over this many entries of q from first_angle, in place
     block: int = 0                # C batch: configurations per block
     in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
     batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
@@ -288,6 +295,15 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
             where = f"[{k}][j]" if batch else f"[{k}]"
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
     arguments = _kernel_argument_names(program, dialect, names, angles, batch) if trig == "kernel" else []
+    half = 0
+    if arguments and not angles and not batch and dialect.name == "c" and not dialect.single:
+        halves = half_angles(program)
+        if halves:
+            first = min(halves.values())
+            half = len(f.input_symbols[[p.name for p in f.inputs].index("q")]) - first
+            for call, k in halves.items():
+                names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{k - first}]"
+            arguments = []
     # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
     block, in_place = (_batch_block(angles + len(arguments), sum(p.size for p in f.outputs) + len(arguments))
                        if batch else (0, False))
@@ -297,7 +313,8 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     for port in program.outputs:
         for e in port:
             used_symbols |= e.free_symbols
-    live = _live_beside_kernel(program, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    live = (_live_beside_kernel(program, [c for c in names if isinstance(c, (se.sin, se.cos))])
+            if arguments or half else None)
     assignments = []
     printed = {}
     for sym, expr in program.assignments:
@@ -337,6 +354,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         first_angle=first,
         arguments=tuple(arguments),
         lanes=-(-(angles + len(arguments)) // KERNEL_LANES) * KERNEL_LANES,
+        half=half,
         block=block,
         in_place=in_place,
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
@@ -359,6 +377,33 @@ def _kernel_argument_names(program: Program, dialect: Dialect, names: dict, angl
         where = f"[{lane[argument]}][j]" if batch else f"[{lane[argument]}]"
         names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where}"
     return arguments
+
+
+def half_angles(program: Program) -> dict:
+    """``{call: k}`` when every sin/cos the kernel would serve beside the joint angles
+    (:func:`kindyngen.codegen.optimize.kernel_arguments`) has the half joint angle q[k]/2 as its
+    argument, else ``{}``. Such a single call runs the half-angle kernel
+    (``trig_kernel.kernel_c(half=True)``) over q read in place: bit for bit the values of the
+    kernel over a copy of the halves, without the copy, whose pieces the store buffer cannot
+    forward to the kernel's vector load (docs/latency.md, "Half angles read in place").
+
+    >>> from kindyngen.algorithms.symbolic import Port, SymbolicFunction
+    >>> from kindyngen.codegen.opcount import OpCount
+    >>> q = se.symbols("q_0 q_1")
+    >>> def program(e):
+    ...     f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((e,),))
+    ...     return Program(f, (), ((e,),), OpCount(0, 0, 0), OpCount(0, 0, 0))
+    >>> sorted(half_angles(program(se.sin(q[1] / 2) * se.cos(q[0] / 2))).items(), key=str)
+    [(cos((1/2)*q_0), 0), (sin((1/2)*q_1), 1)]
+    >>> half_angles(program(se.sin(q[1] / 2) * se.cos((q[0] + q[1]) / 2)))
+    {}
+    """
+    f = program.function
+    q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+    index = {se.Rational(1, 2) * sym: k for k, sym in enumerate(q)}
+    served = kernel_arguments(f, program.assignments, [e for port in program.outputs for e in port])
+    halves = {call: index.get(argument) for call, argument in served.items()}
+    return halves if halves and None not in halves.values() else {}
 
 
 def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
@@ -445,11 +490,13 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
     single = scalar == "float"
     env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig, lanes)
     ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
-               sincos="kdg_sincosf" if single else "kdg_sincos",
+               sincos="kdg_sincosf" if single else "kdg_sincos", sincos_half=HALF_KERNEL,
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
                sincos_kernel=kernel_c_float() if single else kernel_c(),
                float_error={name: e.text() for name, e in (float_error or {}).items()})
+    if any(f.half for f in ctx["functions"]):
+        ctx["sincos_kernel"] += "\n" + kernel_c(HALF_KERNEL, half=True)
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),

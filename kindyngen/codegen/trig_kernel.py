@@ -205,19 +205,20 @@ SELECTS = 2
 negation itself is a sign flip, counted 0)."""
 
 
-def kernel_latency(latency=None) -> int:
+def kernel_latency(latency=None, half: bool = False) -> int:
     """Cycles from the argument to sin and cos along the kernel's longest chain, with
     :data:`kindyngen.codegen.opcount.LATENCY` (no contraction): the instruction-level latency bound
-    of one call. Read from the very expressions :func:`kernel_c` prints.
+    of one call. Read from the very expressions :func:`kernel_c` prints; ``half``: of the
+    half-angle kernel, whose chain starts with the halving.
 
-    >>> kernel_latency()
-    47
+    >>> kernel_latency(), kernel_latency(half=True)
+    (47, 50)
     """
     import ast
     from .opcount import LATENCY
     lat = dict(LATENCY, **(latency or {}))
     ops = {ast.Add: lat["add"], ast.Sub: lat["add"], ast.Mult: lat["mul"]}
-    ready = {"xi": 0}
+    ready = {"xi": lat["mul"] if half else 0}
 
     def visit(node):
         if isinstance(node, ast.BinOp):
@@ -255,9 +256,10 @@ def _quadrant(s: str, c: str) -> str:
         out[j] = fabs(xi) <= {BOUND!r} ? 0.0 : 1.0;"""
 
 
-def _block(name: str, lanes: int, body: str) -> str:
-    """The C of ``name``<lanes>: the kernel's steps on ``lanes`` consecutive arguments, returning
-    nonzero if a lane needs libm (its range flags summed as a balanced tree)."""
+def _block(name: str, lanes: int, body: str, argument: str = "x[j]") -> str:
+    """The C of ``name``<lanes>: the kernel's steps on ``lanes`` consecutive arguments (each
+    ``argument`` of lane j), returning nonzero if a lane needs libm (its range flags summed as a
+    balanced tree)."""
     flags = [f"out[{j}]" for j in range(lanes)]
     while len(flags) > 1:
         flags = [f"({a} + {b})" for a, b in zip(flags[0::2], flags[1::2])]
@@ -266,7 +268,7 @@ def _block(name: str, lanes: int, body: str) -> str:
     double out[{lanes}];
     int j;
     for (j = 0; j < {lanes}; ++j) {{
-        const double xi = x[j];
+        const double xi = {argument};
 {body}
 {_quadrant("s[j]", "c[j]")}
     }}
@@ -275,22 +277,30 @@ def _block(name: str, lanes: int, body: str) -> str:
 """
 
 
-def kernel_c(name: str = "kdg_sincos") -> str:
+def kernel_c(name: str = "kdg_sincos", half: bool = False) -> str:
     """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
     for i < n. The arrays must not overlap. Its work is done in blocks of consecutive
     arguments: ``name``8 on eight (n >= 8; the last block overlaps the one before), ``name``4
-    on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy)."""
+    on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy).
+
+    ``half``: the same kernel of sin and cos of x[i]/2 instead, for the half angles of the
+    dual-quaternion functions read in place from q; the halving is its first step, exact
+    (a multiplication by 0.5 loses no bit above the subnormals), so each result is the plain
+    kernel's on the double 0.5*x[i], bit for bit."""
     bound = repr(BOUND)
+    argument = "0.5*x[j]" if half else "x[j]"
+    libm_argument = "0.5*x[i]" if half else "x[i]"
+    what = "x[i]/2" if half else "x[i]"
     body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
     return f"""\
-/* The blocks of {name} (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
- * nonzero if some |x[i]| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
+/* The blocks of {name} (below): s[i] = sin({what}), c[i] = cos({what}) for eight or four lanes; they return
+ * nonzero if some |{what}| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and {name} replaces them by libm. codegen/trig_kernel.py's
  * _steps explains each step. {name}8: i = 0..7. */
-{_block(name, 8, body)}
+{_block(name, 8, body, argument)}
 /* {name}4: i = 0..3 */
-{_block(name, 4, body)}
-/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
+{_block(name, 4, body, argument)}
+/* s[i] = sin({what}), c[i] = cos({what}) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
  * explains the method and where its constants come from): blocks of eight or four lanes
  * without a branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
  * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
@@ -319,9 +329,9 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
     }}
     if (out)
         for (i = 0; i < n; ++i)
-            if (!(fabs(x[i]) <= {bound})) {{
-                s[i] = sin(x[i]);
-                c[i] = cos(x[i]);
+            if (!(fabs({libm_argument}) <= {bound})) {{
+                s[i] = sin({libm_argument});
+                c[i] = cos({libm_argument});
             }}
 }}
 """

@@ -119,6 +119,9 @@ def test_critical_path_is_the_printed_codes(robot):
                 lanes = ast.parse(f"({m.group(1)},)", mode="eval").body.elts
                 kernel_at = kernel + max(c_ready(ast.unparse(a), ready, kernel) for a in lanes)
                 continue
+            if line.startswith("kdg_sincos_half("):      # half angles of q in place: halved in the kernel
+                kernel_at = trig_kernel.kernel_latency(half=True)
+                continue
             m = re.match(r"const double (t\d+) = (.*);$", line)
             if m:
                 ready[m.group(1)] = c_ready(m.group(2), ready, kernel_at)
@@ -132,14 +135,15 @@ def test_critical_path_is_the_printed_codes(robot):
 
 
 def test_kernel_latency_is_its_printed_chain():
-    """kernel_latency() against the kernel's C text walked line by line."""
-    ready = {"xi": 0}
-    for line in trig_kernel.kernel_c().splitlines():
-        m = re.match(r"\s*const double (\w+) = (.*);$", line)
-        if m and "?" not in m.group(2) and m.group(1) != "xi":
-            ready[m.group(1)] = c_ready(m.group(2), ready, 0)
-    chain = max(ready["sin_r"], ready["cos_r"], ready["q"] + 2 * LATENCY["add"])
-    assert trig_kernel.kernel_latency() == chain + trig_kernel.SELECTS * LATENCY["select"]
+    """kernel_latency() against the kernel's C text walked line by line, the half-angle kernel's too."""
+    for half in (False, True):
+        ready = {"x": 0}
+        for line in trig_kernel.kernel_c(half=half).splitlines():
+            m = re.match(r"\s*const double (\w+) = (.*);$", line)
+            if m and "?" not in m.group(2):
+                ready[m.group(1)] = c_ready(m.group(2).replace("x[j]", "x"), ready, 0)
+        chain = max(ready["sin_r"], ready["cos_r"], ready["q"] + 2 * LATENCY["add"])
+        assert trig_kernel.kernel_latency(half=half) == chain + trig_kernel.SELECTS * LATENCY["select"]
 
 
 # -- shallower code: reassociation chosen by the count ----------------------------------------

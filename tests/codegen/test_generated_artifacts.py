@@ -43,9 +43,12 @@ def test_c_has_no_globals_or_allocation(robot):
     # the one static thing allowed is the sincos kernel's functions (kindyngen/codegen/trig_kernel.py)
     kernel = [line for line in trig_kernel.kernel_c().splitlines() if line.startswith("static ")]
     assert kernel[-1] == "static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)"
+    # its half-angle variant where single calls read half angles in place (render.half_angles)
+    half = [line for line in trig_kernel.kernel_c("kdg_sincos_half", half=True).splitlines() if line.startswith("static ")]
     # and, inside the derivatives' lane programs, their read-only seed tables (re-entrant)
     statics = [line for line in source.splitlines() if "static " in line and not line.startswith("    static const double kdg_seed[")]
-    assert statics in ([], kernel)
+    assert statics in ([], kernel, kernel + half)
+    assert (statics == kernel + half) is ("kdg_sincos_half(7, q" in source or "kdg_sincos_half(6, q" in source)
     # every statement lives inside a function body: nothing at file scope but includes and functions
     depth, file_scope = 0, []
     for line in source.splitlines():

@@ -191,3 +191,67 @@ def test_constants_are_the_fit():
     for part in trig_kernel.PIO2_PARTS[:3]:   # 33 significant bits: k * part exact for |k| < 2^20
         mantissa, _ = part.as_integer_ratio()
         assert mantissa.bit_length() - (mantissa & -mantissa).bit_length() + 1 <= 33
+
+
+HALF_DRIVER = r"""
+/* kdg_sincos_half(n, x) against kdg_sincos(n, 0.5*x), which is what single calls ran before they
+ * read half angles in place: prints the number of results whose bits differ, then the points */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include KERNEL
+
+static uint64_t state = 0x2545F4914F6CDD1Du;
+static uint64_t next(void)
+{
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    return state;
+}
+
+int main(void)
+{
+    double x[9], h[9], s[9], c[9], sh[9], ch[9];
+    const double special[6] = {INFINITY, -INFINITY, NAN, 0.0, -0.0, 4.9406564584124654e-324};
+    long differ = 0, points = 0, r;
+    int n, j;
+    for (r = 0; r < 200000; ++r)
+        for (n = 1; n <= 9; ++n) {
+            for (j = 0; j < n; ++j) {
+                const uint64_t bits = next();
+                const double significand = 1.0 + (double)(bits >> 12)/4503599627370496.0;
+                /* exponents 2^-30 .. 2^24: the kernel's range (+-2^20 after halving) and beyond it (libm) */
+                x[j] = (bits & 1 ? -1.0 : 1.0)*ldexp(significand, (int)(next() % 55) - 30);
+                if (r % 1000 == 0 && j < 6) x[j] = special[(j + n) % 6];
+                h[j] = 0.5*x[j];
+            }
+            kdg_sincos(n, h, s, c);
+            kdg_sincos_half(n, x, sh, ch);
+            for (j = 0; j < n; ++j, ++points)
+                if (memcmp(&s[j], &sh[j], sizeof s[j]) || memcmp(&c[j], &ch[j], sizeof c[j])) ++differ;
+        }
+    printf("%ld %ld\n", differ, points);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("compiler,flags", BUILDS, ids=lambda v: v if isinstance(v, str) else " ".join(v))
+def test_half_angle_kernel_is_the_kernel_on_halves_bit_for_bit(compiler, flags, tmp_path):
+    """Single calls whose sin/cos arguments are all q[k]/2 run kdg_sincos_half over q in place
+    (render.half_angles): its results must be those of the kernel on the halved copy it replaced."""
+    if shutil.which(compiler) is None:
+        pytest.skip(f"{compiler} not installed")
+    (tmp_path / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c()
+                                       + trig_kernel.kernel_c("kdg_sincos_half", half=True))
+    (tmp_path / "driver.c").write_text(HALF_DRIVER)
+    exe = tmp_path / "driver"
+    build = subprocess.run([compiler, *STRICT, *flags, '-DKERNEL="kernel.h"', "-I", str(tmp_path),
+                            str(tmp_path / "driver.c"), "-o", str(exe), "-lm"], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    differ, points = (int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True,
+                                                     check=True).stdout.split())
+    assert points == 200000 * 45 and differ == 0

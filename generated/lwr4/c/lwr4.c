@@ -112,6 +112,114 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             }
 }
 
+/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
+ * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
+ * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
+ * _steps explains each step. kdg_sincos_half8: i = 0..7. */
+static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[8];
+    int j;
+    for (j = 0; j < 8; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
+}
+
+/* kdg_sincos_half4: i = 0..3 */
+static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}
+
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
+ * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
+ * as C99 specifies it: no -ffast-math. */
+static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    int out = 0;
+    if (n >= 8) {
+        for (i = 0; i + 8 <= n; i += 8)
+            out |= kdg_sincos_half8(x + i, s + i, c + i);
+        if (i < n)
+            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
+    } else if (n >= 4) {
+        out = kdg_sincos_half4(x, s, c);
+        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
+    } else if (n > 0) {
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        for (i = 0; i < n; ++i)
+            xb[i] = x[i];
+        out = kdg_sincos_half4(xb, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i];
+            c[i] = cb[i];
+        }
+    }
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+                s[i] = sin(0.5*x[i]);
+                c[i] = cos(0.5*x[i]);
+            }
+}
+
 void lwr4_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
@@ -627,30 +735,30 @@ out_J[41][j] = t40;
 
 void lwr4_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[3];
-    const double t9 = cos_q[4];
-    const double t11 = cos_q[5];
+    const double t7 = sin_q[4];
+    const double t9 = cos_q[5];
+    const double t11 = cos_q[6];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos_q[3];
-    const double t15 = sin_q[5];
+    const double t14 = cos_q[4];
+    const double t15 = sin_q[6];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t7*t13 + t14*t17;
-    const double t20 = sin_q[6];
+    const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = sin_q[4];
+    const double t22 = sin_q[5];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 - t24*t14;
-    const double t26 = cos_q[6];
+    const double t26 = cos_q[3];
     const double t27 = t21 + t26*t25;
     const double t28 = cos_q[2];
     const double t29 = t13*t14 - t7*t17;
@@ -1330,36 +1438,36 @@ out_Jx[55][j] = t280 + t279;
 
 void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[2], 0.5*q[1], 0.5*q[0], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
-    const double t1 = sin_q[0];
-    const double t3 = cos_q[1];
-    const double t5 = cos_q[2];
-    const double t7 = cos_q[3];
-    const double t9 = cos_q[4];
-    const double t11 = sin_q[5];
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
+    const double t1 = sin_q[6];
+    const double t3 = cos_q[5];
+    const double t5 = cos_q[4];
+    const double t7 = cos_q[2];
+    const double t9 = cos_q[1];
+    const double t11 = sin_q[0];
     const double t12 = t9*t11;
-    const double t13 = sin_q[3];
-    const double t14 = cos_q[5];
+    const double t13 = sin_q[2];
+    const double t14 = cos_q[0];
     const double t15 = t9*t14;
     const double t16 = t7*t12 + t13*t15;
-    const double t18 = cos_q[6];
-    const double t19 = sin_q[4];
+    const double t18 = cos_q[3];
+    const double t19 = sin_q[1];
     const double t20 = t19*t14;
     const double t21 = t19*t11;
     const double t22 = t7*t21 - t20*t13;
-    const double t23 = sin_q[6];
+    const double t23 = sin_q[3];
     const double t24 = t23*t22;
     const double t25 = t16*t18 + t24;
-    const double t26 = sin_q[2];
+    const double t26 = sin_q[4];
     const double t27 = -t7*t20 - t21*t13;
     const double t28 = t23*t27;
     const double t29 = t7*t15 - t12*t13;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t25 + t26*t30;
-    const double t32 = sin_q[1];
+    const double t32 = sin_q[5];
     const double t33 = t29*t23;
     const double t34 = t27*t18 + t33;
     const double t35 = t23*t16;
@@ -1371,7 +1479,7 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t32;
     const double t42 = t5*t30 - t26*t25;
     const double t43 = t41 + t3*t42;
-    const double t44 = cos_q[0];
+    const double t44 = cos_q[6];
     const double t45 = t43*t44 - t1*t39;
     const double t46 = 0.4*t5;
     const double t47 = 0.4*t26;
@@ -20226,27 +20334,27 @@ out_c[6][j] = t958 + qd[0*count + start + j]*(t945 - (t584 + t194));
 
 void lwr4_M_dq(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.5*q[4], 0.5*q[2], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t4 = sin_q[1];
+    const double t4 = sin_q[2];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t8 = sin_q[2];
+    const double t8 = sin_q[4];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t13 = sin_q[3];
+    const double t13 = sin_q[5];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
-    const double t16 = cos_q[3];
+    const double t16 = cos_q[5];
     const double t17 = t13*t16;
     const double t18 = 2.132e-05*t15 + 6.698e-05*t17;
     const double t19 = t18 - 0.00010112;
-    const double t20 = cos_q[2];
+    const double t20 = cos_q[4];
     const double t21 = t8*t20;
     const double t22 = 2.0*t21;
     const double t23 = t22*t19;
@@ -20268,7 +20376,7 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t166 = 0.39*t36 + 0.00029096;
     const double t167 = t29*t10 - t24*t22;
     const double t37 = t167 + t166;
-    const double t39 = sin_q[4];
+    const double t39 = sin_q[3];
     const double t40 = t39*t39;
     const double t41 = -2.0*t40 + 1.0;
     const double t42 = t41*t37;
@@ -20286,12 +20394,12 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t52 = t49*t10*t10;
     const double t170 = -t48 - 0.0702099;
     const double t53 = 0.39*(t51 + t52) + t170;
-    const double t54 = cos_q[4];
+    const double t54 = cos_q[3];
     const double t55 = t54*t39;
     const double t56 = 2.0*t55;
     const double t57 = t56*t53;
     const double t58 = t57 - t42 - 0.0001025;
-    const double t59 = cos_q[1];
+    const double t59 = cos_q[2];
     const double t60 = t4*t59;
     const double t61 = 2.0*t60;
     const double t62 = -t58*t61;
@@ -20322,7 +20430,7 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t81 = -t64 - t80*t61;
     const double t82 = -(t6*t63 + t81*t61) + 0.046847925;
     const double t83 = t2*t82;
-    const double t85 = sin_q[5];
+    const double t85 = sin_q[1];
     const double t86 = -2.0*t85*t85 + 1.0;
     const double t180 = -t41*t41*t73 - 1.5867;
     const double t87 = t180 - 4.0*t40*t73*t54*t54;
@@ -20349,7 +20457,7 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
     const double t185 = 0.4*(-4.0*t5*t59*t59*t103 - t6*t6*t103) + 0.12652;
     const double t186 = t185 - t96;
     const double t104 = t186 - t100;
-    const double t105 = 2.0*t85*cos_q[5];
+    const double t105 = 2.0*t85*cos_q[1];
     const double t106 = t86*t93 - t105*t104;
     const double t107 = t106 + 0.00028859;
     const double t108 = 2.0*t1*cos_q[0];
@@ -20748,10 +20856,10 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_g_dq(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[1];
@@ -20918,10 +21026,10 @@ out_g[6][j] = t37;
 
 void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21570,10 +21678,10 @@ out_c[6][j] = t99;
 
 void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21601,16 +21709,16 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t157 = -t21*qd[2] - t15*qdd[1];
     const double t22 = t157 - t6*t18;
     const double t23 = qdd[3] + t22;
-    const double t25 = sin_q[2];
+    const double t25 = sin_q[3];
     const double t26 = -2.0*t25*t25 + 1.0;
     const double t27 = qd[2] + t3;
-    const double t29 = sin_q[3];
-    const double t30 = t29*cos_q[3];
+    const double t29 = sin_q[2];
+    const double t30 = t29*cos_q[2];
     const double t31 = 2.0*t30;
     const double t32 = -2.0*t29*t29 + 1.0;
     const double t33 = t21*t32 - t27*t31;
     const double t34 = qd[3] + t17;
-    const double t35 = t25*cos_q[2];
+    const double t35 = t25*cos_q[3];
     const double t36 = 2.0*t35;
     const double t37 = t26*t33 + t34*t36;
     const double t38 = t30*t17;
@@ -22270,10 +22378,10 @@ out_tau[6][j] = t112;
 
 void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];

@@ -112,6 +112,114 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             }
 }
 
+/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
+ * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
+ * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
+ * _steps explains each step. kdg_sincos_half8: i = 0..7. */
+static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[8];
+    int j;
+    for (j = 0; j < 8; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
+}
+
+/* kdg_sincos_half4: i = 0..3 */
+static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}
+
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
+ * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
+ * as C99 specifies it: no -ffast-math. */
+static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    int out = 0;
+    if (n >= 8) {
+        for (i = 0; i + 8 <= n; i += 8)
+            out |= kdg_sincos_half8(x + i, s + i, c + i);
+        if (i < n)
+            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
+    } else if (n >= 4) {
+        out = kdg_sincos_half4(x, s, c);
+        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
+    } else if (n > 0) {
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        for (i = 0; i < n; ++i)
+            xb[i] = x[i];
+        out = kdg_sincos_half4(xb, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i];
+            c[i] = cb[i];
+        }
+    }
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+                s[i] = sin(0.5*x[i]);
+                c[i] = cos(0.5*x[i]);
+            }
+}
+
 void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
@@ -631,29 +739,29 @@ out_J[41][j] = t41;
 
 void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[5], 0.5*q[4], 0.5*q[6], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[3];
+    const double t7 = sin_q[5];
     const double t9 = sin_q[4];
-    const double t11 = sin_q[5];
+    const double t11 = sin_q[6];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
     const double t14 = cos_q[4];
-    const double t15 = cos_q[5];
+    const double t15 = cos_q[6];
     const double t16 = 0.5*t15;
     const double t17 = t7*t16;
     const double t18 = t7*t13 - t14*t17;
-    const double t20 = sin_q[6];
+    const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = cos_q[3];
+    const double t22 = cos_q[5];
     const double t23 = t22*t16;
     const double t24 = -t22*t13 - t23*t14;
-    const double t25 = cos_q[6];
+    const double t25 = cos_q[3];
     const double t26 = t21 + t24*t25;
     const double t27 = cos_q[2];
     const double t28 = t12*t14;
@@ -1314,36 +1422,36 @@ out_Jx[55][j] = t272 + t15*t148;
 
 void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[1], 0.5*q[0], 0.5*q[2], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
-    const double t1 = sin_q[0];
-    const double t3 = cos_q[1];
-    const double t5 = cos_q[2];
-    const double t7 = cos_q[3];
-    const double t9 = sin_q[4];
-    const double t11 = cos_q[5];
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
+    const double t1 = sin_q[6];
+    const double t3 = cos_q[5];
+    const double t5 = cos_q[4];
+    const double t7 = cos_q[1];
+    const double t9 = sin_q[0];
+    const double t11 = cos_q[2];
     const double t12 = t9*t11;
-    const double t13 = cos_q[4];
-    const double t14 = sin_q[5];
+    const double t13 = cos_q[0];
+    const double t14 = sin_q[2];
     const double t15 = t7*t14;
     const double t16 = t7*t12 - t13*t15;
-    const double t18 = cos_q[6];
-    const double t19 = sin_q[3];
+    const double t18 = cos_q[3];
+    const double t19 = sin_q[1];
     const double t20 = t19*t14;
     const double t21 = t20*t13 + t19*t12;
-    const double t22 = sin_q[6];
+    const double t22 = sin_q[3];
     const double t23 = t22*t21;
     const double t24 = t16*t18 + t23;
-    const double t25 = sin_q[2];
+    const double t25 = sin_q[4];
     const double t26 = t11*t13;
     const double t27 = t9*t20 - t26*t19;
     const double t28 = t22*t27;
     const double t29 = t9*t15 + t7*t26;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t24 + t25*t30;
-    const double t32 = sin_q[1];
+    const double t32 = sin_q[5];
     const double t33 = t29*t22;
     const double t34 = t27*t18 + t33;
     const double t35 = t22*t16;
@@ -1351,7 +1459,7 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
     const double t37 = t25*t34 + t5*t36;
     const double t38 = t32*t37;
     const double t39 = t3*t31 - t38;
-    const double t40 = cos_q[0];
+    const double t40 = cos_q[6];
     const double t41 = t5*t34 - t25*t36;
     const double t42 = t41*t32;
     const double t43 = t5*t30 - t24*t25;
@@ -20459,29 +20567,29 @@ out_c[6][j] = t1003 + qd[0*count + start + j]*(t990 - (t624 + t493));
 
 void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.5*q[4], 0.5*q[2], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t4 = sin_q[1];
+    const double t4 = sin_q[2];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t8 = sin_q[2];
+    const double t8 = sin_q[4];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t13 = sin_q[3];
+    const double t13 = sin_q[5];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
     const double t16 = 2.132e-05*t15;
-    const double t17 = cos_q[3];
+    const double t17 = cos_q[5];
     const double t18 = t13*t17;
     const double t19 = 6.698e-05*t18;
     const double t163 = -t19 - 0.00010112;
     const double t20 = t163 - t16;
-    const double t21 = cos_q[2];
+    const double t21 = cos_q[4];
     const double t22 = t8*t21;
     const double t23 = 2.0*t22;
     const double t24 = t23*t20;
@@ -20495,7 +20603,7 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t165 = t25*t10 + 0.028522772;
     const double t31 = t23*t30 + t165;
     const double t32 = t6*t31;
-    const double t34 = sin_q[4];
+    const double t34 = sin_q[3];
     const double t35 = t34*t34;
     const double t36 = -2.0*t35 + 1.0;
     const double t37 = 0.0466*t22;
@@ -20522,12 +20630,12 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t55 = t53*t10*t10;
     const double t169 = -t50 - 0.0702099;
     const double t56 = t169 + 0.39*(t54 + t55);
-    const double t57 = cos_q[4];
+    const double t57 = cos_q[3];
     const double t58 = t57*t34;
     const double t59 = 2.0*t58;
     const double t60 = t56*t59;
     const double t61 = t60 - t44 - 0.0001025;
-    const double t62 = cos_q[1];
+    const double t62 = cos_q[2];
     const double t63 = t4*t62;
     const double t64 = 2.0*t63;
     const double t65 = t64*t61;
@@ -20560,7 +20668,7 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t181 = t6*t66 + 0.046847925;
     const double t83 = t82*t64 + t181;
     const double t84 = t2*t83;
-    const double t86 = sin_q[5];
+    const double t86 = sin_q[1];
     const double t87 = -2.0*t86*t86 + 1.0;
     const double t182 = -t74*t36*t36 - 1.5867;
     const double t88 = t182 - 4.0*t74*t57*t57*t35;
@@ -20587,7 +20695,7 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
     const double t105 = t103 + t104;
     const double t187 = 0.4*(4.0*t5*t62*t62*t105 + t6*t6*t105) - 0.12652;
     const double t106 = t187 - t102;
-    const double t107 = 2.0*t86*cos_q[5];
+    const double t107 = 2.0*t86*cos_q[1];
     const double t108 = t107*t106;
     const double t189 = t108 + 0.00028859;
     const double t109 = t189 - t95;
@@ -20987,24 +21095,24 @@ out_M[48][j] = 0.0006000875;
 
 void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[2], 0.5*q[1], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
-    const double t1 = sin_q[0];
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    const double t1 = sin_q[1];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t4 = sin_q[1];
-    const double t5 = t4*cos_q[1];
+    const double t4 = sin_q[0];
+    const double t5 = t4*cos_q[0];
     const double t6 = t5*t2;
-    const double t7 = t1*cos_q[0];
+    const double t7 = t1*cos_q[1];
     const double t8 = t5*t7;
-    const double t10 = sin_q[2];
+    const double t10 = sin_q[4];
     const double t11 = -2.0*t10*t10 + 1.0;
     const double t13 = sin_q[3];
     const double t14 = t13*cos_q[3];
     const double t15 = -2.0*t4*t4 + 1.0;
-    const double t17 = sin_q[4];
-    const double t18 = t17*cos_q[4];
+    const double t17 = sin_q[2];
+    const double t18 = t17*cos_q[2];
     const double t19 = -2.0*t17*t17 + 1.0;
     const double t51 = 19.62*t19;
     const double t52 = -19.62*t18;
@@ -21014,7 +21122,7 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t8*t53 + t21*t20;
     const double t55 = -39.24*t18;
     const double t23 = t6*t55 - 9.81*t19*t15;
-    const double t24 = 2.0*cos_q[2]*t10;
+    const double t24 = 2.0*cos_q[4]*t10;
     const double t25 = t22*t11 - t24*t23;
     const double t26 = -t24*t22 - t23*t11;
     const double t28 = sin_q[5];
@@ -21159,10 +21267,10 @@ out_g[6][j] = t38;
 
 void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[6], 0.5*q[3], 0.5*q[5], 0.5*q[4], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21176,10 +21284,10 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t12 = 2.0*t11;
     const double t13 = t7*t10 + t12*qd[1];
     const double t14 = -0.12652*t4 - 0.0006915*t13;
-    const double t16 = sin_q[2];
+    const double t16 = sin_q[5];
     const double t17 = -2.0*t16*t16 + 1.0;
-    const double t19 = sin_q[3];
-    const double t20 = t19*cos_q[3];
+    const double t19 = sin_q[2];
+    const double t20 = t19*cos_q[2];
     const double t21 = 2.0*t20;
     const double t22 = -2.0*t19*t19 + 1.0;
     const double t23 = t4*t22 - t21*t13;
@@ -21192,8 +21300,8 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t148 = -4.0*t11;
     const double t31 = t9*t148 + t30;
     const double t32 = qd[3] - t31;
-    const double t34 = sin_q[5];
-    const double t35 = t34*cos_q[5];
+    const double t34 = sin_q[3];
+    const double t35 = t34*cos_q[3];
     const double t36 = 2.0*t35;
     const double t37 = -2.0*t34*t34 + 1.0;
     const double t38 = t4*t21 + t22*t13;
@@ -21201,7 +21309,7 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t40 = t24*t28 + t29*t39;
     const double t41 = t32*t37 - t38*t36;
     const double t42 = qd[5] - t41;
-    const double t43 = 2.0*t16*cos_q[2];
+    const double t43 = 2.0*t16*cos_q[5];
     const double t44 = t40*t17 + t43*t42;
     const double t45 = t31*qd[2] + t3*t30;
     const double t46 = t9*qd[1];
@@ -21825,10 +21933,10 @@ out_c[6][j] = t114;
 
 void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[3], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21855,11 +21963,11 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     const double t22 = t156 - t13*t18;
     const double t23 = t8*t10;
     const double t24 = t8*t7;
-    const double t26 = sin_q[2];
+    const double t26 = sin_q[3];
     const double t27 = -2.0*t26*t26 + 1.0;
     const double t28 = 19.62*t23 + 0.4*t22;
-    const double t30 = sin_q[3];
-    const double t31 = t30*cos_q[3];
+    const double t30 = sin_q[2];
+    const double t31 = t30*cos_q[2];
     const double t32 = 2.0*t31;
     const double t33 = -2.0*t30*t30 + 1.0;
     const double t34 = t33*t11;
@@ -21869,7 +21977,7 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     const double t38 = sin_q[4];
     const double t39 = -2.0*t38*t38 + 1.0;
     const double t40 = qd[3] - t11;
-    const double t41 = t26*cos_q[2];
+    const double t41 = t26*cos_q[3];
     const double t42 = 2.0*t41;
     const double t43 = t4*t32 + t33*t14;
     const double t44 = t42*t40 + t43*t27;
@@ -22535,10 +22643,10 @@ out_tau[6][j] = t116;
 
 void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];

@@ -113,8 +113,8 @@ void lwr4_hartl_jacobian_batch(long count, const double *q, double *J);
  * Cost: 228 add, 357 mul, 14 call
  * (as derived, before CSE: 2072 add, 16208 mul, 8384 call);
  * critical path 92 cycles, 15 dependent operations.
- * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q, read in place.
  */
 void lwr4_hartl_pose_jacobian_dq(const double *q, double *Jx);
 void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -133,8 +133,8 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  * Cost: 142 add, 259 mul, 14 call
  * (as derived, before CSE: 15347 add, 110828 mul, 62154 call);
  * critical path 110 cycles, 21 dependent operations.
- * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q, read in place.
  */
 void lwr4_hartl_jacobian_dq(const double *q, double *J);
 void lwr4_hartl_jacobian_dq_batch(long count, const double *q, double *J);
@@ -437,8 +437,8 @@ void lwr4_hartl_c_christoffel_batch(long count, const double *q, const double *q
  * Cost: 167 add, 244 mul, 12 call
  * (as derived, before CSE: 10819 add, 36451 mul, 12471 call);
  * critical path 134 cycles, 29 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void lwr4_hartl_M_dq(const double *q, double *M);
 void lwr4_hartl_M_dq_batch(long count, const double *q, double *M);
@@ -457,8 +457,8 @@ void lwr4_hartl_M_dq_batch(long count, const double *q, double *M);
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
  * critical path 125 cycles, 26 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void lwr4_hartl_g_dq(const double *q, double *g);
 void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
@@ -478,8 +478,8 @@ void lwr4_hartl_g_dq_batch(long count, const double *q, double *g);
  * Cost: 290 add, 420 mul, 12 call
  * (as derived, before CSE: 91914 add, 408827 mul, 136861 call);
  * critical path 155 cycles, 36 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void lwr4_hartl_c_dq(const double *q, const double *qd, double *c);
 void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -500,8 +500,8 @@ void lwr4_hartl_c_dq_batch(long count, const double *q, const double *qd, double
  * Cost: 313 add, 440 mul, 12 call
  * (as derived, before CSE: 102182 add, 437860 mul, 146946 call);
  * critical path 158 cycles, 37 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void lwr4_hartl_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -524,8 +524,8 @@ void lwr4_hartl_tau_dq_batch(long count, const double *q, const double *qd, cons
  * Cost: 691 add, 858 mul, 12 call
  * (as derived, before CSE: 116775 add, 503492 mul, 169711 call);
  * critical path 140 cycles, 31 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void lwr4_hartl_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void lwr4_hartl_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);

@@ -112,6 +112,114 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             }
 }
 
+/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
+ * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
+ * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
+ * _steps explains each step. kdg_sincos_half8: i = 0..7. */
+static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[8];
+    int j;
+    for (j = 0; j < 8; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
+}
+
+/* kdg_sincos_half4: i = 0..3 */
+static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {
+        const double xi = 0.5*x[j];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[j] = q >= 2.0 ? -sin_q : sin_q;
+        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+    }
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}
+
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from): blocks of eight or four lanes
+ * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
+ * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
+ * as C99 specifies it: no -ffast-math. */
+static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    int out = 0;
+    if (n >= 8) {
+        for (i = 0; i + 8 <= n; i += 8)
+            out |= kdg_sincos_half8(x + i, s + i, c + i);
+        if (i < n)
+            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
+    } else if (n >= 4) {
+        out = kdg_sincos_half4(x, s, c);
+        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
+    } else if (n > 0) {
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        for (i = 0; i < n; ++i)
+            xb[i] = x[i];
+        out = kdg_sincos_half4(xb, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i];
+            c[i] = cb[i];
+        }
+    }
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+                s[i] = sin(0.5*x[i]);
+                c[i] = cos(0.5*x[i]);
+            }
+}
+
 void panda_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
@@ -719,30 +827,30 @@ out_J[41][j] = -t58;
 
 void panda_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[0], 0.5*q[1], 0.5*q[2], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[3];
-    const double t9 = sin_q[4];
-    const double t11 = sin_q[5];
+    const double t7 = sin_q[4];
+    const double t9 = sin_q[5];
+    const double t11 = sin_q[6];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos_q[3];
-    const double t15 = cos_q[5];
+    const double t14 = cos_q[4];
+    const double t15 = cos_q[6];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t14*t17 - t7*t13;
-    const double t20 = sin_q[6];
+    const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = cos_q[4];
+    const double t22 = cos_q[5];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 + t24*t14;
-    const double t26 = cos_q[6];
+    const double t26 = cos_q[3];
     const double t27 = t26*t25 - t21;
     const double t28 = cos_q[2];
     const double t29 = -t7*t17 - t13*t14;
@@ -1498,39 +1606,39 @@ out_Jx[55][j] = t331 + t330;
 
 void panda_jacobian_dq(const double *restrict q, double *restrict J)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[2], 0.5*q[0], 0.5*q[1], 0.5*q[3], 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
-    const double t1 = sin_q[0];
-    const double t3 = cos_q[1];
-    const double t5 = cos_q[2];
-    const double t7 = cos_q[3];
-    const double t9 = sin_q[4];
-    const double t11 = cos_q[5];
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[7], cos_q[7];
+    kdg_sincos_half(7, q, sin_q, cos_q);
+    const double t1 = sin_q[6];
+    const double t3 = cos_q[5];
+    const double t5 = cos_q[4];
+    const double t7 = cos_q[2];
+    const double t9 = sin_q[0];
+    const double t11 = cos_q[1];
     const double t12 = t9*t11;
-    const double t13 = sin_q[3];
-    const double t14 = cos_q[4];
+    const double t13 = sin_q[2];
+    const double t14 = cos_q[0];
     const double t15 = t11*t14;
     const double t16 = t7*t12 + t13*t15;
-    const double t18 = cos_q[6];
-    const double t19 = sin_q[5];
+    const double t18 = cos_q[3];
+    const double t19 = sin_q[1];
     const double t20 = t19*t14;
     const double t21 = t20*t13;
     const double t22 = t9*t19;
     const double t23 = t7*t22;
     const double t24 = t21 - t23;
-    const double t25 = sin_q[6];
+    const double t25 = sin_q[3];
     const double t26 = t24*t25;
     const double t27 = t16*t18 - t26;
-    const double t28 = sin_q[2];
+    const double t28 = sin_q[4];
     const double t29 = t7*t20;
     const double t30 = t22*t13;
     const double t31 = t29 + t30;
     const double t32 = t7*t15 - t12*t13;
     const double t33 = t25*t31 + t32*t18;
     const double t34 = t5*t27 + t28*t33;
-    const double t35 = sin_q[1];
+    const double t35 = sin_q[5];
     const double t36 = t25*t32;
     const double t37 = t31*t18 - t36;
     const double t38 = t25*t16;
@@ -1539,7 +1647,7 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t35;
     const double t42 = t3*t34 - t41;
     const double t43 = t1*t42;
-    const double t44 = cos_q[0];
+    const double t44 = cos_q[6];
     const double t45 = t5*t37 - t28*t39;
     const double t46 = t45*t35;
     const double t47 = t5*t33 - t28*t27;
@@ -23983,21 +24091,21 @@ out_c[6][j] = t1310 + qd[0*count + start + j]*(t1302 - (t769 + t212));
 
 void panda_M_dq(const double *restrict q, double *restrict M)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[2], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t4 = sin_q[1];
-    const double t5 = t4*cos_q[1];
+    const double t4 = sin_q[5];
+    const double t5 = t4*cos_q[5];
     const double t6 = 0.006254879088*t5;
     const double t7 = -2.0*t4*t4 + 1.0;
     const double t8 = 0.007735484874*t7;
     const double t9 = -t6 - t8;
     const double t10 = -t9 + 0.164967552695;
-    const double t12 = sin_q[2];
-    const double t13 = cos_q[2];
+    const double t12 = sin_q[4];
+    const double t13 = cos_q[4];
     const double t14 = t12*t13;
     const double t15 = 2.0*t14;
     const double t16 = t15*t10;
@@ -24011,8 +24119,8 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t25 = cos_q[3];
     const double t26 = -t24*t24*t20 - 4.0*t23*t25*t25*t20;
     const double t27 = -t26 + 1.720683553603;
-    const double t29 = sin_q[4];
-    const double t30 = cos_q[4];
+    const double t29 = sin_q[2];
+    const double t30 = cos_q[2];
     const double t31 = t29*t30;
     const double t32 = 2.0*t31;
     const double t33 = t27*t32;
@@ -24097,7 +24205,7 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t221 = t97*t32 + t220;
     const double t98 = t221 + t46*t82;
     const double t99 = -t2*t98;
-    const double t101 = sin_q[5];
+    const double t101 = sin_q[1];
     const double t102 = t101*t101;
     const double t103 = -2.0*t102 + 1.0;
     const double t104 = t46*t97 - t82*t32 - 0.005487648106562256;
@@ -24120,7 +24228,7 @@ void panda_M_dq(const double *restrict q, double *restrict M)
     const double t113 = t230 - t112;
     const double t114 = t32*t109 + t46*t113;
     const double t115 = -t114 - 0.004377257121839584;
-    const double t116 = cos_q[5];
+    const double t116 = cos_q[1];
     const double t117 = t101*t116;
     const double t118 = 2.0*t117;
     const double t119 = t115*t118;
@@ -24595,10 +24703,10 @@ out_M[48][j] = 0.004909651967360946;
 
 void panda_g_dq(const double *restrict q, double *restrict g)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[1];
@@ -24607,12 +24715,12 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     const double t7 = t5*t6;
     const double t8 = t4*cos_q[1];
     const double t9 = t8*t6;
-    const double t11 = sin_q[2];
+    const double t11 = sin_q[4];
     const double t12 = -2.0*t11*t11 + 1.0;
     const double t14 = sin_q[3];
     const double t15 = t14*cos_q[3];
-    const double t17 = sin_q[4];
-    const double t18 = t17*cos_q[4];
+    const double t17 = sin_q[2];
+    const double t18 = t17*cos_q[2];
     const double t19 = -2.0*t17*t17 + 1.0;
     const double t51 = -19.62*t19;
     const double t52 = 19.62*t18;
@@ -24622,7 +24730,7 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t9*t53 + t21*t20;
     const double t55 = 39.24*t18;
     const double t23 = t7*t55 + 9.81*t2*t19;
-    const double t24 = 2.0*t11*cos_q[2];
+    const double t24 = 2.0*t11*cos_q[4];
     const double t25 = t22*t12 + t24*t23;
     const double t26 = t23*t12 - t24*t22;
     const double t28 = sin_q[5];
@@ -24767,10 +24875,10 @@ out_g[6][j] = t38;
 
 void panda_c_dq(const double *restrict q, const double *restrict qd, double *restrict c)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -25533,10 +25641,10 @@ out_c[6][j] = t133;
 
 void panda_tau_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict tau)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -26315,10 +26423,10 @@ out_tau[6][j] = t138;
 
 void panda_Y_dq(const double *restrict q, const double *restrict qd, const double *restrict qdd, double *restrict Y)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[1], 0.5*q[2], 0.5*q[3], 0.5*q[4], 0.5*q[5], 0.5*q[6], 0.0, 0.0};
-    double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
+       buffer could not forward to the kernel's vector load (docs/latency.md) */
+    double sin_q[6], cos_q[6];
+    kdg_sincos_half(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];

@@ -113,8 +113,8 @@ void panda_jacobian_batch(long count, const double *q, double *J);
  * Cost: 286 add, 427 mul, 14 call
  * (as derived, before CSE: 3672 add, 26272 mul, 13432 call);
  * critical path 98 cycles, 17 dependent operations.
- * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q, read in place.
  */
 void panda_pose_jacobian_dq(const double *q, double *Jx);
 void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
@@ -133,8 +133,8 @@ void panda_pose_jacobian_dq_batch(long count, const double *q, double *Jx);
  * Cost: 188 add, 313 mul, 14 call
  * (as derived, before CSE: 27455 add, 193768 mul, 107648 call);
  * critical path 119 cycles, 24 dependent operations.
- * The sin/cos of its 7 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q, read in place.
  */
 void panda_jacobian_dq(const double *q, double *J);
 void panda_jacobian_dq_batch(long count, const double *q, double *J);
@@ -437,8 +437,8 @@ void panda_c_christoffel_batch(long count, const double *q, const double *qd, do
  * Cost: 219 add, 303 mul, 12 call
  * (as derived, before CSE: 14791 add, 48807 mul, 16807 call);
  * critical path 140 cycles, 31 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void panda_M_dq(const double *q, double *M);
 void panda_M_dq_batch(long count, const double *q, double *M);
@@ -457,8 +457,8 @@ void panda_M_dq_batch(long count, const double *q, double *M);
  * Cost: 44 add, 98 mul, 12 call
  * (as derived, before CSE: 1676 add, 8829 mul, 3217 call);
  * critical path 125 cycles, 26 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void panda_g_dq(const double *q, double *g);
 void panda_g_dq_batch(long count, const double *q, double *g);
@@ -478,8 +478,8 @@ void panda_g_dq_batch(long count, const double *q, double *g);
  * Cost: 332 add, 468 mul, 12 call
  * (as derived, before CSE: 148676 add, 646792 mul, 215417 call);
  * critical path 158 cycles, 37 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void panda_c_dq(const double *q, const double *qd, double *c);
 void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
@@ -500,8 +500,8 @@ void panda_c_dq_batch(long count, const double *q, const double *qd, double *c);
  * Cost: 353 add, 484 mul, 12 call
  * (as derived, before CSE: 164689 add, 688748 mul, 229617 call);
  * critical path 161 cycles, 38 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void panda_tau_dq(const double *q, const double *qd, const double *qdd, double *tau);
 void panda_tau_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *tau);
@@ -524,8 +524,8 @@ void panda_tau_dq_batch(long count, const double *q, const double *qd, const dou
  * Cost: 842 add, 963 mul, 12 call
  * (as derived, before CSE: 179060 add, 753806 mul, 252381 call);
  * critical path 146 cycles, 33 dependent operations.
- * The sin/cos of its 6 arguments affine in q (half angles) are served by one run of the
- * sincos kernel over those arguments.
+ * The sin/cos of its half angles q[k]/2 are served by one run of the sincos kernel over the halves
+ * of q[1:], read in place.
  */
 void panda_Y_dq(const double *q, const double *qd, const double *qdd, double *Y);
 void panda_Y_dq_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
