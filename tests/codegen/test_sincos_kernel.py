@@ -8,6 +8,18 @@ import pytest
 
 from kindyngen.codegen import trig_kernel
 
+XORSHIFT = r"""
+/* random bits for random doubles of uniform significand and exponent (xorshift64, seeded) */
+static uint64_t state = 0x9E3779B97F4A7C15u;
+static uint64_t next(void)
+{
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    return state;
+}
+"""
+
 DRIVER = r"""
 /* Compare the generated sincos kernel (included as KERNEL, a file holding kernel_c()) with libm:
  * prints one line per set of arguments, "<set> <max ulp sin> <max ulp cos> <points>", then one
@@ -67,16 +79,7 @@ static void report(const char *set)
     points = 0;
 }
 
-/* a random double of uniform significand and exponent in [lo, hi) (xorshift64, seeded) */
-static uint64_t state = 0x9E3779B97F4A7C15u;
-static uint64_t next(void)
-{
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
-    return state;
-}
-
+""" + XORSHIFT + r"""
 int main(int argc, char **argv)
 {
     const long grid = argc > 1 ? atol(argv[1]) : 10000000;
@@ -203,15 +206,7 @@ HALF_DRIVER = r"""
 
 #include KERNEL
 
-static uint64_t state = 0x2545F4914F6CDD1Du;
-static uint64_t next(void)
-{
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
-    return state;
-}
-
+""" + XORSHIFT + r"""
 int main(void)
 {
     double x[9], h[9], s[9], c[9], sh[9], ch[9];
