@@ -294,16 +294,16 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         for k, sym in enumerate(q[first:]):
             where = f"[{k}][j]" if batch else f"[{k}]"
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
-    arguments = _kernel_argument_names(program, dialect, names, angles, batch) if trig == "kernel" else []
-    half = 0
-    if arguments and not angles and not batch and dialect.name == "c" and not dialect.single:
-        halves = half_angles(program)
-        if halves:
-            first = min(halves.values())
-            half = len(f.input_symbols[[p.name for p in f.inputs].index("q")]) - first
-            for call, k in halves.items():
-                names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{k - first}]"
-            arguments = []
+    served = _served(program) if trig == "kernel" else {}
+    halves = half_angles(f, served) if not angles and not batch and dialect.name == "c" and not dialect.single else {}
+    half, arguments = 0, []
+    if halves:
+        first = min(halves.values())
+        half = len(f.input_symbols[[p.name for p in f.inputs].index("q")]) - first
+        for call, k in halves.items():
+            names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{k - first}]"
+    else:
+        arguments = _kernel_argument_names(served, dialect, names, angles, batch)
     # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
     block, in_place = (_batch_block(angles + len(arguments), sum(p.size for p in f.outputs) + len(arguments))
                        if batch else (0, False))
@@ -364,13 +364,17 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     )
 
 
-def _kernel_argument_names(program: Program, dialect: Dialect, names: dict, angles: int, batch: bool) -> list:
-    """The C texts of the program's sin/cos arguments affine in q (half angles, joint offsets),
+def _served(program: Program) -> dict:
+    """The program's sin/cos with arguments affine in q (:func:`kindyngen.codegen.optimize.kernel_arguments`)."""
+    return kernel_arguments(program.function, program.assignments, [e for p in program.outputs for e in p])
+
+
+def _kernel_argument_names(served: dict, dialect: Dialect, names: dict, angles: int, batch: bool) -> list:
+    """The C texts of the ``served`` sin/cos arguments affine in q (half angles, joint offsets),
     which take the kernel's lanes after the ``angles`` joint angles; ``names`` learns where each
     such sin/cos is read."""
     arguments, lane = [], {}
-    for call, argument in kernel_arguments(program.function, program.assignments,
-                                           [e for p in program.outputs for e in p]).items():
+    for call, argument in served.items():
         if argument not in lane:
             lane[argument] = angles + len(arguments)
             arguments.append(dialect.expr(argument, names))
@@ -379,31 +383,28 @@ def _kernel_argument_names(program: Program, dialect: Dialect, names: dict, angl
     return arguments
 
 
-def half_angles(program: Program) -> dict:
-    """``{call: k}`` when every sin/cos the kernel would serve beside the joint angles
-    (:func:`kindyngen.codegen.optimize.kernel_arguments`) has the half joint angle q[k]/2 as its
-    argument, else ``{}``. Such a single call runs the half-angle kernel
-    (``trig_kernel.kernel_c(half=True)``) over q read in place: bit for bit the values of the
-    kernel over a copy of the halves, without the copy, whose pieces the store buffer cannot
-    forward to the kernel's vector load (docs/latency.md, "Half angles read in place").
+def half_angles(function, served: dict) -> dict:
+    """``{call: k}`` when every one of the ``served`` sin/cos (:func:`_served`: those the kernel
+    would serve beside the joint angles) has the half joint angle q[k]/2 as its argument, else
+    ``{}``. Such a single call runs the half-angle kernel (``trig_kernel.kernel_c(half=True)``)
+    over q read in place: bit for bit the values of the kernel over a copy of the halves,
+    without the copy, whose pieces the store buffer cannot forward to the kernel's vector load
+    (docs/latency.md, "Half angles read in place").
 
     >>> from kindyngen.algorithms.symbolic import Port, SymbolicFunction
-    >>> from kindyngen.codegen.opcount import OpCount
     >>> q = se.symbols("q_0 q_1")
-    >>> def program(e):
-    ...     f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((e,),))
-    ...     return Program(f, (), ((e,),), OpCount(0, 0, 0), OpCount(0, 0, 0))
-    >>> sorted(half_angles(program(se.sin(q[1] / 2) * se.cos(q[0] / 2))).items(), key=str)
-    [(cos((1/2)*q_0), 0), (sin((1/2)*q_1), 1)]
-    >>> half_angles(program(se.sin(q[1] / 2) * se.cos((q[0] + q[1]) / 2)))
+    >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((0,),))
+    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos(q[0] / 2): q[0] / 2})
+    {sin((1/2)*q_1): 1, cos((1/2)*q_0): 0}
+    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos((q[0] + q[1]) / 2): (q[0] + q[1]) / 2})
     {}
     """
-    f = program.function
-    q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+    if not served:
+        return {}
+    q = function.input_symbols[[p.name for p in function.inputs].index("q")]
     index = {se.Rational(1, 2) * sym: k for k, sym in enumerate(q)}
-    served = kernel_arguments(f, program.assignments, [e for port in program.outputs for e in port])
     halves = {call: index.get(argument) for call, argument in served.items()}
-    return halves if halves and None not in halves.values() else {}
+    return halves if None not in halves.values() else {}
 
 
 def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
@@ -421,7 +422,7 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
         q = f.input_symbols[[p.name for p in f.inputs].index("q")]
         for k, sym in enumerate(q[first:]):
             names[se.sin(sym)], names[se.cos(sym)] = f"sin_q[{k}]", f"cos_q[{k}]"
-    arguments = _kernel_argument_names(everything, dialect, names, angles, False) if trig == "kernel" else []
+    arguments = _kernel_argument_names(_served(everything), dialect, names, angles, False) if trig == "kernel" else []
     live = _live_beside_kernel(everything, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
     for k, seed in enumerate(lp.seeds):
         names[seed] = f"kdg_seed[{k}][kdg_lane]"

@@ -137,11 +137,11 @@ def test_critical_path_is_the_printed_codes(robot):
 def test_kernel_latency_is_its_printed_chain():
     """kernel_latency() against the kernel's C text walked line by line, the half-angle kernel's too."""
     for half in (False, True):
-        ready = {"x": 0}
+        ready = {}
         for line in trig_kernel.kernel_c(half=half).splitlines():
             m = re.match(r"\s*const double (\w+) = (.*);$", line)
-            if m and "?" not in m.group(2):
-                ready[m.group(1)] = c_ready(m.group(2).replace("x[j]", "x"), ready, 0)
+            if m and "?" not in m.group(2):        # xi = x[j] (an input, ready at 0) or 0.5*x[j]
+                ready[m.group(1)] = c_ready(m.group(2), ready, 0)
         chain = max(ready["sin_r"], ready["cos_r"], ready["q"] + 2 * LATENCY["add"])
         assert trig_kernel.kernel_latency(half=half) == chain + trig_kernel.SELECTS * LATENCY["select"]
 
