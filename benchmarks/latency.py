@@ -15,8 +15,9 @@ alone against its latency bound, and what FMA contraction buys; results/latency.
   time and (a) the critical path in cycles, (b) add + mul + call after CSE, (c) each figure of
   ``machine_code``, and the least-squares fits time = a * cycles + b * operations + c and
   time = a * cycles + b * memory operands + c with their r.
-* ``kernel``: kdg_sincos alone on 8 angles (n passed at run time, as the batch and half-angle
-  calls do) and on 7 (``n7``: n a constant, as lwr4's and panda's single calls do): latency (the
+* ``kernel``: kdg_sincos alone on 8 angles (n passed at run time, as the batch calls do) and
+  on 7 (``n7``: the split kernel, kdg_sincos_split with n a constant and its libm fix-up behind
+  the flag, as lwr4's and panda's single calls run it): latency (the
   next call's angles depend on this call's results) and throughput (independent calls), both
   net of the same harness around an empty kernel, in cycles of this core (calibrated by a chain
   of dependent multiplications, 3 cycles each on Zen 2-5; a chain of additions is not: 3 cycles
@@ -181,9 +182,10 @@ __attribute__((noinline)) static void empty(long n, const double *restrict x, do
 { long i; for (i = 0; i < n; ++i) { s[i] = x[i]; c[i] = x[i]; } }
 __attribute__((noinline)) static void kernel(long n, const double *restrict x, double *restrict s, double *restrict c)
 { kdg_sincos(n, x, s, c); }
-/* as a single call of lwr4's or panda's functions calls it: seven angles read in place, n a constant */
+/* as a single call of lwr4's or panda's functions calls it: seven angles read in place by the split
+   kernel, n a constant (its results fill all eight lanes of s and c: lane 4 repeats lane 3) */
 __attribute__((noinline)) static void kernel7(long n, const double *restrict x, double *restrict s, double *restrict c)
-{ (void)n; kdg_sincos(7, x, s, c); }
+{ (void)n; if (kdg_sincos_split(7, x, s, c)) kdg_sincos_split_libm(7, x, s, c); }
 static double now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec*1e9 + t.tv_nsec; }
 static volatile double sink;
 __attribute__((noinline)) static double chain(long n, double d)

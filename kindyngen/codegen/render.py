@@ -14,7 +14,7 @@ import jinja2
 import symengine as se
 
 from .. import __version__
-from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, kernel_c,
+from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, kernel_c, split_slot,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
 from .optimize import Program, kernel_arguments
@@ -45,10 +45,11 @@ SCALARS = ("double", "float")
 KERNEL_LANES = 8
 """Single calls with arguments affine in q other than the half joint angles q[k]/2 (those: the
 half-angle kernel over q in place, :func:`half_angles`), e.g. lwr4's fk_dq with 0.5*(q[0] + q[2]),
-run the sincos kernel over the joint angles and those arguments, padded with zeros to a
-multiple of this (AVX-512 lanes), the arguments being computed into that array anyway. Joint angles alone are read in place from q, unpadded: the
-padded copy, stored in pieces and loaded back as one vector, cost more than the kernel's
-scalar remainder (lwr4 on Zen 5: jacobian 35.0 -> 31.8 ns, tau 82.6 -> 71.4; docs/latency.md)."""
+run the sincos kernel over the joint angles and those arguments, computed into an array; more
+than seven of them are padded with zeros to a multiple of this (AVX-512 lanes). Joint angles
+alone are read in place from q, unpadded: the padded copy, stored in pieces and loaded back as
+one vector, cost more than the kernel's scalar remainder (lwr4 on Zen 5: jacobian 35.0 -> 31.8
+ns, tau 82.6 -> 71.4; docs/latency.md)."""
 
 
 HALF_KERNEL = "kdg_sincos_half"
@@ -147,6 +148,8 @@ class FunctionView:
     first_angle: int = 0          # ... starting at this one (after a floating base's 7 coordinates)
     arguments: tuple = ()         # C single calls: then these arguments affine in q (C text), e.g. half angles
     lanes: int = 0                # C with arguments: angles padded to a multiple of KERNEL_LANES
+    split: bool = False           # C single calls of 4-7 kernel arguments: the split kernel, whose
+                                  # arrays of eight hold argument k at trig_kernel.split_slot(k, count)
     half: int = 0                 # C single calls whose kernel arguments are all half joint angles: the
                                   # half-angle kernel over this many entries of q from first_angle, in place
     block: int = 0                # C batch: configurations per block
@@ -289,21 +292,19 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         names = {sym: f"{port.name}[{k}*count + start + j]"
                  for port, symbols in zip(f.inputs, f.input_symbols) for k, sym in enumerate(symbols)}
     first, angles = kernel_angles(program) if (trig == "kernel" or batch) else (0, 0)
-    if angles:
-        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
-        for k, sym in enumerate(q[first:]):
-            where = f"[{k}][j]" if batch else f"[{k}]"
-            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where}", f"cos_q{where}"
     served = _served(program) if trig == "kernel" else {}
     halves = half_angles(f, served) if not angles and not batch and dialect.name == "c" and not dialect.single else {}
     half, arguments = 0, []
     if halves:
         first = min(halves.values())
         half = len(f.input_symbols[[p.name for p in f.inputs].index("q")]) - first
+        split = _splits(half, dialect, batch)
         for call, k in halves.items():
-            names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{k - first}]"
+            names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{_slot(k - first, half, split)}]"
     else:
         arguments = _kernel_argument_names(served, dialect, names, angles, batch)
+        split = _splits(angles + len(arguments), dialect, batch)
+        _name_kernel_results(f, served, names, first, angles, arguments, batch, split)
     # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
     block, in_place = (_batch_block(angles + len(arguments), sum(p.size for p in f.outputs) + len(arguments))
                        if batch else (0, False))
@@ -333,6 +334,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     lane = None
     if dialect.name == "c" and not batch and lanes and program.lanes is not None:
         lane, first, angles, arguments = _lane_view(program, dialect, trig)
+        split = _splits(angles + len(arguments), dialect, batch)
     statements = ()
     pressure = False
     # the scalar program's print order, for single calls that do not print a lane program
@@ -353,7 +355,8 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         angles=angles,
         first_angle=first,
         arguments=tuple(arguments),
-        lanes=-(-(angles + len(arguments)) // KERNEL_LANES) * KERNEL_LANES,
+        lanes=(angles + len(arguments)) if split else -(-(angles + len(arguments)) // KERNEL_LANES) * KERNEL_LANES,
+        split=split,
         half=half,
         block=block,
         in_place=in_place,
@@ -371,16 +374,45 @@ def _served(program: Program) -> dict:
 
 def _kernel_argument_names(served: dict, dialect: Dialect, names: dict, angles: int, batch: bool) -> list:
     """The C texts of the ``served`` sin/cos arguments affine in q (half angles, joint offsets),
-    which take the kernel's lanes after the ``angles`` joint angles; ``names`` learns where each
-    such sin/cos is read."""
-    arguments, lane = [], {}
-    for call, argument in served.items():
-        if argument not in lane:
-            lane[argument] = angles + len(arguments)
+    which take the kernel's lanes after the ``angles`` joint angles, in order of first use."""
+    arguments, seen = [], set()
+    for argument in served.values():
+        if argument not in seen:
+            seen.add(argument)
             arguments.append(dialect.expr(argument, names))
-        where = f"[{lane[argument]}][j]" if batch else f"[{lane[argument]}]"
-        names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where}"
     return arguments
+
+
+def _splits(count: int, dialect: Dialect, batch: bool) -> bool:
+    """Whether a call of the double C kernel on ``count`` arguments is the split kernel: single
+    calls of four to seven (trig_kernel.SPLIT; batches and float C run the loop over blocks)."""
+    return dialect.name == "c" and not dialect.single and not batch and count in SPLIT
+
+
+def _slot(lane: int, count: int, split: bool) -> int:
+    """Where the kernel leaves the sin/cos of its argument ``lane`` of ``count``."""
+    return split_slot(lane, count) if split else lane
+
+
+def _name_kernel_results(f, served: dict, names: dict, first: int, angles: int, arguments: list,
+                         batch: bool, split: bool) -> None:
+    """``names`` learns where the kernel leaves sin/cos of the joint angles q[first:first + angles]
+    (lanes 0..angles-1) and of the ``served`` arguments (the lanes after them, in order of first
+    use, as :func:`_kernel_argument_names` lists them): ``sin_q[lane]`` of a single call
+    (:func:`_slot`), ``sin_q[lane][j]`` of configuration j of a batch block."""
+    count = angles + len(arguments)
+
+    def where(lane):
+        return f"[{lane}][j]" if batch else f"[{_slot(lane, count, split)}]"
+
+    if angles:
+        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
+        for k, sym in enumerate(q[first:]):
+            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q{where(k)}", f"cos_q{where(k)}"
+    lane = {}
+    for call, argument in served.items():
+        lane.setdefault(argument, angles + len(lane))
+        names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where(lane[argument])}"
 
 
 def half_angles(function, served: dict) -> dict:
@@ -418,11 +450,10 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
                          outputs=(tuple(e for port in lp.outputs if port is not None for e in port)
                                   + tuple(v for row in lp.values for v in row) + lp.lane_outputs,))
     first, angles = kernel_angles(everything) if trig == "kernel" else (0, 0)
-    if angles:
-        q = f.input_symbols[[p.name for p in f.inputs].index("q")]
-        for k, sym in enumerate(q[first:]):
-            names[se.sin(sym)], names[se.cos(sym)] = f"sin_q[{k}]", f"cos_q[{k}]"
-    arguments = _kernel_argument_names(_served(everything), dialect, names, angles, False) if trig == "kernel" else []
+    served = _served(everything) if trig == "kernel" else {}
+    arguments = _kernel_argument_names(served, dialect, names, angles, False)
+    split = _splits(angles + len(arguments), dialect, False)
+    _name_kernel_results(f, served, names, first, angles, arguments, False, split)
     live = _live_beside_kernel(everything, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
     for k, seed in enumerate(lp.seeds):
         names[seed] = f"kdg_seed[{k}][kdg_lane]"
@@ -494,15 +525,28 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
                sincos="kdg_sincosf" if single else "kdg_sincos", sincos_half=HALF_KERNEL,
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
-               sincos_kernel=kernel_c_float() if single else kernel_c(),
+               sincos_kernel=kernel_c_float() if single else _kernels(ctx["functions"], batch),
                float_error={name: e.text() for name, e in (float_error or {}).items()})
-    if any(f.half for f in ctx["functions"]):
-        ctx["sincos_kernel"] += "\n" + kernel_c(HALF_KERNEL, half=True)
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
             f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
             "CMakeLists.txt": env.get_template("c/CMakeLists.txt.j2").render(ctx)}
+
+
+def _kernels(functions, batch: bool) -> str:
+    """The double sincos kernels the functions call, and only those (a static function no call
+    uses is a compiler warning): the loop over blocks where a batch variant or a single call of
+    eight or more arguments runs it, the split kernel where a single call of four to seven does
+    (the loop over blocks calls it too), each for the plain and for the half-angle kernel."""
+    text = []
+    for name, half in (("kdg_sincos", False), (HALF_KERNEL, True)):
+        calls = [f for f in functions if bool(f.half) == half and (f.half or f.angles or f.arguments)]
+        loop = any(not f.split for f in calls) or (not half and batch and any(
+            f.batch.angles or f.batch.arguments for f in functions))
+        if loop or calls:
+            text.append(kernel_c(name, half=half, blocks=loop))
+    return "\n".join(text)
 
 
 def render_python(model: RobotModel, programs) -> dict[str, str]:

@@ -24,19 +24,22 @@ in blocks of four or eight lanes of plain C99 that compilers vectorise:
   from one compare (q odd, q >= 2, q in {1, 2}), so that gcc keeps the AVX-512 masks in mask
   registers instead of combining them in general ones; the tail is carried negated, which
   makes sin(-0) = -0 come out of the arithmetic (no select for tiny arguments);
-* blocks (:data:`LANES`) of eight consecutive arguments (one AVX-512 vector) for n >= 8, of
-  four (one AVX2 vector) twice for 4 <= n < 8, x[0..3] and x[n-4..n-1] (for seven angles one
-  lane is computed twice), instead of a loop over n, whose remainder for n = 7 took half the
-  kernel's time with AVX-512;
+* blocks (:data:`LANES`) of eight consecutive arguments (one AVX-512 vector) for n >= 8, instead
+  of a loop over n, whose remainder for n = 7 took half the kernel's time with AVX-512; for
+  4 <= n < 8 the split kernel: two blocks of four (one AVX2 vector each), x[0..3] and
+  x[n-4..n-1], in one loop body (for seven angles one lane is computed twice), two independent
+  chains the core overlaps, its results in arrays of eight (:func:`split_slot`);
 * |x| > BOUND, infinities and NaN are computed by libm afterwards, in a loop entered only if a
-  block's one range test saw one.
+  block's one range test saw one (for the split kernel, by the caller, so that the kernel is a
+  leaf function without the calls' register saves).
 
-Measured alone (the harness of ``python -m benchmarks.latency``, old and new kernel alternated,
-docs/latency.md; AMD EPYC Zen 5, gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average
-5.6-6.0): the latency of a call on seven angles in place (as lwr4's and panda's single calls
-make it) fell from 134 to 92 cycles net (34.5 to 24.0 ns; FMA build 115 to 76), on eight from
-62 to 60 cycles; the bound is 47 (39 with Zen 5's 2-cycle addition): 1.3x for eight lanes,
-2.0x for seven.
+Measured alone (the harness of ``python -m benchmarks.latency``, docs/latency.md): on AMD EPYC
+Zen 5 (gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average 5.6-6.0) the blocks took
+the latency of a call on seven angles in place (as lwr4's and panda's single calls make it)
+from 134 to 92 cycles net and on eight from 62 to 60 cycles; on AMD EPYC Zen 4 the two blocks
+of four one after the other took 87 cycles for seven angles and the split kernel 55 (an ad-hoc
+harness, docs/latency.md, "Two blocks of four in one loop"); the bound is 47 cycles (39 with
+Zen 5's 2-cycle addition).
 
 Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
 practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
@@ -46,6 +49,8 @@ The coefficients below are written out (generation must not depend on a fit's nu
 ``fit_coefficients()`` and ``split_pio2()`` recompute them, and a test checks they agree.
 """
 from __future__ import annotations
+
+import re
 
 TRIG_MODES = ("kernel", "libm")
 """kernel: sin/cos of joint angles and of arguments affine in them (half angles) by the emitted
@@ -160,10 +165,23 @@ def _pairs(coeffs, z: str):
     return [f"({coeffs[j]!r} + {coeffs[j + 1]!r}*{z})" for j in range(0, len(coeffs), 2)]
 
 
-def _steps() -> tuple[tuple[str, str], ...]:
+def _steps(suffix: str = "") -> tuple[tuple[str, str], ...]:
     """The kernel's arithmetic for one argument ``xi`` as (name, C expression) in evaluation
     order; every expression is also valid Python (names, literals, + - *, parentheses), which
-    :func:`kernel_latency` reads. The quadrant selects follow in :func:`kernel_c`."""
+    :func:`kernel_latency` reads. The quadrant selects follow in :func:`kernel_c`. ``suffix``
+    is appended to every name (``xi`` included), for two arguments in one loop body.
+
+    >>> _steps("_a")[0]
+    ('k_a', '(xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0')
+    """
+    steps = _plain_steps()
+    if not suffix:
+        return steps
+    names = re.compile(r"\b(" + "|".join(["xi"] + [n for n, _ in steps]) + r")\b")
+    return tuple((n + suffix, names.sub(lambda m: m.group(1) + suffix, e)) for n, e in steps)
+
+
+def _plain_steps() -> tuple[tuple[str, str], ...]:
     p1, p2, p3, p4 = (repr(p) for p in PIO2_PARTS)
     shifter = repr(SHIFTER)
     s0, s1, s2 = _pairs(SIN_COEFFS, "z")
@@ -240,71 +258,151 @@ LANES = (8, 4)
 """Lanes of the kernel's blocks: eight doubles are one AVX-512 vector, four one AVX2 vector. A
 block is a loop of fixed count over consecutive arguments, which compilers vectorise whole,
 without the scalar remainder a loop over n = 7 has (measured: with AVX-512 the remainder took
-half the kernel's time, docs/latency.md); seven angles are two blocks of four, x[0..3] and
-x[3..6], lane 3 computed twice to the same value."""
+half the kernel's time, docs/latency.md). Four to seven arguments are two blocks of four in
+one loop body, x[0..3] and x[n-4..n-1] (for seven angles x[3] is computed twice, to the same
+value): two independent chains the core overlaps, where two blocks one after the other took
+1.7x as long (docs/latency.md, "Two blocks of four in one loop")."""
 
 
-def _quadrant(s: str, c: str) -> str:
-    """The quadrant selects and the range flag of lane j, storing to ``s`` and ``c``."""
+def _quadrant(s: str, c: str, suffix: str = "") -> str:
+    """The quadrant selects of lane j (the steps' names with ``suffix``), storing to ``s`` and ``c``."""
+    q, sin_r, cos_r, sin_q, cos_q = (name + suffix for name in ("q", "sin_r", "cos_r", "sin_q", "cos_q"))
     return f"""\
+        const double {sin_q} = fabs({q} - 2.0) == 1.0 ? {cos_r} : {sin_r};
+        const double {cos_q} = fabs({q} - 2.0) == 1.0 ? {sin_r} : {cos_r};
+        {s} = {q} >= 2.0 ? -{sin_q} : {sin_q};
+        {c} = fabs({q} - 1.5) == 0.5 ? -{cos_q} : {cos_q};"""
+
+
+QUADRANT_COMMENT = """\
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        {s} = q >= 2.0 ? -sin_q : sin_q;
-        {c} = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= {BOUND!r} ? 0.0 : 1.0;"""
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */"""
 
 
-def _block(name: str, lanes: int, body: str, argument: str = "x[j]") -> str:
-    """The C of ``name``<lanes>: the kernel's steps on ``lanes`` consecutive arguments (each
-    ``argument`` of lane j), returning nonzero if a lane needs libm (its range flags summed as a
-    balanced tree)."""
-    flags = [f"out[{j}]" for j in range(lanes)]
-    while len(flags) > 1:
-        flags = [f"({a} + {b})" for a, b in zip(flags[0::2], flags[1::2])]
-    return f"""static int {name}{lanes}(const double *restrict x, double *restrict s, double *restrict c)
+def _body(suffix: str, argument: str) -> str:
+    """The steps of one argument as C declarations in a block's loop body."""
+    xi = "xi" + suffix
+    return "\n".join([f"        const double {xi} = {argument};"]
+                     + [f"        const double {n} = {e};" for n, e in _steps(suffix)])
+
+
+def _in_range(*xs: str) -> str:
+    """C: 0.0 if every argument is within the kernel's range, else 1.0 (a lane libm must redo)."""
+    return " && ".join(f"fabs({x}) <= {BOUND!r}" for x in xs) + " ? 0.0 : 1.0"
+
+
+def _block8(name: str, argument: str) -> str:
+    """The C of ``name``8: the kernel's steps on eight consecutive arguments (each ``argument``
+    of lane j), returning nonzero if a lane needs libm (its range flags summed as a balanced tree)."""
+    return f"""static int {name}8(const double *restrict x, double *restrict s, double *restrict c)
 {{
-    double out[{lanes}];
+    double out[8];
     int j;
-    for (j = 0; j < {lanes}; ++j) {{
-        const double xi = {argument};
-{body}
+    for (j = 0; j < 8; ++j) {{
+{_body("", argument.format(j="j"))}
+{QUADRANT_COMMENT}
 {_quadrant("s[j]", "c[j]")}
+        out[j] = {_in_range("xi")};
     }}
-    return {flags[0][1:-1]} != 0.0;
+    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
 }}
 """
 
 
-def kernel_c(name: str = "kdg_sincos", half: bool = False) -> str:
-    """The kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
-    for i < n. The arrays must not overlap. Its work is done in blocks of consecutive
-    arguments: ``name``8 on eight (n >= 8; the last block overlaps the one before), ``name``4
-    on four, twice for 4 <= n < 8 (x[0..3] and x[n-4..n-1]; n < 4 through a zero-padded copy).
+def _split(name: str, argument: str, libm_argument: str, what: str) -> str:
+    """The C of ``name``_split, four to seven arguments as two blocks of four in one loop body,
+    and of ``name``_split_libm, which redoes the lanes out of the kernel's range by libm. The
+    caller runs the second only where the first returns nonzero: kept apart, the kernel is a
+    leaf function without the libm calls' register saves and stack frame, which measured 1.1x
+    on lwr4's and panda's fk_hom and jacobian (docs/latency.md)."""
+    bound = repr(BOUND)
+    lo, hi = libm_argument.format(i="i"), libm_argument.format(i="n - 4 + i")
+    x_lo, x_hi = what.format(i="i"), what.format(i="n - 4 + i")
+    return f"""/* s[i] = sin({x_lo}), c[i] = cos({x_lo}) and s[4 + i] = sin({x_hi}), c[4 + i] = cos({x_hi})
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |{what.format(i="k")}| exceeds {BOUND:g} or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until {name}_split_libm replaces them. */
+static int {name}_split(long n, const double *restrict x, double *restrict s, double *restrict c)
+{{
+    double out[4];
+    int j;
+    for (j = 0; j < 4; ++j) {{
+{_body("_a", argument.format(j="j"))}
+{_body("_b", argument.format(j="n - 4 + j"))}
+{QUADRANT_COMMENT}
+{_quadrant("s[j]", "c[j]", "_a")}
+{_quadrant("s[4 + j]", "c[4 + j]", "_b")}
+        out[j] = {_in_range("xi_a", "xi_b")};
+    }}
+    return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
+}}
+
+/* The lanes of {name}_split(n, x, s, c) whose argument is beyond +-{BOUND:g}, infinite or NaN, by libm. */
+static void {name}_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
+{{
+    long i;
+    for (i = 0; i < 4; ++i) {{
+        if (!(fabs({lo}) <= {bound})) {{
+            s[i] = sin({lo});
+            c[i] = cos({lo});
+        }}
+        if (!(fabs({hi}) <= {bound})) {{
+            s[4 + i] = sin({hi});
+            c[4 + i] = cos({hi});
+        }}
+    }}
+}}
+"""
+
+
+def split_slot(k: int, n: int) -> int:
+    """Where ``name``_split(n, ...) leaves sin/cos of argument k < n: x[0..3] in lanes 0..3,
+    x[n-4..n-1] in lanes 4..7 (for k = 3 of seven, lane 3).
+
+    >>> [split_slot(k, 7) for k in range(7)]
+    [0, 1, 2, 3, 5, 6, 7]
+    """
+    return k if k < 4 else k + 8 - n
+
+
+SPLIT = range(4, 8)
+"""Argument counts that single calls pass to the split kernel (``name``_split) in place of the
+loop over blocks; the arrays then hold eight (:func:`split_slot`)."""
+
+
+def kernel_c(name: str = "kdg_sincos", half: bool = False, blocks: bool = True) -> str:
+    """The kernel as static C99 functions: ``name(n, x, s, c)``: s[i] = sin x[i], c[i] = cos x[i]
+    for i < n, and ``name``_split(n, x, s, c) for 4 <= n <= 8, which leaves argument k in lane
+    :func:`split_slot` of arrays of eight (single calls of 4-7 angles read them there). The
+    arrays must not overlap. The work is done in blocks of consecutive arguments: ``name``8 on
+    eight (n >= 8; the last block overlaps the one before), the split kernel's two blocks of four
+    in one loop body for 4 <= n < 8, through a zero-padded copy for n < 4.
 
     ``half``: the same kernel of sin and cos of x[i]/2 instead, for the half angles of the
     dual-quaternion functions read in place from q; the halving is its first step, exact
     (a multiplication by 0.5 loses no bit above the subnormals), so each result is the plain
-    kernel's on the double 0.5*x[i], bit for bit."""
+    kernel's on the double 0.5*x[i], bit for bit. ``blocks=False``: the split kernel alone (a
+    static function no call uses is a compiler warning)."""
     bound = repr(BOUND)
-    argument = "0.5*x[j]" if half else "x[j]"
-    libm_argument = "0.5*x[i]" if half else "x[i]"
-    what = "x[i]/2" if half else "x[i]"
-    body = "\n".join(f"        const double {n} = {e};" for n, e in _steps())
+    argument = "0.5*x[{j}]" if half else "x[{j}]"
+    libm_argument = "0.5*x[{i}]" if half else "x[{i}]"
+    what = "x[{i}]/2" if half else "x[{i}]"
+    whole = what.format(i="i")
+    if not blocks:
+        return _split(name, argument, libm_argument, what)
     return f"""\
-/* The blocks of {name} (below): s[i] = sin({what}), c[i] = cos({what}) for eight or four lanes; they return
- * nonzero if some |{what}| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
+/* The blocks of {name} (below): s[i] = sin({whole}), c[i] = cos({whole}) for eight lanes; they return
+ * nonzero if some |{whole}| exceeds {BOUND:g} or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and {name} replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. {name}8: i = 0..7. */
-{_block(name, 8, body, argument)}
-/* {name}4: i = 0..3 */
-{_block(name, 4, body, argument)}
-/* s[i] = sin({what}), c[i] = cos({what}) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-{BOUND:g}, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
+ * _steps explains each step. */
+{_block8(name, argument)}
+{_split(name, argument, libm_argument, what)}
+/* s[i] = sin({whole}), c[i] = cos({whole}) for i < n, within {MAX_ULP} ulp of glibc (kindyngen/codegen/trig_kernel.py
+ * explains the method and where its constants come from): blocks of eight lanes (n >= 8) or
+ * the split kernel's two blocks of four without a branch or a call, which compilers vectorise;
+ * arguments beyond +-{BOUND:g}, infinities and NaN take libm afterwards, in a loop entered only
+ * if a block saw one. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
 static void {name}(long n, const double *restrict x, double *restrict s, double *restrict c)
 {{
     long i;
@@ -314,25 +412,31 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
             out |= {name}8(x + i, s + i, c + i);
         if (i < n)
             out |= {name}8(x + n - 8, s + n - 8, c + n - 8);
+        if (out)
+            for (i = 0; i < n; ++i)
+                if (!(fabs({libm_argument.format(i="i")}) <= {bound})) {{
+                    s[i] = sin({libm_argument.format(i="i")});
+                    c[i] = cos({libm_argument.format(i="i")});
+                }}
     }} else if (n >= 4) {{
-        out = {name}4(x, s, c);
-        out |= {name}4(x + n - 4, s + n - 4, c + n - 4);
+        double sb[8], cb[8];
+        if ({name}_split(n, x, sb, cb))
+            {name}_split_libm(n, x, sb, cb);
+        for (i = 0; i < n; ++i) {{
+            s[i] = sb[i < 4 ? i : i + 8 - n];
+            c[i] = cb[i < 4 ? i : i + 8 - n];
+        }}
     }} else if (n > 0) {{
-        double xb[4] = {{0.0, 0.0, 0.0, 0.0}}, sb[4], cb[4];
+        double xb[4] = {{0.0, 0.0, 0.0, 0.0}}, sb[8], cb[8];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = {name}4(xb, sb, cb);
+        if ({name}_split(4, xb, sb, cb))
+            {name}_split_libm(4, xb, sb, cb);
         for (i = 0; i < n; ++i) {{
             s[i] = sb[i];
             c[i] = cb[i];
         }}
     }}
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs({libm_argument}) <= {bound})) {{
-                s[i] = sin({libm_argument});
-                c[i] = cos({libm_argument});
-            }}
 }}
 """
 

@@ -162,7 +162,7 @@ def test_floating_tree_kernel_skips_the_base(tmp_path):
         manifest = json.loads((folder / "functions.json").read_text())
         source = (folder / "c" / f"{model.identifier}.c").read_text()
         if trig == "kernel":
-            assert "kdg_sincos(4, q + 8, sin_q, cos_q);" in source
+            assert "if (kdg_sincos_split(4, q + 8, sin_q, cos_q))" in source
             assert "served by one run of the sincos kernel over q[8:]" in " ".join(
                 (folder / "c" / f"{model.identifier}.h").read_text().split())
         assert "q + (8 + k)*count + start" in source or "q[(8 + k)*count + start + j]" in source

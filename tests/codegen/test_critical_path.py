@@ -119,7 +119,7 @@ def test_critical_path_is_the_printed_codes(robot):
                 lanes = ast.parse(f"({m.group(1)},)", mode="eval").body.elts
                 kernel_at = kernel + max(c_ready(ast.unparse(a), ready, kernel) for a in lanes)
                 continue
-            if line.startswith("kdg_sincos_half("):      # half angles of q in place: halved in the kernel
+            if line.startswith(("kdg_sincos_half(", "if (kdg_sincos_half_split(")):  # half angles of q in place: halved in the kernel
                 kernel_at = trig_kernel.kernel_latency(half=True)
                 continue
             m = re.match(r"const double (t\d+) = (.*);$", line)
@@ -142,8 +142,10 @@ def test_kernel_latency_is_its_printed_chain():
             m = re.match(r"\s*const double (\w+) = (.*);$", line)
             if m and "?" not in m.group(2):        # xi = x[j] (an input, ready at 0) or 0.5*x[j]
                 ready[m.group(1)] = c_ready(m.group(2), ready, 0)
-        chain = max(ready["sin_r"], ready["cos_r"], ready["q"] + 2 * LATENCY["add"])
-        assert trig_kernel.kernel_latency(half=half) == chain + trig_kernel.SELECTS * LATENCY["select"]
+        # the blocks of eight, and both blocks of four of the split kernel (their names suffixed)
+        for suffix in ("", "_a", "_b"):
+            chain = max(ready["sin_r" + suffix], ready["cos_r" + suffix], ready["q" + suffix] + 2 * LATENCY["add"])
+            assert trig_kernel.kernel_latency(half=half) == chain + trig_kernel.SELECTS * LATENCY["select"]
 
 
 # -- shallower code: reassociation chosen by the count ----------------------------------------

@@ -250,3 +250,73 @@ def test_half_angle_kernel_is_the_kernel_on_halves_bit_for_bit(compiler, flags, 
     differ, points = (int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True,
                                                      check=True).stdout.split())
     assert points == 200000 * 45 and differ == 0
+
+
+SPLIT_DRIVER = r"""
+/* kdg_sincos_split(n, x) and kdg_sincos_half_split(n, x), with their libm fix-up behind the flag
+ * they return, as single calls of four to seven angles run them, against the blocks of eight on the same arguments zero-padded (kdg_sincos(8, x)
+ * and kdg_sincos_half(8, x)): prints the number of results whose bits differ, then the points */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include KERNEL
+
+""" + XORSHIFT + r"""
+static int slot(int k, int n) { return k < 4 ? k : k + 8 - n; }   /* trig_kernel.split_slot */
+
+int main(void)
+{
+    double x[8], s8[8], c8[8], s[8], c[8];
+    const double special[6] = {INFINITY, -INFINITY, NAN, 0.0, -0.0, 4.9406564584124654e-324};
+    long differ = 0, points = 0, r;
+    int n, j, half;
+    for (r = 0; r < 200000; ++r)
+        for (n = 4; n <= 7; ++n)
+            for (half = 0; half < 2; ++half) {
+                for (j = 0; j < 8; ++j) {
+                    const uint64_t bits = next();
+                    const double significand = 1.0 + (double)(bits >> 12)/4503599627370496.0;
+                    /* exponents 2^-30 .. 2^24: the kernel's range and beyond it (libm) in either block */
+                    x[j] = j < n ? (bits & 1 ? -1.0 : 1.0)*ldexp(significand, (int)(next() % 55) - 30) : 0.0;
+                    if (r % 1000 == 0 && j < n) x[j] = special[(j + n) % 6];
+                }
+                if (half) {
+                    kdg_sincos_half(8, x, s8, c8);
+                    if (kdg_sincos_half_split(n, x, s, c))
+                        kdg_sincos_half_split_libm(n, x, s, c);
+                } else {
+                    kdg_sincos(8, x, s8, c8);
+                    if (kdg_sincos_split(n, x, s, c))
+                        kdg_sincos_split_libm(n, x, s, c);
+                }
+                for (j = 0; j < n; ++j, ++points)
+                    if (memcmp(&s8[j], &s[slot(j, n)], sizeof s[0]) || memcmp(&c8[j], &c[slot(j, n)], sizeof c[0]))
+                        ++differ;
+            }
+    printf("%ld %ld\n", differ, points);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("compiler,flags", BUILDS, ids=lambda v: v if isinstance(v, str) else " ".join(v))
+def test_split_kernel_is_the_blocks_of_eight_bit_for_bit(compiler, flags, tmp_path):
+    """Single calls of four to seven angles (lwr4's and panda's seven) run the split kernel, two
+    blocks of four in one loop body: lane for lane the arithmetic of the blocks of eight, so the
+    same bits, left where trig_kernel.split_slot says (which the driver's slot() restates)."""
+    if shutil.which(compiler) is None:
+        pytest.skip(f"{compiler} not installed")
+    assert [trig_kernel.split_slot(k, n) for n in trig_kernel.SPLIT for k in range(n)] == \
+        [k if k < 4 else k + 8 - n for n in range(4, 8) for k in range(n)]
+    (tmp_path / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c()
+                                       + trig_kernel.kernel_c("kdg_sincos_half", half=True))
+    (tmp_path / "driver.c").write_text(SPLIT_DRIVER)
+    exe = tmp_path / "driver"
+    build = subprocess.run([compiler, *STRICT, *flags, '-DKERNEL="kernel.h"', "-I", str(tmp_path),
+                            str(tmp_path / "driver.c"), "-o", str(exe), "-lm"], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    differ, points = (int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True,
+                                                     check=True).stdout.split())
+    assert points == 200000 * 2 * (4 + 5 + 6 + 7) and differ == 0

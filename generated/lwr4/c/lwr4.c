@@ -4,10 +4,10 @@
 
 #include "lwr4.h"
 
-/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
+/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
  * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos8: i = 0..7. */
+ * _steps explains each step. */
 static int kdg_sincos8(const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[8];
@@ -42,46 +42,88 @@ static int kdg_sincos8(const double *restrict x, double *restrict s, double *res
     return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
 }
 
-/* kdg_sincos4: i = 0..3 */
-static int kdg_sincos4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) and s[4 + i] = sin(x[n - 4 + i]), c[4 + i] = cos(x[n - 4 + i])
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_split_libm replaces them. */
+static int kdg_sincos_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
+/* The lanes of kdg_sincos_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(x[i]) <= 1048576.0)) {
+            s[i] = sin(x[i]);
+            c[i] = cos(x[i]);
+        }
+        if (!(fabs(x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(x[n - 4 + i]);
+            c[4 + i] = cos(x[n - 4 + i]);
+        }
+    }
+}
+
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
+ * explains the method and where its constants come from): blocks of eight lanes (n >= 8) or
+ * the split kernel's two blocks of four without a branch or a call, which compilers vectorise;
+ * arguments beyond +-1.04858e+06, infinities and NaN take libm afterwards, in a loop entered only
+ * if a block saw one. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
 static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
@@ -91,143 +133,120 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             out |= kdg_sincos8(x + i, s + i, c + i);
         if (i < n)
             out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
+        if (out)
+            for (i = 0; i < n; ++i)
+                if (!(fabs(x[i]) <= 1048576.0)) {
+                    s[i] = sin(x[i]);
+                    c[i] = cos(x[i]);
+                }
     } else if (n >= 4) {
-        out = kdg_sincos4(x, s, c);
-        out |= kdg_sincos4(x + n - 4, s + n - 4, c + n - 4);
+        double sb[8], cb[8];
+        if (kdg_sincos_split(n, x, sb, cb))
+            kdg_sincos_split_libm(n, x, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i < 4 ? i : i + 8 - n];
+            c[i] = cb[i < 4 ? i : i + 8 - n];
+        }
     } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[8], cb[8];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = kdg_sincos4(xb, sb, cb);
+        if (kdg_sincos_split(4, xb, sb, cb))
+            kdg_sincos_split_libm(4, xb, sb, cb);
         for (i = 0; i < n; ++i) {
             s[i] = sb[i];
             c[i] = cb[i];
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(x[i]) <= 1048576.0)) {
-                s[i] = sin(x[i]);
-                c[i] = cos(x[i]);
-            }
 }
 
-/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
- * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
- * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos_half8: i = 0..7. */
-static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
-{
-    double out[8];
-    int j;
-    for (j = 0; j < 8; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
-        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
-    }
-    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
-}
-
-/* kdg_sincos_half4: i = 0..3 */
-static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) and s[4 + i] = sin(x[n - 4 + i]/2), c[4 + i] = cos(x[n - 4 + i]/2)
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]/2| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_half_split_libm replaces them. */
+static int kdg_sincos_half_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = 0.5*x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = 0.5*x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
-/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
-static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+/* The lanes of kdg_sincos_half_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_half_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
-    int out = 0;
-    if (n >= 8) {
-        for (i = 0; i + 8 <= n; i += 8)
-            out |= kdg_sincos_half8(x + i, s + i, c + i);
-        if (i < n)
-            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
-    } else if (n >= 4) {
-        out = kdg_sincos_half4(x, s, c);
-        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
-    } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
-        for (i = 0; i < n; ++i)
-            xb[i] = x[i];
-        out = kdg_sincos_half4(xb, sb, cb);
-        for (i = 0; i < n; ++i) {
-            s[i] = sb[i];
-            c[i] = cb[i];
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+            s[i] = sin(0.5*x[i]);
+            c[i] = cos(0.5*x[i]);
+        }
+        if (!(fabs(0.5*x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(0.5*x[n - 4 + i]);
+            c[4 + i] = cos(0.5*x[n - 4 + i]);
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
-                s[i] = sin(0.5*x[i]);
-                c[i] = cos(0.5*x[i]);
-            }
 }
 
 void lwr4_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
-    const double t1 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
+    const double t1 = cos_q[5];
     const double t2 = sin_q[0];
     const double t3 = cos_q[2];
     const double t4 = t3*t2;
@@ -236,7 +255,7 @@ void lwr4_fk_hom(const double *restrict q, double *restrict T)
     const double t7 = cos_q[0];
     const double t8 = t7*t6;
     const double t9 = -t8*t5 - t4;
-    const double t10 = sin_q[4];
+    const double t10 = sin_q[5];
     const double t11 = sin_q[3];
     const double t12 = sin_q[1];
     const double t13 = t11*t12;
@@ -246,11 +265,11 @@ void lwr4_fk_hom(const double *restrict q, double *restrict T)
     const double t17 = t5*t16 - t15;
     const double t18 = t14*t17 + t7*t13;
     const double t19 = t9*t1 - t18*t10;
-    const double t20 = cos_q[6];
-    const double t21 = sin_q[5];
+    const double t20 = cos_q[7];
+    const double t21 = sin_q[6];
     const double t22 = t12*t14;
     const double t23 = t7*t22 - t11*t17;
-    const double t24 = cos_q[5];
+    const double t24 = cos_q[6];
     const double t25 = t1*t18 + t9*t10;
     const double t26 = t24*t25 - t23*t21;
     const double t27 = 0.4*t12;
@@ -371,10 +390,12 @@ out_T[15][j] = 1.0;
 
 void lwr4_fk_dq(const double *restrict q, double *restrict x)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*(q[0] + q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] - q[2]), 0.5*q[5], 0.5*(q[4] + q[6]), 0.5*(q[4] - q[6]), 0.0};
+    /* the kernel's arguments */
+    const double angles[7] = {0.5*(q[0] + q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] - q[2]), 0.5*q[5], 0.5*(q[4] + q[6]), 0.5*(q[4] - q[6])};
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
     double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    if (kdg_sincos_split(7, angles, sin_q, cos_q))
+        kdg_sincos_split_libm(7, angles, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = cos_q[1];
     const double t5 = cos_q[2];
@@ -385,24 +406,24 @@ void lwr4_fk_dq(const double *restrict q, double *restrict x)
     const double t11 = t9*t10;
     const double t12 = t8*t11;
     const double t13 = t6*t1 + t12;
-    const double t16 = cos_q[4];
-    const double t17 = t16*sin_q[5];
+    const double t16 = cos_q[5];
+    const double t17 = t16*sin_q[6];
     const double t18 = cos_q[3];
     const double t19 = t9*t5;
     const double t20 = cos_q[0];
     const double t21 = t3*t10;
     const double t22 = t21*t20;
     const double t23 = t22 - t19*t18;
-    const double t24 = sin_q[4];
-    const double t26 = cos_q[6];
+    const double t24 = sin_q[5];
+    const double t26 = cos_q[7];
     const double t27 = t24*t26;
-    const double t28 = sin_q[6];
+    const double t28 = sin_q[7];
     const double t29 = t1*t21;
     const double t30 = t8*t19 - t29;
     const double t31 = t24*t30;
     const double t32 = t11*t18;
     const double t33 = t32 + t6*t20;
-    const double t34 = t16*cos_q[5];
+    const double t34 = t16*cos_q[6];
     const double t35 = t24*t13;
     const double t36 = t24*t28;
     const double t37 = 0.395*t33 - 0.4*t32;
@@ -532,8 +553,10 @@ void lwr4_jacobian(const double *restrict q, double *restrict J)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[0];
     const double t1 = -t0;
     const double t2 = cos_q[1];
@@ -559,16 +582,16 @@ void lwr4_jacobian(const double *restrict q, double *restrict J)
     const double t22 = -(-t8*t18 - t13*t17);
     const double t23 = t15*t18 - t2*t17;
     const double t24 = -(-t2*t18 - t15*t17);
-    const double t25 = sin_q[4];
-    const double t26 = cos_q[4];
+    const double t25 = sin_q[5];
+    const double t26 = cos_q[5];
     const double t27 = t25*t12 + t26*t19;
     const double t28 = -(t26*t12 - t25*t19);
     const double t29 = t25*t14 + t21*t26;
     const double t30 = -(t26*t14 - t21*t25);
     const double t31 = t25*t16 + t23*t26;
     const double t32 = -(t26*t16 - t23*t25);
-    const double t33 = sin_q[5];
-    const double t34 = cos_q[5];
+    const double t33 = sin_q[6];
+    const double t34 = cos_q[6];
     const double t36 = t20*t34 - t27*t33;
     const double t38 = t22*t34 - t29*t33;
     const double t40 = t24*t34 - t33*t31;
@@ -737,24 +760,26 @@ void lwr4_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[4];
-    const double t9 = cos_q[5];
-    const double t11 = cos_q[6];
+    const double t7 = sin_q[5];
+    const double t9 = cos_q[6];
+    const double t11 = cos_q[7];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos_q[4];
-    const double t15 = sin_q[6];
+    const double t14 = cos_q[5];
+    const double t15 = sin_q[7];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t7*t13 + t14*t17;
     const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = sin_q[5];
+    const double t22 = sin_q[6];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 - t24*t14;
@@ -1440,11 +1465,13 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
-    const double t1 = sin_q[6];
-    const double t3 = cos_q[5];
-    const double t5 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
+    const double t1 = sin_q[7];
+    const double t3 = cos_q[6];
+    const double t5 = cos_q[5];
     const double t7 = cos_q[2];
     const double t9 = cos_q[1];
     const double t11 = sin_q[0];
@@ -1461,13 +1488,13 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
     const double t23 = sin_q[3];
     const double t24 = t23*t22;
     const double t25 = t16*t18 + t24;
-    const double t26 = sin_q[4];
+    const double t26 = sin_q[5];
     const double t27 = -t7*t20 - t21*t13;
     const double t28 = t23*t27;
     const double t29 = t7*t15 - t12*t13;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t25 + t26*t30;
-    const double t32 = sin_q[5];
+    const double t32 = sin_q[6];
     const double t33 = t29*t23;
     const double t34 = t27*t18 + t33;
     const double t35 = t23*t16;
@@ -1479,7 +1506,7 @@ void lwr4_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t32;
     const double t42 = t5*t30 - t26*t25;
     const double t43 = t41 + t3*t42;
-    const double t44 = cos_q[6];
+    const double t44 = cos_q[7];
     const double t45 = t43*t44 - t1*t39;
     const double t46 = 0.4*t5;
     const double t47 = 0.4*t26;
@@ -1957,11 +1984,13 @@ void lwr4_M(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
     const double t1 = t0*t0;
-    const double t2 = cos_q[6];
+    const double t2 = cos_q[7];
     const double t3 = t0*t2;
     const double t4 = -4.0084e-05*t3 - 9.99755e-05*t1;
     const double t5 = t4 + 0.0034462475;
@@ -1976,9 +2005,9 @@ void lwr4_M(const double *restrict q, double *restrict M)
     const double t14 = 0.000105*t2;
     const double t15 = 0.00014*t0;
     const double t16 = -(t15 - t14);
-    const double t17 = sin_q[5];
+    const double t17 = sin_q[6];
     const double t18 = t13*t17;
-    const double t19 = cos_q[5];
+    const double t19 = cos_q[6];
     const double t20 = 0.0233*t19;
     const double t21 = t20 + t18;
     const double t22 = 0.78*t21;
@@ -2004,8 +2033,8 @@ void lwr4_M(const double *restrict q, double *restrict M)
     const double t35 = t232 - t26;
     const double t36 = t30 - 0.00136;
     const double t37 = -t16 + 0.1915;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t40 = t39*t38;
     const double t41 = t38*t38;
     const double t42 = t27 - t32;
@@ -2424,19 +2453,21 @@ void lwr4_g(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[3];
-    const double t1 = cos_q[5];
-    const double t2 = sin_q[6];
-    const double t3 = cos_q[6];
+    const double t1 = cos_q[6];
+    const double t2 = sin_q[7];
+    const double t3 = cos_q[7];
     const double t4 = 0.000105*t2 + 0.00014*t3 + 0.00112;
-    const double t5 = sin_q[5];
+    const double t5 = sin_q[6];
     const double t6 = -(0.0233*t1 + t5*t4) - 1.5867;
     const double t7 = sin_q[3];
     const double t8 = 0.00014*t2 - 0.000105*t3 + 0.1915;
-    const double t9 = sin_q[4];
-    const double t10 = cos_q[4];
+    const double t9 = sin_q[5];
+    const double t10 = cos_q[5];
     const double t28 = -0.0233*t5 - 0.00136;
     const double t11 = t4*t1 + t28;
     const double t29 = -t9*t8 + 0.0035;
@@ -2533,8 +2564,10 @@ void lwr4_c(const double *restrict q, const double *restrict qd, double *restric
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = t0*qd[0];
     const double t2 = t1*qd[1];
@@ -2580,9 +2613,9 @@ void lwr4_c(const double *restrict q, const double *restrict qd, double *restric
     const double t65 = -t52;
     const double t66 = t58 + t65;
     const double t67 = t63 + t50;
-    const double t69 = sin_q[4];
+    const double t69 = sin_q[5];
     const double t70 = 0.4*t37;
-    const double t71 = cos_q[4];
+    const double t71 = cos_q[5];
     const double t72 = t46*t71 + t70*t69;
     const double t73 = t70*t71 - t46*t69;
     const double t74 = qd[4] - t49;
@@ -2609,9 +2642,9 @@ void lwr4_c(const double *restrict q, const double *restrict qd, double *restric
     const double t93 = t89 + t76;
     const double t94 = -(t87 + t80);
     const double t95 = 0.39*t94 - t47;
-    const double t96 = sin_q[5];
+    const double t96 = sin_q[6];
     const double t97 = 0.39*t85 + t72;
-    const double t98 = cos_q[5];
+    const double t98 = cos_q[6];
     const double t99 = t97*t98 + t95*t96;
     const double t100 = t95*t98 - t96*t97;
     const double t101 = -(t73 + 0.39*t90);
@@ -2635,8 +2668,8 @@ void lwr4_c(const double *restrict q, const double *restrict qd, double *restric
     const double t119 = -t106;
     const double t120 = t112 + t119;
     const double t121 = t117 + t104;
-    const double t123 = sin_q[6];
-    const double t124 = cos_q[6];
+    const double t123 = sin_q[7];
+    const double t124 = cos_q[7];
     const double t125 = t99*t124 - t101*t123;
     const double t126 = -t101*t124 - t99*t123;
     const double t127 = t103 + qd[6];
@@ -3102,8 +3135,10 @@ void lwr4_S(const double *restrict q, const double *restrict qd, double *restric
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t84 = cos_q[1];
@@ -3111,18 +3146,18 @@ void lwr4_S(const double *restrict q, const double *restrict qd, double *restric
     const double t86 = t0*t0;
     const double t71 = sin_q[2];
     const double t17 = sin_q[3];
-    const double t4 = cos_q[4];
-    const double t22 = sin_q[4];
+    const double t4 = cos_q[5];
+    const double t22 = sin_q[5];
     const double t52 = t4*t22;
-    const double t5 = cos_q[5];
+    const double t5 = cos_q[6];
     const double t6 = 0.0233*t5;
-    const double t7 = sin_q[6];
+    const double t7 = sin_q[7];
     const double t8 = 0.000105*t7;
-    const double t9 = cos_q[6];
+    const double t9 = cos_q[7];
     const double t10 = 0.00014*t9;
     const double t11 = t8 + t10;
     const double t12 = t11 + 0.00112;
-    const double t13 = sin_q[5];
+    const double t13 = sin_q[6];
     const double t14 = t12*t13;
     const double t114 = t14 + t6;
     const double t115 = 0.78*t114;
@@ -4865,8 +4900,10 @@ void lwr4_tau(const double *restrict q, const double *restrict qd, const double 
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = 9.81*t0;
     const double t2 = cos_q[1];
@@ -4920,8 +4957,8 @@ void lwr4_tau(const double *restrict q, const double *restrict qd, const double 
     const double t73 = -t59;
     const double t74 = t66 + t73;
     const double t75 = t71 + t57;
-    const double t77 = sin_q[4];
-    const double t78 = cos_q[4];
+    const double t77 = sin_q[5];
+    const double t78 = cos_q[5];
     const double t79 = t78*t52 + t77*t54;
     const double t80 = t78*t54 - t77*t52;
     const double t81 = qd[4] - t56;
@@ -4948,9 +4985,9 @@ void lwr4_tau(const double *restrict q, const double *restrict qd, const double 
     const double t101 = t97 + t83;
     const double t102 = -(t95 + t88);
     const double t103 = 0.39*t102 - t53;
-    const double t104 = sin_q[5];
+    const double t104 = sin_q[6];
     const double t105 = 0.39*t93 + t79;
-    const double t106 = cos_q[5];
+    const double t106 = cos_q[6];
     const double t107 = t106*t105 + t104*t103;
     const double t108 = t106*t103 - t105*t104;
     const double t109 = -(t80 + 0.39*t98);
@@ -4974,8 +5011,8 @@ void lwr4_tau(const double *restrict q, const double *restrict qd, const double 
     const double t126 = t110*t111;
     const double t128 = t121 - t114;
     const double t129 = t126 + t112;
-    const double t131 = sin_q[6];
-    const double t132 = cos_q[6];
+    const double t131 = sin_q[7];
+    const double t132 = cos_q[7];
     const double t133 = t107*t132 - t109*t131;
     const double t134 = -t109*t132 - t107*t131;
     const double t135 = t111 + qd[6];
@@ -5458,12 +5495,14 @@ void lwr4_fd(const double *restrict q, const double *restrict qd, const double *
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
-    const double t0 = cos_q[6];
-    const double t1 = sin_q[6];
+    const double t0 = cos_q[7];
+    const double t1 = sin_q[7];
     const double t9 = -(2.132e-05*t1 - 3.349e-05*t0);
     const double t98 = sin_q[1];
     const double t99 = cos_q[1];
@@ -5471,14 +5510,14 @@ void lwr4_fd(const double *restrict q, const double *restrict qd, const double *
     const double t3 = t1*t1;
     const double t8 = -(2.0042e-05*(-2.0*t3 + 1.0) + 9.99755e-05*t2) - 9.328e-05;
     const double t10 = t9 - 0.0001904;
-    const double t17 = sin_q[5];
-    const double t19 = cos_q[5];
+    const double t17 = sin_q[6];
+    const double t19 = cos_q[6];
     const double t33 = t8*t17 + t19*t10;
     const double t57 = cos_q[3];
     const double t59 = sin_q[3];
     const double t28 = t8*t19 - t17*t10;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t4 = -9.99755e-05*t3 - 4.0084e-05*t2;
     const double t11 = -(t4 + 9.99755e-05) + 0.0069478155;
     const double t12 = 0.000105*t1 + 0.00014*t0;
@@ -6617,11 +6656,13 @@ void lwr4_com(const double *restrict q, double *restrict com, double *restrict J
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
     const double t1 = t0*t0;
-    const double t2 = cos_q[6];
+    const double t2 = cos_q[7];
     const double t3 = t0*t2;
     const double t4 = -4.0084e-05*t3 - 9.99755e-05*t1;
     const double t5 = t4 + 0.0034462475;
@@ -6636,9 +6677,9 @@ void lwr4_com(const double *restrict q, double *restrict com, double *restrict J
     const double t14 = 0.000105*t2;
     const double t15 = 0.00014*t0;
     const double t16 = -(t15 - t14);
-    const double t17 = sin_q[5];
+    const double t17 = sin_q[6];
     const double t18 = t13*t17;
-    const double t19 = cos_q[5];
+    const double t19 = cos_q[6];
     const double t20 = 0.0233*t19;
     const double t21 = t20 + t18;
     const double t22 = 0.78*t21;
@@ -6664,8 +6705,8 @@ void lwr4_com(const double *restrict q, double *restrict com, double *restrict J
     const double t35 = t245 - t26;
     const double t36 = t30 - 0.00136;
     const double t37 = -t16 + 0.1915;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t40 = t39*t38;
     const double t41 = t38*t38;
     const double t42 = t27 - t32;
@@ -7308,8 +7349,10 @@ void lwr4_tau_derivatives(const double *restrict q, const double *restrict qd, c
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -7329,19 +7372,19 @@ void lwr4_tau_derivatives(const double *restrict q, const double *restrict qd, c
     const double t10 = t9 + t6;
     const double t11 = -t3*qdd[1] - t5*qd[2] - t0*t10;
     const double t12 = t11 + qdd[3];
-    const double t13 = sin_q[5];
-    const double t14 = cos_q[6];
-    const double t15 = sin_q[6];
-    const double t16 = sin_q[4];
+    const double t13 = sin_q[6];
+    const double t14 = cos_q[7];
+    const double t15 = sin_q[7];
+    const double t16 = sin_q[5];
     const double t17 = sin_q[3];
     const double t18 = t8 + qd[2];
     const double t19 = t5*t2 - t17*t18;
-    const double t20 = cos_q[4];
+    const double t20 = cos_q[5];
     const double t21 = -t3*qd[1] - t4*t0;
     const double t22 = t21 + qd[3];
     const double t23 = t22*t20 - t19*t16;
     const double t24 = qd[5] - t23;
-    const double t25 = cos_q[5];
+    const double t25 = cos_q[6];
     const double t26 = t22*t16 + t20*t19;
     const double t27 = -t2*t18 - t5*t17;
     const double t28 = qd[4] - t27;
@@ -9386,8 +9429,10 @@ void lwr4_fd_derivatives(const double *restrict q, const double *restrict qd, co
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -9395,15 +9440,15 @@ void lwr4_fd_derivatives(const double *restrict q, const double *restrict qd, co
     double kdg_lane_out[21][8];
     int kdg_lane;
     const double t0 = sin_q[1];
-    const double t1 = sin_q[6];
+    const double t1 = sin_q[7];
     const double t2 = 0.000105*t1;
-    const double t3 = cos_q[6];
+    const double t3 = cos_q[7];
     const double t4 = 0.00014*t3;
     const double t5 = t2 + t4;
     const double t6 = t5 + 0.00112;
-    const double t7 = sin_q[5];
+    const double t7 = sin_q[6];
     const double t8 = t7*t6;
-    const double t9 = cos_q[5];
+    const double t9 = cos_q[6];
     const double t10 = 0.0233*t9;
     const double t11 = t8 + t10;
     const double t12 = 0.78*t11;
@@ -9424,9 +9469,9 @@ void lwr4_fd_derivatives(const double *restrict q, const double *restrict qd, co
     const double t27 = t26 + 0.0069478155;
     const double t28 = t25 + 0.0279668435;
     const double t29 = t28 - (t12 + t27);
-    const double t30 = sin_q[4];
+    const double t30 = sin_q[5];
     const double t31 = t30*t30;
-    const double t32 = cos_q[4];
+    const double t32 = cos_q[5];
     const double t33 = t32*t30;
     const double t34 = -(9.99755e-05*t13 + 2.0042e-05*(-2.0*t14 + 1.0)) - 9.328e-05;
     const double t35 = 2.132e-05*t1 - 3.349e-05*t3;
@@ -12928,8 +12973,10 @@ void lwr4_fd_derivatives_no_minv(const double *restrict q, const double *restric
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -12937,15 +12984,15 @@ void lwr4_fd_derivatives_no_minv(const double *restrict q, const double *restric
     double kdg_lane_out[14][8];
     int kdg_lane;
     const double t0 = sin_q[1];
-    const double t1 = sin_q[6];
+    const double t1 = sin_q[7];
     const double t2 = 0.000105*t1;
-    const double t3 = cos_q[6];
+    const double t3 = cos_q[7];
     const double t4 = 0.00014*t3;
     const double t5 = t2 + t4;
     const double t6 = t5 + 0.00112;
-    const double t7 = sin_q[5];
+    const double t7 = sin_q[6];
     const double t8 = t7*t6;
-    const double t9 = cos_q[5];
+    const double t9 = cos_q[6];
     const double t10 = 0.0233*t9;
     const double t11 = t8 + t10;
     const double t12 = 0.78*t11;
@@ -12966,9 +13013,9 @@ void lwr4_fd_derivatives_no_minv(const double *restrict q, const double *restric
     const double t27 = t26 + 0.0069478155;
     const double t28 = t25 + 0.0279668435;
     const double t29 = t28 - (t12 + t27);
-    const double t30 = sin_q[4];
+    const double t30 = sin_q[5];
     const double t31 = t30*t30;
-    const double t32 = cos_q[4];
+    const double t32 = cos_q[5];
     const double t33 = t32*t30;
     const double t34 = -(9.99755e-05*t13 + 2.0042e-05*(-2.0*t14 + 1.0)) - 9.328e-05;
     const double t35 = 2.132e-05*t1 - 3.349e-05*t3;
@@ -16267,11 +16314,13 @@ void lwr4_M_lagrange(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
-    const double t41 = sin_q[6];
+    const double t41 = sin_q[7];
     const double t0 = sin_q[3];
     const double t1 = cos_q[2];
     const double t2 = sin_q[1];
@@ -16281,26 +16330,26 @@ void lwr4_M_lagrange(const double *restrict q, double *restrict M)
     const double t6 = cos_q[3];
     const double t7 = t5*t6;
     const double t8 = t4 + t7;
-    const double t26 = sin_q[5];
+    const double t26 = sin_q[6];
     const double t27 = t8*t26;
-    const double t13 = cos_q[4];
+    const double t13 = cos_q[5];
     const double t14 = t5*t0;
     const double t15 = t6*t3;
     const double t16 = t15 - t14;
     const double t17 = t13*t16;
-    const double t9 = sin_q[4];
+    const double t9 = sin_q[5];
     const double t11 = sin_q[2];
     const double t12 = t2*t11;
     const double t28 = t9*t12;
     const double t29 = t17 - t28;
-    const double t31 = cos_q[5];
+    const double t31 = cos_q[6];
     const double t32 = t29*t31;
     const double t44 = t27 + t32;
     const double t46 = t44*t41;
     const double t19 = t9*t16;
     const double t24 = t12*t13;
     const double t25 = t19 + t24;
-    const double t43 = cos_q[6];
+    const double t43 = cos_q[7];
     const double t47 = t43*t25;
     const double t75 = -t47 - t46;
     const double t45 = t43*t44;
@@ -18320,15 +18369,17 @@ void lwr4_g_lagrange(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = cos_q[2];
-    const double t2 = sin_q[4];
+    const double t2 = sin_q[5];
     const double t3 = sin_q[2];
     const double t4 = t0*t3;
     const double t5 = 9.81*t4;
-    const double t6 = cos_q[4];
+    const double t6 = cos_q[5];
     const double t7 = sin_q[3];
     const double t8 = sin_q[1];
     const double t9 = 9.81*t8;
@@ -18339,23 +18390,23 @@ void lwr4_g_lagrange(const double *restrict q, double *restrict g)
     const double t14 = -t10 - t1*t13;
     const double t15 = t6*t14;
     const double t16 = t5*t2 + t15;
-    const double t17 = sin_q[5];
+    const double t17 = sin_q[6];
     const double t18 = 0.0233*t17;
     const double t19 = t9*t11;
     const double t20 = t7*t0;
     const double t21 = 9.81*t20;
     const double t22 = t1*t21 - t19;
-    const double t23 = cos_q[5];
+    const double t23 = cos_q[6];
     const double t24 = 0.0233*t23;
     const double t25 = 15.565527*t20;
     const double t26 = t2*t14;
     const double t27 = t5*t6 - t26;
-    const double t28 = cos_q[6];
+    const double t28 = cos_q[7];
     const double t29 = 0.000105*t28;
     const double t30 = t22*t17;
     const double t31 = t23*t16;
     const double t32 = t31 - t30;
-    const double t33 = sin_q[6];
+    const double t33 = sin_q[7];
     const double t34 = 0.000105*t33;
     const double t35 = 0.00014*t28;
     const double t36 = 0.00014*t33;
@@ -18647,8 +18698,10 @@ void lwr4_c_christoffel(const double *restrict q, const double *restrict qd, dou
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t0 = sin_q[1];
@@ -18656,20 +18709,20 @@ void lwr4_c_christoffel(const double *restrict q, const double *restrict qd, dou
     const double t38 = cos_q[1];
     const double t1 = cos_q[2];
     const double t22 = sin_q[3];
-    const double t3 = cos_q[4];
-    const double t12 = sin_q[4];
+    const double t3 = cos_q[5];
+    const double t12 = sin_q[5];
     const double t145 = t3*t12;
-    const double t4 = sin_q[6];
+    const double t4 = sin_q[7];
     const double t96 = t4*t4;
     const double t97 = 9.99755e-05*t96;
-    const double t6 = cos_q[6];
+    const double t6 = cos_q[7];
     const double t99 = t4*t6;
     const double t222 = -t97 - 4.0084e-05*t99;
     const double t223 = -(t222 + 9.99755e-05);
     const double t224 = t223 + 0.0069478155;
-    const double t9 = cos_q[5];
+    const double t9 = cos_q[6];
     const double t212 = 0.0233*t9;
-    const double t23 = sin_q[5];
+    const double t23 = sin_q[6];
     const double t13 = 0.00014*t6;
     const double t14 = 0.000105*t4;
     const double t56 = t14 + t13;
@@ -20336,25 +20389,27 @@ void lwr4_M_dq(const double *restrict q, double *restrict M)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[2];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t8 = sin_q[4];
+    const double t8 = sin_q[6];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t13 = sin_q[5];
+    const double t13 = sin_q[7];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
-    const double t16 = cos_q[5];
+    const double t16 = cos_q[7];
     const double t17 = t13*t16;
     const double t18 = 2.132e-05*t15 + 6.698e-05*t17;
     const double t19 = t18 - 0.00010112;
-    const double t20 = cos_q[4];
+    const double t20 = cos_q[6];
     const double t21 = t8*t20;
     const double t22 = 2.0*t21;
     const double t23 = t22*t19;
@@ -20858,8 +20913,10 @@ void lwr4_g_dq(const double *restrict q, double *restrict g)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[1];
@@ -20881,14 +20938,14 @@ void lwr4_g_dq(const double *restrict q, double *restrict g)
     const double t19 = t14*t17 + t9*t53;
     const double t20 = 2.0*t18;
     const double t21 = -t20*t14 - 39.24*t9*t17;
-    const double t23 = sin_q[4];
-    const double t24 = 2.0*t23*cos_q[4];
+    const double t23 = sin_q[6];
+    const double t24 = 2.0*t23*cos_q[6];
     const double t57 = -39.24*t13;
     const double t25 = t7*t57 - 9.81*t2*t12;
     const double t26 = -2.0*t23*t23 + 1.0;
     const double t27 = -t24*t19 - t26*t25;
-    const double t29 = sin_q[5];
-    const double t30 = t29*cos_q[5];
+    const double t29 = sin_q[7];
+    const double t30 = t29*cos_q[7];
     const double t31 = t27*t30;
     const double t32 = -2.0*t29*t29 + 1.0;
     const double t33 = t27*t32;
@@ -21028,8 +21085,10 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21079,9 +21138,9 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     const double t45 = 0.001088*t20;
     const double t46 = t45 - 0.0702099*t28 - 0.00015448*t37;
     const double t47 = t43*t34 - t37*qd[4] - t41*t33;
-    const double t49 = sin_q[4];
+    const double t49 = sin_q[6];
     const double t50 = -2.0*t49*t49 + 1.0;
-    const double t51 = t49*cos_q[4];
+    const double t51 = t49*cos_q[6];
     const double t52 = 2.0*t51;
     const double t53 = t50*t37 + t52*t28;
     const double t54 = 0.4*t26;
@@ -21114,8 +21173,8 @@ void lwr4_c_dq(const double *restrict q, const double *restrict qd, double *rest
     const double t167 = -t57*qd[4] - t40*t66;
     const double t75 = t167 - t74*t33;
     const double t76 = 0.39*t44 - t75;
-    const double t78 = sin_q[5];
-    const double t79 = 2.0*t78*cos_q[5];
+    const double t78 = sin_q[7];
+    const double t79 = 2.0*t78*cos_q[7];
     const double t80 = -2.0*t78*t78 + 1.0;
     const double t81 = -t79*t61 - t80*t68;
     const double t82 = qd[6] + t63;
@@ -21680,8 +21739,10 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21726,8 +21787,8 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t40 = -t21*t31 - t27*t32;
     const double t41 = qd[4] - t40;
     const double t42 = t39 - 0.0702099*t41 - 0.00015448*t37;
-    const double t44 = sin_q[4];
-    const double t45 = t44*cos_q[4];
+    const double t44 = sin_q[6];
+    const double t45 = t44*cos_q[6];
     const double t46 = 2.0*t45;
     const double t47 = -2.0*t44*t44 + 1.0;
     const double t48 = t47*t41 - t46*t37;
@@ -21742,8 +21803,8 @@ void lwr4_tau_dq(const double *restrict q, const double *restrict qd, const doub
     const double t57 = t47*t50 - t46*t56;
     const double t58 = 0.000105*t57;
     const double t59 = t47*t37 + t46*t41;
-    const double t61 = sin_q[5];
-    const double t62 = 2.0*t61*cos_q[5];
+    const double t61 = sin_q[7];
+    const double t62 = 2.0*t61*cos_q[7];
     const double t63 = qd[5] - t51;
     const double t64 = -2.0*t61*t61 + 1.0;
     const double t65 = -t59*t62 - t64*t63;
@@ -22380,8 +22441,10 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -22712,8 +22775,8 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t257 = t253*t153 + t254*t155;
     const double t258 = -t78*t252 - t81*t255;
     Y[28] = (t23*t256 - t26*t257)*t4 + t7*t258;
-    const double t261 = sin_q[4];
-    const double t262 = t261*cos_q[4];
+    const double t261 = sin_q[6];
+    const double t262 = t261*cos_q[6];
     const double t263 = 2.0*t262;
     const double t283 = t167 - t175 - t174;
     const double t284 = t283 - t162;
@@ -22895,8 +22958,8 @@ void lwr4_Y_dq(const double *restrict q, const double *restrict qd, const double
     const double t406 = t153*t401 + t155*t403;
     const double t407 = -t78*t400 - t81*t404;
     Y[35] = (t23*t405 - t26*t406)*t4 + t7*t407;
-    const double t411 = sin_q[5];
-    const double t412 = t411*cos_q[5];
+    const double t411 = sin_q[7];
+    const double t412 = t411*cos_q[7];
     const double t413 = 2.0*t412;
     const double t414 = -2.0*t411*t411 + 1.0;
     const double t415 = -t278*t413 - t272*t414;
@@ -25421,8 +25484,10 @@ void lwr4_Y_g(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = 9.81*cos_q[1];
     const double t1 = 9.81*sin_q[1];
     const double t2 = cos_q[2];
@@ -25435,15 +25500,15 @@ void lwr4_Y_g(const double *restrict q, double *restrict Y)
     const double t9 = -t8*t3 - t7;
     const double t10 = t8*t1;
     const double t11 = t6*t3 - t10;
-    const double t12 = sin_q[4];
-    const double t13 = cos_q[4];
+    const double t12 = sin_q[5];
+    const double t13 = cos_q[5];
     const double t14 = t9*t13 + t5*t12;
     const double t15 = t5*t13 - t9*t12;
-    const double t16 = sin_q[5];
-    const double t17 = cos_q[5];
+    const double t16 = sin_q[6];
+    const double t17 = cos_q[6];
     const double t18 = t14*t17 - t11*t16;
-    const double t19 = cos_q[6];
-    const double t20 = sin_q[6];
+    const double t19 = cos_q[7];
+    const double t20 = sin_q[7];
     const double t21 = t4*t1;
     const double t22 = t1*t2;
     const double t23 = t4*t10;
@@ -25716,8 +25781,10 @@ void lwr4_Y_m(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = 1.0;
@@ -25768,9 +25835,9 @@ void lwr4_Y_m(const double *restrict q, double *restrict Y)
     const double t27 = -t14 - t12;
     Y[16] = t23*t15 + t27*t26;
     Y[17] = t6*t27 - t6*t15;
-    const double t28 = sin_q[4];
+    const double t28 = sin_q[5];
     const double t29 = t6*t28;
-    const double t30 = cos_q[4];
+    const double t30 = cos_q[5];
     const double t31 = t23*t30;
     const double t32 = t31 - t29;
     const double t33 = t4*t30;
@@ -25802,9 +25869,9 @@ void lwr4_Y_m(const double *restrict q, double *restrict Y)
     const double t52 = t29 - t31;
     Y[23] = t42*t32 + t52*t50;
     Y[24] = -2.0*t51;
-    const double t53 = cos_q[5];
+    const double t53 = cos_q[6];
     const double t54 = t37*t10;
-    const double t55 = sin_q[5];
+    const double t55 = sin_q[6];
     const double t56 = 0.39*t30;
     const double t57 = t48 - t6*t56 - 0.39*t40;
     const double t58 = -t53*t54 - t57*t55;
@@ -25832,9 +25899,9 @@ void lwr4_Y_m(const double *restrict q, double *restrict Y)
     const double t74 = 2.0*t73;
     Y[30] = t74*t71;
     Y[31] = t73*t50 + t42*t62;
-    const double t75 = cos_q[6];
+    const double t75 = cos_q[7];
     const double t76 = t42*t75;
-    const double t77 = sin_q[6];
+    const double t77 = sin_q[7];
     const double t78 = t77*t71;
     const double t79 = t76 + t78;
     const double t80 = 2.0*t58;
@@ -28630,8 +28697,10 @@ void lwr4_Y(const double *restrict q, const double *restrict qd, const double *r
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -28818,8 +28887,8 @@ void lwr4_Y(const double *restrict q, const double *restrict qd, const double *r
     const double t353 = t20*t350 - t22*t352;
     const double t356 = t0*t353 + t2*t351;
     Y[21] = t356;
-    const double t69 = sin_q[4];
-    const double t70 = cos_q[4];
+    const double t69 = sin_q[5];
+    const double t70 = cos_q[5];
     const double t76 = t70*t54 + t51*t69;
     const double t85 = t76*t76;
     const double t73 = qd[4] - t52;
@@ -28926,13 +28995,13 @@ void lwr4_Y(const double *restrict q, const double *restrict qd, const double *r
     const double t473 = t20*t471 - t22*t470;
     const double t476 = t0*t473 + t2*t472;
     Y[28] = t476;
-    const double t95 = cos_q[5];
+    const double t95 = cos_q[6];
     const double t89 = t88 + t87;
     const double t98 = -(t72 + 0.39*t89);
     const double t484 = t95*t98;
     const double t485 = -t484;
     const double t99 = qd[5] - t74;
-    const double t93 = sin_q[5];
+    const double t93 = sin_q[6];
     const double t102 = t76*t95 + t73*t93;
     const double t109 = t99*t102;
     const double t757 = t79*t95 - t102*qd[5];
@@ -29053,8 +29122,8 @@ void lwr4_Y(const double *restrict q, const double *restrict qd, const double *r
     const double t605 = t20*t603 - t22*t602;
     const double t608 = t0*t605 + t2*t604;
     Y[35] = t608;
-    const double t118 = sin_q[6];
-    const double t119 = cos_q[6];
+    const double t118 = sin_q[7];
+    const double t119 = cos_q[7];
     const double t121 = -t98*t119 - t96*t118;
     const double t615 = t97*t118;
     const double t620 = t93*t615 + t95*t121;

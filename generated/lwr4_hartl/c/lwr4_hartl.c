@@ -4,10 +4,10 @@
 
 #include "lwr4_hartl.h"
 
-/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
+/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
  * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos8: i = 0..7. */
+ * _steps explains each step. */
 static int kdg_sincos8(const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[8];
@@ -42,46 +42,88 @@ static int kdg_sincos8(const double *restrict x, double *restrict s, double *res
     return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
 }
 
-/* kdg_sincos4: i = 0..3 */
-static int kdg_sincos4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) and s[4 + i] = sin(x[n - 4 + i]), c[4 + i] = cos(x[n - 4 + i])
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_split_libm replaces them. */
+static int kdg_sincos_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
+/* The lanes of kdg_sincos_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(x[i]) <= 1048576.0)) {
+            s[i] = sin(x[i]);
+            c[i] = cos(x[i]);
+        }
+        if (!(fabs(x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(x[n - 4 + i]);
+            c[4 + i] = cos(x[n - 4 + i]);
+        }
+    }
+}
+
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
+ * explains the method and where its constants come from): blocks of eight lanes (n >= 8) or
+ * the split kernel's two blocks of four without a branch or a call, which compilers vectorise;
+ * arguments beyond +-1.04858e+06, infinities and NaN take libm afterwards, in a loop entered only
+ * if a block saw one. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
 static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
@@ -91,143 +133,120 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             out |= kdg_sincos8(x + i, s + i, c + i);
         if (i < n)
             out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
+        if (out)
+            for (i = 0; i < n; ++i)
+                if (!(fabs(x[i]) <= 1048576.0)) {
+                    s[i] = sin(x[i]);
+                    c[i] = cos(x[i]);
+                }
     } else if (n >= 4) {
-        out = kdg_sincos4(x, s, c);
-        out |= kdg_sincos4(x + n - 4, s + n - 4, c + n - 4);
+        double sb[8], cb[8];
+        if (kdg_sincos_split(n, x, sb, cb))
+            kdg_sincos_split_libm(n, x, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i < 4 ? i : i + 8 - n];
+            c[i] = cb[i < 4 ? i : i + 8 - n];
+        }
     } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[8], cb[8];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = kdg_sincos4(xb, sb, cb);
+        if (kdg_sincos_split(4, xb, sb, cb))
+            kdg_sincos_split_libm(4, xb, sb, cb);
         for (i = 0; i < n; ++i) {
             s[i] = sb[i];
             c[i] = cb[i];
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(x[i]) <= 1048576.0)) {
-                s[i] = sin(x[i]);
-                c[i] = cos(x[i]);
-            }
 }
 
-/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
- * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
- * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos_half8: i = 0..7. */
-static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
-{
-    double out[8];
-    int j;
-    for (j = 0; j < 8; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
-        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
-    }
-    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
-}
-
-/* kdg_sincos_half4: i = 0..3 */
-static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) and s[4 + i] = sin(x[n - 4 + i]/2), c[4 + i] = cos(x[n - 4 + i]/2)
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]/2| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_half_split_libm replaces them. */
+static int kdg_sincos_half_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = 0.5*x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = 0.5*x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
-/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
-static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+/* The lanes of kdg_sincos_half_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_half_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
-    int out = 0;
-    if (n >= 8) {
-        for (i = 0; i + 8 <= n; i += 8)
-            out |= kdg_sincos_half8(x + i, s + i, c + i);
-        if (i < n)
-            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
-    } else if (n >= 4) {
-        out = kdg_sincos_half4(x, s, c);
-        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
-    } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
-        for (i = 0; i < n; ++i)
-            xb[i] = x[i];
-        out = kdg_sincos_half4(xb, sb, cb);
-        for (i = 0; i < n; ++i) {
-            s[i] = sb[i];
-            c[i] = cb[i];
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+            s[i] = sin(0.5*x[i]);
+            c[i] = cos(0.5*x[i]);
+        }
+        if (!(fabs(0.5*x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(0.5*x[n - 4 + i]);
+            c[4 + i] = cos(0.5*x[n - 4 + i]);
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
-                s[i] = sin(0.5*x[i]);
-                c[i] = cos(0.5*x[i]);
-            }
 }
 
 void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
-    const double t1 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
+    const double t1 = cos_q[5];
     const double t2 = sin_q[0];
     const double t3 = cos_q[2];
     const double t4 = t3*t2;
@@ -236,7 +255,7 @@ void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)
     const double t7 = cos_q[0];
     const double t8 = t7*t6;
     const double t9 = t4 - t8*t5;
-    const double t10 = sin_q[4];
+    const double t10 = sin_q[5];
     const double t11 = sin_q[3];
     const double t12 = sin_q[1];
     const double t13 = t11*t12;
@@ -246,11 +265,11 @@ void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)
     const double t17 = t5*t16 + t15;
     const double t18 = t14*t17 + t7*t13;
     const double t19 = -t18*t10 - t9*t1;
-    const double t20 = cos_q[6];
-    const double t21 = sin_q[5];
+    const double t20 = cos_q[7];
+    const double t21 = sin_q[6];
     const double t22 = t12*t14;
     const double t23 = t7*t22 - t11*t17;
-    const double t24 = cos_q[5];
+    const double t24 = cos_q[6];
     const double t25 = t1*t18 - t9*t10;
     const double t26 = t24*t25 - t23*t21;
     const double t27 = 0.4*t12;
@@ -371,10 +390,12 @@ out_T[15][j] = 1.0;
 
 void lwr4_hartl_fk_dq(const double *restrict q, double *restrict x)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*(q[4] + q[6]), 0.5*(q[0] - q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] + q[2]), 0.5*q[5], 0.5*(q[4] - q[6]), 0.0};
+    /* the kernel's arguments */
+    const double angles[7] = {0.5*(q[4] + q[6]), 0.5*(q[0] - q[2]), 0.5*q[1], 0.5*q[3], 0.5*(q[0] + q[2]), 0.5*q[5], 0.5*(q[4] - q[6])};
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
     double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    if (kdg_sincos_split(7, angles, sin_q, cos_q))
+        kdg_sincos_split_libm(7, angles, sin_q, cos_q);
     const double t1 = cos_q[0];
     const double t3 = sin_q[1];
     const double t5 = cos_q[2];
@@ -382,22 +403,22 @@ void lwr4_hartl_fk_dq(const double *restrict q, double *restrict x)
     const double t8 = t5*t7;
     const double t9 = sin_q[3];
     const double t11 = sin_q[2];
-    const double t12 = t11*sin_q[4];
+    const double t12 = t11*sin_q[5];
     const double t13 = t9*t12;
     const double t14 = t8*t3 + t13;
-    const double t16 = sin_q[5];
+    const double t16 = sin_q[6];
     const double t17 = t14*t16;
-    const double t18 = t11*cos_q[4];
+    const double t18 = t11*cos_q[5];
     const double t19 = cos_q[1];
     const double t20 = t9*t5;
     const double t21 = t20*t19;
     const double t22 = t21 - t7*t18;
-    const double t23 = cos_q[5];
-    const double t25 = sin_q[6];
+    const double t23 = cos_q[6];
+    const double t25 = sin_q[7];
     const double t26 = t23*t25;
     const double t27 = t3*t20;
     const double t28 = t7*t12 - t27;
-    const double t29 = cos_q[6];
+    const double t29 = cos_q[7];
     const double t30 = t29*t23;
     const double t31 = t9*t18;
     const double t32 = t31 + t8*t19;
@@ -534,8 +555,10 @@ void lwr4_hartl_jacobian(const double *restrict q, double *restrict J)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[0];
     const double t1 = -t0;
     const double t2 = cos_q[1];
@@ -562,16 +585,16 @@ void lwr4_hartl_jacobian(const double *restrict q, double *restrict J)
     const double t23 = -(t8*t19 - t14*t18);
     const double t24 = t9*t18 + t19*t16;
     const double t25 = -(t9*t19 - t16*t18);
-    const double t26 = sin_q[4];
-    const double t27 = cos_q[4];
+    const double t26 = sin_q[5];
+    const double t27 = cos_q[5];
     const double t28 = t26*t13 + t27*t20;
     const double t29 = -(t27*t13 - t26*t20);
     const double t30 = t26*t15 + t22*t27;
     const double t31 = -(t27*t15 - t22*t26);
     const double t32 = t26*t17 + t24*t27;
     const double t33 = -(t27*t17 - t24*t26);
-    const double t34 = sin_q[5];
-    const double t35 = cos_q[5];
+    const double t34 = sin_q[6];
+    const double t35 = cos_q[6];
     const double t37 = -(t21*t35 - t28*t34);
     const double t39 = -(t23*t35 - t34*t30);
     const double t41 = -(t25*t35 - t34*t32);
@@ -741,24 +764,26 @@ void lwr4_hartl_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[5];
-    const double t9 = sin_q[4];
-    const double t11 = sin_q[6];
+    const double t7 = sin_q[6];
+    const double t9 = sin_q[5];
+    const double t11 = sin_q[7];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos_q[4];
-    const double t15 = cos_q[6];
+    const double t14 = cos_q[5];
+    const double t15 = cos_q[7];
     const double t16 = 0.5*t15;
     const double t17 = t7*t16;
     const double t18 = t7*t13 - t14*t17;
     const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = cos_q[5];
+    const double t22 = cos_q[6];
     const double t23 = t22*t16;
     const double t24 = -t22*t13 - t23*t14;
     const double t25 = cos_q[3];
@@ -1424,11 +1449,13 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
-    const double t1 = sin_q[6];
-    const double t3 = cos_q[5];
-    const double t5 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
+    const double t1 = sin_q[7];
+    const double t3 = cos_q[6];
+    const double t5 = cos_q[5];
     const double t7 = cos_q[1];
     const double t9 = sin_q[0];
     const double t11 = cos_q[2];
@@ -1444,14 +1471,14 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
     const double t22 = sin_q[3];
     const double t23 = t22*t21;
     const double t24 = t16*t18 + t23;
-    const double t25 = sin_q[4];
+    const double t25 = sin_q[5];
     const double t26 = t11*t13;
     const double t27 = t9*t20 - t26*t19;
     const double t28 = t22*t27;
     const double t29 = t9*t15 + t7*t26;
     const double t30 = t29*t18 - t28;
     const double t31 = t5*t24 + t25*t30;
-    const double t32 = sin_q[5];
+    const double t32 = sin_q[6];
     const double t33 = t29*t22;
     const double t34 = t27*t18 + t33;
     const double t35 = t22*t16;
@@ -1459,7 +1486,7 @@ void lwr4_hartl_jacobian_dq(const double *restrict q, double *restrict J)
     const double t37 = t25*t34 + t5*t36;
     const double t38 = t32*t37;
     const double t39 = t3*t31 - t38;
-    const double t40 = cos_q[6];
+    const double t40 = cos_q[7];
     const double t41 = t5*t34 - t25*t36;
     const double t42 = t41*t32;
     const double t43 = t5*t30 - t24*t25;
@@ -1941,10 +1968,12 @@ void lwr4_hartl_M(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
-    const double t1 = cos_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
+    const double t1 = cos_q[7];
     const double t2 = t1*t0;
     const double t3 = t0*t0;
     const double t4 = -9.99755e-05*t3 - 4.0084e-05*t2;
@@ -1961,9 +1990,9 @@ void lwr4_hartl_M(const double *restrict q, double *restrict M)
     const double t14 = 0.000105*t1;
     const double t15 = 0.00014*t0;
     const double t16 = t15 - t14;
-    const double t17 = sin_q[5];
+    const double t17 = sin_q[6];
     const double t18 = t13*t17;
-    const double t19 = cos_q[5];
+    const double t19 = cos_q[6];
     const double t20 = 0.0233*t19;
     const double t21 = t18 - t20;
     const double t22 = 0.78*t21;
@@ -1989,8 +2018,8 @@ void lwr4_hartl_M(const double *restrict q, double *restrict M)
     const double t35 = t229 - t26;
     const double t36 = t30 - 0.00136;
     const double t37 = -t16 + 0.1915;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t40 = t39*t38;
     const double t41 = t38*t38;
     const double t42 = t27 - t32;
@@ -2416,19 +2445,21 @@ void lwr4_hartl_g(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[3];
-    const double t1 = cos_q[5];
-    const double t2 = sin_q[6];
-    const double t3 = cos_q[6];
+    const double t1 = cos_q[6];
+    const double t2 = sin_q[7];
+    const double t3 = cos_q[7];
     const double t4 = 0.000105*t2 + 0.00014*t3 - 0.00112;
-    const double t5 = sin_q[5];
+    const double t5 = sin_q[6];
     const double t6 = -(t5*t4 - 0.0233*t1) - 1.5867;
     const double t7 = sin_q[3];
     const double t8 = -(0.00014*t2 - 0.000105*t3) + 0.1915;
-    const double t9 = sin_q[4];
-    const double t10 = cos_q[4];
+    const double t9 = sin_q[5];
+    const double t10 = cos_q[5];
     const double t27 = 0.0233*t5 - 0.00136;
     const double t11 = t4*t1 + t27;
     const double t28 = -t9*t8 + 0.0035;
@@ -2523,8 +2554,10 @@ void lwr4_hartl_c(const double *restrict q, const double *restrict qd, double *r
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[1];
     const double t1 = t0*qd[0];
     const double t2 = t1*qd[1];
@@ -2570,9 +2603,9 @@ void lwr4_hartl_c(const double *restrict q, const double *restrict qd, double *r
     const double t65 = -t52;
     const double t66 = t58 + t65;
     const double t67 = t63 + t50;
-    const double t69 = sin_q[4];
+    const double t69 = sin_q[5];
     const double t70 = 0.4*t37;
-    const double t71 = cos_q[4];
+    const double t71 = cos_q[5];
     const double t72 = t46*t71 - t70*t69;
     const double t73 = -t70*t71 - t46*t69;
     const double t74 = qd[4] - t49;
@@ -2599,9 +2632,9 @@ void lwr4_hartl_c(const double *restrict q, const double *restrict qd, double *r
     const double t93 = t89 + t76;
     const double t94 = -(t87 + t80);
     const double t95 = 0.39*t94 - t47;
-    const double t96 = sin_q[5];
+    const double t96 = sin_q[6];
     const double t97 = 0.39*t85 + t72;
-    const double t98 = cos_q[5];
+    const double t98 = cos_q[6];
     const double t99 = t97*t98 + t95*t96;
     const double t100 = t95*t98 - t96*t97;
     const double t101 = -(t73 + 0.39*t90);
@@ -2625,8 +2658,8 @@ void lwr4_hartl_c(const double *restrict q, const double *restrict qd, double *r
     const double t119 = -t106;
     const double t120 = t112 + t119;
     const double t121 = t117 + t104;
-    const double t123 = sin_q[6];
-    const double t124 = cos_q[6];
+    const double t123 = sin_q[7];
+    const double t124 = cos_q[7];
     const double t125 = t99*t124 + t101*t123;
     const double t126 = t101*t124 - t99*t123;
     const double t127 = qd[6] - t103;
@@ -3098,8 +3131,10 @@ void lwr4_hartl_S(const double *restrict q, const double *restrict qd, double *r
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t104 = cos_q[1];
@@ -3107,14 +3142,14 @@ void lwr4_hartl_S(const double *restrict q, const double *restrict qd, double *r
     const double t2 = cos_q[3];
     const double t40 = sin_q[3];
     const double t65 = t2*t40;
-    const double t8 = cos_q[6];
-    const double t9 = sin_q[6];
+    const double t8 = cos_q[7];
+    const double t9 = sin_q[7];
     const double t10 = t9*t8;
     const double t13 = t9*t9;
     const double t14 = -9.99755e-05*t13;
     const double t116 = t14 - 4.0084e-05*t10;
-    const double t7 = cos_q[5];
-    const double t20 = sin_q[5];
+    const double t7 = cos_q[6];
+    const double t20 = sin_q[6];
     const double t26 = t7*t20;
     const double t17 = 3.349e-05*t9;
     const double t18 = 2.132e-05*t8;
@@ -3137,8 +3172,8 @@ void lwr4_hartl_S(const double *restrict q, const double *restrict qd, double *r
     const double t188 = t111 - t159;
     const double t203 = 0.78*t188;
     const double t204 = t203 + t200;
-    const double t3 = sin_q[4];
-    const double t36 = cos_q[4];
+    const double t3 = sin_q[5];
+    const double t36 = cos_q[5];
     const double t37 = t3*t36;
     const double t4 = t3*t3;
     const double t205 = -(t116 + 9.99755e-05);
@@ -4871,8 +4906,10 @@ void lwr4_hartl_tau(const double *restrict q, const double *restrict qd, const d
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = 9.81*t0;
     const double t2 = cos_q[1];
@@ -4928,8 +4965,8 @@ void lwr4_hartl_tau(const double *restrict q, const double *restrict qd, const d
     const double t75 = -t61;
     const double t76 = t68 + t75;
     const double t77 = t73 + t59;
-    const double t79 = sin_q[4];
-    const double t80 = cos_q[4];
+    const double t79 = sin_q[5];
+    const double t80 = cos_q[5];
     const double t81 = t54*t80 + t79*t56;
     const double t82 = t56*t80 - t79*t54;
     const double t83 = qd[4] - t58;
@@ -4956,9 +4993,9 @@ void lwr4_hartl_tau(const double *restrict q, const double *restrict qd, const d
     const double t103 = t99 + t85;
     const double t104 = -(t97 + t90);
     const double t105 = 0.39*t104 - t55;
-    const double t106 = sin_q[5];
+    const double t106 = sin_q[6];
     const double t107 = 0.39*t95 + t81;
-    const double t108 = cos_q[5];
+    const double t108 = cos_q[6];
     const double t109 = t108*t107 + t106*t105;
     const double t110 = t108*t105 - t107*t106;
     const double t111 = -(t82 + 0.39*t100);
@@ -4983,8 +5020,8 @@ void lwr4_hartl_tau(const double *restrict q, const double *restrict qd, const d
     const double t130 = -t116;
     const double t131 = t123 + t130;
     const double t132 = t128 + t114;
-    const double t134 = sin_q[6];
-    const double t135 = cos_q[6];
+    const double t134 = sin_q[7];
+    const double t135 = cos_q[7];
     const double t136 = t109*t135 + t134*t111;
     const double t137 = t135*t111 - t109*t134;
     const double t138 = qd[6] - t113;
@@ -5468,28 +5505,30 @@ void lwr4_hartl_fd(const double *restrict q, const double *restrict qd, const do
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t97 = sin_q[1];
     const double t98 = cos_q[1];
-    const double t1 = sin_q[6];
+    const double t1 = sin_q[7];
     const double t3 = t1*t1;
-    const double t0 = cos_q[6];
+    const double t0 = cos_q[7];
     const double t2 = t1*t0;
     const double t559 = 9.99755e-05*t2 + 9.328e-05;
     const double t8 = 2.0042e-05*(-2.0*t3 + 1.0) + t559;
     const double t9 = 2.132e-05*t1 - 3.349e-05*t0;
     const double t10 = -t9 + 0.0001904;
-    const double t17 = sin_q[5];
-    const double t19 = cos_q[5];
+    const double t17 = sin_q[6];
+    const double t19 = cos_q[6];
     const double t33 = t8*t17 + t19*t10;
     const double t57 = sin_q[3];
     const double t59 = cos_q[3];
     const double t28 = t8*t19 - t17*t10;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t4 = -9.99755e-05*t3 - 4.0084e-05*t2;
     const double t11 = -(t4 + 9.99755e-05) + 0.0069478155;
     const double t12 = 0.00014*t0 + 0.000105*t1;
@@ -6663,11 +6702,13 @@ void lwr4_hartl_com(const double *restrict q, double *restrict com, double *rest
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
     const double t1 = t0*t0;
-    const double t2 = cos_q[6];
+    const double t2 = cos_q[7];
     const double t3 = t0*t2;
     const double t4 = -4.0084e-05*t3 - 9.99755e-05*t1;
     const double t5 = t4 + 0.0034462475;
@@ -6683,9 +6724,9 @@ void lwr4_hartl_com(const double *restrict q, double *restrict com, double *rest
     const double t14 = 0.000105*t2;
     const double t15 = 0.00014*t0;
     const double t16 = t15 - t14;
-    const double t17 = sin_q[5];
+    const double t17 = sin_q[6];
     const double t18 = t13*t17;
-    const double t19 = cos_q[5];
+    const double t19 = cos_q[6];
     const double t20 = 0.0233*t19;
     const double t21 = t18 - t20;
     const double t22 = 0.78*t21;
@@ -6711,8 +6752,8 @@ void lwr4_hartl_com(const double *restrict q, double *restrict com, double *rest
     const double t35 = t242 - t26;
     const double t36 = t30 - 0.00136;
     const double t37 = -t16 + 0.1915;
-    const double t38 = sin_q[4];
-    const double t39 = cos_q[4];
+    const double t38 = sin_q[5];
+    const double t39 = cos_q[5];
     const double t40 = t39*t38;
     const double t41 = t38*t38;
     const double t42 = t27 - t32;
@@ -7356,8 +7397,10 @@ void lwr4_hartl_tau_derivatives(const double *restrict q, const double *restrict
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -7365,10 +7408,10 @@ void lwr4_hartl_tau_derivatives(const double *restrict q, const double *restrict
     double kdg_lane_out[14][8];
     int kdg_lane;
     const double t0 = sin_q[2];
-    const double t1 = sin_q[4];
-    const double t2 = cos_q[5];
-    const double t3 = sin_q[6];
-    const double t4 = sin_q[5];
+    const double t1 = sin_q[5];
+    const double t2 = cos_q[6];
+    const double t3 = sin_q[7];
+    const double t4 = sin_q[6];
     const double t5 = sin_q[3];
     const double t6 = cos_q[2];
     const double t7 = sin_q[1];
@@ -7380,7 +7423,7 @@ void lwr4_hartl_tau_derivatives(const double *restrict q, const double *restrict
     const double t13 = qd[2] - t12;
     const double t14 = t13*t10 - t9*t5;
     const double t15 = qd[4] - t14;
-    const double t16 = cos_q[4];
+    const double t16 = cos_q[5];
     const double t17 = t5*t13 + t9*t10;
     const double t18 = t6*qd[1] - t8*t0;
     const double t19 = qd[3] - t18;
@@ -7409,7 +7452,7 @@ void lwr4_hartl_tau_derivatives(const double *restrict q, const double *restrict
     const double t42 = t2*t41 - t4*t38 - t21*qd[5];
     const double t43 = -t42;
     const double t44 = t43 + qdd[6];
-    const double t45 = cos_q[6];
+    const double t45 = cos_q[7];
     const double t46 = qd[5] - t22;
     const double t47 = t46*t45 - t3*t21;
     const double t48 = t47*qd[6];
@@ -9408,8 +9451,10 @@ void lwr4_hartl_fd_derivatives(const double *restrict q, const double *restrict 
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -9417,13 +9462,13 @@ void lwr4_hartl_fd_derivatives(const double *restrict q, const double *restrict 
     double kdg_lane_out[21][8];
     int kdg_lane;
     const double t0 = sin_q[1];
-    const double t1 = cos_q[6];
-    const double t2 = sin_q[6];
+    const double t1 = cos_q[7];
+    const double t2 = sin_q[7];
     const double t3 = t1*t2;
     const double t4 = t2*t2;
     const double t5 = -4.0084e-05*t3 - 9.99755e-05*t4;
-    const double t6 = cos_q[5];
-    const double t7 = sin_q[5];
+    const double t6 = cos_q[6];
+    const double t7 = sin_q[6];
     const double t8 = t7*t6;
     const double t9 = 2.132e-05*t1 + 3.349e-05*t2;
     const double t10 = -t9 - 0.00010112;
@@ -9442,7 +9487,7 @@ void lwr4_hartl_fd_derivatives(const double *restrict q, const double *restrict 
     const double t23 = t21 - t22;
     const double t24 = 0.78*t23;
     const double t25 = t24 + t16;
-    const double t26 = sin_q[4];
+    const double t26 = sin_q[5];
     const double t27 = t26*t26;
     const double t28 = -(t5 + 9.99755e-05);
     const double t29 = t28 + 0.0069478155;
@@ -9455,7 +9500,7 @@ void lwr4_hartl_fd_derivatives(const double *restrict q, const double *restrict 
     const double t36 = 9.99755e-05*t3 + 2.0042e-05*(-2.0*t4 + 1.0) + 9.328e-05;
     const double t37 = t6*t36 - t7*t35;
     const double t38 = -t37 - 0.00015448;
-    const double t39 = cos_q[4];
+    const double t39 = cos_q[5];
     const double t40 = t26*t39;
     const double t41 = t40*t38;
     const double t42 = -t32 - 2.0*t41;
@@ -13008,8 +13053,10 @@ void lwr4_hartl_fd_derivatives_no_minv(const double *restrict q, const double *r
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -13017,13 +13064,13 @@ void lwr4_hartl_fd_derivatives_no_minv(const double *restrict q, const double *r
     double kdg_lane_out[14][8];
     int kdg_lane;
     const double t0 = sin_q[1];
-    const double t1 = cos_q[6];
-    const double t2 = sin_q[6];
+    const double t1 = cos_q[7];
+    const double t2 = sin_q[7];
     const double t3 = t1*t2;
     const double t4 = t2*t2;
     const double t5 = -4.0084e-05*t3 - 9.99755e-05*t4;
-    const double t6 = cos_q[5];
-    const double t7 = sin_q[5];
+    const double t6 = cos_q[6];
+    const double t7 = sin_q[6];
     const double t8 = t7*t6;
     const double t9 = 2.132e-05*t1 + 3.349e-05*t2;
     const double t10 = -t9 - 0.00010112;
@@ -13042,7 +13089,7 @@ void lwr4_hartl_fd_derivatives_no_minv(const double *restrict q, const double *r
     const double t23 = t21 - t22;
     const double t24 = 0.78*t23;
     const double t25 = t24 + t16;
-    const double t26 = sin_q[4];
+    const double t26 = sin_q[5];
     const double t27 = t26*t26;
     const double t28 = -(t5 + 9.99755e-05);
     const double t29 = t28 + 0.0069478155;
@@ -13055,7 +13102,7 @@ void lwr4_hartl_fd_derivatives_no_minv(const double *restrict q, const double *r
     const double t36 = 9.99755e-05*t3 + 2.0042e-05*(-2.0*t4 + 1.0) + 9.328e-05;
     const double t37 = t6*t36 - t7*t35;
     const double t38 = -t37 - 0.00015448;
-    const double t39 = cos_q[4];
+    const double t39 = cos_q[5];
     const double t40 = t26*t39;
     const double t41 = t40*t38;
     const double t42 = -t32 - 2.0*t41;
@@ -16396,12 +16443,14 @@ void lwr4_hartl_M_lagrange(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
-    const double t36 = sin_q[6];
-    const double t16 = sin_q[5];
+    const double t36 = sin_q[7];
+    const double t16 = sin_q[6];
     const double t1 = sin_q[3];
     const double t5 = cos_q[2];
     const double t6 = sin_q[1];
@@ -16412,15 +16461,15 @@ void lwr4_hartl_M_lagrange(const double *restrict q, double *restrict M)
     const double t18 = t4*t2;
     const double t19 = t17 + t18;
     const double t20 = t19*t16;
-    const double t21 = cos_q[5];
-    const double t0 = sin_q[4];
+    const double t21 = cos_q[6];
+    const double t0 = sin_q[5];
     const double t12 = sin_q[2];
     const double t13 = t6*t12;
     const double t22 = t0*t13;
     const double t3 = t1*t2;
     const double t8 = t4*t7;
     const double t9 = t8 - t3;
-    const double t11 = cos_q[4];
+    const double t11 = cos_q[5];
     const double t23 = t9*t11;
     const double t24 = t22 + t23;
     const double t25 = t24*t21;
@@ -16429,7 +16478,7 @@ void lwr4_hartl_M_lagrange(const double *restrict q, double *restrict M)
     const double t10 = t9*t0;
     const double t14 = t11*t13;
     const double t15 = t10 - t14;
-    const double t38 = cos_q[6];
+    const double t38 = cos_q[7];
     const double t42 = t38*t15;
     const double t48 = t42 - t41;
     const double t40 = t39*t38;
@@ -18463,8 +18512,10 @@ void lwr4_hartl_g_lagrange(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = cos_q[1];
     const double t2 = cos_q[2];
@@ -18476,9 +18527,9 @@ void lwr4_hartl_g_lagrange(const double *restrict q, double *restrict g)
     const double t8 = cos_q[3];
     const double t9 = t8*t0;
     const double t10 = 15.565527*t9;
-    const double t11 = sin_q[4];
+    const double t11 = sin_q[5];
     const double t12 = 9.81*t4;
-    const double t13 = cos_q[4];
+    const double t13 = cos_q[5];
     const double t14 = 9.81*t0;
     const double t15 = t5*t14;
     const double t16 = t8*t1;
@@ -18486,20 +18537,20 @@ void lwr4_hartl_g_lagrange(const double *restrict q, double *restrict g)
     const double t18 = -t15 - t2*t17;
     const double t19 = t13*t18;
     const double t20 = t19 - t11*t12;
-    const double t21 = sin_q[5];
+    const double t21 = sin_q[6];
     const double t22 = 0.0233*t21;
     const double t23 = t11*t18;
     const double t24 = -t12*t13 - t23;
-    const double t25 = cos_q[6];
+    const double t25 = cos_q[7];
     const double t26 = 0.000105*t25;
     const double t27 = t8*t14;
     const double t28 = 9.81*t6;
     const double t29 = t2*t28 - t27;
     const double t30 = t29*t21;
-    const double t31 = cos_q[5];
+    const double t31 = cos_q[6];
     const double t32 = t20*t31;
     const double t33 = t32 - t30;
-    const double t34 = sin_q[6];
+    const double t34 = sin_q[7];
     const double t35 = 0.000105*t34;
     const double t36 = 0.034335*t16;
     const double t37 = t5*t0;
@@ -18792,8 +18843,10 @@ void lwr4_hartl_c_christoffel(const double *restrict q, const double *restrict q
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t0 = sin_q[1];
@@ -18801,20 +18854,20 @@ void lwr4_hartl_c_christoffel(const double *restrict q, const double *restrict q
     const double t35 = sin_q[2];
     const double t45 = cos_q[1];
     const double t27 = sin_q[3];
-    const double t3 = cos_q[4];
-    const double t19 = sin_q[4];
+    const double t3 = cos_q[5];
+    const double t19 = sin_q[5];
     const double t77 = t3*t19;
-    const double t5 = cos_q[6];
-    const double t6 = sin_q[6];
+    const double t5 = cos_q[7];
+    const double t6 = sin_q[7];
     const double t7 = t5*t6;
     const double t8 = t6*t6;
     const double t61 = -9.99755e-05*t8;
     const double t62 = t61 - 4.0084e-05*t7;
     const double t171 = -(t62 + 9.99755e-05);
     const double t172 = t171 + 0.0069478155;
-    const double t16 = cos_q[5];
+    const double t16 = cos_q[6];
     const double t40 = 0.0233*t16;
-    const double t4 = sin_q[5];
+    const double t4 = sin_q[6];
     const double t20 = 0.000105*t6;
     const double t21 = 0.00014*t5;
     const double t22 = t20 + t21;
@@ -20569,27 +20622,29 @@ void lwr4_hartl_M_dq(const double *restrict q, double *restrict M)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[2];
     const double t5 = t4*t4;
     const double t6 = -2.0*t5 + 1.0;
-    const double t8 = sin_q[4];
+    const double t8 = sin_q[6];
     const double t9 = t8*t8;
     const double t10 = -2.0*t9 + 1.0;
     const double t11 = 0.0006000875*t10;
-    const double t13 = sin_q[5];
+    const double t13 = sin_q[7];
     const double t14 = t13*t13;
     const double t15 = -2.0*t14 + 1.0;
     const double t16 = 2.132e-05*t15;
-    const double t17 = cos_q[5];
+    const double t17 = cos_q[7];
     const double t18 = t13*t17;
     const double t19 = 6.698e-05*t18;
     const double t163 = -t19 - 0.00010112;
     const double t20 = t163 - t16;
-    const double t21 = cos_q[4];
+    const double t21 = cos_q[6];
     const double t22 = t8*t21;
     const double t23 = 2.0*t22;
     const double t24 = t23*t20;
@@ -21097,8 +21152,10 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[1];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[0];
@@ -21106,7 +21163,7 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
     const double t6 = t5*t2;
     const double t7 = t1*cos_q[1];
     const double t8 = t5*t7;
-    const double t10 = sin_q[4];
+    const double t10 = sin_q[6];
     const double t11 = -2.0*t10*t10 + 1.0;
     const double t13 = sin_q[3];
     const double t14 = t13*cos_q[3];
@@ -21122,11 +21179,11 @@ void lwr4_hartl_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t8*t53 + t21*t20;
     const double t55 = -39.24*t18;
     const double t23 = t6*t55 - 9.81*t19*t15;
-    const double t24 = 2.0*cos_q[4]*t10;
+    const double t24 = 2.0*cos_q[6]*t10;
     const double t25 = t22*t11 - t24*t23;
     const double t26 = -t24*t22 - t23*t11;
-    const double t28 = sin_q[5];
-    const double t29 = t28*cos_q[5];
+    const double t28 = sin_q[7];
+    const double t29 = t28*cos_q[7];
     const double t30 = t29*t26;
     const double t31 = -2.0*t28*t28 + 1.0;
     const double t32 = t26*t31;
@@ -21269,8 +21326,10 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21284,7 +21343,7 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t12 = 2.0*t11;
     const double t13 = t7*t10 + t12*qd[1];
     const double t14 = -0.12652*t4 - 0.0006915*t13;
-    const double t16 = sin_q[5];
+    const double t16 = sin_q[7];
     const double t17 = -2.0*t16*t16 + 1.0;
     const double t19 = sin_q[2];
     const double t20 = t19*cos_q[2];
@@ -21292,8 +21351,8 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t22 = -2.0*t19*t19 + 1.0;
     const double t23 = t4*t22 - t21*t13;
     const double t24 = qd[4] - t23;
-    const double t26 = sin_q[4];
-    const double t27 = t26*cos_q[4];
+    const double t26 = sin_q[6];
+    const double t27 = t26*cos_q[6];
     const double t28 = 2.0*t27;
     const double t29 = -2.0*t26*t26 + 1.0;
     const double t30 = t7*qd[1];
@@ -21309,7 +21368,7 @@ void lwr4_hartl_c_dq(const double *restrict q, const double *restrict qd, double
     const double t40 = t24*t28 + t29*t39;
     const double t41 = t32*t37 - t38*t36;
     const double t42 = qd[5] - t41;
-    const double t43 = 2.0*t16*cos_q[5];
+    const double t43 = 2.0*t16*cos_q[7];
     const double t44 = t40*t17 + t43*t42;
     const double t45 = t31*qd[2] + t3*t30;
     const double t46 = t9*qd[1];
@@ -21935,8 +21994,10 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -21974,7 +22035,7 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     const double t35 = 0.4*t34;
     const double t158 = -t35*qd[3] - 9.81*t2*t33;
     const double t36 = t158 - t28*t32;
-    const double t38 = sin_q[4];
+    const double t38 = sin_q[6];
     const double t39 = -2.0*t38*t38 + 1.0;
     const double t40 = qd[3] - t11;
     const double t41 = t26*cos_q[3];
@@ -21983,15 +22044,15 @@ void lwr4_hartl_tau_dq(const double *restrict q, const double *restrict qd, cons
     const double t44 = t42*t40 + t43*t27;
     const double t45 = t4*t33 - t32*t14;
     const double t46 = qd[4] - t45;
-    const double t47 = t38*cos_q[4];
+    const double t47 = t38*cos_q[6];
     const double t48 = 2.0*t47;
     const double t49 = t44*t39 + t46*t48;
     const double t50 = t40*t27 - t43*t42;
     const double t51 = qd[5] - t50;
     const double t52 = 0.00112*t51;
-    const double t54 = sin_q[5];
+    const double t54 = sin_q[7];
     const double t55 = -2.0*t54*t54 + 1.0;
-    const double t56 = 2.0*t54*cos_q[5];
+    const double t56 = 2.0*t54*cos_q[7];
     const double t57 = t49*t55 + t56*t51;
     const double t58 = t55*t51 - t49*t56;
     const double t59 = -0.00014*t58 - 0.000105*t57;
@@ -22645,8 +22706,10 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -23020,9 +23083,9 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t293 = -t291 - t292;
     const double t294 = t82*t287 - t80*t289;
     Y[28] = (-t288 - t290)*t3 + (t25*t294 - t33*t293)*t8;
-    const double t297 = sin_q[4];
+    const double t297 = sin_q[6];
     const double t298 = -2.0*t297*t297 + 1.0;
-    const double t300 = t297*cos_q[4];
+    const double t300 = t297*cos_q[6];
     const double t301 = 2.0*t300;
     const double t295 = qd[5] - t181;
     const double t299 = t298*t184;
@@ -23216,8 +23279,8 @@ void lwr4_hartl_Y_dq(const double *restrict q, const double *restrict qd, const 
     const double t455 = -t453 - t454;
     const double t456 = t82*t447 - t80*t451;
     Y[35] = (-t448 - t452)*t3 + (t25*t456 - t33*t455)*t8;
-    const double t461 = sin_q[5];
-    const double t462 = t461*cos_q[5];
+    const double t461 = sin_q[7];
+    const double t462 = t461*cos_q[7];
     const double t463 = 2.0*t462;
     const double t465 = -2.0*t461*t461 + 1.0;
     const double t464 = t303*t463;
@@ -25922,8 +25985,10 @@ void lwr4_hartl_Y_g(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = 9.81*cos_q[1];
     const double t1 = 9.81*sin_q[1];
     const double t2 = cos_q[2];
@@ -25936,16 +26001,16 @@ void lwr4_hartl_Y_g(const double *restrict q, double *restrict Y)
     const double t9 = -t8*t3 - t7;
     const double t10 = t8*t1;
     const double t11 = t6*t3 - t10;
-    const double t12 = sin_q[4];
-    const double t13 = cos_q[4];
+    const double t12 = sin_q[5];
+    const double t13 = cos_q[5];
     const double t14 = t9*t13 - t5*t12;
     const double t15 = t5*t13;
     const double t16 = t9*t12;
-    const double t17 = sin_q[5];
-    const double t18 = cos_q[5];
+    const double t17 = sin_q[6];
+    const double t18 = cos_q[6];
     const double t19 = t14*t18 - t11*t17;
-    const double t20 = cos_q[6];
-    const double t21 = sin_q[6];
+    const double t20 = cos_q[7];
+    const double t21 = sin_q[7];
     const double t22 = -t16 - t15;
     const double t23 = t4*t1;
     const double t24 = t1*t2;
@@ -26223,8 +26288,10 @@ void lwr4_hartl_Y_m(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = 1.0;
@@ -26274,9 +26341,9 @@ void lwr4_hartl_Y_m(const double *restrict q, double *restrict Y)
     const double t27 = -t15 - t13;
     Y[16] = t23*t16 + t27*t26;
     Y[17] = t7*t16 - t7*t27;
-    const double t28 = cos_q[4];
+    const double t28 = cos_q[5];
     const double t29 = t23*t28;
-    const double t30 = sin_q[4];
+    const double t30 = sin_q[5];
     const double t31 = t7*t30;
     const double t32 = t29 + t31;
     const double t33 = t23*t30;
@@ -26307,11 +26374,11 @@ void lwr4_hartl_Y_m(const double *restrict q, double *restrict Y)
     Y[22] = t16*t16;
     Y[23] = t46*t45 + t32*t35;
     Y[24] = -2.0*t47;
-    const double t52 = sin_q[5];
+    const double t52 = sin_q[6];
     const double t53 = 0.39*t28;
     const double t270 = t51 + t7*t53;
     const double t54 = t270 - 0.39*t33;
-    const double t55 = cos_q[5];
+    const double t55 = cos_q[6];
     const double t56 = 0.4*t37;
     const double t57 = -t52*t54 - t56*t55;
     const double t58 = 2.0*t57;
@@ -26335,8 +26402,8 @@ void lwr4_hartl_Y_m(const double *restrict q, double *restrict Y)
     const double t71 = t60 - t59;
     Y[30] = t71*t69 + t70*t61;
     Y[31] = t46*t71 + t35*t61;
-    const double t72 = cos_q[6];
-    const double t73 = sin_q[6];
+    const double t72 = cos_q[7];
+    const double t73 = sin_q[7];
     const double t74 = -t72*t63 - t73*t65;
     const double t75 = 2.0*t61;
     const double t76 = t72*t35;
@@ -29171,8 +29238,10 @@ void lwr4_hartl_Y(const double *restrict q, const double *restrict qd, const dou
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -29366,8 +29435,8 @@ void lwr4_hartl_Y(const double *restrict q, const double *restrict qd, const dou
     const double t361 = t20*t357 - t22*t359;
     const double t364 = t0*t361 - t2*t360;
     Y[21] = t364;
-    const double t69 = sin_q[4];
-    const double t70 = cos_q[4];
+    const double t69 = sin_q[5];
+    const double t70 = cos_q[5];
     const double t76 = t70*t53 + t50*t69;
     const double t85 = t76*t76;
     const double t73 = qd[4] - t51;
@@ -29474,12 +29543,12 @@ void lwr4_hartl_Y(const double *restrict q, const double *restrict qd, const dou
     const double t481 = t20*t479 + t22*t478;
     const double t484 = t0*t481 - t2*t480;
     Y[28] = t484;
-    const double t94 = sin_q[5];
+    const double t94 = sin_q[6];
     const double t89 = t88 + t87;
     const double t99 = -(t72 + 0.39*t89);
     const double t490 = t94*t99;
     const double t100 = qd[5] - t74;
-    const double t96 = cos_q[5];
+    const double t96 = cos_q[6];
     const double t103 = t76*t96 + t73*t94;
     const double t110 = t100*t103;
     const double t766 = t79*t96 - t103*qd[5];
@@ -29599,8 +29668,8 @@ void lwr4_hartl_Y(const double *restrict q, const double *restrict qd, const dou
     const double t611 = t20*t609 + t22*t608;
     const double t614 = t0*t611 - t2*t610;
     Y[35] = t614;
-    const double t119 = sin_q[6];
-    const double t120 = cos_q[6];
+    const double t119 = sin_q[7];
+    const double t120 = cos_q[7];
     const double t122 = t99*t120 - t97*t119;
     const double t621 = -t98*t119;
     const double t626 = t94*t621 - t96*t122;

@@ -4,10 +4,10 @@
 
 #include "panda.h"
 
-/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight or four lanes; they return
+/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
  * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos8: i = 0..7. */
+ * _steps explains each step. */
 static int kdg_sincos8(const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[8];
@@ -42,46 +42,88 @@ static int kdg_sincos8(const double *restrict x, double *restrict s, double *res
     return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
 }
 
-/* kdg_sincos4: i = 0..3 */
-static int kdg_sincos4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) and s[4 + i] = sin(x[n - 4 + i]), c[4 + i] = cos(x[n - 4 + i])
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_split_libm replaces them. */
+static int kdg_sincos_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
+/* The lanes of kdg_sincos_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(x[i]) <= 1048576.0)) {
+            s[i] = sin(x[i]);
+            c[i] = cos(x[i]);
+        }
+        if (!(fabs(x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(x[n - 4 + i]);
+            c[4 + i] = cos(x[n - 4 + i]);
+        }
+    }
+}
+
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
+ * explains the method and where its constants come from): blocks of eight lanes (n >= 8) or
+ * the split kernel's two blocks of four without a branch or a call, which compilers vectorise;
+ * arguments beyond +-1.04858e+06, infinities and NaN take libm afterwards, in a loop entered only
+ * if a block saw one. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
 static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
@@ -91,143 +133,120 @@ static void kdg_sincos(long n, const double *restrict x, double *restrict s, dou
             out |= kdg_sincos8(x + i, s + i, c + i);
         if (i < n)
             out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
+        if (out)
+            for (i = 0; i < n; ++i)
+                if (!(fabs(x[i]) <= 1048576.0)) {
+                    s[i] = sin(x[i]);
+                    c[i] = cos(x[i]);
+                }
     } else if (n >= 4) {
-        out = kdg_sincos4(x, s, c);
-        out |= kdg_sincos4(x + n - 4, s + n - 4, c + n - 4);
+        double sb[8], cb[8];
+        if (kdg_sincos_split(n, x, sb, cb))
+            kdg_sincos_split_libm(n, x, sb, cb);
+        for (i = 0; i < n; ++i) {
+            s[i] = sb[i < 4 ? i : i + 8 - n];
+            c[i] = cb[i < 4 ? i : i + 8 - n];
+        }
     } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
+        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[8], cb[8];
         for (i = 0; i < n; ++i)
             xb[i] = x[i];
-        out = kdg_sincos4(xb, sb, cb);
+        if (kdg_sincos_split(4, xb, sb, cb))
+            kdg_sincos_split_libm(4, xb, sb, cb);
         for (i = 0; i < n; ++i) {
             s[i] = sb[i];
             c[i] = cb[i];
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(x[i]) <= 1048576.0)) {
-                s[i] = sin(x[i]);
-                c[i] = cos(x[i]);
-            }
 }
 
-/* The blocks of kdg_sincos_half (below): s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for eight or four lanes; they return
- * nonzero if some |x[i]/2| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
- * undefined behaviour: all in double) and kdg_sincos_half replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. kdg_sincos_half8: i = 0..7. */
-static int kdg_sincos_half8(const double *restrict x, double *restrict s, double *restrict c)
-{
-    double out[8];
-    int j;
-    for (j = 0; j < 8; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
-        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
-    }
-    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
-}
-
-/* kdg_sincos_half4: i = 0..3 */
-static int kdg_sincos_half4(const double *restrict x, double *restrict s, double *restrict c)
+/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) and s[4 + i] = sin(x[n - 4 + i]/2), c[4 + i] = cos(x[n - 4 + i]/2)
+ * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
+ * one loop body, two independent chains instead of one after the other. Returns nonzero if some
+ * |x[k]/2| exceeds 1.04858e+06 or is not a number: its lanes are garbage (no undefined
+ * behaviour: all in double) until kdg_sincos_half_split_libm replaces them. */
+static int kdg_sincos_half_split(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     double out[4];
     int j;
     for (j = 0; j < 4; ++j) {
-        const double xi = 0.5*x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        const double xi_a = 0.5*x[j];
+        const double k_a = (xi_a*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_a = k_a - 4.0*(((0.25*k_a - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_a = xi_a - k_a*1.5707963267341256;
+        const double b_a = a_a - k_a*6.077100506303966e-11;
+        const double b_err_a = (a_a - b_a) - k_a*6.077100506303966e-11;
+        const double d_a = b_a - k_a*2.0222662487111665e-21;
+        const double d_err_a = (b_a - d_a) - k_a*2.0222662487111665e-21;
+        const double ntail_a = k_a*8.4784276603689e-32 - (b_err_a + d_err_a);
+        const double z_a = d_a*d_a;
+        const double z2_a = z_a*z_a;
+        const double z4_a = z2_a*z2_a;
+        const double u_a = d_a*z_a;
+        const double half_z_a = 0.5*z_a;
+        const double w_a = 1.0 - half_z_a;
+        const double nsin_a = (ntail_a*w_a - (u_a*z4_a)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_a)) - (u_a*(-0.16666666666666632 + 0.008333333333322424*z_a) + (u_a*z2_a)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_a));
+        const double sin_r_a = d_a - nsin_a;
+        const double cos_r_a = w_a + (((z2_a*(0.0416666666666666 + -0.0013888888888874138*z_a) + z4_a*(2.4801587289491644e-05 + -2.755731435518579e-07*z_a)) + (z2_a*z4_a)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_a)) + (((1.0 - w_a) - half_z_a) + d_a*ntail_a));
+        const double xi_b = 0.5*x[n - 4 + j];
+        const double k_b = (xi_b*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q_b = k_b - 4.0*(((0.25*k_b - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a_b = xi_b - k_b*1.5707963267341256;
+        const double b_b = a_b - k_b*6.077100506303966e-11;
+        const double b_err_b = (a_b - b_b) - k_b*6.077100506303966e-11;
+        const double d_b = b_b - k_b*2.0222662487111665e-21;
+        const double d_err_b = (b_b - d_b) - k_b*2.0222662487111665e-21;
+        const double ntail_b = k_b*8.4784276603689e-32 - (b_err_b + d_err_b);
+        const double z_b = d_b*d_b;
+        const double z2_b = z_b*z_b;
+        const double z4_b = z2_b*z2_b;
+        const double u_b = d_b*z_b;
+        const double half_z_b = 0.5*z_b;
+        const double w_b = 1.0 - half_z_b;
+        const double nsin_b = (ntail_b*w_b - (u_b*z4_b)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z_b)) - (u_b*(-0.16666666666666632 + 0.008333333333322424*z_b) + (u_b*z2_b)*(-0.0001984126982981672 + 2.7557313695144572e-06*z_b));
+        const double sin_r_b = d_b - nsin_b;
+        const double cos_r_b = w_b + (((z2_b*(0.0416666666666666 + -0.0013888888888874138*z_b) + z4_b*(2.4801587289491644e-05 + -2.755731435518579e-07*z_b)) + (z2_b*z4_b)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z_b)) + (((1.0 - w_b) - half_z_b) + d_b*ntail_b));
         /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
            cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
+        const double sin_q_a = fabs(q_a - 2.0) == 1.0 ? cos_r_a : sin_r_a;
+        const double cos_q_a = fabs(q_a - 2.0) == 1.0 ? sin_r_a : cos_r_a;
+        s[j] = q_a >= 2.0 ? -sin_q_a : sin_q_a;
+        c[j] = fabs(q_a - 1.5) == 0.5 ? -cos_q_a : cos_q_a;
+        const double sin_q_b = fabs(q_b - 2.0) == 1.0 ? cos_r_b : sin_r_b;
+        const double cos_q_b = fabs(q_b - 2.0) == 1.0 ? sin_r_b : cos_r_b;
+        s[4 + j] = q_b >= 2.0 ? -sin_q_b : sin_q_b;
+        c[4 + j] = fabs(q_b - 1.5) == 0.5 ? -cos_q_b : cos_q_b;
+        out[j] = fabs(xi_a) <= 1048576.0 && fabs(xi_b) <= 1048576.0 ? 0.0 : 1.0;
     }
     return (out[0] + out[1]) + (out[2] + out[3]) != 0.0;
 }
 
-/* s[i] = sin(x[i]/2), c[i] = cos(x[i]/2) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight or four lanes
- * without a branch or a call, which compilers vectorise; arguments beyond +-1.04858e+06, infinities and NaN
- * take libm afterwards, in a loop entered only if a block saw one. Needs IEEE double arithmetic
- * as C99 specifies it: no -ffast-math. */
-static void kdg_sincos_half(long n, const double *restrict x, double *restrict s, double *restrict c)
+/* The lanes of kdg_sincos_half_split(n, x, s, c) whose argument is beyond +-1.04858e+06, infinite or NaN, by libm. */
+static void kdg_sincos_half_split_libm(long n, const double *restrict x, double *restrict s, double *restrict c)
 {
     long i;
-    int out = 0;
-    if (n >= 8) {
-        for (i = 0; i + 8 <= n; i += 8)
-            out |= kdg_sincos_half8(x + i, s + i, c + i);
-        if (i < n)
-            out |= kdg_sincos_half8(x + n - 8, s + n - 8, c + n - 8);
-    } else if (n >= 4) {
-        out = kdg_sincos_half4(x, s, c);
-        out |= kdg_sincos_half4(x + n - 4, s + n - 4, c + n - 4);
-    } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[4], cb[4];
-        for (i = 0; i < n; ++i)
-            xb[i] = x[i];
-        out = kdg_sincos_half4(xb, sb, cb);
-        for (i = 0; i < n; ++i) {
-            s[i] = sb[i];
-            c[i] = cb[i];
+    for (i = 0; i < 4; ++i) {
+        if (!(fabs(0.5*x[i]) <= 1048576.0)) {
+            s[i] = sin(0.5*x[i]);
+            c[i] = cos(0.5*x[i]);
+        }
+        if (!(fabs(0.5*x[n - 4 + i]) <= 1048576.0)) {
+            s[4 + i] = sin(0.5*x[n - 4 + i]);
+            c[4 + i] = cos(0.5*x[n - 4 + i]);
         }
     }
-    if (out)
-        for (i = 0; i < n; ++i)
-            if (!(fabs(0.5*x[i]) <= 1048576.0)) {
-                s[i] = sin(0.5*x[i]);
-                c[i] = cos(0.5*x[i]);
-            }
 }
 
 void panda_fk_hom(const double *restrict q, double *restrict T)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
-    const double t1 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
+    const double t1 = cos_q[5];
     const double t2 = sin_q[0];
     const double t3 = cos_q[2];
     const double t4 = t3*t2;
@@ -236,7 +255,7 @@ void panda_fk_hom(const double *restrict q, double *restrict T)
     const double t7 = cos_q[0];
     const double t8 = t7*t6;
     const double t9 = -t4 - t8*t5;
-    const double t10 = sin_q[4];
+    const double t10 = sin_q[5];
     const double t11 = sin_q[3];
     const double t12 = sin_q[1];
     const double t13 = t11*t12;
@@ -246,11 +265,11 @@ void panda_fk_hom(const double *restrict q, double *restrict T)
     const double t17 = t5*t16 - t15;
     const double t18 = t7*t13 + t14*t17;
     const double t19 = t9*t1 - t18*t10;
-    const double t20 = cos_q[6];
-    const double t21 = sin_q[5];
+    const double t20 = cos_q[7];
+    const double t21 = sin_q[6];
     const double t22 = t12*t14;
     const double t23 = t7*t22 - t11*t17;
-    const double t24 = cos_q[5];
+    const double t24 = cos_q[6];
     const double t25 = t9*t10 + t1*t18;
     const double t26 = t23*t21 + t24*t25;
     const double t27 = 0.316*t12;
@@ -391,25 +410,27 @@ out_T[15][j] = 1.0;
 
 void panda_fk_dq(const double *restrict q, double *restrict x)
 {
-    /* zero-padded to 8 lanes: the kernel's vector loop covers all angles */
-    const double angles[8] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[1], 0.5*(q[0] - q[2]), 0.5*(q[0] + q[2]), 0.0};
+    /* the kernel's arguments */
+    const double angles[7] = {0.5*q[6], 0.5*q[5], 0.5*q[4], 0.5*q[3], 0.5*q[1], 0.5*(q[0] - q[2]), 0.5*(q[0] + q[2])};
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
     double sin_q[8], cos_q[8];
-    kdg_sincos(8, angles, sin_q, cos_q);
+    if (kdg_sincos_split(7, angles, sin_q, cos_q))
+        kdg_sincos_split_libm(7, angles, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = cos_q[1];
     const double t5 = cos_q[2];
     const double t7 = cos_q[3];
-    const double t10 = sin_q[4];
-    const double t11 = cos_q[5]*t10;
+    const double t10 = sin_q[5];
+    const double t11 = cos_q[6]*t10;
     const double t12 = t7*t11;
     const double t13 = sin_q[3];
-    const double t15 = cos_q[4];
-    const double t16 = t15*cos_q[6];
+    const double t15 = cos_q[5];
+    const double t16 = t15*cos_q[7];
     const double t17 = t13*t16;
     const double t18 = t12 - t17;
-    const double t19 = t15*sin_q[6];
+    const double t19 = t15*sin_q[7];
     const double t20 = t19*t13;
-    const double t21 = sin_q[5]*t10;
+    const double t21 = sin_q[6]*t10;
     const double t22 = t7*t21;
     const double t23 = t20 - t22;
     const double t24 = sin_q[2];
@@ -584,8 +605,10 @@ void panda_jacobian(const double *restrict q, double *restrict J)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[0];
     const double t1 = -t0;
     const double t2 = cos_q[0];
@@ -619,8 +642,8 @@ void panda_jacobian(const double *restrict q, double *restrict J)
     const double t32 = 0.0825*t15;
     const double t33 = -0.316*t8;
     const double t35 = 0.0825*t17;
-    const double t37 = sin_q[4];
-    const double t38 = cos_q[4];
+    const double t37 = sin_q[5];
+    const double t38 = cos_q[5];
     const double t39 = t37*t14 + t23*t38;
     const double t40 = t38*t14 - t23*t37;
     const double t41 = t37*t16 + t25*t38;
@@ -630,8 +653,8 @@ void panda_jacobian(const double *restrict q, double *restrict J)
     const double t45 = 0.384*t24 - 0.0825*t23;
     const double t47 = 0.384*t26 - 0.0825*t25;
     const double t49 = 0.384*t28 - 0.0825*t27;
-    const double t51 = sin_q[5];
-    const double t52 = cos_q[5];
+    const double t51 = sin_q[6];
+    const double t52 = cos_q[6];
     const double t53 = t51*t24 + t52*t39;
     const double t54 = t52*t24 - t51*t39;
     const double t55 = t51*t26 + t41*t52;
@@ -829,24 +852,26 @@ void panda_pose_jacobian_dq(const double *restrict q, double *restrict Jx)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t3 = sin_q[1];
     const double t5 = sin_q[2];
-    const double t7 = sin_q[4];
-    const double t9 = sin_q[5];
-    const double t11 = sin_q[6];
+    const double t7 = sin_q[5];
+    const double t9 = sin_q[6];
+    const double t11 = sin_q[7];
     const double t12 = 0.5*t11;
     const double t13 = t9*t12;
-    const double t14 = cos_q[4];
-    const double t15 = cos_q[6];
+    const double t14 = cos_q[5];
+    const double t15 = cos_q[7];
     const double t16 = 0.5*t15;
     const double t17 = t9*t16;
     const double t18 = t14*t17 - t7*t13;
     const double t20 = sin_q[3];
     const double t21 = t20*t18;
-    const double t22 = cos_q[5];
+    const double t22 = cos_q[6];
     const double t23 = t22*t12;
     const double t24 = t22*t16;
     const double t25 = t7*t23 + t24*t14;
@@ -1608,11 +1633,13 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos_half(7, q, sin_q, cos_q);
-    const double t1 = sin_q[6];
-    const double t3 = cos_q[5];
-    const double t5 = cos_q[4];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(7, q, sin_q, cos_q))
+        kdg_sincos_half_split_libm(7, q, sin_q, cos_q);
+    const double t1 = sin_q[7];
+    const double t3 = cos_q[6];
+    const double t5 = cos_q[5];
     const double t7 = cos_q[2];
     const double t9 = sin_q[0];
     const double t11 = cos_q[1];
@@ -1631,14 +1658,14 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
     const double t25 = sin_q[3];
     const double t26 = t24*t25;
     const double t27 = t16*t18 - t26;
-    const double t28 = sin_q[4];
+    const double t28 = sin_q[5];
     const double t29 = t7*t20;
     const double t30 = t22*t13;
     const double t31 = t29 + t30;
     const double t32 = t7*t15 - t12*t13;
     const double t33 = t25*t31 + t32*t18;
     const double t34 = t5*t27 + t28*t33;
-    const double t35 = sin_q[5];
+    const double t35 = sin_q[6];
     const double t36 = t25*t32;
     const double t37 = t31*t18 - t36;
     const double t38 = t25*t16;
@@ -1647,7 +1674,7 @@ void panda_jacobian_dq(const double *restrict q, double *restrict J)
     const double t41 = t40*t35;
     const double t42 = t3*t34 - t41;
     const double t43 = t1*t42;
-    const double t44 = cos_q[6];
+    const double t44 = cos_q[7];
     const double t45 = t5*t37 - t28*t39;
     const double t46 = t45*t35;
     const double t47 = t5*t33 - t28*t27;
@@ -2201,11 +2228,13 @@ void panda_M(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
     const double t1 = t0*t0;
-    const double t2 = cos_q[6];
+    const double t2 = cos_q[7];
     const double t3 = t0*t2;
     const double t4 = 0.000790217436631504*t3 - 0.00242094377852123*t1;
     const double t5 = t4 + 0.001536820248013426;
@@ -2225,8 +2254,8 @@ void panda_M(const double *restrict q, double *restrict M)
     const double t243 = t13 + 0.032810450989188535;
     const double t17 = t243 - (t4 + 0.00242094377852123);
     const double t18 = t12 + 0.164967552695;
-    const double t19 = sin_q[5];
-    const double t20 = cos_q[5];
+    const double t19 = sin_q[6];
+    const double t20 = cos_q[6];
     const double t21 = t20*t19;
     const double t22 = t5 - t14;
     const double t23 = t19*t19;
@@ -2250,8 +2279,8 @@ void panda_M(const double *restrict q, double *restrict M)
     const double t36 = t19*t18;
     const double t37 = t36 - t35;
     const double t38 = 0.768*t37;
-    const double t39 = sin_q[4];
-    const double t40 = cos_q[4];
+    const double t39 = sin_q[5];
+    const double t40 = cos_q[5];
     const double t41 = t40*t39;
     const double t42 = t25 - t17;
     const double t43 = t39*t39;
@@ -2774,20 +2803,22 @@ void panda_g(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = cos_q[3];
-    const double t1 = cos_q[5];
-    const double t2 = sin_q[6];
-    const double t3 = cos_q[6];
+    const double t1 = cos_q[6];
+    const double t2 = sin_q[7];
+    const double t3 = cos_q[7];
     const double t4 = 0.003127439544*t2 + 0.007735484874*t3 + 0.164967552695;
-    const double t5 = sin_q[5];
+    const double t5 = sin_q[6];
     const double t27 = -0.068832705569*t1 + 1.720683553603;
     const double t6 = t5*t4 + t27;
     const double t7 = sin_q[3];
-    const double t8 = sin_q[4];
+    const double t8 = sin_q[5];
     const double t9 = -(0.007735484874*t2 - 0.003127439544*t3) + 0.067870631425;
-    const double t10 = cos_q[4];
+    const double t10 = cos_q[5];
     const double t28 = 0.068832705569*t5 - 0.014653732538;
     const double t11 = t4*t1 + t28;
     const double t29 = -t9*t8 - 0.49008027465;
@@ -2885,8 +2916,10 @@ void panda_c(const double *restrict q, const double *restrict qd, double *restri
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = t0*qd[0];
     const double t2 = -t1;
@@ -2949,9 +2982,9 @@ void panda_c(const double *restrict q, const double *restrict qd, double *restri
     const double t73 = -t60;
     const double t74 = t66 + t73;
     const double t75 = t71 + t58;
-    const double t77 = sin_q[4];
+    const double t77 = sin_q[5];
     const double t78 = t55 + 0.384*t75 - 0.0825*t74;
-    const double t79 = cos_q[4];
+    const double t79 = cos_q[5];
     const double t80 = 0.384*t65 - 0.0825*t63 + t53;
     const double t81 = t79*t80 - t78*t77;
     const double t82 = -t78*t79 - t77*t80;
@@ -2975,8 +3008,8 @@ void panda_c(const double *restrict q, const double *restrict qd, double *restri
     const double t101 = -t88;
     const double t102 = t94 + t101;
     const double t103 = t99 + t86;
-    const double t105 = sin_q[5];
-    const double t106 = cos_q[5];
+    const double t105 = sin_q[6];
+    const double t106 = cos_q[6];
     const double t107 = t81*t106 + t83*t105;
     const double t108 = t83*t106 - t81*t105;
     const double t109 = qd[5] - t85;
@@ -3000,9 +3033,9 @@ void panda_c(const double *restrict q, const double *restrict qd, double *restri
     const double t127 = t119 + t126;
     const double t128 = t124 + t111;
     const double t130 = 0.088*t127 - t82;
-    const double t131 = sin_q[6];
+    const double t131 = sin_q[7];
     const double t132 = 0.088*t116 + t107;
-    const double t133 = cos_q[6];
+    const double t133 = cos_q[7];
     const double t134 = t133*t132 + t130*t131;
     const double t135 = t130*t133 - t131*t132;
     const double t136 = -(t108 + 0.088*t121);
@@ -3508,8 +3541,10 @@ void panda_S(const double *restrict q, const double *restrict qd, double *restri
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t105 = cos_q[1];
@@ -3520,9 +3555,9 @@ void panda_S(const double *restrict q, const double *restrict qd, double *restri
     const double t1 = sin_q[3];
     const double t10 = cos_q[3];
     const double t81 = t1*t10;
-    const double t4 = cos_q[6];
+    const double t4 = cos_q[7];
     const double t12 = 0.007735484874*t4;
-    const double t2 = sin_q[6];
+    const double t2 = sin_q[7];
     const double t13 = 0.003127439544*t2;
     const double t133 = t12 + t13;
     const double t146 = 0.176*t133;
@@ -3531,8 +3566,8 @@ void panda_S(const double *restrict q, const double *restrict qd, double *restri
     const double t56 = -0.00242094377852123*t43;
     const double t147 = 0.000790217436631504*t41 + t56;
     const double t148 = t147 + 0.001536820248013426;
-    const double t0 = sin_q[5];
-    const double t16 = cos_q[5];
+    const double t0 = sin_q[6];
+    const double t16 = cos_q[6];
     const double t49 = t0*t16;
     const double t51 = 0.000548359106408232*t2;
     const double t52 = 0.001672482661783778*t4;
@@ -3544,14 +3579,14 @@ void panda_S(const double *restrict q, const double *restrict qd, double *restri
     const double t163 = -t33*t149;
     const double t245 = t163 - t49*t143;
     const double t310 = -(t148 + t245);
-    const double t17 = cos_q[4];
+    const double t17 = cos_q[5];
     const double t134 = t133 + 0.164967552695;
     const double t174 = t16*t134;
     const double t190 = 0.068832705569*t0;
     const double t191 = t190 + t174;
     const double t222 = t191 - 0.014653732538;
     const double t227 = t17*t222;
-    const double t11 = sin_q[4];
+    const double t11 = sin_q[5];
     const double t3 = 0.007735484874*t2;
     const double t5 = 0.003127439544*t4;
     const double t153 = t3 - t5;
@@ -5931,8 +5966,10 @@ void panda_tau(const double *restrict q, const double *restrict qd, const double
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
     const double t1 = -9.81*t0;
     const double t2 = cos_q[1];
@@ -6002,9 +6039,9 @@ void panda_tau(const double *restrict q, const double *restrict qd, const double
     const double t78 = t63*t62;
     const double t80 = t73 - t66;
     const double t81 = t78 + t64;
-    const double t83 = sin_q[4];
+    const double t83 = sin_q[5];
     const double t84 = t61 + 0.384*t81 - 0.0825*t80;
-    const double t85 = cos_q[4];
+    const double t85 = cos_q[5];
     const double t86 = 0.384*t72 - 0.0825*t70 + t59;
     const double t87 = t86*t85 - t84*t83;
     const double t88 = -t84*t85 - t83*t86;
@@ -6030,8 +6067,8 @@ void panda_tau(const double *restrict q, const double *restrict qd, const double
     const double t108 = -t94;
     const double t109 = t101 + t108;
     const double t110 = t106 + t92;
-    const double t112 = sin_q[5];
-    const double t113 = cos_q[5];
+    const double t112 = sin_q[6];
+    const double t113 = cos_q[6];
     const double t114 = t87*t113 + t89*t112;
     const double t115 = t89*t113 - t87*t112;
     const double t116 = qd[5] - t91;
@@ -6056,9 +6093,9 @@ void panda_tau(const double *restrict q, const double *restrict qd, const double
     const double t135 = t127 + t134;
     const double t136 = t132 + t118;
     const double t138 = 0.088*t135 - t88;
-    const double t139 = sin_q[6];
+    const double t139 = sin_q[7];
     const double t140 = 0.088*t124 + t114;
-    const double t141 = cos_q[6];
+    const double t141 = cos_q[7];
     const double t142 = t140*t141 + t138*t139;
     const double t143 = t141*t138 - t140*t139;
     const double t144 = -(t115 + 0.088*t129);
@@ -6590,12 +6627,14 @@ void panda_fd(const double *restrict q, const double *restrict qd, const double 
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
-    const double t0 = cos_q[6];
-    const double t1 = sin_q[6];
+    const double t0 = cos_q[7];
+    const double t1 = sin_q[7];
     const double t15 = -0.001672482661783778*t1 - 0.000548359106408232*t0;
     const double t103 = cos_q[1];
     const double t104 = sin_q[1];
@@ -6609,16 +6648,16 @@ void panda_fd(const double *restrict q, const double *restrict qd, const double 
     const double t589 = t588 - 0.088*t10;
     const double t11 = t589 - 0.000395108718315752*(-2.0*t3 + 1.0);
     const double t16 = -t15 + 9.3569097314605e-05;
-    const double t19 = cos_q[5];
-    const double t20 = sin_q[5];
+    const double t19 = cos_q[6];
+    const double t20 = sin_q[6];
     const double t26 = t19*t11 - t20*t16;
-    const double t39 = cos_q[4];
+    const double t39 = cos_q[5];
     const double t4 = 0.000790217436631504*t2 - 0.00242094377852123*t3;
     const double t12 = 0.003127439544*t1 + 0.007735484874*t0;
     const double t13 = 0.176*t12;
     const double t590 = t13 + 0.032810450989188535;
     const double t17 = t590 - (t4 + 0.00242094377852123);
-    const double t40 = sin_q[4];
+    const double t40 = sin_q[5];
     const double t35 = 0.068832705569*t19;
     const double t18 = t12 + 0.164967552695;
     const double t36 = t20*t18;
@@ -7903,11 +7942,13 @@ void panda_com(const double *restrict q, double *restrict com, double *restrict 
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
-    const double t0 = sin_q[6];
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
+    const double t0 = sin_q[7];
     const double t1 = t0*t0;
-    const double t2 = cos_q[6];
+    const double t2 = cos_q[7];
     const double t3 = t0*t2;
     const double t4 = 0.000790217436631504*t3 - 0.00242094377852123*t1;
     const double t5 = t4 + 0.001536820248013426;
@@ -7927,8 +7968,8 @@ void panda_com(const double *restrict q, double *restrict com, double *restrict 
     const double t253 = t13 + 0.032810450989188535;
     const double t17 = t253 - (t4 + 0.00242094377852123);
     const double t18 = t12 + 0.164967552695;
-    const double t19 = sin_q[5];
-    const double t20 = cos_q[5];
+    const double t19 = sin_q[6];
+    const double t20 = cos_q[6];
     const double t21 = t20*t19;
     const double t22 = t5 - t14;
     const double t23 = t19*t19;
@@ -7952,8 +7993,8 @@ void panda_com(const double *restrict q, double *restrict com, double *restrict 
     const double t36 = t19*t18;
     const double t37 = t36 - t35;
     const double t38 = 0.768*t37;
-    const double t39 = sin_q[4];
-    const double t40 = cos_q[4];
+    const double t39 = sin_q[5];
+    const double t40 = cos_q[5];
     const double t41 = t40*t39;
     const double t42 = t25 - t17;
     const double t43 = t39*t39;
@@ -8682,8 +8723,10 @@ void panda_tau_derivatives(const double *restrict q, const double *restrict qd, 
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
@@ -8691,7 +8734,7 @@ void panda_tau_derivatives(const double *restrict q, const double *restrict qd, 
     double kdg_lane_out[14][8];
     int kdg_lane;
     const double t0 = cos_q[3];
-    const double t1 = sin_q[4];
+    const double t1 = sin_q[5];
     const double t2 = sin_q[2];
     const double t3 = cos_q[2];
     const double t4 = sin_q[1];
@@ -8729,7 +8772,7 @@ void panda_tau_derivatives(const double *restrict q, const double *restrict qd, 
     const double t36 = t35 - 0.0825*t31;
     const double t37 = t0*t36 + t29*t16;
     const double t38 = t37 + 0.0825*t25 + 0.384*t21;
-    const double t39 = cos_q[4];
+    const double t39 = cos_q[5];
     const double t40 = t22*qd[2];
     const double t41 = t3*t12 + t2*qdd[1];
     const double t42 = t41 + t40;
@@ -8751,8 +8794,8 @@ void panda_tau_derivatives(const double *restrict q, const double *restrict qd, 
     const double t58 = t39*t18 - t1*t23;
     const double t59 = t19 + qd[4];
     const double t60 = 0.00216405205209813*t59 - 0.00151524447332703*t58;
-    const double t61 = sin_q[5];
-    const double t62 = cos_q[5];
+    const double t61 = sin_q[6];
+    const double t62 = cos_q[6];
     const double t63 = t59*t62 - t58*t61;
     const double t64 = -t23*t39 - t1*t18;
     const double t65 = qd[5] - t64;
@@ -8767,9 +8810,9 @@ void panda_tau_derivatives(const double *restrict q, const double *restrict qd, 
     const double t74 = t67*t62 - t70*t61 - t73*qd[5];
     const double t75 = -t74;
     const double t76 = t73*t65 + t75;
-    const double t77 = sin_q[6];
+    const double t77 = sin_q[7];
     const double t78 = t75 + qdd[6];
-    const double t79 = cos_q[6];
+    const double t79 = cos_q[7];
     const double t80 = t79*t65 - t77*t73;
     const double t81 = t79*t73 + t77*t65;
     const double t82 = t80*t81;
@@ -11081,18 +11124,20 @@ void panda_fd_derivatives(const double *restrict q, const double *restrict qd, c
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
     static const double kdg_seed[7][8] = {{1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0}};
     double kdg_lane_out[21][8];
     int kdg_lane;
-    const double t0 = cos_q[4];
-    const double t1 = sin_q[6];
+    const double t0 = cos_q[5];
+    const double t1 = sin_q[7];
     const double t2 = 0.007735484874*t1;
-    const double t3 = cos_q[6];
+    const double t3 = cos_q[7];
     const double t4 = 0.003127439544*t3;
     const double t5 = t2 - t4;
     const double t6 = -t5 + 0.067870631425;
@@ -11101,11 +11146,11 @@ void panda_fd_derivatives(const double *restrict q, const double *restrict qd, c
     const double t9 = 0.003127439544*t1;
     const double t10 = t8 + t9;
     const double t11 = t10 + 0.164967552695;
-    const double t12 = sin_q[5];
-    const double t13 = cos_q[5];
+    const double t12 = sin_q[6];
+    const double t13 = cos_q[6];
     const double t14 = t11*t13 + 0.068832705569*t12;
     const double t15 = t14 - 0.014653732538;
-    const double t16 = sin_q[4];
+    const double t16 = sin_q[5];
     const double t17 = t15*t16;
     const double t18 = t7 + t17;
     const double t19 = -0.0825*t18;
@@ -15236,18 +15281,20 @@ void panda_fd_derivatives_no_minv(const double *restrict q, const double *restri
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* one pass over the model, then one program per lane: lane l carries the gradient of */
     /* the joint torques weighted by its seeds, row l of the result; the iterations are */
     /* independent, and compilers vectorise the loop across lanes: 8 lanes, 7 stored */
     static const double kdg_seed[7][8] = {{1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0}, {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0}};
     double kdg_lane_out[14][8];
     int kdg_lane;
-    const double t0 = cos_q[4];
-    const double t1 = sin_q[6];
+    const double t0 = cos_q[5];
+    const double t1 = sin_q[7];
     const double t2 = 0.007735484874*t1;
-    const double t3 = cos_q[6];
+    const double t3 = cos_q[7];
     const double t4 = 0.003127439544*t3;
     const double t5 = t2 - t4;
     const double t6 = -t5 + 0.067870631425;
@@ -15256,11 +15303,11 @@ void panda_fd_derivatives_no_minv(const double *restrict q, const double *restri
     const double t9 = 0.003127439544*t1;
     const double t10 = t8 + t9;
     const double t11 = t10 + 0.164967552695;
-    const double t12 = sin_q[5];
-    const double t13 = cos_q[5];
+    const double t12 = sin_q[6];
+    const double t13 = cos_q[6];
     const double t14 = t11*t13 + 0.068832705569*t12;
     const double t15 = t14 - 0.014653732538;
-    const double t16 = sin_q[4];
+    const double t16 = sin_q[5];
     const double t17 = t15*t16;
     const double t18 = t7 + t17;
     const double t19 = -0.0825*t18;
@@ -19144,16 +19191,18 @@ void panda_M_lagrange(const double *restrict q, double *restrict M)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
-    const double t0 = sin_q[4];
+    const double t0 = sin_q[5];
     const double t1 = sin_q[2];
     const double t2 = sin_q[1];
     const double t3 = t1*t2;
     const double t4 = t0*t3;
-    const double t5 = cos_q[4];
+    const double t5 = cos_q[5];
     const double t6 = sin_q[3];
     const double t7 = cos_q[1];
     const double t8 = t7*t6;
@@ -19164,23 +19213,23 @@ void panda_M_lagrange(const double *restrict q, double *restrict M)
     const double t13 = t8 - t12;
     const double t14 = t5*t13;
     const double t15 = t4 + t14;
-    const double t23 = sin_q[5];
+    const double t23 = sin_q[6];
     const double t27 = t23*t15;
     const double t20 = t6*t10;
     const double t21 = t2*t20;
     const double t24 = t9*t7;
     const double t25 = t21 + t24;
-    const double t28 = cos_q[5];
+    const double t28 = cos_q[6];
     const double t30 = t28*t25;
     const double t63 = t27 - t30;
     const double t17 = t0*t13;
     const double t68 = t5*t3;
     const double t69 = t17 - t68;
-    const double t47 = cos_q[6];
+    const double t47 = cos_q[7];
     const double t113 = 0.000548359106408232*t47;
     const double t114 = 0.004909651967360946*t28;
     const double t437 = -t69*t113 - t25*t114;
-    const double t59 = sin_q[6];
+    const double t59 = sin_q[7];
     const double t76 = t59*t69;
     const double t438 = 0.004909651967360946*t27 - 0.001672482661783778*t76;
     const double t439 = t438 + t437;
@@ -21401,10 +21450,12 @@ void panda_g_lagrange(const double *restrict q, double *restrict g)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = sin_q[1];
-    const double t1 = cos_q[4];
+    const double t1 = cos_q[5];
     const double t2 = sin_q[3];
     const double t3 = t0*t2;
     const double t4 = cos_q[3];
@@ -21417,24 +21468,24 @@ void panda_g_lagrange(const double *restrict q, double *restrict g)
     const double t11 = t4*t0;
     const double t12 = 9.81*t2;
     const double t13 = 9.81*t11 - t7*t12;
-    const double t14 = cos_q[5];
+    const double t14 = cos_q[6];
     const double t15 = 0.068832705569*t14;
-    const double t16 = sin_q[5];
+    const double t16 = sin_q[6];
     const double t17 = t13*t16;
     const double t18 = sin_q[2];
     const double t19 = t5*t18;
-    const double t20 = sin_q[4];
+    const double t20 = sin_q[5];
     const double t21 = 9.81*t20;
     const double t22 = t10 - t21*t19;
     const double t23 = 0.068832705569*t16;
     const double t24 = t22*t14;
     const double t25 = t17 + t24;
-    const double t26 = cos_q[6];
+    const double t26 = cos_q[7];
     const double t27 = 0.007735484874*t26;
     const double t28 = t1*t19;
     const double t29 = t9*t20;
     const double t30 = -9.81*t28 - t29;
-    const double t31 = sin_q[6];
+    const double t31 = sin_q[7];
     const double t32 = 0.007735484874*t31;
     const double t33 = 0.003127439544*t31;
     const double t34 = 0.14375311619778*t20;
@@ -21718,8 +21769,10 @@ void panda_c_christoffel(const double *restrict q, const double *restrict qd, do
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     const double t203 = 0.5*qd[1];
@@ -21732,15 +21785,15 @@ void panda_c_christoffel(const double *restrict q, const double *restrict qd, do
     const double t1 = cos_q[2];
     const double t197 = t1*t40;
     const double t28 = sin_q[3];
-    const double t13 = sin_q[4];
+    const double t13 = sin_q[5];
     const double t139 = t13*t13;
     const double t156 = 2.0*t139;
     const double t157 = -t156 + 1.0;
-    const double t3 = cos_q[4];
+    const double t3 = cos_q[5];
     const double t143 = t3*t13;
-    const double t7 = cos_q[6];
+    const double t7 = cos_q[7];
     const double t17 = 0.007735484874*t7;
-    const double t5 = sin_q[6];
+    const double t5 = sin_q[7];
     const double t18 = 0.003127439544*t5;
     const double t214 = t18 + t17;
     const double t265 = 0.176*t214;
@@ -21750,8 +21803,8 @@ void panda_c_christoffel(const double *restrict q, const double *restrict qd, do
     const double t266 = 0.000790217436631504*t55 + t59;
     const double t267 = t265 - (t266 + 0.00242094377852123);
     const double t268 = t267 + 0.032810450989188535;
-    const double t4 = cos_q[5];
-    const double t10 = sin_q[5];
+    const double t4 = cos_q[6];
+    const double t10 = sin_q[6];
     const double t101 = t4*t10;
     const double t110 = 2.0*t101;
     const double t95 = t10*t10;
@@ -24093,19 +24146,21 @@ void panda_M_dq(const double *restrict q, double *restrict M)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
-    const double t4 = sin_q[5];
-    const double t5 = t4*cos_q[5];
+    const double t4 = sin_q[7];
+    const double t5 = t4*cos_q[7];
     const double t6 = 0.006254879088*t5;
     const double t7 = -2.0*t4*t4 + 1.0;
     const double t8 = 0.007735484874*t7;
     const double t9 = -t6 - t8;
     const double t10 = -t9 + 0.164967552695;
-    const double t12 = sin_q[4];
-    const double t13 = cos_q[4];
+    const double t12 = sin_q[6];
+    const double t13 = cos_q[6];
     const double t14 = t12*t13;
     const double t15 = 2.0*t14;
     const double t16 = t15*t10;
@@ -24705,8 +24760,10 @@ void panda_g_dq(const double *restrict q, double *restrict g)
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t4 = sin_q[1];
@@ -24715,7 +24772,7 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     const double t7 = t5*t6;
     const double t8 = t4*cos_q[1];
     const double t9 = t8*t6;
-    const double t11 = sin_q[4];
+    const double t11 = sin_q[6];
     const double t12 = -2.0*t11*t11 + 1.0;
     const double t14 = sin_q[3];
     const double t15 = t14*cos_q[3];
@@ -24730,11 +24787,11 @@ void panda_g_dq(const double *restrict q, double *restrict g)
     const double t22 = t9*t53 + t21*t20;
     const double t55 = 39.24*t18;
     const double t23 = t7*t55 + 9.81*t2*t19;
-    const double t24 = 2.0*t11*cos_q[4];
+    const double t24 = 2.0*t11*cos_q[6];
     const double t25 = t22*t12 + t24*t23;
     const double t26 = t23*t12 - t24*t22;
-    const double t28 = sin_q[5];
-    const double t29 = t28*cos_q[5];
+    const double t28 = sin_q[7];
+    const double t29 = t28*cos_q[7];
     const double t30 = t29*t26;
     const double t31 = -2.0*t28*t28 + 1.0;
     const double t32 = t26*t31;
@@ -24877,8 +24934,10 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -24917,8 +24976,8 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     const double t38 = sin_q[3];
     const double t39 = -2.0*t38*t38 + 1.0;
     const double t40 = qd[4] + t31;
-    const double t42 = sin_q[4];
-    const double t43 = 2.0*t42*cos_q[4];
+    const double t42 = sin_q[6];
+    const double t43 = 2.0*t42*cos_q[6];
     const double t44 = -2.0*t42*t42 + 1.0;
     const double t45 = 2.0*t38*cos_q[3];
     const double t46 = t27*t39 - t45*t29;
@@ -24935,9 +24994,9 @@ void panda_c_dq(const double *restrict q, const double *restrict qd, double *res
     const double t55 = t179 + t44*t53;
     const double t56 = 0.068832705569*t49;
     const double t57 = t44*t36 - t47*qd[5] - t43*t53;
-    const double t59 = sin_q[5];
+    const double t59 = sin_q[7];
     const double t60 = -2.0*t59*t59 + 1.0;
-    const double t61 = 2.0*t59*cos_q[5];
+    const double t61 = 2.0*t59*cos_q[7];
     const double t62 = t49*t60 - t47*t61;
     const double t63 = t47*t60 + t49*t61;
     const double t64 = -0.007735484874*t62 - 0.003127439544*t63;
@@ -25643,8 +25702,10 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     const double t1 = sin_q[0];
     const double t2 = -2.0*t1*t1 + 1.0;
     const double t3 = t2*qd[0];
@@ -25685,8 +25746,8 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     const double t40 = sin_q[3];
     const double t41 = -2.0*t40*t40 + 1.0;
     const double t42 = qd[4] + t29;
-    const double t44 = sin_q[4];
-    const double t45 = 2.0*t44*cos_q[4];
+    const double t44 = sin_q[6];
+    const double t45 = 2.0*t44*cos_q[6];
     const double t46 = -2.0*t44*t44 + 1.0;
     const double t47 = 2.0*t40*cos_q[3];
     const double t48 = t41*t25 - t47*t27;
@@ -25705,8 +25766,8 @@ void panda_tau_dq(const double *restrict q, const double *restrict qd, const dou
     const double t59 = t181 + t46*t57;
     const double t182 = t46*t58 - t49*qd[5];
     const double t60 = t182 - t45*t57;
-    const double t62 = sin_q[5];
-    const double t63 = 2.0*t62*cos_q[5];
+    const double t62 = sin_q[7];
+    const double t63 = 2.0*t62*cos_q[7];
     const double t64 = -2.0*t62*t62 + 1.0;
     const double t65 = t51*t64 - t49*t63;
     const double t66 = t49*t64 + t51*t63;
@@ -26425,8 +26486,10 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
 {
     /* the half-angle kernel halves q read in place: no copy of the halves, whose pieces the store
        buffer could not forward to the kernel's vector load (docs/latency.md) */
-    double sin_q[6], cos_q[6];
-    kdg_sincos_half(6, q + 1, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 2-5 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_half_split(6, q + 1, sin_q, cos_q))
+        kdg_sincos_half_split_libm(6, q + 1, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -26886,9 +26949,9 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t358 = -t319;
     const double t359 = t357 + t358;
     Y[28] = -(-t354 - t355)*t3 - (t23*t356 - t34*t359)*t8;
-    const double t361 = sin_q[4];
+    const double t361 = sin_q[6];
     const double t364 = -2.0*t361*t361 + 1.0;
-    const double t362 = t361*cos_q[4];
+    const double t362 = t361*cos_q[6];
     const double t365 = 2.0*t362;
     const double t375 = t213*t365;
     const double t376 = t218*t364;
@@ -27099,9 +27162,9 @@ void panda_Y_dq(const double *restrict q, const double *restrict qd, const doubl
     const double t530 = t207*t433;
     const double t531 = t529 + t530;
     Y[35] = -(-t525 - t527)*t3 - (t23*t528 - t34*t531)*t8;
-    const double t533 = sin_q[5];
+    const double t533 = sin_q[7];
     const double t534 = -2.0*t533*t533 + 1.0;
-    const double t538 = t533*cos_q[5];
+    const double t538 = t533*cos_q[7];
     const double t539 = 2.0*t538;
     const double t535 = qd[6] - t378;
     const double t562 = 0.088*t370;
@@ -29004,8 +29067,10 @@ void panda_Y_g(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     const double t0 = 9.81*cos_q[1];
     const double t1 = 9.81*sin_q[1];
     const double t2 = cos_q[2];
@@ -29018,15 +29083,15 @@ void panda_Y_g(const double *restrict q, double *restrict Y)
     const double t9 = t8*t3 + t7;
     const double t10 = t8*t1;
     const double t11 = t10 - t6*t3;
-    const double t12 = sin_q[4];
-    const double t13 = cos_q[4];
+    const double t12 = sin_q[5];
+    const double t13 = cos_q[5];
     const double t14 = t9*t13 - t5*t12;
     const double t15 = -t9*t12 - t5*t13;
-    const double t16 = sin_q[5];
-    const double t17 = cos_q[5];
+    const double t16 = sin_q[6];
+    const double t17 = cos_q[6];
     const double t18 = t14*t17 + t11*t16;
-    const double t19 = cos_q[6];
-    const double t20 = sin_q[6];
+    const double t19 = cos_q[7];
+    const double t20 = sin_q[7];
     const double t21 = t4*t1;
     const double t22 = t1*t2;
     const double t23 = t4*t10;
@@ -29299,8 +29364,10 @@ void panda_Y_m(const double *restrict q, double *restrict Y)
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = 1.0;
@@ -29360,10 +29427,10 @@ void panda_Y_m(const double *restrict q, double *restrict Y)
     Y[16] = -t6*t36;
     const double t37 = t5*t5;
     Y[17] = t1*t37;
-    const double t38 = sin_q[4];
+    const double t38 = sin_q[5];
     const double t39 = 0.384*t6 + t31;
     const double t40 = t39*t38;
-    const double t41 = cos_q[4];
+    const double t41 = cos_q[5];
     const double t43 = 0.0825*t18;
     const double t44 = t0*t43 + t23*t10;
     const double t285 = 0.384*t32 - t23;
@@ -29394,8 +29461,8 @@ void panda_Y_m(const double *restrict q, double *restrict Y)
     Y[22] = t58*t36;
     Y[23] = t36*t60;
     Y[24] = t35*t35;
-    const double t61 = cos_q[5];
-    const double t62 = sin_q[5];
+    const double t61 = cos_q[6];
+    const double t62 = sin_q[6];
     const double t63 = t49*t61 - t56*t62;
     const double t64 = t58*t62;
     const double t65 = t35*t61;
@@ -29414,9 +29481,9 @@ void panda_Y_m(const double *restrict q, double *restrict Y)
     Y[29] = t73*t52;
     Y[30] = t72*t53;
     Y[31] = t52*t52;
-    const double t74 = cos_q[6];
+    const double t74 = cos_q[7];
     const double t75 = t74*t52;
-    const double t76 = sin_q[6];
+    const double t76 = sin_q[7];
     const double t77 = t76*t68;
     const double t78 = t77 - t75;
     const double t79 = 0.088*t41;
@@ -32217,8 +32284,10 @@ void panda_Y(const double *restrict q, const double *restrict qd, const double *
 {
     /* the kernel reads the joint angles in place: a padded copy would be stored in pieces and
        read back as one vector, which the store buffer cannot forward (docs/latency.md) */
-    double sin_q[7], cos_q[7];
-    kdg_sincos(7, q, sin_q, cos_q);
+    /* two blocks of four in one loop: arguments 0-3 into lanes 0-3 of sin_q and cos_q, 3-6 into 4-7 */
+    double sin_q[8], cos_q[8];
+    if (kdg_sincos_split(7, q, sin_q, cos_q))
+        kdg_sincos_split_libm(7, q, sin_q, cos_q);
     /* in demand order: each temporary computed right before its first use, each output
        stored once known (fewer values live at once, fewer register spills) */
     Y[0] = qdd[0];
@@ -32408,9 +32477,9 @@ void panda_Y(const double *restrict q, const double *restrict qd, const double *
     const double t350 = t27*t348 + t23*t63;
     const double t353 = -(t0*t350 - t2*t349);
     Y[21] = t353;
-    const double t76 = sin_q[4];
+    const double t76 = sin_q[5];
     const double t79 = 0.384*t77 + t57 + t78;
-    const double t80 = cos_q[4];
+    const double t80 = cos_q[5];
     const double t81 = 0.384*t68 - 0.0825*t66 + t54;
     const double t83 = -t79*t80 - t76*t81;
     const double t86 = t59 + qd[4];
@@ -32518,8 +32587,8 @@ void panda_Y(const double *restrict q, const double *restrict qd, const double *
     const double t461 = t27*t459 + t23*t458;
     const double t464 = -(t0*t461 - t2*t460);
     Y[28] = t464;
-    const double t105 = sin_q[5];
-    const double t106 = cos_q[5];
+    const double t105 = sin_q[6];
+    const double t106 = cos_q[6];
     const double t108 = t85*t106 - t82*t105;
     const double t109 = qd[5] - t87;
     const double t112 = t89*t106 + t86*t105;
@@ -32645,9 +32714,9 @@ void panda_Y(const double *restrict q, const double *restrict qd, const double *
     const double t591 = -(t0*t588 - t2*t587);
     Y[35] = t591;
     const double t128 = 0.088*t126 - t83;
-    const double t129 = sin_q[6];
+    const double t129 = sin_q[7];
     const double t130 = 0.088*t117 + t107;
-    const double t131 = cos_q[6];
+    const double t131 = cos_q[7];
     const double t133 = t131*t128 - t130*t129;
     const double t136 = qd[6] - t110;
     const double t142 = t136*t136;
