@@ -5,7 +5,7 @@ paper's Table II (Hartl-Nesic and Meiringer: Maple 2018, with and without optimi
 """
 from __future__ import annotations
 
-from .optimize import Program
+from .optimize import IN_PLACE_BOUND, Program
 
 # Kinematics paper, Table II: (add, mult, calls); "derived" = without code optimisation.
 PAPER_TABLE_II = {
@@ -93,7 +93,10 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
     chosen = [p for p in programs if p.routes]
     if chosen:
         lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "
-                  "additions + multiplications after CSE.", "",
+                  "additions + multiplications after CSE, or the cheapest whose sin/cos arguments are all "
+                  "joint angles or their halves, which the C sincos kernel reads in place from q, where that "
+                  f"costs at most {IN_PLACE_BOUND[0]}/{IN_PLACE_BOUND[1]} of the fewest (fk_dq: a route with sums of half angles as arguments "
+                  "computes them into an array for the kernel first; docs/latency.md).", "",
                   "| function | route | add after | mul after | call after | kept |", "|---|---|---|---|---|---|"]
         for p in chosen:
             for name, c in p.routes:

@@ -185,7 +185,10 @@ PyDoc_STRVAR(kdg_d_fk_dq,
     "fk_dq($module, q)\n"
     "--\n"
     "\n"
-    "Forward kinematics: flange pose as a unit dual quaternion.\n"
+    "Forward kinematics: flange pose as a unit dual quaternion. Route chosen as the cheapest\n"
+    "whose sin/cos arguments are joint angles or their halves (the C kernel reads them in\n"
+    "place) within 11/10 of the fewest additions + multiplications after CSE: half angles 54\n"
+    "+ 97; sum angles 52 + 93.\n"
     "\n"
     "Frames: base = DH frame 0, flange = last DH frame (7). Lengths in m, angles in rad. x =\n"
     "(rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the\n"
@@ -194,7 +197,7 @@ PyDoc_STRVAR(kdg_d_fk_dq,
     "q: (7,) float64, joint angles, DH order [rad]\n"
     "Returns x: (8,) float64, flange pose: rotation quaternion (w,x,y,z), then dual part 1/2\n"
     "    t (x) r (w,x,y,z); t = flange position in the base frame [1 (real), m (dual)]\n"
-    "Cost of the generated C: 52 add, 93 mul, 14 call.\n"
+    "Cost of the generated C: 54 add, 97 mul, 14 call.\n"
     "One configuration per call, outputs freshly allocated; for batches use the numpy module\n"
     "python/panda.py. Same as fk_dq(q) there.");
 

@@ -16,6 +16,8 @@ True
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import sympy
 import symengine as se
 
@@ -153,11 +155,17 @@ def _common_point(lines):
     return tuple(se.sympify(x) for x in solution)
 
 
-def _spherical_triple(lines, q, i, revolute):
+def _spherical_triple(lines, q, i, revolute, half_angles: bool = False):
     """Joints i, i+1, i+2 about axes u, v, +-u through one point p (a spherical shoulder or
     wrist, as the LWR's), as the factors T(p), r, T(-p) with r in closed form:
     cos(b) cos(a+c) + cos(b) sin(a+c) u + sin(b) cos(a-c) v + sin(b) sin(a-c) (u x v),
-    for half angles a, b, c: two sums and four products instead of two quaternion products."""
+    for half angles a, b, c: two sums and four products instead of two quaternion products.
+
+    ``half_angles``: the sines and cosines of a +- c by the addition formulas from those of a
+    and c (four products and four sums more, two sums fewer), so that every sin/cos argument is
+    half a joint angle, which the C sincos kernel reads in place from q; with the sums a + c and
+    a - c as arguments it needs them computed into an array first (:func:`fk_dq` keeps both
+    routes; kindyngen.codegen.optimize chooses)."""
     if i + 2 >= len(lines) or not all(revolute[i:i + 3]):
         return None
     (u, _), (v, _), (w, _) = lines[i:i + 3]
@@ -172,24 +180,31 @@ def _spherical_triple(lines, q, i, revolute):
     point = _common_point(lines[i:i + 3])
     if point is None:
         return None
-    half = se.Rational(1, 2)
-    plus, minus = half * (q[i] + sign_c * q[i + 2]), half * (q[i] - sign_c * q[i + 2])
     cb, sb = se.cos(q[i + 1] / 2), se.sin(q[i + 1] / 2)
-    cp, sp, cm, sm = se.cos(plus), se.sin(plus), se.cos(minus), se.sin(minus)
+    if half_angles:
+        ca, sa, cc, sc = se.cos(q[i] / 2), se.sin(q[i] / 2), se.cos(q[i + 2] / 2), se.sin(q[i + 2] / 2)
+        sa_cc, ca_sc, ca_cc, sa_sc = sa * cc, ca * sc, ca * cc, sa * sc
+        cp, sp = ca_cc - sign_c * sa_sc, sa_cc + sign_c * ca_sc
+        cm, sm = ca_cc + sign_c * sa_sc, sa_cc - sign_c * ca_sc
+    else:
+        half = se.Rational(1, 2)
+        plus, minus = half * (q[i] + sign_c * q[i + 2]), half * (q[i] - sign_c * q[i + 2])
+        cp, sp, cm, sm = se.cos(plus), se.sin(plus), se.cos(minus), se.sin(minus)
     uxv = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
     vector = [cb * sp * u[k] + sb * cm * v[k] + sb * sm * uxv[k] for k in range(3)]
     rotation = ((cb * cp, *vector), (0, 0, 0, 0))
     return [_translation(point), rotation, _translation(tuple(-x for x in point))]
 
 
-def joint_screw_factors(model: RobotModel, q) -> list[tuple[Quat, Quat]]:
+def joint_screw_factors(model: RobotModel, q, half_angles: bool = False) -> list[tuple[Quat, Quat]]:
     """The factors whose product is the flange dual quaternion: one screw per joint, or
-    closed-form factors per spherical triple, with runs of constants multiplied out."""
+    closed-form factors per spherical triple (``half_angles``: see :func:`_spherical_triple`),
+    with runs of constants multiplied out."""
     lines, constant = joint_lines(model)
     revolute = [not joint.prismatic for joint in model.joints]
     factors, i = [], 0
     while i < len(lines):
-        triple = _spherical_triple(lines, q, i, revolute)
+        triple = _spherical_triple(lines, q, i, revolute, half_angles)
         if triple is not None:
             factors += triple
             i += 3
@@ -213,10 +228,27 @@ def _is_identity(u) -> bool:
     return tuple(se.sympify(v) for v in u[0]) == (1, 0, 0, 0) and all(se.sympify(v) == 0 for v in u[1])
 
 
+ROUTES = {"half angles": True, "sum angles": False}
+"""fk_dq's routes where the arm has a spherical triple, by their spherical triples' sin/cos
+arguments (:func:`_spherical_triple`): halves of joint angles only, or the sums a +- c."""
+
+
 def fk_dq(model: RobotModel) -> SymbolicFunction:
-    """Flange pose as a unit dual quaternion, ``fk_dq(q) -> x``."""
+    """Flange pose as a unit dual quaternion, ``fk_dq(q) -> x``. An arm with a spherical triple
+    gets both routes of :data:`ROUTES` (the first with the second as its alternative)."""
     q = port_symbols("q", (model.n,))
-    factors = joint_screw_factors(model, q)
+    routes = []
+    for route, half_angles in ROUTES.items():
+        factors = joint_screw_factors(model, q, half_angles)
+        if routes and factors == routes[0][1]:
+            break                        # no spherical triple: one route
+        routes.append((route, factors))
+    functions = [_fk_dq_function(model, q, factors, route if len(routes) > 1 else None)
+                 for route, factors in routes]
+    return replace(functions[0], alternatives=tuple(functions[1:]))
+
+
+def _fk_dq_function(model: RobotModel, q, factors, route) -> SymbolicFunction:
     u = factors[0]
     for factor in factors[1:]:
         u = dq_mul(u, factor)
@@ -232,6 +264,7 @@ def fk_dq(model: RobotModel) -> SymbolicFunction:
         conventions=pose_convention(model)
         + " x = (rw, rx, ry, rz, dw, dx, dy, dz), x and -x are the same pose; the sign is that of the "
           "product of the joint dual quaternions (continuous in q, not normalised to rw >= 0).",
+        metadata={"route": route} if route else {},
     )
 
 

@@ -110,3 +110,26 @@ def test_joint_factors_are_the_dh_formula(convention, kind):
         expected = (motion @ _tr(0, 0, 1 / 8) @ _tr(0.4, 0, 0) @ _rx(-math.pi / 2) if convention == "standard"
                     else _rx(-math.pi / 2) @ _tr(0.4, 0, 0) @ _tr(0, 0, 1 / 8) @ motion)
         np.testing.assert_allclose(_hom(dq_mul(dq_mul(A, M), B)), expected, atol=1e-14)
+
+
+@pytest.mark.parametrize("robot", ("lwr4", "panda"))
+def test_fk_dq_routes_are_one_function(robot):
+    """fk_dq of an arm with a spherical triple has two routes (dq_kinematics.ROUTES): the sines and
+    cosines of the triple's a +- c directly, or by the addition formulas from those of its half
+    angles a and c. The same dual quaternion at random angles; the second's sin/cos arguments are
+    halves of joint angles only (what lets the C kernel read q in place)."""
+    import symengine as se
+    from kindyngen.algorithms.dualquat.dq_kinematics import fk_dq
+    from kindyngen.readers.yaml_description import load_robot
+    from tests.harness import ROOT
+    f = fk_dq(load_robot(ROOT / "robots" / f"{robot}.yaml"))
+    routes = {g.metadata["route"]: g for g in (f, *f.alternatives)}
+    assert set(routes) == {"half angles", "sum angles"} and f.metadata["route"] == "half angles"
+    q = f.input_symbols[0]
+    halves = {se.Rational(1, 2) * s for s in q}
+    arguments = {name: {call.args[0] for e in g.output_exprs[0] for call in se.sympify(e).atoms(se.sin, se.cos)}
+                 for name, g in routes.items()}
+    assert arguments["half angles"] <= halves and not arguments["sum angles"] <= halves
+    values = {name: se.Lambdify(list(q), list(g.output_exprs[0])) for name, g in routes.items()}
+    for angles in RNG.uniform(-3, 3, (20, len(q))):
+        np.testing.assert_allclose(values["half angles"](angles), values["sum angles"](angles), atol=1e-14)
