@@ -302,7 +302,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         for call, k in halves.items():
             names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q[{_slot(k - first, half, split)}]"
     else:
-        arguments = _kernel_argument_names(served, dialect, names, angles, batch)
+        arguments = _kernel_argument_names(served, dialect, names)
         split = _splits(angles + len(arguments), dialect, batch)
         _name_kernel_results(f, served, names, first, angles, arguments, batch, split)
     # a batch block's arrays: sin/cos of every lane, the arguments, the outputs
@@ -372,9 +372,9 @@ def _served(program: Program) -> dict:
     return kernel_arguments(program.function, program.assignments, [e for p in program.outputs for e in p])
 
 
-def _kernel_argument_names(served: dict, dialect: Dialect, names: dict, angles: int, batch: bool) -> list:
+def _kernel_argument_names(served: dict, dialect: Dialect, names: dict) -> list:
     """The C texts of the ``served`` sin/cos arguments affine in q (half angles, joint offsets),
-    which take the kernel's lanes after the ``angles`` joint angles, in order of first use."""
+    which take the kernel's lanes after its joint angles, in order of first use."""
     arguments, seen = [], set()
     for argument in served.values():
         if argument not in seen:
@@ -451,7 +451,7 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
                                   + tuple(v for row in lp.values for v in row) + lp.lane_outputs,))
     first, angles = kernel_angles(everything) if trig == "kernel" else (0, 0)
     served = _served(everything) if trig == "kernel" else {}
-    arguments = _kernel_argument_names(served, dialect, names, angles, False)
+    arguments = _kernel_argument_names(served, dialect, names)
     split = _splits(angles + len(arguments), dialect, False)
     _name_kernel_results(f, served, names, first, angles, arguments, False, split)
     live = _live_beside_kernel(everything, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None

@@ -36,10 +36,11 @@ in blocks of four or eight lanes of plain C99 that compilers vectorise:
 Measured alone (the harness of ``python -m benchmarks.latency``, docs/latency.md): on AMD EPYC
 Zen 5 (gcc 12.2 ``-O3 -march=native -ffp-contract=off``, load average 5.6-6.0) the blocks took
 the latency of a call on seven angles in place (as lwr4's and panda's single calls make it)
-from 134 to 92 cycles net and on eight from 62 to 60 cycles; on AMD EPYC Zen 4 the two blocks
-of four one after the other took 87 cycles for seven angles and the split kernel 55 (an ad-hoc
-harness, docs/latency.md, "Two blocks of four in one loop"); the bound is 47 cycles (39 with
-Zen 5's 2-cycle addition).
+from 134 to 92 cycles net and on eight from 62 to 60 cycles; on AMD EPYC Zen 4 the split kernel
+took seven angles from 103 to 75 cycles net of the same eight-lane empty kernel, 64 net of an
+empty kernel with its own loads and stores (1.37x the bound; eight angles 66, 1.41x;
+docs/latency.md, "Seven angles by the split kernel"); the bound is 47 cycles (39 with Zen 5's
+2-cycle addition).
 
 Accuracy: at most MAX_ULP ulp from glibc's sin and cos (which are correctly rounded in
 practice) for every double, as tests/codegen/test_sincos_kernel.py checks on dense grids, near every
@@ -261,7 +262,7 @@ without the scalar remainder a loop over n = 7 has (measured: with AVX-512 the r
 half the kernel's time, docs/latency.md). Four to seven arguments are two blocks of four in
 one loop body, x[0..3] and x[n-4..n-1] (for seven angles x[3] is computed twice, to the same
 value): two independent chains the core overlaps, where two blocks one after the other took
-1.7x as long (docs/latency.md, "Two blocks of four in one loop")."""
+1.6x as long on Zen 4 (86 against 55 cycles; docs/latency.md, "Two blocks of four in one loop")."""
 
 
 def _quadrant(s: str, c: str, suffix: str = "") -> str:
