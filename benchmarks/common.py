@@ -39,10 +39,27 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def cpu_identity() -> dict:
+    """The core's family and model numbers and its widest vector extension, from /proc/cpuinfo
+    (the model name alone, "AMD EPYC", does not tell Zen 4 from Zen 5: family 25 from 26), or {}."""
+    try:
+        fields = {}
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if not line.strip():
+                break                                # the first core's block
+            key, _, value = line.partition(":")
+            fields[key.strip()] = value.strip()
+        flags = set(fields.get("flags", "").split())
+        vector = next((v for v in ("avx512f", "avx2", "avx", "sse2") if v in flags), "none")
+        return {"cpu_family": int(fields["cpu family"]), "cpu_model_number": int(fields["model"]), "vector": vector}
+    except (OSError, KeyError, ValueError):
+        return {}
+
+
 def machine() -> dict:
     import casadi
     import numpy
-    info = {"cpu": cpu_model(), "cores": os.cpu_count(), "platform": platform.platform(),
+    info = {"cpu": cpu_model(), **cpu_identity(), "cores": os.cpu_count(), "platform": platform.platform(),
             "python": platform.python_version(), "numpy": numpy.__version__,
             "casadi": casadi.__version__, "gcc": compiler_version("gcc"), "g++": compiler_version("g++")}
     try:
