@@ -239,18 +239,23 @@ int main(void)
 def test_half_angle_kernel_is_the_kernel_on_halves_bit_for_bit(compiler, flags, tmp_path):
     """Single calls whose sin/cos arguments are all q[k]/2 run kdg_sincos_half over q in place
     (render.half_angles): its results must be those of the kernel on the halved copy it replaced."""
+    differ, points = differing_bits(compiler, flags, tmp_path, HALF_DRIVER)
+    assert points == 200000 * 45 and differ == 0
+
+
+def differing_bits(compiler, flags, tmp_path, driver):
+    """(results whose bits differ, results compared) as ``driver`` prints them, built with the
+    kernel and the half-angle kernel; skips where ``compiler`` is not installed."""
     if shutil.which(compiler) is None:
         pytest.skip(f"{compiler} not installed")
     (tmp_path / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c()
                                        + trig_kernel.kernel_c("kdg_sincos_half", half=True))
-    (tmp_path / "driver.c").write_text(HALF_DRIVER)
+    (tmp_path / "driver.c").write_text(driver)
     exe = tmp_path / "driver"
     build = subprocess.run([compiler, *STRICT, *flags, '-DKERNEL="kernel.h"', "-I", str(tmp_path),
                             str(tmp_path / "driver.c"), "-o", str(exe), "-lm"], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr
-    differ, points = (int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True,
-                                                     check=True).stdout.split())
-    assert points == 200000 * 45 and differ == 0
+    return tuple(int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split())
 
 
 SPLIT_DRIVER = r"""
@@ -322,17 +327,7 @@ def test_split_kernel_is_the_blocks_of_eight_bit_for_bit(compiler, flags, tmp_pa
     """Single calls of four to seven angles (lwr4's and panda's seven) run the split kernel, two
     blocks of four in one loop body: lane for lane the arithmetic of the blocks of eight, so the
     same bits, left where trig_kernel.split_slot says (which the driver's slot() restates)."""
-    if shutil.which(compiler) is None:
-        pytest.skip(f"{compiler} not installed")
     assert [trig_kernel.split_slot(k, n) for n in trig_kernel.SPLIT for k in range(n)] == \
         [k if k < 4 else k + 8 - n for n in range(4, 8) for k in range(n)]
-    (tmp_path / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c()
-                                       + trig_kernel.kernel_c("kdg_sincos_half", half=True))
-    (tmp_path / "driver.c").write_text(SPLIT_DRIVER)
-    exe = tmp_path / "driver"
-    build = subprocess.run([compiler, *STRICT, *flags, '-DKERNEL="kernel.h"', "-I", str(tmp_path),
-                            str(tmp_path / "driver.c"), "-o", str(exe), "-lm"], capture_output=True, text=True)
-    assert build.returncode == 0, build.stderr
-    differ, points = (int(v) for v in subprocess.run([str(exe)], capture_output=True, text=True,
-                                                     check=True).stdout.split())
+    differ, points = differing_bits(compiler, flags, tmp_path, SPLIT_DRIVER)
     assert points == 200000 * 2 * (4 + 5 + 6 + 7) and differ == 0
