@@ -24,7 +24,7 @@ from .trig_kernel import kernel_latency
 import heapq
 
 from .opcount import ChainTimer, CriticalPath, OpCount, program_count, program_critical_path, tree_count
-from ..algorithms.symbolic import SymbolicFunction, port_symbols
+from ..algorithms.symbolic import SymbolicFunction
 
 
 CSE_CHUNK = 4096
@@ -400,23 +400,45 @@ reads them in place from q) is kept over a cheaper route with other arguments (a
 the C computes them into an array, whose pieces the kernel's vector loads cannot take from the
 store buffer) when it costs at most 11/10 of that route's additions + multiplications. Measured
 (docs/latency.md, "Sums of half angles"): lwr4's and panda's fk_dq by the in-place route, 6 % and
-4 % more operations, 1.55x and 1.58x faster single calls."""
+4 % more operations, 1.24x and 1.34x faster single calls (both with the split kernel)."""
+
+
+def half_angles(function, served: dict) -> dict:
+    """``{call: k}`` when every one of the ``served`` sin/cos (:func:`kernel_arguments`: those the kernel
+    would serve beside the joint angles) has the half joint angle q[k]/2 as its argument, else
+    ``{}``. Such a single call runs the half-angle kernel (``trig_kernel.kernel_c(half=True)``)
+    over q read in place: bit for bit the values of the kernel over a copy of the halves,
+    without the copy, whose pieces the store buffer cannot forward to the kernel's vector load
+    (docs/latency.md, "Half angles read in place").
+
+    >>> from kindyngen.algorithms.symbolic import Port
+    >>> q = se.symbols("q_0 q_1")
+    >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((0,),))
+    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos(q[0] / 2): q[0] / 2})
+    {sin((1/2)*q_1): 1, cos((1/2)*q_0): 0}
+    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos((q[0] + q[1]) / 2): (q[0] + q[1]) / 2})
+    {}
+    """
+    if not served:
+        return {}
+    q = function.input_symbols[[p.name for p in function.inputs].index("q")]
+    index = {se.Rational(1, 2) * sym: k for k, sym in enumerate(q)}
+    halves = {call: index.get(argument) for call, argument in served.items()}
+    return halves if None not in halves.values() else {}
 
 
 def reads_q_in_place(program: Program) -> bool:
-    """Whether every sin/cos of ``program`` has a joint angle or half of one as its argument.
+    """Whether every sin/cos of ``program`` has a joint angle or half of one as its argument
+    (:func:`half_angles` of its :func:`kernel_arguments`, or none of those).
 
-    >>> from kindyngen.algorithms.symbolic import Port
+    >>> from kindyngen.algorithms.symbolic import Port, port_symbols
     >>> q = port_symbols("q", (2,))
     >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((se.sin(q[0] / 2),),))
     >>> reads_q_in_place(optimize(f)), reads_q_in_place(optimize(replace(f, output_exprs=((se.sin(q[0] + q[1]),),))))
     (True, False)
     """
-    f = program.function
-    names = [p.name for p in f.inputs]
-    halves = {se.Rational(1, 2) * sym for sym in f.input_symbols[names.index("q")]} if "q" in names else set()
-    served = kernel_arguments(f, program.assignments, [e for port in program.outputs for e in port])
-    return all(argument in halves for argument in served.values())
+    served = kernel_arguments(program.function, program.assignments, [e for port in program.outputs for e in port])
+    return not served or bool(half_angles(program.function, served))
 
 
 def _cheapest(routes) -> Program:
@@ -425,11 +447,13 @@ def _cheapest(routes) -> Program:
     programs = [optimize(route) for route in routes]
     ops = [p.after.add + p.after.mul for p in programs]
     best = min(range(len(programs)), key=lambda k: (ops[k], k))
-    in_place = [k for k in range(len(programs)) if reads_q_in_place(programs[k])]
     counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)
     routes_text = "; ".join(f"{name} {count.add} + {count.mul}" for name, count in counted) + "."
     text = "Route chosen by the fewest additions + multiplications after CSE: " + routes_text
-    if in_place and best not in in_place:
+    # the other routes are read only where the cheapest computes kernel arguments (fk_dq's sums)
+    in_place = [] if reads_q_in_place(programs[best]) else [
+        k for k in range(len(programs)) if k != best and reads_q_in_place(programs[k])]
+    if in_place:
         kept = min(in_place, key=lambda k: (ops[k], k))
         numerator, denominator = IN_PLACE_BOUND
         if ops[kept] * denominator <= ops[best] * numerator:

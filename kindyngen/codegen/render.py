@@ -17,7 +17,7 @@ from .. import __version__
 from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, kernel_c, split_slot,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
-from .optimize import Program, kernel_arguments
+from .optimize import Program, half_angles, kernel_arguments
 from .schedule import pressure_order
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
@@ -44,7 +44,7 @@ SCALARS = ("double", "float")
 
 KERNEL_LANES = 8
 """Single calls with arguments affine in q other than the half joint angles q[k]/2 (those: the
-half-angle kernel over q in place, :func:`half_angles`), e.g. lwr4's fk_dq with 0.5*(q[0] + q[2]),
+half-angle kernel over q in place, :func:`kindyngen.codegen.optimize.half_angles`), e.g. lwr4's fk_dq with 0.5*(q[0] + q[2]),
 run the sincos kernel over the joint angles and those arguments, computed into an array; more
 than seven of them are padded with zeros to a multiple of this (AVX-512 lanes). Joint angles
 alone are read in place from q, unpadded: the padded copy, stored in pieces and loaded back as
@@ -413,30 +413,6 @@ def _name_kernel_results(f, served: dict, names: dict, first: int, angles: int, 
     for call, argument in served.items():
         lane.setdefault(argument, angles + len(lane))
         names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where(lane[argument])}"
-
-
-def half_angles(function, served: dict) -> dict:
-    """``{call: k}`` when every one of the ``served`` sin/cos (:func:`_served`: those the kernel
-    would serve beside the joint angles) has the half joint angle q[k]/2 as its argument, else
-    ``{}``. Such a single call runs the half-angle kernel (``trig_kernel.kernel_c(half=True)``)
-    over q read in place: bit for bit the values of the kernel over a copy of the halves,
-    without the copy, whose pieces the store buffer cannot forward to the kernel's vector load
-    (docs/latency.md, "Half angles read in place").
-
-    >>> from kindyngen.algorithms.symbolic import Port, SymbolicFunction
-    >>> q = se.symbols("q_0 q_1")
-    >>> f = SymbolicFunction("f", "", (Port("q", (2,), ""),), (Port("y", (1,), ""),), (q,), ((0,),))
-    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos(q[0] / 2): q[0] / 2})
-    {sin((1/2)*q_1): 1, cos((1/2)*q_0): 0}
-    >>> half_angles(f, {se.sin(q[1] / 2): q[1] / 2, se.cos((q[0] + q[1]) / 2): (q[0] + q[1]) / 2})
-    {}
-    """
-    if not served:
-        return {}
-    q = function.input_symbols[[p.name for p in function.inputs].index("q")]
-    index = {se.Rational(1, 2) * sym: k for k, sym in enumerate(q)}
-    halves = {call: index.get(argument) for call, argument in served.items()}
-    return halves if None not in halves.values() else {}
 
 
 def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:

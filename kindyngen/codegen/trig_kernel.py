@@ -314,8 +314,8 @@ def _split(name: str, argument: str, libm_argument: str, what: str) -> str:
     """The C of ``name``_split, four to seven arguments as two blocks of four in one loop body,
     and of ``name``_split_libm, which redoes the lanes out of the kernel's range by libm. The
     caller runs the second only where the first returns nonzero: kept apart, the kernel is a
-    leaf function without the libm calls' register saves and stack frame, which measured 1.1x
-    on lwr4's and panda's fk_hom and jacobian (docs/latency.md)."""
+    leaf function without the libm calls' register saves and stack frame, which measured
+    1.08-1.10x on lwr4's and panda's fk_hom and jacobian (docs/latency.md)."""
     bound = repr(BOUND)
     lo, hi = libm_argument.format(i="i"), libm_argument.format(i="n - 4 + i")
     x_lo, x_hi = what.format(i="i"), what.format(i="n - 4 + i")

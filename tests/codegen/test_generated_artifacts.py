@@ -48,7 +48,7 @@ def test_c_has_no_globals_or_allocation(robot):
     kernel = statics_of(trig_kernel.kernel_c())
     assert kernel[-1] == "static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)"
     # the loop over blocks, or the split kernel alone, as the calls need them (render._kernels); the
-    # same of the half-angle variant where single calls read half angles in place (render.half_angles)
+    # same of the half-angle variant where single calls read half angles in place (optimize.half_angles)
     plain = [statics_of(trig_kernel.kernel_c(blocks=blocks)) for blocks in (True, False)]
     half = [statics_of(trig_kernel.kernel_c("kdg_sincos_half", half=True, blocks=blocks)) for blocks in (True, False)]
     # and, inside the derivatives' lane programs, their read-only seed tables (re-entrant)

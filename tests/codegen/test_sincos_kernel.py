@@ -238,7 +238,7 @@ int main(void)
 @pytest.mark.parametrize("compiler,flags", BUILDS, ids=lambda v: v if isinstance(v, str) else " ".join(v))
 def test_half_angle_kernel_is_the_kernel_on_halves_bit_for_bit(compiler, flags, tmp_path):
     """Single calls whose sin/cos arguments are all q[k]/2 run kdg_sincos_half over q in place
-    (render.half_angles): its results must be those of the kernel on the halved copy it replaced."""
+    (optimize.half_angles): its results must be those of the kernel on the halved copy it replaced."""
     differ, points = differing_bits(compiler, flags, tmp_path, HALF_DRIVER)
     assert points == 200000 * 45 and differ == 0
 
