@@ -299,7 +299,7 @@ def _cmd_identify(args) -> int:
     from ..measured.effect_columns import SENSING_EFFECTS
     from ..measured.identify import IdentificationRequest, identify, write_outputs
     from ..measured.log_preparing import Preprocessing
-    from ..measured.streaming import FitLimits, check_fit, check_joint_limits, identify_streamed
+    from ..measured.streaming import FitLimits, check_fit, identify_streamed
     from .output_dir import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
@@ -330,7 +330,6 @@ def _cmd_identify(args) -> int:
             progress(f"{', '.join(e for e in args.effects if e in SENSING_EFFECTS)}: identified in memory "
                      f"(re-linearised fits; not streamed, --workers and --scheduler unused)")
             result = identify(request, progress,
-                              check_segment=lambda model, segment: check_joint_limits(segment.source, model, segment),
                               check_fit=lambda samples, columns, condition: check_fit(samples, columns, condition,
                                                                                       limits))
         else:
