@@ -28,7 +28,6 @@ Example:
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from ..json_text import strict_json
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, Discovery, Recording, discover,
@@ -448,7 +448,7 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = result_document(result)
-    (out / "discovery.json").write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    (out / "discovery.json").write_text(strict_json(doc, indent=1) + "\n")
     if result.model_yaml is not None:
         (out / "model.yaml").write_text(result.model_yaml)
     d = result.discovery

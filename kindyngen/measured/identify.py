@@ -25,7 +25,6 @@ Example:
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 import yaml
 
 from ..algorithms.base_parameters import condition_number_2norm
+from ..json_text import json_number, strict_json
 from ..model.inertial_parameters import parameter_vector
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
@@ -362,11 +362,9 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
 
 
 def _numbers(values) -> list:
-    """Floats for JSON; a non-finite one (std of a zero value) as a string, JSON-valid."""
-    out = []
-    for v in np.asarray(values, float):
-        out.append(float(v) if math.isfinite(v) else ("Infinity" if v > 0 else "-Infinity" if v < 0 else "NaN"))
-    return out
+    """Floats for JSON; a non-finite one (the relative std of a zero value or of a coefficient
+    the data does not determine) as the string of :mod:`kindyngen.json_text`'s rule."""
+    return json_number(np.asarray(values, float).tolist())
 
 
 def result_document(result: Identification) -> dict:
@@ -381,7 +379,7 @@ def result_document(result: Identification) -> dict:
                         "std_percent": None if result.base_std_percent is None else _numbers(result.base_std_percent)},
         "effects": {"names": list(result.effect_names), "values": _numbers(result.effect_values),
                     "std_percent": None if result.effect_std_percent is None else _numbers(result.effect_std_percent)},
-        "condition_number": result.condition_number,
+        "condition_number": json_number(float(result.condition_number)),
         "rms_train": _numbers(result.rms_train),
         "rms_validation": None if result.rms_validation is None else _numbers(result.rms_validation),
         "rms_validation_description": None if result.rms_validation_nominal is None
@@ -399,7 +397,7 @@ def write_outputs(result: Identification, out: str | Path) -> Path:
     ``validation_torques.png`` under ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "identification.json").write_text(json.dumps(result_document(result), indent=1, allow_nan=False) + "\n")
+    (out / "identification.json").write_text(strict_json(result_document(result), indent=1) + "\n")
     if result.model_yaml is not None:
         (out / "model.yaml").write_text(result.model_yaml)
     n = len(result.rms_train)
