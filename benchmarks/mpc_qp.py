@@ -16,12 +16,13 @@ reference with the measured state's speeds perturbed (seeded).
 """
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from kindyngen.json_text import strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 for _p in (str(ROOT / "examples"), str(ROOT / "tests"), str(ROOT)):
@@ -114,13 +115,13 @@ def main(argv=None) -> int:
                                            "iterations": int(stats.get("iter_count", -1)),
                                            "max_du_difference_to_daqp": float(np.abs(du - du_d).max())}
         rows.append(row)
-        print(json.dumps(row), flush=True)
+        print(strict_json(row), flush=True)
     doc = {"problem": "the tracking MPC's QP, LWR reach reference, N = 20, hard state limits", "points": rows,
            "versions": {"daqp": getattr(daqp, "__version__", "0.11.0 (pip)"), "casadi": ca.__version__},
            "machine": mpc.machine(), "max_du_scale": "torque steps up to a few N m"}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(doc, indent=1) + "\n")
+    out.write_text(strict_json(doc, indent=1) + "\n")
     print(f"  wrote {out}")
     return 0
 

@@ -45,6 +45,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 
+from kindyngen.json_text import strict_json  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
 import ocp_fd_options  # noqa: E402
@@ -248,7 +250,7 @@ def main(argv=None):
         doc["crocoddyl"] = dict(summary, loadavg=list(os.getloadavg()))
         doc.setdefault("versions", {})["crocoddyl_venv"] = summary.get("versions", {"error": summary.get("error")})
         doc["rows"] = [r for r in doc["rows"] if r.get("dynamics") != "crocoddyl"] + rows
-        out.write_text(json.dumps(doc, indent=1) + "\n")
+        out.write_text(strict_json(doc, indent=1) + "\n")
         print(f"crocoddyl: {summary.get('versions', summary)}")
         return
     funcs = ocp_reach.load()
@@ -300,7 +302,7 @@ def main(argv=None):
         doc["rows"][-1]["solve_cpu_s_runs"] = res["solve_cpu_s_runs"]
         if form == "baseline" and solver == "ipopt":
             base_s = res["solve_cpu_s"]
-        out.write_text(json.dumps(doc, indent=1) + "\n")
+        out.write_text(strict_json(doc, indent=1) + "\n")
     if not args.no_peers:
         peers, failures = peer_fds(funcs)
         doc["peer_failures"] = failures
@@ -312,7 +314,7 @@ def main(argv=None):
                 row = _row(f"{source} {form} {solver} M=1", source, res, setup, funcs, base_s)
                 row["fd_max_abs_diff"] = err
                 doc["rows"].append(row)
-                out.write_text(json.dumps(doc, indent=1) + "\n")
+                out.write_text(strict_json(doc, indent=1) + "\n")
         summary, rows = crocoddyl_peer(Path(args.crocoddyl_venv), funcs, setup, base_s)
         doc["crocoddyl"], doc["rows"] = summary, doc["rows"] + rows
         if "error" in summary and old_crocoddyl and "error" not in old_crocoddyl:
@@ -326,7 +328,7 @@ def main(argv=None):
         print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
               f"iterations {doc['warm_resolve_stages']['iterations']}")
     doc["loadavg_end"] = list(os.getloadavg())
-    out.write_text(json.dumps(doc, indent=1) + "\n")
+    out.write_text(strict_json(doc, indent=1) + "\n")
     plot(doc, out.with_suffix(".png"))
     print(f"wrote {out} and {out.with_suffix('.png')}")
 

@@ -31,6 +31,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from kindyngen.json_text import strict_json
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
 import ocp  # noqa: E402
@@ -169,7 +171,7 @@ def main(argv=None) -> int:
               f"{', '.join(f'{v:.1f}x' for v in spi)}", flush=True)
     doc["load_after"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+    Path(args.out).write_text(strict_json(doc, indent=1) + "\n")
     print(f"wrote {args.out} (load {doc['load_before'][0]:.1f} -> {doc['load_after'][0]:.1f})")
     return 0
 

@@ -16,13 +16,14 @@ Rows (CPU time by time.process_time, one BLAS thread; medians of --repeats solve
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from kindyngen.json_text import strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
@@ -114,7 +115,7 @@ def main(argv=None):
         doc["rows"].append(row)
         print(name, r["status"], r["iterations"], f"{r['solve_cpu_s']:.3f}s", f"f={r['objective']:.2f}", r["kkt"],
               flush=True)
-        out.write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
+        out.write_text(strict_json(doc, indent=1, default=_plain) + "\n")
 
     # IPOPT's barrier options on the compiled stages
     stages = ocp_stages.StageReach(N, funcs)
@@ -130,7 +131,7 @@ def main(argv=None):
               f"cpu={doc['ipopt_stages_options'][-1]['solve_cpu_s']:.3f} f={r['objective']:.4f}", flush=True)
     doc["loadavg_end"] = list(os.getloadavg())
     doc["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
-    out.write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
+    out.write_text(strict_json(doc, indent=1, default=_plain) + "\n")
     print(f"wrote {out}")
 
 

@@ -20,6 +20,8 @@ import matplotlib
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
 
+from kindyngen.json_text import strict_json  # noqa: E402
+
 from . import paper, scaling  # noqa: E402
 from .common import GENERATED, RESULTS, manifest  # noqa: E402
 
@@ -256,7 +258,7 @@ def build_report(timings: dict, study: dict, out: Path, counts: dict | None = No
     (out / "report.md").write_text("\n".join(md))
     summary = {"date": timings.get("date"), "machine": m, "opcounts": rows, "speed": functions, "ratios": ratios,
                "fig1": figure, "peers": peers, "scaling": study, "checks": checks}
-    (out / "report.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (out / "report.json").write_text(strict_json(summary, indent=1) + "\n")
     return summary
 
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import symengine as se
 
+from kindyngen.json_text import strict_json
+
 from .common import GENERATED, RESULTS
 
 # (quantity, homogeneous-route function, dual-quaternion-route function)
@@ -120,7 +122,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     doc = table()
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "representations.json").write_text(json.dumps(doc, indent=1) + "\n")
+    (args.out / "representations.json").write_text(strict_json(doc, indent=1) + "\n")
     (args.out / "representations.md").write_text(markdown(doc))
     print(markdown(doc))
     return 0

@@ -16,6 +16,7 @@ import numpy as np
 from ..algorithms.base_parameters import BaseParameterError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
+from ..json_text import strict_json
 from ..runtime.evaluate import EvaluationError
 from ..measured import MeasuredDataError
 from ..model.robot_model import RobotDescriptionError
@@ -160,7 +161,7 @@ def _cmd_count(args) -> int:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
                              f"(does not apply to this arm; see the README's function table)")
         if args.format == "json":
-            print(json.dumps({model.identifier: opcounts_json(programs)}, indent=1))
+            print(strict_json({model.identifier: opcounts_json(programs)}, indent=1))
         else:
             print(opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     return 0
@@ -179,21 +180,6 @@ def _strict_numbers(value, where: str):
         raise EvaluationError(f"input {where} must be finite, got {value}")
 
 
-def json_number(value):
-    """A float as JSON: finite numbers as they are, NaN and the infinities as the strings
-    ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (protobuf's JSON mapping of doubles), since
-    JSON itself has no spelling for them.
-
-    >>> [json_number(v) for v in (1.5, float("nan"), float("-inf"))]
-    [1.5, 'NaN', '-Infinity']
-    """
-    if isinstance(value, list):
-        return [json_number(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    return value
-
-
 def _cmd_eval(args) -> int:
     from ..runtime.evaluate import load_generated
     text = sys.stdin.read()
@@ -205,9 +191,9 @@ def _cmd_eval(args) -> int:
         raise EvaluationError("standard input must be a JSON object of named inputs, e.g. {\"q\": [...]}")
     for name, value in inputs.items():
         _strict_numbers(value, name)
-    with np.errstate(all="ignore"):   # overflow is reported in the output itself (see json_number)
+    with np.errstate(all="ignore"):   # overflow is reported in the output itself (see kindyngen.json_text)
         outputs = load_generated(args.generated_dir, args.lang).call(args.function, inputs)
-    print(json.dumps({k: json_number(np.asarray(v).tolist()) for k, v in outputs.items()}, allow_nan=False))
+    print(strict_json({k: np.asarray(v).tolist() for k, v in outputs.items()}))
     return 0
 
 
@@ -299,7 +285,7 @@ def _cmd_identify(args) -> int:
     from ..measured.effect_columns import SENSING_EFFECTS
     from ..measured.identify import IdentificationRequest, identify, write_outputs
     from ..measured.log_preparing import Preprocessing
-    from ..measured.streaming import FitLimits, check_fit, check_joint_limits, identify_streamed
+    from ..measured.streaming import FitLimits, check_fit, identify_streamed
     from .output_dir import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
@@ -330,7 +316,6 @@ def _cmd_identify(args) -> int:
             progress(f"{', '.join(e for e in args.effects if e in SENSING_EFFECTS)}: identified in memory "
                      f"(re-linearised fits; not streamed, --workers and --scheduler unused)")
             result = identify(request, progress,
-                              check_segment=lambda model, segment: check_joint_limits(segment.source, model, segment),
                               check_fit=lambda samples, columns, condition: check_fit(samples, columns, condition,
                                                                                       limits))
         else:
@@ -345,7 +330,7 @@ def _cmd_identify(args) -> int:
         summary["rms_validation"] = [round(float(v), 4) for v in result.rms_validation]
         summary["rms_validation_sum"] = round(float(np.sum(result.rms_validation)), 4)
     summary["physically_consistent"] = result.physically_consistent
-    print(json.dumps(summary))
+    print(strict_json(summary))
     progress(f"wrote {out}/identification.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
 
@@ -374,10 +359,10 @@ def _cmd_discover(args) -> int:
     replace_outputs(args.out, lambda folder: write_outputs(result, folder), DISCOVER_OUTPUTS)
     out = Path(args.out)
     d = result.discovery
-    print(json.dumps({"effects": list(d.effects),
-                      "indistinguishable": [list(group) for group, _ in d.indistinguishable],
-                      "rms_before": [round(float(v), 4) for v in result.rms_before],
-                      "rms_after": [round(float(v), 4) for v in result.rms_after]}))
+    print(strict_json({"effects": list(d.effects),
+                       "indistinguishable": [list(group) for group, _ in d.indistinguishable],
+                       "rms_before": [round(float(v), 4) for v in result.rms_before],
+                       "rms_after": [round(float(v), 4) for v in result.rms_after]}))
     progress(f"wrote {out}/discovery.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
 
@@ -404,7 +389,7 @@ def _cmd_reproduce(args) -> int:
     result = reproduce(source, model, n_train=args.train, n_val=args.validate, seed=args.seed,
                        tip_mass=args.tip_mass, progress=progress)
     summary = write_report(result, args.out)
-    print(json.dumps({"tip_mass": summary.get("tip_mass")}))
+    print(strict_json({"tip_mass": summary.get("tip_mass")}))
     progress(f"wrote {args.out}/reproduction.json, report.md")
     return 0
 
@@ -443,9 +428,9 @@ def _cmd_excite(args) -> int:
         write_trajectory_csv(folder / "excitation.csv", result.trajectory, args.rate, periods=args.periods)
         write_trajectory_json(folder / "excitation.json", result)
     replace_outputs(out, write, EXCITE_OUTPUTS)
-    print(json.dumps({"condition_number": round(result.condition_number, 3),
-                      "initial_condition_number": round(result.initial_condition_number, 3),
-                      "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
+    print(strict_json({"condition_number": round(result.condition_number, 3),
+                       "initial_condition_number": round(result.initial_condition_number, 3),
+                       "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
     progress(f"wrote {out}/excitation.csv ({rows} rows at {args.rate:g} Hz) and excitation.json")
     return 0
 

@@ -6,12 +6,12 @@ language. Output is deterministic: the same description gives the same bytes.
 """
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
+from ..json_text import strict_json
 from .catalog import derive_all
 from .interface import manifest
 from .optimize import Program, optimize
@@ -100,14 +100,14 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
-    _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
+    _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
-        _write(out / "base_params.json", json.dumps(base_params, indent=1) + "\n")
+        _write(out / "base_params.json", strict_json(base_params, indent=1) + "\n")
     float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None
-    _write(out / "opcounts.json", json.dumps(opcounts_json(programs, float_error), indent=1) + "\n")
+    _write(out / "opcounts.json", strict_json(opcounts_json(programs, float_error), indent=1) + "\n")
     _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
                                                   float_error))
     for lang in languages:

@@ -28,7 +28,6 @@ Example:
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,11 +36,13 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from ..json_text import strict_json
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import links_from_barycentric
 from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, Discovery, Recording, discover,
                         in_memory, piece_windows, predict_effects, spring_torque)
 from .effect_columns import EFFECTS, coulomb_eps, effect_names
+from .log_checks import log_bounds
 from .log_formats import joint_names_of, read_any
 from .log_preparing import Preprocessing, Segment, preprocess, split_time
 from .log_streaming import ChunkedParallelFilter, NotStreamable, overlap_rows, segment_pieces
@@ -225,10 +226,13 @@ def _rows(seg: Segment, a: int, b: int) -> Segment:
 
 
 def _part(path, model, settings, k0: int, k1: int, chunk_rows: int):
-    """Rows ``[k0, k1)`` of the (single) segment of a streamed log, piece by piece."""
+    """Rows ``[k0, k1)`` of the (single) segment of a streamed log, piece by piece (each pass
+    checks the samples against the robot again: the file may have changed since the first)."""
+    bounds = log_bounds(model)
+
     def pieces():
         row = 0
-        for _, piece in segment_pieces(path, model.n, settings, joint_names_of(model), chunk_rows):
+        for _, piece in segment_pieces(path, model.n, settings, joint_names_of(model), chunk_rows, bounds=bounds):
             m = len(piece.t)
             a, b = max(k0 - row, 0), min(k1 - row, m)
             if a < b:
@@ -244,19 +248,21 @@ def _file_parts(path, model, request, progress):
     ``holdout`` fraction of its own time span held out (as
     :func:`kindyngen.measured.log_preparing.split_time` cuts).  A log whose chunks preprocess
     like the whole is streamed (a first pass reads its time stamps); any other log (gaps,
-    repeated rows, ``--rate`` resampling, or short) is preprocessed whole in memory."""
+    repeated rows, ``--rate`` resampling, or short) is preprocessed whole in memory.  Every
+    sample is checked against the robot as it is read (:mod:`kindyngen.measured.log_checks`)."""
     settings = request.preprocessing
+    bounds = log_bounds(model)
     notes, spans, times = [], [], []
     try:
         for index, piece in segment_pieces(path, model.n, settings, joint_names_of(model), request.chunk_rows,
-                                           notes=notes, spans=spans):
+                                           notes=notes, spans=spans, bounds=bounds):
             if spans:                          # preprocessed whole anyway (short, or resampled)
                 break
             times.append(piece.t)
     except NotStreamable as exc:
         notes, spans = [f"preprocessed whole in memory ({exc})"], [None]
     if spans:
-        segments = preprocess(read_any(path, model.n, joint_names_of(model)), settings)
+        segments = preprocess(read_any(path, model.n, joint_names_of(model), bounds), settings)
         notes = [note for note in notes if note.startswith("preprocessed whole")] + \
             [note for s in segments for note in s.notes]
         a, b = split_time(segments, 1.0 - request.holdout)
@@ -442,7 +448,7 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = result_document(result)
-    (out / "discovery.json").write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    (out / "discovery.json").write_text(strict_json(doc, indent=1) + "\n")
     if result.model_yaml is not None:
         (out / "model.yaml").write_text(result.model_yaml)
     d = result.discovery

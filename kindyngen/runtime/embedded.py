@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..json_text import strict_json
+
 HERE = Path(__file__).resolve().parents[1] / "codegen" / "templates" / "embedded"
 REPS = 20
 TICK_INSTRUCTIONS = 40      # 25 MHz SysTick over the 1 GHz virtual clock of -icount shift=0
@@ -328,7 +330,7 @@ def main(argv=None) -> int:
         return 2
     document = {k: r[k] for k in ("flash", "stack", "instructions", "batch_stack", "undefined")}
     document["vs_host"] = agreement(r)
-    text = json.dumps(document, indent=1) + "\n"
+    text = strict_json(document, indent=1) + "\n"
     print(text, end="")
     if args.write:
         folder = Path(args.generated_dir)

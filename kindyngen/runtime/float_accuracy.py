@@ -19,12 +19,13 @@ error exceeds ACCEPTABLE.
 from __future__ import annotations
 
 import dataclasses
-import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ..json_text import strict_json
 
 STATES = 1000
 SEED = 0
@@ -166,7 +167,7 @@ def measure(model, double_files: dict, float_files: dict, manifest: dict,
             document = {k: v for k, v in manifest.items() if k != "c_scalar"}
             if scalar == "float":
                 document["c_scalar"] = "float"
-            (folder / "functions.json").write_text(json.dumps(document))
+            (folder / "functions.json").write_text(strict_json(document))
             libs[scalar] = load_generated(folder, "c")
         rng = np.random.default_rng(seed)
         result = {}
