@@ -3,7 +3,9 @@
 Each builder takes the robot model and the inertial-parameter mode ("numeric": the
 description's values baked in; "symbolic": an extra input ``p`` of 10 barycentric parameters
 per body, a floating base's root body first) and returns a SymbolicFunction, or None where
-the derivation does not apply to that robot.
+the derivation does not apply to that robot. Builders marked :func:`per_scalar` also take the
+C scalar type the code is for (the closed-form IK's tolerances differ between double and
+float).
 """
 from __future__ import annotations
 
@@ -50,11 +52,21 @@ def flange_only(build: Builder) -> Builder:
     """A derivation of a chain's flange (dual-quaternion kinematics, closed-form IK), built on
     :attr:`RobotModel.flange_chain` (a chain read as a tree: its one frame of interest on the
     last link as the flange); None where there is no such flange."""
-    def flange_build(model, params):
+    def flange_build(model, params, *scalar):
         arm = model.flange_chain
-        return build(arm, params) if arm is not None else None
+        return build(arm, params, *scalar) if arm is not None else None
     flange_build.chain_only = True
+    flange_build.per_scalar = getattr(build, "per_scalar", False)
     return flange_build
+
+
+def per_scalar(build: Callable[[RobotModel, str, str], Optional[SymbolicFunction]]) -> Builder:
+    """A derivation whose expressions depend on the C scalar type (render.SCALARS) it is
+    printed in: called as ``build(model, params, scalar)``. Only the closed-form IK: its
+    singular sets are decided by tolerances, which must lie above what the type resolves
+    (kindyngen/ik/lwr_common.py, TOLERANCES); everything else is the same in both."""
+    build.per_scalar = True
+    return build
 
 
 # every robot's functions, in output order; one builder per function, each written over the
@@ -100,8 +112,8 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("tau_dq", chain_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
     ("Y_dq", chain_only(lambda model, params: regressor_dq(model, "Y_dq"))),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
-    ("ik_hom", flange_only(lambda model, params: ik_hom(model))),
-    ("ik_dq", flange_only(lambda model, params: ik_dq(model))),
+    ("ik_hom", flange_only(per_scalar(lambda model, params, scalar: ik_hom(model, scalar)))),
+    ("ik_dq", flange_only(per_scalar(lambda model, params, scalar: ik_dq(model, scalar)))),
     # regressors on base parameters (kindyngen/algorithms/regressors.py): the same functions in both
     # params modes; Y_g and Y_m differentiate the Lagrange route, which is written for chains
     ("Y_g", chain_only(lambda model, params: regressor(model, "Y_g"))),
@@ -114,13 +126,14 @@ NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
 TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
 
 
-def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
-    """All applicable functions for ``model`` (optionally only the named ones)."""
+def derive_all(model: RobotModel, params: str = "numeric", only=None, scalar: str = "double") -> list[SymbolicFunction]:
+    """All applicable functions for ``model`` (optionally only the named ones), for C of the
+    scalar type ``scalar`` (and the other languages written beside it)."""
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:
             continue
-        function = build(model, params)
+        function = build(model, params, scalar) if getattr(build, "per_scalar", False) else build(model, params)
         if function is not None:
             out.append(with_lengths_port(function, model))
     return out

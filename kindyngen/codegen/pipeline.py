@@ -47,9 +47,10 @@ class Progress:
             self.stream.write("\n")
 
 
-def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True) -> list[Program]:
-    """Derive and optimise every applicable function of ``model``."""
-    functions = derive_all(model, params, only)
+def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True,
+                   scalar: str = "double") -> list[Program]:
+    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``)."""
+    functions = derive_all(model, params, only, scalar)
     bar = Progress(f"{model.identifier}", len(functions)) if progress else None
     programs = []
     for f in functions:
@@ -98,7 +99,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
     of lane programs as loops over lanes): see render.render_c."""
     out = Path(out_root) / model.identifier
-    programs = build_programs(model, params, only=only, progress=progress)
+    # --scalar float: the IK with float's tolerances, in every language written (the python
+    # module beside float C is its double reference) and in both builds the float error compares
+    programs = build_programs(model, params, only=only, progress=progress, scalar=scalar)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
     _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
