@@ -35,7 +35,7 @@ from ..model.robot_model import RobotDescriptionError
 from .input_bounds import MAX_YAML_BYTES, read_bounded, shown
 
 MAX_DEPTH = 20               # a description nests 5 deep (top, joints, a joint, origin, xyz)
-MAX_NODES = 1_000_000        # with aliases expanded; a 1 MiB file without aliases has fewer
+MAX_NODES = 1_000_000        # with aliases expanded; about the most a 1 MiB file holds without (a value per byte)
 MAX_INTEGER_DIGITS = 4000    # characters of an integer scalar: below int()'s 4300 digits, and
                              # longer than any double (309 digits), refused by its field
 _MERGE = "tag:yaml.org,2002:merge"
