@@ -56,7 +56,8 @@ import sympy
 
 from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia
 from ..model.placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
-from .input_bounds import MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded
+from .input_bounds import (MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded,
+                           shown)
 
 GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
@@ -141,14 +142,14 @@ def _floats(text: str | None, count: int, reading: Reading, field: str, quantity
     """
     tokens = (text or "").split()
     if len(tokens) != count:
-        raise _error(reading, field, f"expected {count} numbers, got {text!r}")
+        raise _error(reading, field, f"expected {count} numbers, got {shown(text)}")
     for token in tokens:
         if not _NUMBER.fullmatch(token):
             hint = " (a xacro expression: run xacro on the file first)" if "$" in token else ""
-            raise _error(reading, field, f"cannot read {token!r} as a number{hint}")
+            raise _error(reading, field, f"cannot read {shown(token)} as a number{hint}")
     values = tuple(float(token) for token in tokens)
     if not all(math.isfinite(v) for v in values):
-        raise _error(reading, field, f"expected finite numbers, got {text!r}")
+        raise _error(reading, field, f"expected finite numbers, got {shown(text)}")
     for k, value in enumerate(values):
         where = f"{field}[{k}]" if count > 1 else field
         if quantity == "angle":
