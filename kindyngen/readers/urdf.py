@@ -56,6 +56,8 @@ import sympy
 
 from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia
 from ..model.placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
+from .input_bounds import (MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded,
+                           shown)
 
 GRAVITY = (sympy.Integer(0), sympy.Integer(0), sympy.Rational(-981, 100))
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
@@ -129,33 +131,45 @@ class _Tree:
 
 # ------------------------------------------------------------------ numbers and elements
 
-def _floats(text: str | None, count: int, reading: Reading, field: str) -> tuple[float, ...]:
-    """``count`` whitespace-separated finite decimals.
+def _floats(text: str | None, count: int, reading: Reading, field: str, quantity: str | None = None
+            ) -> tuple[float, ...]:
+    """``count`` whitespace-separated finite decimals, each 0 or within 1e-100..1e100 in
+    magnitude, and within the plausible range of ``quantity`` (a key of
+    :data:`kindyngen.readers.input_bounds.QUANTITIES`, or ``"angle"``: a full turn).
 
-    >>> _floats("0 0.333 -1e-3", 3, Reading("f.urdf"), "xyz")
+    >>> _floats("0 0.333 -1e-3", 3, Reading("f.urdf"), "xyz", "length")
     (0.0, 0.333, -0.001)
     """
     tokens = (text or "").split()
     if len(tokens) != count:
-        raise _error(reading, field, f"expected {count} numbers, got {text!r}")
+        raise _error(reading, field, f"expected {count} numbers, got {shown(text)}")
     for token in tokens:
         if not _NUMBER.fullmatch(token):
             hint = " (a xacro expression: run xacro on the file first)" if "$" in token else ""
-            raise _error(reading, field, f"cannot read {token!r} as a number{hint}")
+            raise _error(reading, field, f"cannot read {shown(token)} as a number{hint}")
     values = tuple(float(token) for token in tokens)
     if not all(math.isfinite(v) for v in values):
-        raise _error(reading, field, f"expected finite numbers, got {text!r}")
+        raise _error(reading, field, f"expected finite numbers, got {shown(text)}")
+    for k, value in enumerate(values):
+        where = f"{field}[{k}]" if count > 1 else field
+        if quantity == "angle":
+            check_angle(value, reading.source, where)
+        elif quantity is not None:
+            check_quantity(value, quantity, reading.source, where)
+        else:
+            check_number(value, reading.source, where)
     return values
 
 
-def _attribute(element: ET.Element, name: str, reading: Reading, field: str, default: float | None = None) -> float:
+def _attribute(element: ET.Element, name: str, reading: Reading, field: str, default: float | None = None,
+               quantity: str | None = None) -> float:
     """One numeric attribute (``default`` when absent, an error when there is none)."""
     text = element.get(name)
     if text is None:
         if default is None:
             raise _error(reading, f"{field} {name}", "missing")
         return default
-    return _floats(text, 1, reading, f"{field} {name}")[0]
+    return _floats(text, 1, reading, f"{field} {name}", quantity)[0]
 
 
 def _read_origin(element: ET.Element | None, reading: Reading, field: str) -> _Origin:
@@ -163,8 +177,8 @@ def _read_origin(element: ET.Element | None, reading: Reading, field: str) -> _O
     field = f"{field} origin"
     if element is None:
         return _Origin((0.0,) * 3, (0.0,) * 3, field)
-    return _Origin(_floats(element.get("xyz", "0 0 0"), 3, reading, f"{field} xyz"),
-                   _floats(element.get("rpy", "0 0 0"), 3, reading, f"{field} rpy"), field)
+    return _Origin(_floats(element.get("xyz", "0 0 0"), 3, reading, f"{field} xyz", "length"),
+                   _floats(element.get("rpy", "0 0 0"), 3, reading, f"{field} rpy", "angle"), field)
 
 
 def _placement(origin: _Origin, reading: Reading) -> Placement:
@@ -193,10 +207,10 @@ def _read_inertial(element: ET.Element, link: str, reading: Reading) -> _Inertia
         raise _error(reading, f"{field} mass", "missing")
     if inertia_element is None:
         raise _error(reading, f"{field} inertia", "missing")
-    mass = _attribute(mass_element, "value", reading, f"{field} mass")
+    mass = _attribute(mass_element, "value", reading, f"{field} mass", quantity="mass")
     if mass < 0:
         raise _error(reading, f"{field} mass value", f"mass must not be negative, got {mass:g}")
-    moments = tuple(_attribute(inertia_element, key, reading, f"{field} inertia")
+    moments = tuple(_attribute(inertia_element, key, reading, f"{field} inertia", quantity="inertia")
                     for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
     return _Inertial(mass, _read_origin(inertial.find("origin"), reading, field), moments)
 
@@ -217,16 +231,44 @@ def _read_joint(element: ET.Element, index: int, reading: Reading) -> _UrdfJoint
     axis = (1.0, 0.0, 0.0) if axis is None else _floats(axis.get("xyz", "1 0 0"), 3, reading, f"{field} axis xyz")
     limit = element.find("limit")
     if limit is not None:
-        limit = tuple(_attribute(limit, key, reading, f"{field} limit", default=0.0) for key in ("lower", "upper"))
+        # a prismatic joint's limits are lengths; a revolute one's may exceed a full turn
+        # (multi-turn joints, placeholders such as 1e16: a note, _turn_notes)
+        quantity = "length" if kind == "prismatic" else None
+        limit = tuple(_attribute(limit, key, reading, f"{field} limit", default=0.0, quantity=quantity)
+                      for key in ("lower", "upper"))
     mimic = element.find("mimic")
     return _UrdfJoint(name, kind, ends[0], ends[1], _read_origin(element.find("origin"), reading, field),
                       axis, limit, None if mimic is None else mimic.get("joint", "?"))
 
 
+class _DocumentType(Exception):
+    """A ``<!DOCTYPE>`` met while parsing (see :class:`_NoDocumentType`)."""
+
+
+class _NoDocumentType(ET.TreeBuilder):
+    """A tree builder that stops at a document type declaration: a URDF needs no DTD, and the
+    entities one declares can expand without bound ("billion laughs") or name other files.
+    The parser calls ``doctype`` at the declaration's start, before any entity is read."""
+
+    def doctype(self, name, pubid, system):
+        raise _DocumentType(name)
+
+
 def _read_xml(text: str | bytes, reading: Reading) -> ET.Element:
-    """The ``<robot>`` element of a URDF text."""
+    """The ``<robot>`` element of a URDF text (refused with a document type declaration).
+
+    >>> _read_xml('<!DOCTYPE r [<!ENTITY a "1">]><robot name="&a;"/>', Reading("f.urdf"))
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.urdf: field '<!DOCTYPE>': a document type declaration (DTD) is refused: a URDF needs none, and its entities could expand without bound or read other files
+    """
+    parser = ET.XMLParser(target=_NoDocumentType())
     try:
-        root = ET.fromstring(text)
+        parser.feed(text)
+        root = parser.close()
+    except _DocumentType:
+        raise _error(reading, "<!DOCTYPE>", "a document type declaration (DTD) is refused: a URDF needs none, and "
+                                            "its entities could expand without bound or read other files") from None
     except ET.ParseError as exc:
         line, column = exc.position
         raise _error(reading, "<xml>", f"malformed XML at line {line}, column {column + 1}: {exc}") from exc
@@ -243,20 +285,23 @@ def _closest(name: str, names) -> str:
 def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
     """Links and joints (direct children of ``<robot>``: a ``<transmission>`` names joints
     too), checked to form one tree."""
-    links = {}
+    links, link_index = {}, {}
     for index, element in enumerate(robot.findall("link")):
         name = _name(element, "link", index, reading)
         if name in links:
-            raise _error(reading, f"link '{name}'", "defined twice")
+            raise _error(reading, f"link '{name}'", f"defined twice: <link> number {link_index[name] + 1} and "
+                                                    f"number {index + 1}")
         links[name] = _read_inertial(element, name, reading)
+        link_index[name] = index
     if not links:
         raise _error(reading, "<robot>", "no <link> elements")
-    parent_joint, child_joints, joint_names = {}, {name: [] for name in links}, set()
+    parent_joint, child_joints, joint_index = {}, {name: [] for name in links}, {}
     for index, element in enumerate(robot.findall("joint")):
         joint = _read_joint(element, index, reading)
-        if joint.name in joint_names:
-            raise _error(reading, f"joint '{joint.name}'", "defined twice")
-        joint_names.add(joint.name)
+        if joint.name in joint_index:
+            raise _error(reading, f"joint '{joint.name}'", f"defined twice: <joint> number "
+                                                           f"{joint_index[joint.name] + 1} and number {index + 1}")
+        joint_index[joint.name] = index
         for end, link in (("parent", joint.parent), ("child", joint.child)):
             if link not in links:
                 raise _error(reading, f"joint '{joint.name}' {end}",
@@ -346,6 +391,26 @@ def _limits(joint: _UrdfJoint, reading: Reading) -> tuple[float, float]:
     if not lower < upper:
         raise _error(reading, field, f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     return lower, upper
+
+
+def _note_turns(joints: list, reading: Reading) -> None:
+    """One note for the revolute joints with a limit beyond a full turn that could be degrees
+    (up to 720): URDF states radians, and real URDFs write multi-turn ranges and placeholders
+    (Solo's -10..10, a drone rotor's 1e16), so limits are read as written; the note is there
+    for a URDF written in degrees by mistake.
+
+    >>> reading = Reading("f.urdf")
+    >>> _note_turns([Joint(Placement(), Placement(), 0, -170.0, 170.0, name="q1")], reading)
+    >>> print(reading.notes[0])
+    f.urdf: revolute joint limits beyond a full turn, read as radians (URDF's unit; a multi-turn or unlimited joint): 'q1' -170..170; if degrees were meant, convert them
+    """
+    wide = [j for j in joints if not j.prismatic and (degrees_hint(j.lower) or degrees_hint(j.upper))]
+    if not wide:
+        return
+    listed = ", ".join(f"'{j.name}' {j.lower:g}..{j.upper:g}" for j in wide[:3])
+    more = f" and {len(wide) - 3} more" if len(wide) > 3 else ""
+    reading.note(f"{reading.source}: revolute joint limits beyond a full turn, read as radians (URDF's unit; a "
+                 f"multi-turn or unlimited joint): {listed}{more}; if degrees were meant, convert them")
 
 
 def _axis(joint: _UrdfJoint, reading: Reading) -> tuple:
@@ -479,6 +544,7 @@ def _chain(name: str, tree: _Tree, base: str | None, tip: str | None, reading: R
         fixed, flange = Placement(), joint.child
     if not joints:
         raise _error(reading, "--tip", f"no moving joint between links '{base}' and '{tip}'")
+    _note_turns(joints, reading)
     return RobotModel(name=name, convention="frames", gravity=GRAVITY, joints=tuple(joints), links=tuple(links),
                       source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
 
@@ -515,6 +581,7 @@ def _whole_tree(name: str, tree: _Tree, frames, floating_base: bool, reading: Re
     visit(tree.root, -1, Placement())
     if not joints:
         raise _error(reading, "<robot>", "no moving joint (revolute, continuous or prismatic)")
+    _note_turns(joints, reading)
     links = tuple(_combine(_rigid_body(tree, child, moving, reading), reading) for child in bodies)
     root = _combine(_rigid_body(tree, tree.root, moving, reading), reading)
     if frames is None:
@@ -538,7 +605,6 @@ def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None,
 
 
 def _file_text(path: str | Path) -> bytes:
-    try:
-        return Path(path).read_bytes()       # bytes: the XML declaration names the encoding
-    except OSError as exc:
-        raise RobotDescriptionError(str(path), "<file>", f"cannot read: {exc.strerror}") from exc
+    """The file's bytes (the XML declaration names the encoding), at most
+    :data:`kindyngen.readers.input_bounds.MAX_URDF_BYTES`."""
+    return read_bounded(path, MAX_URDF_BYTES, "a URDF")

@@ -15,106 +15,69 @@ Example:
 """
 from __future__ import annotations
 
-import ast
 import difflib
 import math
 import re
 from pathlib import Path
 
 import sympy
-import yaml
 
 from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
                                  check_inertia)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
+from .constant_expressions import NAMESPACE, parse_constant
+from .input_bounds import beyond_turn, check_angle, check_number, check_quantity, degrees_hint, shown
 from .urdf import load_urdf
-
-_SYMPY_FUNCTIONS = {"sqrt": sympy.sqrt, "sin": sympy.sin, "cos": sympy.cos, "tan": sympy.tan,
-                    "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan,
-                    "atan2": sympy.atan2}
-_SYMPY_NAMESPACE = {"pi": sympy.pi, **_SYMPY_FUNCTIONS}
-# Only arithmetic on numbers, pi and the functions above: sympify evaluates its input as
-# Python, so anything else (attributes, subscripts, other calls) is refused before it runs.
-_EXPRESSION_NODES = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Add, ast.Sub, ast.Mult,
-                     ast.Div, ast.Pow, ast.UAdd, ast.USub, ast.Constant, ast.Name, ast.Load,
-                     ast.Call)
-
-
-def _check_expression(text: str, source: str, field: str) -> None:
-    """Refuse a string that is not an arithmetic expression in numbers, pi and a few functions."""
-    try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except (SyntaxError, ValueError) as exc:
-        raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number") from exc
-    for node in ast.walk(tree):
-        if not isinstance(node, _EXPRESSION_NODES):
-            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
-        if isinstance(node, ast.Constant) and (isinstance(node.value, bool)
-                                               or not isinstance(node.value, (int, float))):
-            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
-        if isinstance(node, ast.Name) and node.id not in _SYMPY_NAMESPACE:
-            raise RobotDescriptionError(
-                source, field, f"{text!r} is not a real constant (unknown name {node.id!r}; "
-                f"allowed: {', '.join(sorted(_SYMPY_NAMESPACE))})")
-        if isinstance(node, ast.Call) and (node.keywords or not isinstance(node.func, ast.Name)
-                                           or node.func.id not in _SYMPY_FUNCTIONS):
-            raise RobotDescriptionError(source, field, f"cannot parse {text!r} as a number")
+from .yaml_loading import load_yaml
 
 
 def _number(value, source: str, field: str, *, exact: bool = False):
-    """Parse a number or a constant expression such as ``pi/2``.
+    """Parse a number or a constant expression such as ``pi/2`` (bounded:
+    :mod:`kindyngen.readers.constant_expressions`; 0 or a magnitude within 1e-100..1e100).
 
     >>> _number("-pi/2", "f.yaml", "alpha", exact=True)
     -pi/2
     """
     if isinstance(value, bool) or value is None or isinstance(value, (list, dict)):
-        raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
+        raise RobotDescriptionError(source, field, f"expected a number, got {shown(value)}")
     if isinstance(value, (int, float)):
         try:
             finite = math.isfinite(float(value))
         except OverflowError:
             finite = False
         if not finite:
-            raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
+            raise RobotDescriptionError(source, field, f"expected a finite number, got {shown(value)}")
+        check_number(float(value), source, field)
         # the shortest decimal that gives this double (Python's repr, the same on every
         # machine): the value as written in the file, as an exact rational
         return sympy.Rational(repr(float(value))) if exact else float(value)
     if isinstance(value, str):
-        _check_expression(value, source, field)
-        try:
-            expr = sympy.sympify(value, locals=_SYMPY_NAMESPACE, rational=True)
-        except Exception as exc:  # sympify raises many kinds (SympifyError, TypeError, ...)
-            raise RobotDescriptionError(source, field, f"cannot parse {value!r} as a number") from exc
-        if not isinstance(expr, sympy.Expr) or not expr.is_number or not expr.is_real:
-            raise RobotDescriptionError(source, field, f"{value!r} is not a real constant")
-        try:
-            finite = math.isfinite(float(expr))
-        except (OverflowError, TypeError, ValueError):
-            finite = False
-        if not finite:
-            raise RobotDescriptionError(source, field, f"expected a finite number, got {value!r}")
+        expr = parse_constant(value, source, field)
+        check_number(float(expr), source, field)
         return expr if exact else float(expr)
-    raise RobotDescriptionError(source, field, f"expected a number, got {value!r}")
+    raise RobotDescriptionError(source, field, f"expected a number, got {shown(value)}")
 
 
-def _rational(value, source: str, field: str) -> sympy.Rational:
+def _rational(value, source: str, field: str, quantity: str = "coefficient") -> sympy.Rational:
     """A number as an exact rational: decimals and fractions exactly as written; a constant
-    expression with no rational value (``sqrt(2)``) as the rational of its double.
+    expression with no rational value (``sqrt(2)``) as the rational of its double; within the
+    plausible range of ``quantity`` (:data:`kindyngen.readers.input_bounds.QUANTITIES`).
 
-    >>> _rational(0.0012, "f.yaml", "mass"), _rational("1/3", "f.yaml", "mass")
+    >>> _rational(0.0012, "f.yaml", "mass", "mass"), _rational("1/3", "f.yaml", "mass", "mass")
     (3/2500, 1/3)
     """
     value = _number(value, source, field, exact=True)
+    check_quantity(float(value), quantity, source, field)
     return value if value.is_Rational else sympy.Rational(repr(float(value)))
 
 
-def _vector(value, length: int, source: str, field: str) -> tuple[sympy.Rational, ...]:
+def _vector(value, length: int, source: str, field: str, quantity: str) -> tuple[sympy.Rational, ...]:
     if not isinstance(value, (list, tuple)):
-        raise RobotDescriptionError(source, field, f"expected a list of {length} numbers, got {value!r}")
+        raise RobotDescriptionError(source, field, f"expected a list of {length} numbers, got {shown(value)}")
     if len(value) != length:
         raise RobotDescriptionError(source, field, f"expected {length} numbers, got {len(value)}")
-    return tuple(_rational(v, source, f"{field}[{k}]") for k, v in enumerate(value))
+    return tuple(_rational(v, source, f"{field}[{k}]", quantity) for k, v in enumerate(value))
 
 
 # every key a description may hold; anything else is refused with the closest known key
@@ -165,12 +128,13 @@ def _length(value, source: str, field: str):
     >>> _length("l1", "f.yaml", "d"), _length(0.4, "f.yaml", "d")
     (l1, 2/5)
     """
-    if isinstance(value, str) and _LENGTH_NAME.fullmatch(value.strip()) and value.strip() not in _SYMPY_NAMESPACE:
+    if isinstance(value, str) and _LENGTH_NAME.fullmatch(value.strip()) and value.strip() not in NAMESPACE:
         name = value.strip()
         if _RESERVED.fullmatch(name):
             raise RobotDescriptionError(source, field, f"the name {name!r} is reserved for generated temporaries")
         return sympy.Symbol(name, real=True)
     value = _number(value, source, field, exact=True)
+    check_quantity(float(value), "length", source, field)
     return exact_length(float(value)) if value.is_Rational else value
 
 
@@ -179,6 +143,7 @@ def _angle(value, reading: Reading, field: str) -> sympy.Expr:
     :func:`kindyngen.model.placement.clean_angle` (floats written for multiples of pi/12 read as
     them; within 1e-5 snapped with a note unless the user keeps them)."""
     value = _number(value, reading.source, field, exact=True)
+    check_angle(float(value), reading.source, field)
     if not value.is_Rational or value.is_Integer and value == 0:
         return value
     return reading.angle(float(value), field)
@@ -187,7 +152,8 @@ def _angle(value, reading: Reading, field: str) -> sympy.Expr:
 def _kind(row, reading: Reading, field: str) -> str:
     kind = row.get("type", "revolute")
     if kind not in JOINT_TYPES:
-        raise RobotDescriptionError(reading.source, f"{field}.type", f"expected one of {JOINT_TYPES}, got {kind!r}")
+        raise RobotDescriptionError(reading.source, f"{field}.type",
+                                    f"expected one of {JOINT_TYPES}, got {shown(kind)}")
     return kind
 
 
@@ -212,13 +178,14 @@ def parse_origin(value, reading: Reading, field: str) -> Placement:
     """``{xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` (both optional, zero) as a placement
     ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (the URDF convention)."""
     if not isinstance(value, dict):
-        raise RobotDescriptionError(reading.source, field, f"expected a mapping with xyz and rpy, got {value!r}")
+        raise RobotDescriptionError(reading.source, field, f"expected a mapping with xyz and rpy, got {shown(value)}")
     _check_keys(value, ORIGIN_KEYS, reading.source, field + ".")
     xyz = value.get("xyz", [0, 0, 0])
     rpy = value.get("rpy", [0, 0, 0])
     for key, item in (("xyz", xyz), ("rpy", rpy)):
         if not isinstance(item, (list, tuple)) or len(item) != 3:
-            raise RobotDescriptionError(reading.source, f"{field}.{key}", f"expected a list of 3 numbers, got {item!r}")
+            raise RobotDescriptionError(reading.source, f"{field}.{key}",
+                                        f"expected a list of 3 numbers, got {shown(item)}")
     lengths = [_length(v, reading.source, f"{field}.xyz[{k}]") for k, v in enumerate(xyz)]
     angles = [_angle(v, reading, f"{field}.rpy[{k}]") for k, v in enumerate(rpy)]
     return rpy_xyz(lengths, angles)
@@ -227,7 +194,7 @@ def parse_origin(value, reading: Reading, field: str) -> Placement:
 def parse_axis(value, source: str, field: str) -> tuple:
     """A joint axis: three numbers, not all zero, as an exact unit vector."""
     if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise RobotDescriptionError(source, field, f"expected a list of 3 numbers, got {value!r}")
+        raise RobotDescriptionError(source, field, f"expected a list of 3 numbers, got {shown(value)}")
     numbers = [_number(v, source, f"{field}[{k}]") for k, v in enumerate(value)]
     if max(abs(v) for v in numbers) < 1e-9:
         raise RobotDescriptionError(source, field, f"the axis {numbers} has no direction (all zero)")
@@ -245,18 +212,18 @@ def _frames_placement(row, kind: str, reading: Reading, field: str):
 def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     source = reading.source
     if not isinstance(row, dict):
-        raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+        raise RobotDescriptionError(source, field, f"expected a mapping, got {shown(row)}")
     kind = _kind(row, reading, field)
     if convention in CONVENTIONS:
         before, after, offset, dh = _dh_placement(row, convention, kind, reading, field)
     else:
         before, after, offset, dh = _frames_placement(row, kind, reading, field)
-    lower = _number(_require(row, "lower", source, field + "."), source, f"{field}.lower")
-    upper = _number(_require(row, "upper", source, field + "."), source, f"{field}.upper")
+    lower, upper = (_limit(_require(row, key, source, field + "."), kind, source, f"{field}.{key}")
+                    for key in ("lower", "upper"))
     if not lower < upper:
         raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     friction = _parse_friction(row["friction"], source, f"{field}.friction") if "friction" in row else None
-    armature = _nonnegative(row["armature"], source, f"{field}.armature") if "armature" in row else None
+    armature = _nonnegative(row["armature"], source, f"{field}.armature", "inertia") if "armature" in row else None
     name = row.get("name", "")
     if not isinstance(name, str):
         raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
@@ -273,9 +240,32 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
                  friction=friction, armature=armature, dh=dh, **sensing)
 
 
-def _nonnegative(value, source: str, field: str) -> sympy.Rational:
+def _limit(value, kind: str, source: str, field: str) -> float:
+    """A joint limit: a prismatic joint's a length; a revolute joint's within a full turn
+    unless written as an expression (``4*pi``, ``'10'``: a multi-turn joint), since a plain
+    number beyond it (170) is almost always degrees.
+
+    >>> _limit("4*pi", "revolute", "f.yaml", "upper") > 12
+    True
+    >>> _limit(170, "revolute", "f.yaml", "joints[0].upper")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'joints[0].upper': 170 rad is beyond a full turn (|q| <= 2*pi); 170 looks like degrees: for 170 degrees write 17*pi/18 (2.96706); a multi-turn range is written as an expression (4*pi, '12.5')
+    """
+    limit = _number(value, source, field)
+    if kind == "prismatic":
+        check_quantity(limit, "length", source, field)
+    elif beyond_turn(limit) and not isinstance(value, str):
+        hint = degrees_hint(limit)
+        raise RobotDescriptionError(source, field, f"{limit:g} rad is beyond a full turn (|q| <= 2*pi); "
+                                    + (f"{hint}; " if hint else "")
+                                    + "a multi-turn range is written as an expression (4*pi, '12.5')")
+    return limit
+
+
+def _nonnegative(value, source: str, field: str, quantity: str = "coefficient") -> sympy.Rational:
     """A coefficient that is physically non-negative (viscous and Coulomb friction, armature)."""
-    value = _rational(value, source, field)
+    value = _rational(value, source, field, quantity)
     if value < 0:
         raise RobotDescriptionError(source, field, f"must be non-negative (a physical coefficient), got {float(value):g}")
     return value
@@ -284,7 +274,8 @@ def _nonnegative(value, source: str, field: str) -> sympy.Rational:
 def _parse_friction(row, source: str, field: str) -> Friction:
     """``{viscous: fv, coulomb: fc, offset: f0}``, each optional (0), fv and fc >= 0."""
     if not isinstance(row, dict):
-        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(FRICTION_KEYS)}, got {row!r}")
+        raise RobotDescriptionError(source, field,
+                                    f"expected a mapping with {', '.join(FRICTION_KEYS)}, got {shown(row)}")
     _check_keys(row, FRICTION_KEYS, source, field + ".")
     zero = sympy.Integer(0)
     return Friction(viscous=_nonnegative(row.get("viscous", 0), source, f"{field}.viscous"),
@@ -294,13 +285,13 @@ def _parse_friction(row, source: str, field: str) -> Friction:
 
 def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) -> Link:
     if not isinstance(row, dict):
-        raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+        raise RobotDescriptionError(source, field, f"expected a mapping, got {shown(row)}")
     _check_keys(row, LINK_KEYS, source, field + ".")
-    mass = _rational(_require(row, "mass", source, field + "."), source, f"{field}.mass")
+    mass = _rational(_require(row, "mass", source, field + "."), source, f"{field}.mass", "mass")
     if mass <= 0:
         raise RobotDescriptionError(source, f"{field}.mass", f"mass must be positive, got {float(mass):g}")
-    com = _vector(_require(row, "com", source, field + "."), 3, source, f"{field}.com")
-    inertia = _vector(_require(row, "inertia", source, field + "."), 6, source, f"{field}.inertia")
+    com = _vector(_require(row, "com", source, field + "."), 3, source, f"{field}.com", "length")
+    inertia = _vector(_require(row, "inertia", source, field + "."), 6, source, f"{field}.inertia", "inertia")
     link = Link(mass=mass, com=com, inertia=inertia)
     check_inertia(link.inertia_matrix(), source, f"{field}.inertia", point_mass_allowed)
     return link
@@ -349,11 +340,12 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     if tree and convention != FRAMES:
         raise RobotDescriptionError(source, "dh", "a tree gives its joints by origin and axis: dh: none")
     if convention not in CONVENTIONS + (FRAMES,):
-        raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS + (FRAMES,)}, got {convention!r}")
-    gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity")
+        raise RobotDescriptionError(source, "dh", f"expected one of {CONVENTIONS + (FRAMES,)}, got {shown(convention)}")
+    gravity = _vector(_require(data, "gravity", source, ""), 3, source, "gravity", "gravity")
     rows = _require(data, "joints", source, "")
     if not isinstance(rows, list) or not rows:
         raise RobotDescriptionError(source, "joints", "expected a non-empty list of joints")
+    _check_unique_names(rows, source)
     if tree:
         joints, parents, index = _tree_joints(rows, reading)
     else:
@@ -380,6 +372,26 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
                       coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes))
 
 
+def _check_unique_names(rows: list, source: str) -> None:
+    """Refuse two joints of one name (a name selects a joint: --frames, parents, logs),
+    naming both.
+
+    >>> _check_unique_names([{"name": "a"}, {}, {}, {"name": "a"}], "f.yaml")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'joints[3].name': 'a' is also the name of joints[0]: joint names are unique
+    """
+    first = {}
+    for k, row in enumerate(rows):
+        name = row.get("name") if isinstance(row, dict) else None
+        if not isinstance(name, str) or not name:
+            continue
+        if name in first:
+            raise RobotDescriptionError(source, f"joints[{k}].name", f"{shown(name)} is also the name of "
+                                                                     f"joints[{first[name]}]: joint names are unique")
+        first[name] = k
+
+
 def _tree_joints(rows: list, reading: Reading) -> tuple[tuple, tuple, dict]:
     """A tree's joints, their parents (-1: the base) and the index of each joint's name."""
     source = reading.source
@@ -387,7 +399,7 @@ def _tree_joints(rows: list, reading: Reading) -> tuple[tuple, tuple, dict]:
     for k, row in enumerate(rows):
         field = f"joints[{k}]"
         if not isinstance(row, dict):
-            raise RobotDescriptionError(source, field, f"expected a mapping, got {row!r}")
+            raise RobotDescriptionError(source, field, f"expected a mapping, got {shown(row)}")
         _check_keys(row, TREE_JOINT_KEYS, source, field + ".")
         joint = _parse_joint({key: v for key, v in row.items() if key != "parent"}, FRAMES, reading, field)
         if not joint.name or joint.name in index or joint.name == BASE_NAME:
@@ -437,24 +449,4 @@ def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = No
                          floating_base=floating_base)
     if not tree and (base is not None or tip is not None):
         raise RobotDescriptionError(source, "<file>", "--base and --tip apply to URDF files only")
-    return parse_robot(_read_yaml(path), source, snap_angles, tree=tree, frames=frames, floating_base=floating_base)
-
-
-def _read_yaml(path: Path):
-    source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise RobotDescriptionError(source, "<file>", f"cannot read: {exc.strerror}") from exc
-    except UnicodeDecodeError as exc:
-        raise RobotDescriptionError(source, "<file>", f"not a text file (byte {exc.start}: {exc.reason}): a robot "
-                                                      f"description is YAML or URDF text") from None
-    if "\0" in text:
-        raise RobotDescriptionError(source, "<file>", "contains NUL bytes: a binary file, not a YAML description")
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise RobotDescriptionError(source, "<yaml>", f"malformed YAML{where}: {problem}") from exc
+    return parse_robot(load_yaml(path), source, snap_angles, tree=tree, frames=frames, floating_base=floating_base)

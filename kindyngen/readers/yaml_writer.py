@@ -23,6 +23,7 @@ import sympy
 
 from ..model.robot_model import Friction, Link, RobotModel
 from ..model.placement import ANGLE_STEP, Z, Placement, rotation, translation
+from .input_bounds import beyond_turn
 
 
 def _angle(value) -> float | str:
@@ -72,8 +73,23 @@ def _joint(joint, effects: dict) -> dict:
         row["name"] = joint.name
     row["origin"] = origin(joint.before * (_offset(joint) * joint.after))
     row["axis"] = [_number(v) for v in axis]
-    row.update(lower=float(joint.lower), upper=float(joint.upper), **effects)
+    row.update(lower=_limit(joint, joint.lower), upper=_limit(joint, joint.upper), **effects)
     return row
+
+
+def _limit(joint, value: float) -> float | str:
+    """A joint limit; a revolute one beyond a full turn (a multi-turn URDF joint) as an
+    expression, the form the YAML reader takes such a range in (a plain number beyond a full
+    turn is read as degrees written by mistake and refused).
+
+    >>> from kindyngen.model.robot_model import Joint
+    >>> joint = Joint(Placement(), Placement(), 0, -10.0, 2.5)
+    >>> _limit(joint, joint.lower), _limit(joint, joint.upper)
+    ('-10.0', 2.5)
+    """
+    if not joint.prismatic and beyond_turn(value):
+        return repr(float(value))
+    return float(value)
 
 
 def _offset(joint) -> Placement:

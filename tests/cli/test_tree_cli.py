@@ -94,7 +94,7 @@ def test_yaml_tree_needs_joints_by_origin_and_axis(tmp_path, capsys, monkeypatch
 
 @pytest.mark.parametrize("change, message", [
     (lambda d: d["joints"][1].update(parent="nope"), "field 'joints[1].parent': 'nope' is not an earlier joint"),
-    (lambda d: d["joints"][1].update(name="hip"), "a tree's joints need unique names"),
+    (lambda d: d["joints"][1].update(name="hip"), "field 'joints[1].name': 'hip' is also the name of joints[0]"),
     (lambda d: d["joints"][0].update(friction={"viscous": 1}), "field 'joints[0].friction': unknown key"),
     (lambda d: d.update(payload={}), "field 'payload': unknown key"),
 ])
