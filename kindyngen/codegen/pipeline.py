@@ -15,7 +15,7 @@ from ..algorithms.regressors import base_params_document, undecided_notes
 from .catalog import derive_all
 from .interface import manifest
 from .optimize import Program, optimize
-from .render import RENDERERS
+from .render import RENDERERS, casadi_builders
 from .count_report import opcounts_json, opcounts_markdown
 from ..model.robot_model import RobotModel
 
@@ -63,11 +63,13 @@ def build_programs(model: RobotModel, params: str = "numeric", only=None, progre
 
 def _write(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")     # names may hold any letters, whatever the locale
 
 
 def save_casadi_functions(module_source: str, directory: Path) -> None:
-    """Build every Function of the rendered CasADi module and save it as <name>.casadi."""
+    """Build every Function of a CasADi module and save it as <name>.casadi. The pipeline runs
+    :func:`kindyngen.codegen.render.casadi_builders`, the module without any user text, never
+    the written one: generating runs nothing the description holds."""
     namespace: dict = {}
     exec(compile(module_source, str(directory / "module"), "exec"), namespace)
     for name, build in namespace["BUILDERS"].items():
@@ -100,7 +102,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     programs = build_programs(model, params, only=only, progress=progress)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
-    _write(out / "functions.json", json.dumps(document, indent=1) + "\n")
+    _write(out / "functions.json", json.dumps(document, indent=1, allow_nan=False) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
@@ -115,6 +117,6 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
                    if lang == "c" else {})
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
-            if lang == "casadi":
-                save_casadi_functions(text, out / lang)
+        if lang == "casadi":
+            save_casadi_functions(casadi_builders(model, programs), out / lang)
     return out
