@@ -561,6 +561,8 @@ def render_matlab(model: RobotModel, programs) -> dict[str, str]:
     iterative ik_dls is left out."""
     env, ctx = _environment(matlab_comment), _context(model, programs, MATLAB)
     ctx["mex"] = f"{model.identifier}_mex"
+    # the gateway's matrix reader, only where an input is a matrix (an unused static function is a warning)
+    ctx["matrix_inputs"] = any(len(p.shape) == 2 for f in ctx["functions"] for p in f.inputs)
     files = {f"{f.c_symbol}.m": env.get_template("matlab/function.m.j2").render(ctx, f=f) for f in ctx["functions"]}
     files[f"{ctx['mex']}.c"] = _environment(c_comment).get_template("matlab/mex.c.j2").render(ctx)
     files[f"{model.identifier}_build_mex.m"] = env.get_template("matlab/build_mex.m.j2").render(ctx)
