@@ -91,8 +91,8 @@ def load(path, args):
                            floating_base=args.floating_base)
     else:
         model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
-    for note in model.notes:
-        print(f"note: {note}", file=sys.stderr)
+    for note in model.notes:      # a note may quote an attribute no name check saw (a URDF <mimic joint>)
+        print(f"note: {one_line(note)}", file=sys.stderr)
     return model
 
 
