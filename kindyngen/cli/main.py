@@ -20,6 +20,7 @@ from ..json_text import strict_json
 from ..runtime.evaluate import EvaluationError
 from ..measured import MeasuredDataError
 from ..model.robot_model import RobotDescriptionError
+from ..model.user_text import one_line
 from ..readers.yaml_description import load_robot
 
 
@@ -91,8 +92,8 @@ def load(path, args):
                            floating_base=args.floating_base)
     else:
         model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
-    for note in model.notes:
-        print(f"note: {note}", file=sys.stderr)
+    for note in model.notes:      # a note may quote an attribute no name check saw (a URDF <mimic joint>)
+        print(f"note: {one_line(note)}", file=sys.stderr)
     return model
 
 
@@ -124,8 +125,8 @@ def _cmd_describe(args) -> int:
         data = describe(model)
     except ValueError as exc:       # a standard DH table: its link frames are off the joint axes
         raise UsageError(f"{args.robot}: {exc}") from None
-    header = (f"# {model.name}: written by kindyngen describe from {Path(args.robot).name}"
-              + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "") + "\n")
+    header = "# " + one_line(f"{model.name}: written by kindyngen describe from {Path(args.robot).name}"
+                             + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "")) + "\n"
     text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     if args.out:
         try:
@@ -647,5 +648,7 @@ def main(argv=None) -> int:
         message = str(exc)
     except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
         message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
-    print(f"error: {message}", file=sys.stderr)
+    # no control character a file or its names hold reaches the terminal (an escape sequence, a
+    # carriage return); newlines stay where a message has them on purpose (a compiler's output)
+    print("error: " + "\n".join(one_line(line) for line in message.split("\n")), file=sys.stderr)
     return EXIT_BAD_INPUT

@@ -6,6 +6,7 @@ paper's Table II (Hartl-Nesic and Meiringer: Maple 2018, with and without optimi
 from __future__ import annotations
 
 from .optimize import IN_PLACE_BOUND, Program
+from ..model.user_text import markdown
 
 # Kinematics paper, Table II: (add, mult, calls); "derived" = without code optimisation.
 PAPER_TABLE_II = {
@@ -61,7 +62,7 @@ def _critical_markdown(programs) -> list[str]:
 
 def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool,
                       float_error: dict | None = None) -> str:
-    lines = [f"# Operation counts: {robot_name}", "",
+    lines = [f"# Operation counts: {markdown(robot_name)}", "",
              "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
              "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
              "after = the generated straight-line code after CSE."

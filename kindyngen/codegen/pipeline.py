@@ -15,7 +15,7 @@ from ..json_text import strict_json
 from .catalog import derive_all
 from .interface import manifest
 from .optimize import Program, optimize
-from .render import RENDERERS
+from .render import RENDERERS, casadi_builders
 from .count_report import opcounts_json, opcounts_markdown
 from ..model.robot_model import RobotModel
 
@@ -64,11 +64,13 @@ def build_programs(model: RobotModel, params: str = "numeric", only=None, progre
 
 def _write(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")     # names may hold any letters, whatever the locale
 
 
 def save_casadi_functions(module_source: str, directory: Path) -> None:
-    """Build every Function of the rendered CasADi module and save it as <name>.casadi."""
+    """Build every Function of a CasADi module and save it as <name>.casadi. The pipeline runs
+    :func:`kindyngen.codegen.render.casadi_builders`, the module without any user text, never
+    the written one: generating runs nothing the description holds."""
     namespace: dict = {}
     exec(compile(module_source, str(directory / "module"), "exec"), namespace)
     for name, build in namespace["BUILDERS"].items():
@@ -118,6 +120,6 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
                    if lang == "c" else {})
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
-            if lang == "casadi":
-                save_casadi_functions(text, out / lang)
+        if lang == "casadi":
+            save_casadi_functions(casadi_builders(model, programs), out / lang)
     return out

@@ -27,16 +27,18 @@ import numpy as np
 import sympy
 
 from .placement import Placement
+from .user_text import identifier, name_problem, one_line
 
 CONVENTIONS = ("standard", "modified")
 
 
 class RobotDescriptionError(ValueError):
-    """A robot description that cannot be used, with the file, field and reason."""
+    """A robot description that cannot be used, with the file, field and reason; its message is
+    one line whatever the file's names hold (:func:`kindyngen.model.user_text.one_line`)."""
 
     def __init__(self, source: str, field: str, reason: str):
         self.source, self.field, self.reason = source, field, reason
-        super().__init__(f"{source}: field '{field}': {reason}")
+        super().__init__(one_line(f"{source}: field '{field}': {reason}"))
 
 
 @dataclass(frozen=True)
@@ -323,14 +325,31 @@ class RobotModel:
 
     @property
     def identifier(self) -> str:
-        """The name as a C identifier (used as the prefix of generated functions)."""
-        ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
-        return ident if not ident[0].isdigit() else "r_" + ident
+        """The name as the identifier of the generated files and symbols (the output folder,
+        ``<identifier>.h``, the prefix of every C function): :func:`kindyngen.model.user_text.identifier`."""
+        return identifier(self.name)
 
 
 def _translations(placement: Placement) -> tuple:
     """The entries of a placement's translations, in order."""
     return tuple(v for kind, *rest in placement.factors if kind == "trans" for v in rest[0])
+
+
+def check_name(name: str, source: str, field: str) -> str:
+    """``name`` itself when it may name a robot, joint, link or frame (no control character:
+    :func:`kindyngen.model.user_text.name_problem`), else a RobotDescriptionError saying why.
+
+    >>> check_name('arm "7" */', "f.yaml", "name")
+    'arm "7" */'
+    >>> check_name("a\\x00b", "f.yaml", "joints[1].name")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'joints[1].name': holds the control character U+0000 (NULL) at position 2: a name is one line of printable text
+    """
+    problem = name_problem(name)
+    if problem:
+        raise RobotDescriptionError(source, field, problem)
+    return name
 
 
 def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:

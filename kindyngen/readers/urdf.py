@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np     # only to check inertias as written: nothing in the model is computed with it
 import sympy
 
-from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia
+from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia, check_name
 from ..model.placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
 from .input_bounds import (MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded,
                            shown)
@@ -192,7 +192,7 @@ def _name(element: ET.Element, what: str, index: int, reading: Reading) -> str:
     name = element.get("name")
     if not name:
         raise _error(reading, f"{what}[{index}] name", f"<{what}> number {index + 1} has no name")
-    return name
+    return check_name(name, reading.source, f"{what}[{index}] name")
 
 
 def _read_inertial(element: ET.Element, link: str, reading: Reading) -> _Inertial | None:
@@ -327,7 +327,7 @@ def _read_robot(text: str | bytes, reading: Reading) -> tuple[str, _Tree]:
     name = (robot.get("name") or "").strip()
     if not name:
         raise _error(reading, "<robot> name", "missing (the model's name)")
-    return name, _read_tree(robot, reading)
+    return check_name(name, reading.source, "<robot> name"), _read_tree(robot, reading)
 
 
 def _descendants(child_joints: dict, link: str, follow=lambda joint: True) -> list:

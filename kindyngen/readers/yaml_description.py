@@ -23,7 +23,7 @@ from pathlib import Path
 import sympy
 
 from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
-                                 check_inertia)
+                                 check_inertia, check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
 from .constant_expressions import NAMESPACE, parse_constant
@@ -227,6 +227,7 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     name = row.get("name", "")
     if not isinstance(name, str):
         raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
+    check_name(name, source, f"{field}.name")
     sensing = {}
     for key in ("stiffness", "torque_gain"):
         if key in row:
@@ -305,7 +306,7 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
     name = _require(data, "name", source, "")
     if not isinstance(name, str) or not name.strip():
         raise RobotDescriptionError(source, "name", f"expected a non-empty string, got {name!r}")
-    return name
+    return check_name(name, source, "name")
 
 
 TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")

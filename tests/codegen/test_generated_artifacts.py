@@ -29,6 +29,21 @@ def test_c_compiles_strictly(robot, compiler, tmp_path):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("compiler", ["gcc", "clang"])
+def test_mex_gateway_compiles_strictly(robot, compiler):
+    """The MEX gateway against Octave's mex.h (a system header: its own warnings are not the
+    gateway's); the gateway itself as strict as the C."""
+    mkoctfile = shutil.which("mkoctfile")
+    if shutil.which(compiler) is None or mkoctfile is None:
+        pytest.skip(f"{compiler} or mkoctfile (GNU Octave's headers) not installed")
+    flags = subprocess.run([mkoctfile, "-p", "INCFLAGS"], capture_output=True, text=True, check=True).stdout.split()
+    done = subprocess.run([compiler, *STRICT, "-fsyntax-only", *(f"-isystem{f[2:]}" for f in flags),
+                           "-I", str(GENERATED / robot / "c"), str(GENERATED / robot / "matlab" / f"{robot}_mex.c")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
 def test_c_builds_with_cmake(robot, tmp_path):
     if shutil.which("cmake") is None:
         pytest.skip("cmake not installed")
