@@ -27,10 +27,12 @@ LANGS = ("c", "python", "casadi", "jax", "matlab")
 GENERATE_LANGS = ("c", "python", "casadi", "python_c", "jax", "matlab")
 EXIT_BAD_INPUT = 2
 #: what each command writes into --out (an earlier run's file of these names that a new run
-#: does not write is removed, so two runs never mix: kindyngen.cli.output_dir)
+#: does not write is dropped, so two runs never mix: kindyngen.output_folder.replace_outputs)
 IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
 DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "residuals.png", "gap.png", "heldout_torques.png")
 EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
+REPRODUCE_OUTPUTS = ("reproduction.json", "report.md", "fig4_torque_validation.png", "fig6_elements.png",
+                     "g2_published.png")
 MAX_HOLDOUT = 0.8
 MAX_FOLDS = 50
 #: excite refuses a design whose regressor condition number exceeds this (identify's default limit)
@@ -127,8 +129,9 @@ def _cmd_describe(args) -> int:
               + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "") + "\n")
     text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     if args.out:
+        from ..output_folder import replace_file
         try:
-            Path(args.out).write_text(text)
+            replace_file(args.out, text)
         except OSError as exc:
             raise UsageError(f"--out {args.out}: cannot write: {exc.strerror}") from None
     else:
@@ -300,7 +303,7 @@ def _cmd_identify(args) -> int:
     from ..measured.identify import IdentificationRequest, identify, write_outputs
     from ..measured.log_preparing import Preprocessing
     from ..measured.streaming import FitLimits, check_fit, check_joint_limits, identify_streamed
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
                          "the data it was fitted to says little")
@@ -363,7 +366,7 @@ def _cmd_discover(args) -> int:
         if not args.quiet:
             print(f"discover: {text}", file=sys.stderr, flush=True)
 
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     if args.holdout > MAX_HOLDOUT:
         raise UsageError(f"--holdout {args.holdout:g} leaves {100 * (1 - args.holdout):.3g} % of the log to find "
                          f"effects in; at most {MAX_HOLDOUT:g} may be held out")
@@ -385,6 +388,7 @@ def _cmd_discover(args) -> int:
 def _cmd_reproduce(args) -> int:
     from ..measured.fri_source import FriSource, MissingPinocchioError
     from ..measured.paper_reproduction import PAPER_TABLE_II, reproduce, write_report
+    from ..output_folder import replace_outputs
     model = load_robot(args.robot)
 
     def progress(text):
@@ -403,7 +407,9 @@ def _cmd_reproduce(args) -> int:
         raise UsageError(str(exc).splitlines()[0]) from None
     result = reproduce(source, model, n_train=args.train, n_val=args.validate, seed=args.seed,
                        tip_mass=args.tip_mass, progress=progress)
-    summary = write_report(result, args.out)
+    summary = {}
+    replace_outputs(args.out, lambda folder: summary.update(write_report(result, folder)),
+                    REPRODUCE_OUTPUTS)
     print(json.dumps({"tip_mass": summary.get("tip_mass")}))
     progress(f"wrote {args.out}/reproduction.json, report.md")
     return 0
@@ -420,7 +426,7 @@ def _cmd_excite(args) -> int:
             print(f"excite: {text}", file=sys.stderr, flush=True)
 
     from ..measured.log_reading import MIN_SAMPLES
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     rows = int(math.floor(args.periods / args.frequency * args.rate + 1e-9)) + 1
     if rows < MIN_SAMPLES:
         raise UsageError(f"--rate {args.rate:g} Hz over {args.periods} period(s) of {1 / args.frequency:g} s gives "
