@@ -97,8 +97,24 @@ def load(path, args):
     return model
 
 
+def writable_out(out, replaced: bool = True) -> Path:
+    """``--out`` checked before any work is done: a folder that can be created or replaced there
+    (``replaced``: ``out`` is swapped whole, in its parent), or one to write folders into
+    (``generate``'s ``OUT``, holding ``OUT/<robot>/``); else a UsageError naming it."""
+    from ..output_folder import check_writable
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a folder")
+    try:
+        check_writable(out.parent if replaced else out)
+    except OSError as exc:
+        raise UsageError(f"--out {out}: {exc.strerror}") from None
+    return out
+
+
 def _cmd_generate(args) -> int:
     from ..codegen.pipeline import generate
+    writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
     if args.scalar == "float" and "python_c" in args.lang:
         if args.lang is not GENERATE_LANGS:      # asked for explicitly
@@ -307,6 +323,7 @@ def _cmd_identify(args) -> int:
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
                          "the data it was fitted to says little")
+    writable_out(args.out)
     settings = Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate)
     request = IdentificationRequest(robot=args.robot, data=tuple(args.data), validate=tuple(args.validate or ()),
                                     effects=args.effects, consistent=args.consistent, weighted=args.weighted,
@@ -367,6 +384,7 @@ def _cmd_discover(args) -> int:
             print(f"discover: {text}", file=sys.stderr, flush=True)
 
     from ..output_folder import replace_outputs
+    writable_out(args.out)
     if args.holdout > MAX_HOLDOUT:
         raise UsageError(f"--holdout {args.holdout:g} leaves {100 * (1 - args.holdout):.3g} % of the log to find "
                          f"effects in; at most {MAX_HOLDOUT:g} may be held out")
@@ -389,6 +407,7 @@ def _cmd_reproduce(args) -> int:
     from ..measured.fri_source import FriSource, MissingPinocchioError
     from ..measured.paper_reproduction import PAPER_TABLE_II, reproduce, write_report
     from ..output_folder import replace_outputs
+    writable_out(args.out)
     model = load_robot(args.robot)
 
     def progress(text):
@@ -418,6 +437,7 @@ def _cmd_reproduce(args) -> int:
 def _cmd_excite(args) -> int:
     from ..measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
                                        write_trajectory_json)
+    writable_out(args.out)
     model = load(args.robot, args)
     limits = default_limits(model, velocity=args.velocity, acceleration=args.acceleration, margin=args.margin)
 
