@@ -20,6 +20,7 @@ from ..runtime.evaluate import EvaluationError
 from ..measured import MeasuredDataError
 from ..model.robot_model import RobotDescriptionError
 from ..readers.yaml_description import load_robot
+from .interrupts import ending_on_signals
 
 
 LANGS = ("c", "python", "casadi", "jax", "matlab")
@@ -679,6 +680,11 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one command; its exit code (2: bad input, 130 / 143: interrupted, kindyngen.cli.interrupts)."""
+    return ending_on_signals(lambda: _run(argv))
+
+
+def _run(argv) -> int:
     args = parser().parse_args(argv)
     try:
         return args.run(args)
