@@ -43,6 +43,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from kindyngen.output_folder import replace_files
+
 from .common import RESULTS, machine
 
 FULL = dict(tree_limbs=4, tree_per_limb=tuple(range(2, 16)), chain_sizes=tuple(range(4, 61, 4)) + (80, 100),
@@ -450,6 +452,15 @@ def robotran(g1: dict | None, tree: dict) -> dict:
 
 # ------------------------------------------------------------------ output
 
+def write(result: dict, out: Path) -> None:
+    """tree_scaling.json and tree_scaling.png in ``out``, both or neither
+    (kindyngen.output_folder.replace_files)."""
+    def both(folder):
+        (folder / "tree_scaling.json").write_text(json.dumps(result, indent=1) + "\n")
+        plot(result, folder / "tree_scaling.png")
+    replace_files(out, both)
+
+
 def plot(result: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -638,9 +649,7 @@ def main(argv=None) -> int:
         return _update_g1(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     settings = QUICK if args.quick else FULL
     result = study(settings, log=lambda text: print(text, flush=True))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "tree_scaling.json").write_text(json.dumps(result, indent=1) + "\n")
-    plot(result, args.out / "tree_scaling.png")
+    write(result, args.out)
     print(markdown(result))
     if result["g1"]:
         g1 = result["g1"]

@@ -29,6 +29,10 @@ How :func:`replace_folder` replaces ``out``:
    and the aside folder, which the next run into the same place renames back (the previous
    output, whole). No ``fsync``: a killed process is covered, a power cut is not.
 
+Several files of one run into a folder that holds other runs' files too (benchmarks/results/):
+:func:`replace_files`, all or none (a kill while they are moved in is finished by the next
+run). One file: :func:`replace_file`.
+
 Example (the second run drops ``b.txt``, which the first run's manifest lists, and keeps the
 user's ``notes.txt``):
 
@@ -62,12 +66,14 @@ import threading
 from pathlib import Path
 from typing import Callable, Iterable
 
-STAGING, PREVIOUS = "kdg-staging", "kdg-previous"
+STAGING, PREVIOUS, FILES = "kdg-staging", "kdg-previous", "kdg-files"
+#: in a replace_files staging folder: its files are complete and are being moved in
+MOVING_MARK = ".kdg-moving"
 #: test hooks (environment): stop the process (SIGSTOP) at a named point of the commit, so that
 #: a test can kill it exactly there; and use the fallback swap instead of renameat2
 PAUSE_VARIABLE = "KINDYNGEN_PAUSE_AT"
 NO_EXCHANGE_VARIABLE = "KINDYNGEN_NO_RENAME_EXCHANGE"
-PAUSE_POINTS = ("staged", "aside", "swapped")
+PAUSE_POINTS = ("staged", "aside", "swapped", "moving")
 
 
 class OutputFolderError(OSError):
@@ -88,7 +94,7 @@ def _leftover_pattern(name: str) -> re.Pattern:
     >>> _leftover_pattern("lwr4").match(".panda.kdg-staging.box-1.4242.9f3a01bc") is None
     True
     """
-    return re.compile(rf"^\.{re.escape(name)}\.(?P<kind>{STAGING}|{PREVIOUS})\.(?P<host>[A-Za-z0-9_-]+)"
+    return re.compile(rf"^\.{re.escape(name)}\.(?P<kind>{STAGING}|{PREVIOUS}|{FILES})\.(?P<host>[A-Za-z0-9_-]+)"
                       rf"\.(?P<pid>\d+)\.[0-9a-f]+$")
 
 
@@ -119,7 +125,7 @@ def tidy_leftovers(out) -> list[str]:
     pattern, host, done = _leftover_pattern(out.name), _host(), []
     for entry in sorted(out.parent.iterdir()):
         m = pattern.match(entry.name)
-        if not m or m["host"] != host or int(m["pid"]) == os.getpid() or _alive(int(m["pid"])):
+        if not m or m["kind"] == FILES or m["host"] != host or int(m["pid"]) == os.getpid() or _alive(int(m["pid"])):
             continue
         if m["kind"] == PREVIOUS and not os.path.lexists(out):
             os.rename(entry, out)
@@ -381,6 +387,71 @@ def replace_outputs(out, write: Callable[[Path], object], known: Iterable[str]) 
         write(folder)
         return tuple(_files_and_empty_folders(folder)[0])
     return replace_folder(out, write_and_list, lambda folder: known)
+
+
+def _move_in(staging: Path, folder: Path) -> list[str]:
+    """Every file of ``staging`` (but the mark) moved to the same place in ``folder``."""
+    moved = []
+    for rel in _files_and_empty_folders(staging)[0]:
+        if rel != MOVING_MARK:
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(staging / rel, folder / rel)
+            moved.append(rel)
+    return moved
+
+
+def finish_moves(folder) -> list[str]:
+    """What killed :func:`replace_files` runs left in ``folder`` (their process, on this host,
+    gone): a staging folder with the mark (the kill came while its files were being moved in)
+    has the rest moved in; one without is removed. Returns what was done, one line each."""
+    folder = Path(folder)
+    pattern, host, done = _leftover_pattern(folder.name), _host(), []
+    for entry in sorted(folder.iterdir()) if folder.is_dir() else ():
+        m = pattern.match(entry.name)
+        if not m or m["kind"] != FILES or m["host"] != host or _alive(int(m["pid"])):
+            continue
+        if (entry / MOVING_MARK).exists():
+            done.append(f"moved in {', '.join(_move_in(entry, folder)) or 'nothing more'} from {entry.name}, "
+                        f"which a killed run was moving in")
+        else:
+            done.append(f"removed {entry.name}, left by a killed run")
+        _remove(entry)
+    return done
+
+
+def replace_files(folder, write: Callable[[Path], object]) -> list[str]:
+    """Several files of one run into a folder shared with others (benchmarks/results/), all or
+    none: ``write(staging)`` writes them into a staging folder inside ``folder``, then they are
+    moved in with SIGINT and SIGTERM held; a failed run moves none. A run killed while moving
+    (one rename per file) leaves a mark in its staging folder, and the next ``replace_files``
+    into ``folder`` moves the rest in first (a killed run's unmarked staging folder is removed).
+    Returns the relative paths written.
+
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> replace_files(folder, lambda d: [(d / n).write_text(n) for n in ("run.json", "run.png")])
+    ['run.json', 'run.png']
+    >>> sorted(p.name for p in folder.iterdir())
+    ['run.json', 'run.png']
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for line in finish_moves(folder):
+        print(f"note: {line}", file=sys.stderr)
+    staging = folder / _leftover_name(folder.name, FILES)
+    try:
+        staging.mkdir()
+        write(staging)
+        with signals_held():
+            (staging / MOVING_MARK).touch()
+            _pause("moving")
+            written = _move_in(staging, folder)
+            shutil.rmtree(staging)
+    except BaseException:
+        if not (staging / MOVING_MARK).exists():
+            shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return written
 
 
 def replace_file(path, text: str | bytes) -> None:

@@ -13,8 +13,8 @@ import sys
 import pytest
 
 from kindyngen import output_folder
-from kindyngen.output_folder import (OutputFolderError, check_writable, replace_file, replace_folder,
-                                     replace_outputs, signals_held, tidy_leftovers)
+from kindyngen.output_folder import (OutputFolderError, check_writable, replace_file, replace_files,
+                                     replace_folder, replace_outputs, signals_held, tidy_leftovers)
 
 KNOWN = ("report.md", "model.yaml", "fit.json")
 
@@ -226,3 +226,35 @@ def test_host_names_fit_the_leftover_pattern(monkeypatch):
     name = output_folder._leftover_name("lwr4", output_folder.STAGING)
     m = output_folder._leftover_pattern("lwr4").match(name)
     assert m and m["host"] == "node_cluster_example" and int(m["pid"]) == os.getpid()
+
+
+def test_several_files_into_a_shared_folder_all_or_none(tmp_path):
+    (tmp_path / "other.json").write_text("another run's")
+    (tmp_path / "run.json").write_text("old")
+
+    def half_then_fail(staging):
+        (staging / "run.json").write_text("new")
+        raise RuntimeError("plot failed")
+    with pytest.raises(RuntimeError):
+        replace_files(tmp_path, half_then_fail)
+    assert _files(tmp_path) == {"other.json": b"another run's", "run.json": b"old"}
+    assert replace_files(tmp_path, lambda d: [(d / n).write_text("new") for n in ("run.json", "run.png")]) == \
+        ["run.json", "run.png"]
+    assert _files(tmp_path) == {"other.json": b"another run's", "run.json": b"new", "run.png": b"new"}
+
+
+def test_a_run_killed_while_moving_its_files_in_is_finished_by_the_next(tmp_path):
+    """A staging folder with the mark: its files were complete, some already moved in; the next
+    run moves the rest. One without the mark was killed while writing: removed."""
+    (tmp_path / "run.json").write_text("new")                    # moved in before the kill
+    (tmp_path / "run.png").write_text("old")
+    moving = _leftover(tmp_path / tmp_path.name, output_folder.FILES, _dead_pid())
+    moving.mkdir()
+    (moving / output_folder.MOVING_MARK).write_text("")
+    (moving / "run.png").write_text("new")
+    writing = _leftover(tmp_path / tmp_path.name, output_folder.FILES, _dead_pid())
+    writing = writing.with_name(writing.name.replace("0123abcd", "89abcdef"))
+    writing.mkdir()
+    (writing / "half.json").write_text("{")
+    replace_files(tmp_path, lambda d: (d / "other.json").write_text("1"))
+    assert _files(tmp_path) == {"run.json": b"new", "run.png": b"new", "other.json": b"1"}
