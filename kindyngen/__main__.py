@@ -1,3 +1,3 @@
-from .cli.interrupts import command_line
+from .cli import command_line
 
 raise SystemExit(command_line())
