@@ -69,11 +69,11 @@ from typing import Callable, Iterable
 STAGING, PREVIOUS, FILES = "kdg-staging", "kdg-previous", "kdg-files"
 #: in a replace_files staging folder: its files are complete and are being moved in
 MOVING_MARK = ".kdg-moving"
-#: test hooks (environment): stop the process (SIGSTOP) at a named point of the commit, so that
-#: a test can kill it exactly there; and use the fallback swap instead of renameat2
+#: test hooks (environment): stop the process (SIGSTOP) at a named point of the commit (staged,
+#: aside, swapped, moving: see _pause's callers), so that a test can kill it exactly there; and
+#: use the fallback swap instead of renameat2
 PAUSE_VARIABLE = "KINDYNGEN_PAUSE_AT"
 NO_EXCHANGE_VARIABLE = "KINDYNGEN_NO_RENAME_EXCHANGE"
-PAUSE_POINTS = ("staged", "aside", "swapped", "moving")
 
 
 class OutputFolderError(OSError):
@@ -226,7 +226,8 @@ def _carry(source: Path, target: Path) -> None:
 def carry_user_files(previous: Path, staging: Path, generated: Iterable[str] | None) -> list[str]:
     """Link (or copy) into ``staging`` every file of ``previous`` that is not in ``generated``
     (the previous run's manifest; None: not known, so every file is the user's) and that the new
-    run did not write, and every empty folder. Returns the relative paths carried."""
+    run did not write, and every empty folder. Returns the relative paths carried; raises
+    OutputFolderError where a file cannot be carried (the caller then replaces nothing)."""
     generated = None if generated is None else set(generated)
     files, empty = _files_and_empty_folders(previous)
     carried = []
@@ -241,9 +242,9 @@ def carry_user_files(previous: Path, staging: Path, generated: Iterable[str] | N
             continue
         try:
             _carry(previous / rel, target)
-        except OSError as exc:
-            print(f"note: {previous / rel}: not carried over ({exc.strerror})", file=sys.stderr)
-            continue
+        except OSError as exc:          # no run rather than a user's file lost with the old folder
+            raise OutputFolderError(exc.errno, f"cannot carry this file over into the new output "
+                                               f"({exc.strerror}); nothing was replaced", str(previous / rel)) from None
         carried.append(rel)
     for rel in empty:
         target = staging / rel

@@ -258,3 +258,19 @@ def test_a_run_killed_while_moving_its_files_in_is_finished_by_the_next(tmp_path
     (writing / "half.json").write_text("{")
     replace_files(tmp_path, lambda d: (d / "other.json").write_text("1"))
     assert _files(tmp_path) == {"run.json": b"new", "run.png": b"new", "other.json": b"1"}
+
+
+def test_a_users_file_that_cannot_be_carried_over_stops_the_run(tmp_path, monkeypatch):
+    """Rather no new output than the user's file removed with the old folder (here neither a
+    hard link nor a copy can be made, as for a file this user may not read)."""
+    out = tmp_path / "run"
+    _run(out, fit_json="1")
+    (out / "notes.txt").write_text("mine")
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(os, "link", refused)
+    monkeypatch.setattr(output_folder.shutil, "copy2", refused)
+    with pytest.raises(OutputFolderError, match="cannot carry this file over"):
+        _run(out, fit_json="2")
+    assert _files(out) == {"fit.json": b"1", "notes.txt": b"mine"} and _beside(out) == ["run"]
