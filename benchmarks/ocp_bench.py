@@ -51,6 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
 import ocp_fd_options  # noqa: E402
 import ocp_reach  # noqa: E402
+from kindyngen.output_folder import replace_file, replace_files  # noqa: E402
 
 VARIANTS = [("baseline", "ipopt", 1), ("fd_rk4", "ipopt", 1), ("id_rk4", "ipopt", 1), ("id_rk4", "fatrop", 1),
             ("id_rk4", "ipopt", 2), ("id_rk4", "stages", 1), ("id_rk4", "stages mu_init=1e-2", 1),
@@ -250,7 +251,7 @@ def main(argv=None):
         doc["crocoddyl"] = dict(summary, loadavg=list(os.getloadavg()))
         doc.setdefault("versions", {})["crocoddyl_venv"] = summary.get("versions", {"error": summary.get("error")})
         doc["rows"] = [r for r in doc["rows"] if r.get("dynamics") != "crocoddyl"] + rows
-        out.write_text(strict_json(doc, indent=1) + "\n")
+        replace_file(out, strict_json(doc, indent=1) + "\n")
         print(f"crocoddyl: {summary.get('versions', summary)}")
         return
     funcs = ocp_reach.load()
@@ -302,7 +303,7 @@ def main(argv=None):
         doc["rows"][-1]["solve_cpu_s_runs"] = res["solve_cpu_s_runs"]
         if form == "baseline" and solver == "ipopt":
             base_s = res["solve_cpu_s"]
-        out.write_text(strict_json(doc, indent=1) + "\n")
+        replace_file(out, strict_json(doc, indent=1) + "\n")
     if not args.no_peers:
         peers, failures = peer_fds(funcs)
         doc["peer_failures"] = failures
@@ -314,7 +315,7 @@ def main(argv=None):
                 row = _row(f"{source} {form} {solver} M=1", source, res, setup, funcs, base_s)
                 row["fd_max_abs_diff"] = err
                 doc["rows"].append(row)
-                out.write_text(strict_json(doc, indent=1) + "\n")
+                replace_file(out, strict_json(doc, indent=1) + "\n")
         summary, rows = crocoddyl_peer(Path(args.crocoddyl_venv), funcs, setup, base_s)
         doc["crocoddyl"], doc["rows"] = summary, doc["rows"] + rows
         if "error" in summary and old_crocoddyl and "error" not in old_crocoddyl:
@@ -328,8 +329,11 @@ def main(argv=None):
         print(f"warm re-solve, compiled stages: median {doc['warm_resolve_stages']['median_ms']:.1f} ms, "
               f"iterations {doc['warm_resolve_stages']['iterations']}")
     doc["loadavg_end"] = list(os.getloadavg())
-    out.write_text(strict_json(doc, indent=1) + "\n")
-    plot(doc, out.with_suffix(".png"))
+
+    def both(folder):          # the finished JSON and its figure, both or neither
+        (folder / out.name).write_text(strict_json(doc, indent=1) + "\n")
+        plot(doc, folder / out.with_suffix(".png").name)
+    replace_files(out.parent, both)
     print(f"wrote {out} and {out.with_suffix('.png')}")
 
 

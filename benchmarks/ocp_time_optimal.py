@@ -18,7 +18,6 @@ benchmarks/results/ocp_time_optimal.json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import resource

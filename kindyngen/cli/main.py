@@ -22,6 +22,7 @@ from ..measured import MeasuredDataError
 from ..model.robot_model import RobotDescriptionError
 from ..model.user_text import one_line
 from ..readers.yaml_description import load_robot
+from .interrupts import ending_on_signals
 
 
 LANGS = ("c", "python", "casadi", "jax", "matlab")
@@ -29,10 +30,12 @@ LANGS = ("c", "python", "casadi", "jax", "matlab")
 GENERATE_LANGS = ("c", "python", "casadi", "python_c", "jax", "matlab")
 EXIT_BAD_INPUT = 2
 #: what each command writes into --out (an earlier run's file of these names that a new run
-#: does not write is removed, so two runs never mix: kindyngen.cli.output_dir)
+#: does not write is dropped, so two runs never mix: kindyngen.output_folder.replace_outputs)
 IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
 DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "residuals.png", "gap.png", "heldout_torques.png")
 EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
+REPRODUCE_OUTPUTS = ("reproduction.json", "report.md", "fig4_torque_validation.png", "fig6_elements.png",
+                     "g2_published.png")
 MAX_HOLDOUT = 0.8
 MAX_FOLDS = 50
 #: excite refuses a design whose regressor condition number exceeds this (identify's default limit)
@@ -97,8 +100,24 @@ def load(path, args):
     return model
 
 
+def writable_out(out, replaced: bool = True) -> Path:
+    """``--out`` checked before any work is done: a folder that can be created or replaced there
+    (``replaced``: ``out`` is swapped whole, in its parent), or one to write folders into
+    (``generate``'s ``OUT``, holding ``OUT/<robot>/``); else a UsageError naming it."""
+    from ..output_folder import check_writable
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a folder")
+    try:
+        check_writable(out.parent if replaced else out)
+    except OSError as exc:
+        raise UsageError(f"--out {out}: {exc.strerror}") from None
+    return out
+
+
 def _cmd_generate(args) -> int:
     from ..codegen.pipeline import generate
+    writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
     if args.scalar == "float" and "python_c" in args.lang:
         if args.lang is not GENERATE_LANGS:      # asked for explicitly
@@ -129,8 +148,9 @@ def _cmd_describe(args) -> int:
                              + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "")) + "\n"
     text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     if args.out:
+        from ..output_folder import replace_file
         try:
-            Path(args.out).write_text(text)
+            replace_file(args.out, text)
         except OSError as exc:
             raise UsageError(f"--out {args.out}: cannot write: {exc.strerror}") from None
     else:
@@ -287,10 +307,11 @@ def _cmd_identify(args) -> int:
     from ..measured.identify import IdentificationRequest, identify, write_outputs
     from ..measured.log_preparing import Preprocessing
     from ..measured.streaming import FitLimits, check_fit, identify_streamed
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
                          "the data it was fitted to says little")
+    writable_out(args.out)
     settings = Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate)
     request = IdentificationRequest(robot=args.robot, data=tuple(args.data), validate=tuple(args.validate or ()),
                                     effects=args.effects, consistent=args.consistent, weighted=args.weighted,
@@ -349,7 +370,8 @@ def _cmd_discover(args) -> int:
         if not args.quiet:
             print(f"discover: {text}", file=sys.stderr, flush=True)
 
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
     if args.holdout > MAX_HOLDOUT:
         raise UsageError(f"--holdout {args.holdout:g} leaves {100 * (1 - args.holdout):.3g} % of the log to find "
                          f"effects in; at most {MAX_HOLDOUT:g} may be held out")
@@ -371,6 +393,8 @@ def _cmd_discover(args) -> int:
 def _cmd_reproduce(args) -> int:
     from ..measured.fri_source import FriSource, MissingPinocchioError
     from ..measured.paper_reproduction import PAPER_TABLE_II, reproduce, write_report
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
     model = load_robot(args.robot)
 
     def progress(text):
@@ -389,7 +413,9 @@ def _cmd_reproduce(args) -> int:
         raise UsageError(str(exc).splitlines()[0]) from None
     result = reproduce(source, model, n_train=args.train, n_val=args.validate, seed=args.seed,
                        tip_mass=args.tip_mass, progress=progress)
-    summary = write_report(result, args.out)
+    summary = {}
+    replace_outputs(args.out, lambda folder: summary.update(write_report(result, folder)),
+                    REPRODUCE_OUTPUTS)
     print(strict_json({"tip_mass": summary.get("tip_mass")}))
     progress(f"wrote {args.out}/reproduction.json, report.md")
     return 0
@@ -398,6 +424,7 @@ def _cmd_reproduce(args) -> int:
 def _cmd_excite(args) -> int:
     from ..measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
                                        write_trajectory_json)
+    writable_out(args.out)
     model = load(args.robot, args)
     limits = default_limits(model, velocity=args.velocity, acceleration=args.acceleration, margin=args.margin)
 
@@ -406,7 +433,7 @@ def _cmd_excite(args) -> int:
             print(f"excite: {text}", file=sys.stderr, flush=True)
 
     from ..measured.log_reading import MIN_SAMPLES
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     rows = int(math.floor(args.periods / args.frequency * args.rate + 1e-9)) + 1
     if rows < MIN_SAMPLES:
         raise UsageError(f"--rate {args.rate:g} Hz over {args.periods} period(s) of {1 / args.frequency:g} s gives "
@@ -639,6 +666,11 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one command; its exit code (2: bad input, 130 / 143: interrupted, kindyngen.cli.interrupts)."""
+    return ending_on_signals(lambda: _run(argv))
+
+
+def _run(argv) -> int:
     args = parser().parse_args(argv)
     try:
         return args.run(args)

@@ -1,6 +1,7 @@
 """The interface document of a generated robot (``functions.json``): every function's name,
-ports (shape, unit, dtype), C symbol and costs. The pipeline writes it; the python_c renderer
-builds its wrappers from it (so the extension follows exactly what the C exports).
+ports (shape, unit, dtype), C symbol and costs, and (added by the pipeline when it writes the
+folder) "files", the relative paths of every file written. The pipeline writes it; the python_c
+renderer builds its wrappers from it (so the extension follows exactly what the C exports).
 """
 from __future__ import annotations
 
@@ -44,3 +45,20 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
                         **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
         } for p in programs] + dls,
     }
+
+
+def listed_files(document) -> list[str] | None:
+    """The "files" of a functions.json document (relative paths with /), or None where the
+    document has no such list (one written before it existed, or not an interface document).
+    Only whether a file of the folder is listed matters (kindyngen.output_folder): a listed
+    path that is not in the folder means nothing.
+
+    >>> listed_files({"robot": "lwr4", "files": ["c/lwr4.c", "functions.json"]})
+    ['c/lwr4.c', 'functions.json']
+    >>> listed_files({"functions": []}) is None
+    True
+    """
+    files = document.get("files") if isinstance(document, dict) else None
+    if not isinstance(files, list):
+        return None
+    return [f for f in files if isinstance(f, str)]

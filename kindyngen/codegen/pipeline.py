@@ -1,11 +1,13 @@
 """Robot description -> derivations -> CSE and counts -> rendered sources, written to disk.
 
 ``generate(model, out_root)`` writes ``out_root/<robot>/`` with ``functions.json`` (the
-interface: names, ports, costs), ``opcounts.json``, ``opcounts.md`` and one folder per
-language. Output is deterministic: the same description gives the same bytes.
+interface: names, ports, costs, and the list of the files written), ``opcounts.json``,
+``opcounts.md`` and one folder per language, replacing an earlier folder whole. Output is
+deterministic: the same description gives the same bytes.
 """
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -13,11 +15,12 @@ from pathlib import Path
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
 from .catalog import derive_all
-from .interface import manifest
+from .interface import listed_files, manifest
 from .optimize import Program, optimize
 from .render import RENDERERS, casadi_builders
 from .count_report import opcounts_json, opcounts_markdown
 from ..model.robot_model import RobotModel
+from ..output_folder import replace_folder
 
 LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
 
@@ -99,27 +102,50 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
-    of lane programs as loops over lanes): see render.render_c."""
+    of lane programs as loops over lanes): see render.render_c.
+
+    Everything is derived first, then written into a staging folder that replaces
+    ``out_root/<robot>/`` whole (kindyngen.output_folder.replace_folder): a failed or killed run
+    leaves the previous folder as it was; a finished one leaves exactly the files that
+    functions.json's "files" lists, plus the files the user added (not listed last time)."""
     out = Path(out_root) / model.identifier
     # --scalar float: the IK with float's tolerances, in every language written (the python
     # module beside float C is its double reference) and in both builds the float error compares
     programs = build_programs(model, params, only=only, progress=progress, scalar=scalar)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
-    _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
-    if base_params is not None:
-        _write(out / "base_params.json", strict_json(base_params, indent=1) + "\n")
     float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None
-    _write(out / "opcounts.json", strict_json(opcounts_json(programs, float_error), indent=1) + "\n")
-    _write(out / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
-                                                  float_error))
-    for lang in languages:
-        options = ({"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error, "lanes": lanes}
-                   if lang == "c" else {})
-        for filename, text in RENDERERS[lang](model, programs, **options).items():
-            _write(out / lang / filename, text)
-        if lang == "casadi":
-            save_casadi_functions(casadi_builders(model, programs), out / lang)
+
+    def write(folder: Path) -> None:
+        if base_params is not None:
+            _write(folder / "base_params.json", strict_json(base_params, indent=1) + "\n")
+        _write(folder / "opcounts.json", strict_json(opcounts_json(programs, float_error), indent=1) + "\n")
+        _write(folder / "opcounts.md", opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4"),
+                                                         float_error))
+        for lang in languages:
+            options = ({"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error, "lanes": lanes}
+                       if lang == "c" else {})
+            for filename, text in RENDERERS[lang](model, programs, **options).items():
+                _write(folder / lang / filename, text)
+            if lang == "casadi":
+                save_casadi_functions(casadi_builders(model, programs), folder / lang)
+        # written last, listing every file of the output (itself included)
+        written = [p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()]
+        document["files"] = sorted(written + ["functions.json"])
+        _write(folder / "functions.json", strict_json(document, indent=1) + "\n")
+
+    replace_folder(out, write, previous_files)
     return out
+
+
+def previous_files(folder: Path) -> list[str] | None:
+    """The files an earlier ``generate`` wrote into ``folder`` (its functions.json's "files"), or
+    None where that is not known (no or an unreadable functions.json, one written before the list
+    existed): then no file of the folder is taken for the generator's."""
+    try:
+        document = json.loads((Path(folder) / "functions.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return listed_files(document)

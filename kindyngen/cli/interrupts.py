@@ -1,0 +1,70 @@
+"""Ctrl-C (SIGINT) and SIGTERM end a command with one line on standard error, ``interrupted``
+or ``terminated``, and exit code 130 or 143 (128 + the signal's number, as a shell reports a
+process killed by it); never a traceback. Output folders are swapped in whole
+(:mod:`kindyngen.output_folder`), so an interrupted command leaves the previous output, or the
+new one complete when the signal came during the swap.
+
+Python turns SIGINT into ``KeyboardInterrupt`` by itself; SIGTERM, which would kill the
+process on the spot and leave a staging folder behind, is turned into :class:`Terminated`
+here, so that it unwinds the same way (staging folders removed on the way out).
+
+Example:
+
+>>> def long_job():
+...     raise KeyboardInterrupt
+>>> ending_on_signals(long_job)
+130
+"""
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+from typing import Callable
+
+EXIT_INTERRUPTED = 128 + signal.SIGINT       # 130
+EXIT_TERMINATED = 128 + signal.SIGTERM       # 143
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread as Python raises KeyboardInterrupt for SIGINT."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def sigterm_raises():
+    """Inside the block (main thread only) SIGTERM raises :class:`Terminated`."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+
+
+def _say(word: str) -> None:
+    stream = sys.stderr
+    with contextlib.suppress(Exception):          # a closed or broken standard error: the exit code says it
+        # a progress line redrawn in place on a terminal has no newline yet
+        stream.write(("\n" if stream.isatty() else "") + word + "\n")
+        stream.flush()
+
+
+def ending_on_signals(run: Callable[[], int]) -> int:
+    """``run()``'s exit code, or 130 after one ``interrupted`` line (SIGINT) or 143 after one
+    ``terminated`` line (SIGTERM) on standard error."""
+    try:
+        with sigterm_raises():
+            return run()
+    except KeyboardInterrupt:
+        _say("interrupted")
+        return EXIT_INTERRUPTED
+    except Terminated:
+        _say("terminated")
+        return EXIT_TERMINATED
