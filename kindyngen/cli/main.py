@@ -116,6 +116,7 @@ def writable_out(out, replaced: bool = True) -> Path:
 
 
 def _cmd_generate(args) -> int:
+    from ..codegen.float32 import FloatRangeError
     from ..codegen.pipeline import generate
     writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
@@ -126,8 +127,11 @@ def _cmd_generate(args) -> int:
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
     for path in args.robots:
         model = load(path, args)
-        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
+        try:
+            out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
+                           only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
+        except FloatRangeError as exc:      # a derived constant float cannot hold: the description's numbers
+            raise UsageError(f"{path}: --scalar float: {exc}; generate it with --scalar double") from None
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
