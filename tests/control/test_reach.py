@@ -1,0 +1,98 @@
+"""The reach over any robot (kindyngen/control/reach.py), checked by Pinocchio (the arms' own
+models, benchmarks/control_robots.py: the UR5 by Pinocchio's URDF parser):
+
+- the native IPOPT solve converges; the plan satisfies its integrator steps of Pinocchio's ABA
+  (from each node, the RK4 steps land on the next node, 1e-8), the flange is at the goal by
+  Pinocchio's kinematics (1e-6 m) and at rest; torques within their limits, q and qd at the
+  nodes within the planned limits (IPOPT relaxes bounds by 1e-8 relative: 1e-7);
+- with two RK4 substeps and the inner states as rows, the inner speeds hold the limits too;
+- on the LWR the native solve, the Opti baseline and IPOPT on the SX graph reach the same
+  objective (1e-6 relative), and the inverse-dynamics form reaches a KKT point of the same
+  discrete problem (its plan on Pinocchio's RK4 steps to 1e-6).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kindyngen.control.integrators import Integrator
+from kindyngen.control.reach import ReachNLP, inverse_dynamics_reach, rollout, solve_baseline
+
+from .helpers import arm, pinocchio_step
+
+
+def _check_plan(name, model, task, res):
+    import pinocchio as pin
+    from benchmarks.control_robots import pinocchio_plant_model
+    step = pinocchio_step(name, model)
+    M = task.integrator.substeps
+    X = np.hstack([res.q, res.qd])
+    for k in range(task.N):
+        x = X[k]
+        for _ in range(M):
+            x = step(x, res.tau[k], task.h / M)
+        assert np.abs(x - X[k + 1]).max() < 1e-8 * max(1.0, np.abs(X[k + 1]).max()), k
+    pm, frame = pinocchio_plant_model(name, model)
+    pd = pm.createData()
+    pin.framesForwardKinematics(pm, pd, res.q[-1])
+    assert np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal)) < 1e-6
+    assert np.abs(res.qd[-1]).max() < 1e-7
+    lim = task.planned_limits
+    assert np.all(np.abs(res.tau) <= lim.array("tau_max") + 1e-9)
+    assert np.all(res.q[1:] >= lim.array("q_lo") - 1e-7) and np.all(res.q[1:] <= lim.array("q_hi") + 1e-7)
+    assert np.all(np.abs(res.qd[1:]) <= lim.array("qd_max") + 1e-7)
+
+
+@pytest.mark.parametrize("name", ["lwr4", "panda", "ur5"])
+def test_native_reach_against_pinocchio(name):
+    model, robot, limits, task = arm(name)
+    res = ReachNLP(robot, task).solve()
+    assert res.success, res.status
+    _check_plan(name, model, task, res)
+
+
+def test_inner_rows_hold_the_speed_limit_between_nodes():
+    """Two RK4 substeps with a 30 % speed margin: the plan's nodes and its inner substep ends
+    within 0.7 qd_max, checked by re-integrating each half interval with Pinocchio."""
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, integrator=Integrator("rk4", 2), inner=True, margin_speed=0.3)
+    res = ReachNLP(robot, task).solve()
+    assert res.success, res.status
+    _check_plan("ur5", model, task, res)
+    step = pinocchio_step("ur5", model)
+    vmax = task.planned_limits.array("qd_max")
+    X = np.hstack([res.q, res.qd])
+    peak = 0.0
+    for k in range(task.N):
+        xm = step(X[k], res.tau[k], task.h / 2)
+        peak = max(peak, float(np.max(np.abs(xm[robot.n:]) / vmax)))
+    assert peak <= 1 + 1e-6, peak
+    assert peak > 0.9          # the margin is what holds it: the plan uses the speed it has
+
+
+def test_lwr_native_baseline_and_sx_agree():
+    import casadi as ca
+    from kindyngen.control.reach import sx_reach_nlp, BASE_OPTIONS
+    model, robot, limits, task = arm("lwr4")
+    nlp = ReachNLP(robot, task)
+    res = nlp.solve()
+    base = solve_baseline(robot, task)
+    assert base.success
+    assert abs(res.objective - base.objective) < 1e-6 * base.objective
+    Z, P, g, f = sx_reach_nlp(robot, task)
+    sx = ca.nlpsol("sx", "ipopt", {"x": Z, "p": P, "f": f, "g": g}, BASE_OPTIONS)
+    sol = sx(x0=nlp.guess(), lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg, p=nlp.p())
+    assert sx.stats()["success"]
+    assert abs(float(sol["f"]) - res.objective) < 1e-6 * res.objective
+    # rollout of the plan's torques with the library's own step reproduces its nodes
+    X = rollout(lambda x, u, dt: nlp.lib.step(x, u), np.concatenate([res.q[0], res.qd[0]]), res.tau, 1, task.h)
+    assert np.abs(X - np.hstack([res.q, res.qd])).max() < 1e-7
+
+
+def test_inverse_dynamics_form_is_the_same_discrete_problem():
+    model, robot, limits, task = arm("ur5")
+    res = inverse_dynamics_reach(robot, task)
+    assert res.success, res.status
+    _check_plan("ur5", model, task, res)
