@@ -249,14 +249,17 @@ def mpc_suite(name, quick) -> dict:
     from kindyngen.control.integrators import Integrator
     from kindyngen.control.reach import ReachNLP
     model, robot, limits, task = cr.load(name)
-    rt = replace(task, integrator=Integrator("rk4", 2), inner=True, margin_speed=0.3, margin_position=0.05)
+    # the reference leaves the MPC's torque reserve (MPCOptions.reserve) to the inner loop
+    rt = replace(task, integrator=Integrator("rk4", 2), inner=True, margin_speed=0.3, margin_position=0.05,
+                 margin_torque=0.1)
     res = ReachNLP(robot, rt).solve()
     if not res.success:
         return {"error": f"reference reach: {res.status}"}
     ref = {"X": np.hstack([res.q, res.qd]), "U": res.tau, "goal": task.goal}
     rows = [mpc_case(name, model, robot, limits, ref, label, d, quick) for label, d in cases(limits, robot.n, quick)]
     return {"robot": name, "reference": {"objective": res.objective, "iterations": res.iterations,
-                                         "integrator": "rk4 x2", "margin_speed": 0.3, "margin_position_rad": 0.05},
+                                         "integrator": "rk4 x2", "margin_speed": 0.3, "margin_position_rad": 0.05,
+                                         "margin_torque": 0.1},
             "cases": rows}
 
 

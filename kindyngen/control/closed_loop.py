@@ -159,7 +159,15 @@ class Controller:
 
 
 def simulate(controller: Controller, plant, x0, duration: float) -> LoopLog:
-    """Run the loop for ``duration`` seconds from the true state x0."""
+    """Run the loop for ``duration`` seconds from the true state x0, with BLAS on one thread
+    (a re-solve of a few milliseconds gains nothing from a second one, whose spinning doubled
+    its CPU time on a 2-core machine and, on a loaded one, made every step miss its budget)."""
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(1):
+        return _simulate(controller, plant, x0, duration)
+
+
+def _simulate(controller, plant, x0, duration):
     log = LoopLog()
     x = np.asarray(x0, float)
     dt = controller.dt

@@ -69,7 +69,7 @@ class MPCOptions:
     reserve: float = 0.1
     penalty: float = 100.0
     screen: float = 0.05
-    qp_iter_limit: int = 150
+    qp_iter_limit: int = 400
     speed_margin: float = 0.05
     position_margin: float = 0.02
 
@@ -209,18 +209,23 @@ class TrackingMPC:
         if active is not None and len(active) == nb + 1 + 2 * m:
             keep_lo |= active[nb + 1:nb + 1 + m] != 0
             keep_hi |= active[nb + 1 + m:] != 0
+        # DAQP on the Jacobi-scaled variables v = dU / D: the condensed Hessian's diagonal spans
+        # eleven decades on the Panda (its light wrist against the terminal weights), and DAQP then
+        # wanders for hundreds of iterations to a solution it finds in two after the scaling
+        D = 1.0 / np.sqrt(np.diag(q["H"]))
+        C = C * D[None, :]
         H = np.zeros((nb + 1, nb + 1))
-        H[:nb, :nb] = q["H"]
+        H[:nb, :nb] = q["H"] * D[:, None] * D[None, :]
         # t's curvature keeps H positive definite; it does not spoil exactness (the penalty's
         # slope at t = 0 is rho whatever the curvature)
-        H[nb, nb] = self.rho
-        f = np.concatenate([q["g"], [self.rho]])
+        H[nb, nb] = 1.0
+        f = np.concatenate([q["g"] * D, [self.rho]])
         iters = 0
         while True:
             il, ih = np.flatnonzero(keep_lo), np.flatnonzero(keep_hi)
             A = np.vstack([np.hstack([C[il], np.ones((len(il), 1))]), np.hstack([C[ih], -np.ones((len(ih), 1))])])
-            bu = np.concatenate([q["box_hi"], [INF], np.full(len(il), INF), hi[ih]])
-            bl = np.concatenate([q["box_lo"], [0.0], lo[il], np.full(len(ih), -INF)])
+            bu = np.concatenate([q["box_hi"] / D, [INF], np.full(len(il), INF), hi[ih]])
+            bl = np.concatenate([q["box_lo"] / D, [0.0], lo[il], np.full(len(ih), -INF)])
             sense = np.zeros(nb + 1 + len(il) + len(ih), dtype=np.int32)
             if active is not None and len(active) == nb + 1 + 2 * m:
                 prev = np.concatenate([active[:nb + 1], active[nb + 1:nb + 1 + m][il], active[nb + 1 + m:][ih]])
@@ -236,8 +241,8 @@ class TrackingMPC:
             x = np.asarray(x)
             if flag < 0 or not np.all(np.isfinite(x)):
                 return np.zeros(nb), 0.0, int(flag), iters, None
-            du, t = x[:nb], max(float(x[nb]), 0.0)
-            v = C @ du
+            du, t = x[:nb] * D, max(float(x[nb]), 0.0)
+            v = q["C"] @ du
             missed_lo = ~keep_lo & (v + t < lo - 1e-9)
             missed_hi = ~keep_hi & (v - t > hi + 1e-9)
             if not (missed_lo.any() or missed_hi.any()):
@@ -294,7 +299,7 @@ class TrackingMPC:
                 break
             D = du.reshape(self.N, self.n)
             Xn = X + (q["G"] @ du + q["c"]).reshape(self.N, self.nx)
-            if not self._sane(Xn):      # a linearisation far from any motion of the arm: keep the iterate
+            if not self._sane(Xn, x0):      # a linearisation far from any motion of the arm: keep the iterate
                 break
             active = act
             ok = True
@@ -312,15 +317,15 @@ class TrackingMPC:
         late = cpu > o.budget_s
         return Solution(X, U, active, status, it, qp_iters, cpu, wall, slack, gap, step, late)
 
-    def _sane(self, X) -> bool:
-        """A plan within 1 rad of the position limits and 10 speed limits: anything else is a
-        linearisation run away (the step of a QP whose sensitivities exploded), not a plan."""
+    def _sane(self, X, x0) -> bool:
+        """Nodes within 2 pi of the measured configuration and 10 speed limits beyond the
+        measured speed: anything else is a linearisation run away (the step of a QP whose
+        sensitivities exploded), not a plan."""
         n = self.n
         if not np.all(np.isfinite(X)):
             return False
         q, v = X[:, :n], X[:, n:]
-        return bool(np.all(q > self.xlo[:n] - 1.0) and np.all(q < self.xhi[:n] + 1.0)
-                    and np.all(np.abs(v) < 10 * self.xhi[n:]))
+        return bool(np.all(np.abs(q - x0[:n]) < 2 * np.pi) and np.all(np.abs(v) < 10 * self.xhi[n:] + np.abs(x0[n:])))
 
     def predict(self, x0, u) -> np.ndarray:
         """The model's state one interval after x0 under u + d."""

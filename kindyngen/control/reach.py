@@ -47,7 +47,8 @@ BASE_OPTIONS = {"print_time": False, "ipopt.print_level": 0, "ipopt.tol": 1e-8, 
 class ReachTask:
     """A reach: start at rest at q0, flange at ``goal`` (m, base frame) and at rest at T.
     ``margin_speed``: fraction of each speed limit the plan keeps free at its nodes (and inner
-    rows); ``margin_position``: rad kept from each position limit."""
+    rows); ``margin_position``: rad kept from each position limit; ``margin_torque``: fraction of
+    each torque limit left unused (for a tracking controller's feedback)."""
     q0: tuple
     goal: tuple
     limits: Limits
@@ -57,6 +58,7 @@ class ReachTask:
     inner: bool = True
     margin_speed: float = 0.0
     margin_position: float = 0.0
+    margin_torque: float = 0.0
 
     def __post_init__(self):
         if len(self.goal) != 3:
@@ -82,7 +84,7 @@ class ReachTask:
 
     @property
     def planned_limits(self) -> Limits:
-        return self.limits.backed_off(self.margin_speed, self.margin_position)
+        return self.limits.backed_off(self.margin_speed, self.margin_position, self.margin_torque)
 
 
 @dataclass(frozen=True)

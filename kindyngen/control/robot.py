@@ -77,11 +77,12 @@ class Limits:
     def array(self, name: str) -> np.ndarray:
         return np.array(getattr(self, name), float)
 
-    def backed_off(self, speed: float = 0.0, position: float = 0.0) -> "Limits":
+    def backed_off(self, speed: float = 0.0, position: float = 0.0, torque: float = 0.0) -> "Limits":
         """The limits a plan keeps to: speeds scaled by (1 - speed), positions moved in by
-        ``position`` rad (a stated margin for what happens between nodes and under disturbances)."""
+        ``position`` rad, torques scaled by (1 - torque) (stated margins for what happens between
+        nodes and under disturbances, and for a feedback loop's share of the torque)."""
         return Limits(tuple(lo + position for lo in self.q_lo), tuple(hi - position for hi in self.q_hi),
-                      tuple((1.0 - speed) * v for v in self.qd_max), self.tau_max)
+                      tuple((1.0 - speed) * v for v in self.qd_max), tuple((1.0 - torque) * v for v in self.tau_max))
 
 
 def urdf_limits(path, model: RobotModel) -> Limits:
