@@ -32,10 +32,19 @@ from .mpc import TrackingMPC
 
 @dataclass(frozen=True)
 class LoopOptions:
+    """``feedback_hz``, ``damping``: the inner PD; ``observer_alpha``, ``observer_slow``: the fast and
+    the slow disturbance estimates' low-pass gains per sample, ``jump``: the difference between
+    them (fraction of a torque limit) past which the fast one is taken; ``filter_gain``: the state estimate's gain on the measurement per
+    sample (1: the raw measurement; below 1 a one-sample model prediction is blended in, which
+    keeps sensor noise out of the MPC's initial state and the estimate); ``brake_time``; and
+    after how many failed re-solves in a row the brake takes over."""
     plant_hz: float = 1000.0
     feedback_hz: float = 10.0
     damping: float = 1.0
     observer_alpha: float = 0.3
+    observer_slow: float = 0.05
+    jump: float = 0.1
+    filter_gain: float = 0.3
     brake_time: float = 0.05
     max_fallback: int = 3
     feedback: bool = True
@@ -76,6 +85,7 @@ class Controller:
         self.kp = (2 * np.pi * options.feedback_hz) ** 2
         self.kd = 2 * options.damping * 2 * np.pi * options.feedback_hz
         self.d_hat = np.zeros(n)
+        self.d_fast = np.zeros(n)
         self.prev = None             # (x_measured, tau) of the last sample
         self.sample = 0
         self.i = 0                   # MPC step
@@ -89,13 +99,30 @@ class Controller:
         self.reports = []
 
     def _observe(self, x):
-        o, n = self.o, self.n
-        if o.observer and self.prev is not None:
-            xp, up = self.prev
+        """The state estimate from the measurement x (blended with the model's one-sample
+        prediction from the last estimate) and the disturbance estimate from the estimate's
+        change; returns the estimate."""
+        o, n, dt = self.o, self.n, self.dt
+        if self.prev is None:
+            return x
+        xp, up = self.prev
+        if o.filter_gain < 1.0:
+            a = self.mpc.lib.fd(xp[:n], xp[n:], up + self.d_hat)
+            v_pred = xp[n:] + dt * a
+            pred = np.concatenate([xp[:n] + dt * (xp[n:] + v_pred) / 2, v_pred])
+            x = pred + o.filter_gain * (x - pred)
+        if o.observer:
+            # two low-pass estimates of the finite-difference disturbance: a slow one, which keeps
+            # sensor noise out (a noisy estimate is a random torque on the light wrists), and a fast
+            # one; where they differ by more than ``jump`` of a torque limit (a push, a step, a
+            # payload) the slow one takes the fast one's value at once
             qm, vm = (x[:n] + xp[:n]) / 2, (x[n:] + xp[n:]) / 2
-            a = (x[n:] - xp[n:]) / self.dt
-            raw = self.mpc.lib.tau(qm, vm, a) - up
-            self.d_hat = self.d_hat + o.observer_alpha * (raw - self.d_hat)
+            raw = self.mpc.lib.tau(qm, vm, (x[n:] - xp[n:]) / dt) - up
+            self.d_fast = self.d_fast + o.observer_alpha * (raw - self.d_fast)
+            slow = self.d_hat + o.observer_slow * (raw - self.d_hat)
+            jump = np.abs(self.d_fast - slow) > o.jump * self.mpc.tau_max
+            self.d_hat = np.where(jump, self.d_fast, slow)
+        return x
 
     def _resolve(self, x):
         mpc = self.mpc
@@ -134,8 +161,7 @@ class Controller:
 
     def control(self, t, x):
         n, mpc = self.n, self.mpc
-        x = np.asarray(x, float)
-        self._observe(x)
+        x = self._observe(np.asarray(x, float))
         k = self.sample % self.per_step
         if k == 0:
             self._resolve(x)
