@@ -33,8 +33,9 @@ from .mpc import TrackingMPC
 @dataclass(frozen=True)
 class LoopOptions:
     """``feedback_hz``, ``damping``: the inner PD; ``observer_alpha``, ``observer_slow``: the fast and
-    the slow disturbance estimates' low-pass gains per sample, ``jump``: the difference between
-    them (fraction of a torque limit) past which the fast one is taken; ``filter_gain``: the state estimate's gain on the measurement per
+    the slow disturbance estimates' low-pass gains per sample, ``jump``: the fast one is taken where
+    the difference between them would change a joint's speed by more than ``jump`` of its
+    limit within ``jump_window`` seconds (M^-1's diagonal, updated at every re-solve); ``filter_gain``: the state estimate's gain on the measurement per
     sample (1: the raw measurement; below 1 a one-sample model prediction is blended in, which
     keeps sensor noise out of the MPC's initial state and the estimate); ``brake_time``; and
     after how many failed re-solves in a row the brake takes over."""
@@ -43,7 +44,8 @@ class LoopOptions:
     damping: float = 1.0
     observer_alpha: float = 0.3
     observer_slow: float = 0.05
-    jump: float = 0.1
+    jump: float = 0.05
+    jump_window: float = 0.01
     filter_gain: float = 0.3
     brake_time: float = 0.05
     max_fallback: int = 3
@@ -86,6 +88,9 @@ class Controller:
         self.kd = 2 * options.damping * 2 * np.pi * options.feedback_hz
         self.d_hat = np.zeros(n)
         self.d_fast = np.zeros(n)
+        self.minv_diag = np.zeros(n)
+        self.d_model = np.zeros(n)
+        self.d_sum, self.d_sum_count, self.jumped = np.zeros(n), 0, np.zeros(n, bool)
         self.prev = None             # (x_measured, tau) of the last sample
         self.sample = 0
         self.i = 0                   # MPC step
@@ -114,19 +119,33 @@ class Controller:
         if o.observer:
             # two low-pass estimates of the finite-difference disturbance: a slow one, which keeps
             # sensor noise out (a noisy estimate is a random torque on the light wrists), and a fast
-            # one; where they differ by more than ``jump`` of a torque limit (a push, a step, a
-            # payload) the slow one takes the fast one's value at once
+            # one; where their difference would move a joint off its speed within milliseconds (a
+            # push, a step, a payload) the slow one takes the fast one's value at once
             qm, vm = (x[:n] + xp[:n]) / 2, (x[n:] + xp[n:]) / 2
             raw = self.mpc.lib.tau(qm, vm, (x[n:] - xp[n:]) / dt) - up
             self.d_fast = self.d_fast + o.observer_alpha * (raw - self.d_fast)
             slow = self.d_hat + o.observer_slow * (raw - self.d_hat)
-            jump = np.abs(self.d_fast - slow) > o.jump * self.mpc.tau_max
+            jump = np.abs(self.d_fast - slow) * self.minv_diag * o.jump_window > o.jump * self.mpc.limits.array("qd_max")
             self.d_hat = np.where(jump, self.d_fast, slow)
+            self.jumped |= jump
+            self.d_sum = self.d_sum + self.d_hat
+            self.d_sum_count += 1
         return x
 
     def _resolve(self, x):
         mpc = self.mpc
-        mpc.d = self.d_hat.copy() if self.o.observer else mpc.d
+        # the model's disturbance: the estimate averaged over the last interval (an inertia
+        # mismatch makes the estimate follow the accelerations; fed back sample by sample into
+        # every re-solve it set the Panda's wrist swinging by 5-15 mm); a jump is taken at once
+        if self.d_sum_count:
+            avg = self.d_sum / self.d_sum_count
+            self.d_model = np.where(self.jumped, self.d_hat, avg)
+        self.d_sum, self.d_sum_count, self.jumped = np.zeros(self.n), 0, np.zeros(self.n, bool)
+        z = np.zeros(self.n)
+        g = mpc.lib.tau(x[:self.n], z, z)
+        M = np.array([mpc.lib.tau(x[:self.n], z, e) - g for e in np.eye(self.n)])
+        self.minv_diag = np.diag(np.linalg.inv(M)).copy()
+        mpc.d = self.d_model.copy() if self.o.observer else mpc.d
         if self.ws is None:
             X, U = mpc.initial_guess(self.i)
             active = None

@@ -376,3 +376,45 @@ def rollout(step, x0, tau, substeps: int, h: float) -> np.ndarray:
             x = step(x, u, h / substeps)
         xs.append(x)
     return np.array(xs)
+
+
+def solve_fatrop(robot: ControlRobot, task: ReachTask, options: dict | None = None) -> ReachResult:
+    """The reach (:func:`sx_reach_nlp`'s SX graph) solved by fatrop, CasADi's structure-exploiting
+    interior point (a Riccati recursion stage by stage): the NLP's rows are already in fatrop's
+    stage layout (per interval the gap first, then the stage's rows: x_0 - x_init at stage 0
+    and the inner substep states; the terminal rows last), declared by hand. Started from a
+    barrier of 1e-2 (from IPOPT's default 0.1 fatrop's iterates crept on the LWR reach,
+    docs/optimal_control.md), to tol 1e-4: its dual residual stalls above 1e-6 (UR5: 18
+    iterations to 1e-4, the native IPOPT's objective to 3e-7 relative; 1000 iterations, 21 s,
+    not to 1e-6)."""
+    import casadi as ca
+    Z, P, g, f = sx_reach_nlp(robot, task)
+    lib = stage_library(robot, task.N, task.h, task.integrator, task.inner)
+    L = lib.layout
+    N, n = task.N, robot.n
+    opts = {"print_time": False, "structure_detection": "manual", "N": N, "nx": [L.nx] * (N + 1),
+            "nu": [n] * N + [0], "ng": [L.nx + L.nin] + [L.nin] * (N - 1) + [3 + n],
+            "fatrop.print_level": 0, "fatrop.mu_init": 1e-2, "fatrop.tol": 1e-4, "fatrop.max_iter": 300}
+    opts.update(options or {})
+    solver = ca.nlpsol("reach_fatrop", "fatrop", {"x": Z, "p": P, "f": f, "g": g}, opts)
+    lbx, ubx = _bounds(task)
+    lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
+    lim = task.planned_limits
+    xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
+    xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
+    for k in range(N):
+        r = L.row_inner(k)
+        if L.nin:
+            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx)
+            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx)
+    q0 = np.asarray(task.q0, float)
+    xr = np.concatenate([q0, np.zeros(n)])
+    z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * N + [xr])
+    t0, c0 = time.perf_counter(), time.process_time()
+    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.concatenate([xr, np.asarray(task.goal, float)]))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    st = solver.stats()
+    gv = np.array(sol["g"]).ravel()
+    viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
+    return _result(np.array(sol["x"]).ravel(), n, N, n, task.T, st.get("return_status", st["success"]), st["success"],
+                   st.get("iter_count", -1), wall, cpu, viol, "fatrop (SX graph, stage structure by hand)")
