@@ -231,7 +231,10 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick) -> dict:
            "statuses": {k: sum(1 for s in steps if s["status"] == k) for k in ("converged", "iterate", "fallback")},
            "late": sum(1 for s in steps if s["late"]), "modes": modes,
            "slack_max": float(max(s["slack"] for s in steps)),
-           "goal_error_final_mm": 1e3 * goal_err, "sim_wall_s": time.perf_counter() - t0}
+           "goal_error_final_mm": 1e3 * goal_err, "sim_wall_s": time.perf_counter() - t0,
+           # the steps past the budget, to see what the time went to
+           "slow_steps": [{k: s[k] for k in ("step", "t", "cpu_ms", "iterations", "qp_iterations", "status", "mode")}
+                          for s in steps if s["cpu_ms"] > 10.0]}
     if dist.kind == "torque":
         k = int(round(dist.start * 1000))
         out["admissibility"] = admissible(plant, limits, X[k - 1], dist)

@@ -70,7 +70,7 @@ class MPCOptions:
     reserve: float = 0.1
     penalty: float = 100.0
     screen: float = 0.05
-    qp_iter_limit: int = 400
+    qp_iter_limit: int = 200
     speed_margin: float = 0.05
     position_margin: float = 0.02
 
@@ -238,7 +238,9 @@ class TrackingMPC:
             x, _, flag, info = daqp.solve(H, f, A, bu, bl, sense, iter_limit=self.options.qp_iter_limit,
                                           time_limit=time_limit)
             iters += int(info["iterations"])
-            if flag < 0 and sense.any():      # the shifted working set did not fit: start cold
+            # the shifted working set did not fit (infeasible, cycling, overdetermined): start cold;
+            # not after the iteration cap (-4), which bounds the step's time
+            if flag in (-1, -2, -6) and sense.any():
                 x, _, flag, info = daqp.solve(H, f, A, bu, bl, np.zeros_like(sense),
                                               iter_limit=self.options.qp_iter_limit, time_limit=time_limit)
                 iters += int(info["iterations"])
