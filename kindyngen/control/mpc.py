@@ -27,11 +27,11 @@ Budget: the SQP stops before an iteration that would end past ``budget_s`` of CP
 real-time iteration is max_iter = 1); a step with no usable iterate, or one that ran past the
 budget, reports ``fallback`` and the caller applies the previous plan shifted.
 
-Example::
+Example (Xref, Uref a plan of the reach, e.g. kindyngen.control.reach.ReachNLP(...).solve()'s
+np.hstack([q, qd]) and tau; tests/control/test_mpc.py runs it)::
 
-    >>> mpc = TrackingMPC(robot, limits, Xref, Uref, MPCOptions(N=20, h=0.05))  # doctest: +SKIP
-    >>> sol = mpc.solve(x0, 0, *mpc.initial_guess(0)); sol.status              # doctest: +SKIP
-    'converged'
+    mpc = TrackingMPC(robot, limits, Xref, Uref, MPCOptions(N=20, h=0.05))
+    sol = mpc.solve(x0, 0, *mpc.initial_guess(0))      # sol.status: 'converged'; sol.U[0] to apply
 """
 from __future__ import annotations
 

@@ -4,11 +4,9 @@ with the integrator's steps of the generated fd (one SX step mapped over the N i
 T / N), joint position and speed limits at the nodes and at the inner substep ends, torques as
 bounds; IPOPT. (examples/ocp.py's problem, written for any robot.)
 
-Example::
+Example (tests/control/test_reach.py runs it on the UR5)::
 
-    >>> res = solve_time_optimal(robot, limits, q0, qf, N=20)      # doctest: +SKIP
-    >>> res["success"], round(res["T"], 3)                          # doctest: +SKIP
-    (True, 0.596)
+    res = solve_time_optimal(robot, limits, q0, qf, N=20)       # res["T"], res["q"], res["tau"]
 """
 from __future__ import annotations
 
