@@ -11,7 +11,8 @@ flange to a goal at rest at T = 1 s, N = 20, one RK4 step per interval, data-she
 - the plain baseline in the same run: Opti + IPOPT with fd on MX symbols and IPOPT's defaults
   (what a new user writes); ratio of CPU times;
 - Crocoddyl + mim-solvers' CSQP on the same problem (benchmarks/crocoddyl_reach.py, in
-  .venv-crocoddyl: see its docstring), where that environment exists;
+  .venv-crocoddyl: see its docstring), and acados' SQP with HPIPM (benchmarks/acados_reach.py,
+  in .venv-acados), where those environments exist;
 - every plan checked by Pinocchio: from each node the RK4 step of Pinocchio's ABA against the next
   node (plan_step_error), the flange at the goal by Pinocchio's kinematics.
 
@@ -130,6 +131,7 @@ def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, quick) -> dict:
         f"{row['baseline']['cold_cpu_s_median']:.2f} s: {row['speedup_cold']:.1f}x; objectives "
         f"{res.objective:.4f} / {row['baseline']['objective']:.4f}; plan step error {row['ours']['plan_step_error']:.1e}")
     row["crocoddyl"] = crocoddyl_rows(name, model, task, crocoddyl_venv, quick)
+    row["acados"] = acados_rows(name, model, robot, task, crocoddyl_venv.parent / ".venv-acados", quick)
     return row
 
 
@@ -167,6 +169,36 @@ def crocoddyl_rows(name, model, task, venv: Path, quick: bool) -> dict:
         log(f"{name} crocoddyl {c['solver']}: {c['status']}, {c['iterations']} it, {c['solve_cpu_s']:.3f} s CPU, "
             f"objective {c['objective']:.4f}")
     return {"versions": out["versions"], "rows": rows}
+
+
+def acados_rows(name, model, robot, task, venv: Path, quick: bool) -> dict:
+    """benchmarks/acados_reach.py in its environment (see its docstring), the plan checked here."""
+    py = venv / "bin" / "python"
+    if not py.exists():
+        return {"error": f"no acados environment at {venv} (benchmarks/acados_reach.py says how to make it)"}
+    lim = task.planned_limits
+    problem = {"q0": list(task.q0), "goal": [float(v) for v in task.goal], "tau_max": list(lim.tau_max),
+               "qd_max": list(lim.qd_max), "q_lo": list(lim.q_lo), "q_hi": list(lim.q_hi), "N": task.N, "T": task.T}
+    module = robot.folder / "casadi" / f"{robot.name}_casadi.py"
+    r = subprocess.run([str(py), str(ROOT / "benchmarks" / "acados_reach.py"), "--module", str(module), "--problem",
+                        json.dumps(problem), "--repeats", "1" if quick else "3",
+                        "--build", str(ROOT / "benchmarks" / "build" / "acados")], capture_output=True, text=True,
+                       cwd=str(ROOT / "benchmarks" / "build"))
+    if r.returncode != 0:
+        lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
+        return {"error": " | ".join(lines[-3:]) if lines else f"exit {r.returncode}"}
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    c = out["row"]
+    from kindyngen.control.reach import ReachResult
+    res = ReachResult(c["success"], str(c["status"]), c["iterations"], 0.0, c["solve_cpu_s"], c["objective"],
+                      np.linspace(0, task.T, task.N + 1), np.array(c["q"]), np.array(c["qd"]), np.array(c["tau"]), 0.0,
+                      "acados")
+    row = {k: c[k] for k in ("status", "success", "iterations", "solve_cpu_s", "solve_cpu_s_runs", "objective", "build_s",
+                             "built_now")}
+    row.update(plan_check(name, model, task, res))
+    log(f"{name} acados: status {c['status']}, {c['iterations']} it, {c['solve_cpu_s']:.3f} s CPU, objective "
+        f"{c['objective']:.4f} (build {c['build_s']:.0f} s)")
+    return {"versions": out["versions"], "options": out["options"], "row": row}
 
 
 SUITE_T = 2.5
