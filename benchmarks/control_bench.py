@@ -234,7 +234,7 @@ def admissible(plant, limits, x, dist) -> dict:
              f"{dv[worst]:.2f} rad/s in the first millisecond, {margin[worst]:.2f} rad/s were left")}
 
 
-def mpc_case(name, model, robot, limits, ref, label, dist, quick) -> dict:
+def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05) -> dict:
     from kindyngen.control.closed_loop import Controller, simulate
     from kindyngen.control.mpc import MPCOptions, TrackingMPC
     mpc = TrackingMPC(robot, limits, ref["X"], ref["U"], MPCOptions())
@@ -251,6 +251,11 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick) -> dict:
             "qd": int(np.sum(np.any(np.abs(qd) > limits.array("qd_max") + TOL, axis=1))),
             "tau": int(np.sum(np.any(np.abs(tau) > limits.array("tau_max") + TOL, axis=1)))}
     goal_err = float(np.linalg.norm(plant.flange(q[-1]) - np.asarray(ref["goal"])))
+    # the MPC's prediction of the state at its next re-solve (its model from the measured state
+    # under the plan's first torque) against the plant's (log entry i is the state at (i + 1) ms)
+    per = int(round(ref_h * 1000))
+    pred_err = [float(np.abs(X[s["step"] * per + per - 1] - np.array(s["predicted_next"])).max())
+                for s in steps if "predicted_next" in s and s["step"] * per + per - 1 < len(X)]
     modes = {m: sum(1 for s in steps if s["mode"] == m) for m in ("mpc", "shifted plan", "brake")}
     out = {"case": label, "disturbance": dist.__dict__ | {"duration": None if not np.isfinite(dist.duration) else dist.duration},
            "violations": viol, "speed_peak_fraction": (np.abs(qd).max(0) / limits.array("qd_max")).tolist(),
@@ -264,6 +269,7 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick) -> dict:
            "late": sum(1 for s in steps if s["late"]), "modes": modes,
            "slack_max": float(max(s["slack"] for s in steps)),
            "goal_error_final_mm": 1e3 * goal_err, "sim_wall_s": time.perf_counter() - t0,
+           "prediction_error": {"median": float(np.median(pred_err)), "max": float(np.max(pred_err))} if pred_err else None,
            # the steps past the budget, to see what the time went to
            "slow_steps": [{k: s[k] for k in ("step", "t", "cpu_ms", "iterations", "qp_iterations", "status", "mode")}
                           for s in steps if s["cpu_ms"] > 10.0]}
@@ -275,7 +281,8 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick) -> dict:
     held = viol["q"] == 0 and viol["qd"] == 0 and viol["tau"] == 0
     out["limits_held"] = held
     out["goal_within_1mm"] = goal_err < 1e-3
-    log(f"{name} {label}: violations {viol}, peak qd {max(out['speed_peak_fraction']):.2f} qd_max, re-solve CPU "
+    log(f"{name} {label}: prediction error {out['prediction_error']['median'] if pred_err else float('nan'):.1e} "
+        f"(median), violations {viol}, peak qd {max(out['speed_peak_fraction']):.2f} qd_max, re-solve CPU "
         f"median {out['resolve_cpu_ms']['median']:.2f} p99 {out['resolve_cpu_ms']['p99']:.2f} worst "
         f"{out['resolve_cpu_ms']['worst']:.2f} ms, modes {modes}, goal {1e3 * goal_err:.3f} mm"
         + (f"; {out['admissibility']['note']}" if "admissibility" in out else ""))

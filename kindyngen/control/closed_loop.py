@@ -164,6 +164,9 @@ class Controller:
                "iterations": sol.iterations, "qp_iterations": sol.qp_iterations, "cpu_ms": 1e3 * sol.cpu_s,
                "wall_ms": 1e3 * sol.wall_s, "slack": sol.slack, "d_hat": self.d_hat.tolist()}
         if usable and not sol.late:
+            # the model's state at the next re-solve under the plan's first torque (the plant's
+            # later state against it: the prediction error)
+            rep["predicted_next"] = mpc.predict(x, sol.U[0]).tolist()
             self.X, self.U = sol.X, sol.U
             self.plan_x0, self.plan_age, self.fallbacks = x.copy(), 0, 0
             self.mode = "mpc"
