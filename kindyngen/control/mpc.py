@@ -119,7 +119,7 @@ class TrackingMPC:
                                f"{self.Xref.shape} and {self.Uref.shape}")
         self.Uhold = robot.gravity_torque(self.Xref[-1, :n])
         self.lib = stage_library(robot, o.N, o.h, o.integrator, o.inner, progress)
-        self.nin = self.lib.integrator_inner if o.inner else 0
+        self.nin = self.lib.layout.nin
         self.tau_max = limits.array("tau_max")
         self.u_max = (1.0 - o.reserve) * self.tau_max
         # the rows hold the limits backed off by a stated margin: between the nodes and the inner

@@ -234,9 +234,10 @@ class StageLibrary:
     def linearise(self, x0, X, U, d=None):
         """F (N x 2n), A (N x 2n x 2n), B (N x 2n x n), XI (N x nin), AXI (N x nin x 3n): the
         intervals' ends from x_0 = x0, x_k = X[k-1] under U[k] + d, their Jacobians, the inner
-        substep states and theirs."""
+        substep states and theirs (nin = 2n (substeps - 1) for a library built with inner
+        rows, else 0)."""
         L = self.layout
-        n, N, nx, nw, nin = L.n, L.N, L.nx, L.nw, self.integrator_inner
+        n, N, nx, nw, nin = L.n, L.N, L.nx, L.nw, L.nin
         x0 = np.ascontiguousarray(x0, float)
         X = np.ascontiguousarray(X, float)
         U = np.ascontiguousarray(U, float)
@@ -248,11 +249,6 @@ class StageLibrary:
         p = ctypes.POINTER(ctypes.c_double)
         self._cdll.kdg_linearise(*(a.ctypes.data_as(p) for a in (x0, X, U, d, F, AB, XI, AXI)))
         return F, AB[:, :, :nx], AB[:, :, nx:], XI[:, :nin], AXI[:, :nin]
-
-    @property
-    def integrator_inner(self) -> int:
-        """Inner-state rows per interval the C computes (2n per inner substep end)."""
-        return 2 * self.robot.n * (self.integrator.substeps - 1)
 
     def step(self, x, u) -> np.ndarray:
         out = np.empty(2 * self.robot.n)

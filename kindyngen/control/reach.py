@@ -241,7 +241,6 @@ def sx_reach_nlp(robot: ControlRobot, task: ReachTask):
     lib_layout = stage_library(robot, task.N, task.h, task.integrator, task.inner).layout
     n, N, L = robot.n, task.N, lib_layout
     Z, P = ca.SX.sym("z", L.nz), ca.SX.sym("p", L.nx + 3)
-    rows = [None] * L.ng
     g = ca.SX.zeros(L.ng)
     for k in range(N):
         x, u = Z[k * L.nw:k * L.nw + L.nx], Z[k * L.nw + L.nx:(k + 1) * L.nw]
@@ -252,7 +251,6 @@ def sx_reach_nlp(robot: ControlRobot, task: ReachTask):
     g[L.nx:2 * L.nx] = Z[:L.nx] - P[:L.nx]
     xN = Z[N * L.nw:]
     g[L.ng - 3 - n:] = ca.vertcat(robot.fk_hom(xN[:n])[:3, 3] - P[L.nx:], xN[n:])
-    del rows
     f = task.h * sum(ca.sumsqr(Z[k * L.nw + L.nx:(k + 1) * L.nw]) for k in range(N))
     return Z, P, g, f
 
