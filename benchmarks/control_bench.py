@@ -91,7 +91,9 @@ def plan_check(name, model, task, res) -> dict:
         err = max(err, float(np.abs(x - X[k + 1]).max()))
     pin.framesForwardKinematics(pm, pd, res.q[-1])
     lim = task.planned_limits
-    return {"plan_step_error": err, "goal_error_m": float(np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal))),
+    from kindyngen.control.reach import check_between_nodes
+    between = check_between_nodes(lambda q, v, u: pin.aba(pm, pd, q, v, u), res, lim, 20)
+    return {"plan_step_error": err, "between_nodes_pinocchio": between, "goal_error_m": float(np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal))),
             "final_speed": float(np.abs(res.qd[-1]).max()),
             "limit_excess": {"tau": float(np.max(np.abs(res.tau) - lim.array("tau_max"), initial=0)),
                              "q": float(max(np.max(res.q[1:] - lim.array("q_hi")), np.max(lim.array("q_lo") - res.q[1:]), 0)),

@@ -691,6 +691,9 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--substeps", type=_count, default=1, help="integrator steps per interval (default 1)")
     pl.add_argument("--speed-margin", type=_fraction, default=0.0, metavar="FRACTION",
                     help="fraction of every speed limit the plan keeps free (default 0)")
+    pl.add_argument("--position-margin", type=float, default=0.0, metavar="RAD",
+                    help="rad the plan keeps from every position limit (default 0); plan.json's between_nodes "
+                         "says what the limits at the nodes leave between them")
     pl.add_argument("--track", action="store_true", help="also track the plan by MPC in a simulated 1 kHz loop")
     pl.add_argument("--settle", type=float, default=1.0, help="--track: seconds simulated after --T (default 1)")
     pl.add_argument("--budget-ms", type=_positive, default=10.0, help="--track: CPU budget per re-solve (default 10)")

@@ -80,16 +80,22 @@ def plan_reach(model, description, args, progress) -> tuple[dict, object, object
         raise ControlError(f"--q0: {len(q0)} values for {robot.n} joints")
     goal = tuple(args.goal) if args.goal is not None else tuple(robot.flange_position(q0) + np.asarray(args.offset))
     task = ReachTask(q0, goal, limits, T=args.T, N=args.N, integrator=Integrator(args.integrator, args.substeps),
-                     inner=True, margin_speed=args.speed_margin)
+                     inner=True, margin_speed=args.speed_margin, margin_position=args.position_margin)
     nlp = ReachNLP(robot, task, progress=progress)
     progress(f"solving the reach ({robot.name}, N = {task.N}, T = {task.T:g} s, {task.integrator.tag})")
     res = nlp.solve()
+    from .reach import check_between_nodes
+    between = check_between_nodes(nlp.lib.fd, res, limits) if res.success else None
     doc = {"robot": robot.name, "description": str(description), "n": robot.n, "q0": list(q0), "goal": list(goal),
            "T": task.T, "N": task.N, "integrator": task.integrator.tag, "limits": limits.__dict__,
-           "margin_speed": task.margin_speed, **res.as_json(),
+           "margin_speed": task.margin_speed, "margin_position": task.margin_position, **res.as_json(),
+           # the plan's torques integrated finely between the nodes by the model: what a margin must cover
+           "between_nodes": between,
            "pinocchio": pinocchio_check(description, getattr(args, "tip", None), task, res)}
     progress(f"{res.status}: {res.iterations} iterations, {1e3 * res.solve_cpu_s:.1f} ms CPU, objective "
-             f"{res.objective:.4f}")
+             f"{res.objective:.4f}" + (f"; between the nodes the speeds pass their limits by up to "
+                                       f"{between['speed_excess']:.3g} rad/s (negative: margin left), positions by "
+                                       f"{between['position_excess']:.3g} rad" if between else ""))
     if not res.success:
         raise ControlError(f"the reach was not solved ({res.status}): the goal {[round(float(v), 4) for v in goal]} may be out of "
                            f"reach in T = {task.T:g} s within the limits")

@@ -422,3 +422,43 @@ def solve_fatrop(robot: ControlRobot, task: ReachTask, options: dict | None = No
     viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
     return _result(np.array(sol["x"]).ravel(), n, N, n, task.T, st.get("return_status", st["success"]), st["success"],
                    st.get("iter_count", -1), wall, cpu, viol, "fatrop (SX graph, stage structure by hand)")
+
+
+def check_between_nodes(accel, res: ReachResult, limits: Limits, samples: int = 50) -> dict:
+    """The between-node check: from every node of a plan, its torque held over the interval and
+    integrated by RK4 in ``samples`` steps of ``accel(q, qd, tau) -> qdd`` (the library's ``fd``,
+    or an independent simulator's); returns the largest excess (negative: the margin left) of
+    the positions and speeds over the limits at those samples, in rad and rad/s, and where.
+
+    >>> lim = Limits((-1.0,), (1.0,), (1.0,), (10.0,))
+    >>> res = ReachResult(True, "", 0, 0.0, 0.0, 0.0, np.array([0.0, 1.0]), np.array([[0.0], [0.5]]),
+    ...                   np.array([[0.0], [0.0]]), np.array([[1.0]]), 0.0, "")
+    >>> out = check_between_nodes(lambda q, qd, u: u, res, lim, 10)   # qdd = 1 for 1 s: qd reaches 1
+    >>> abs(round(out["speed_excess"], 6)), out["speed_at"]        # at the limit at the interval's end
+    (0.0, (0, 10))
+    """
+    n = res.q.shape[1]
+    lo, hi, vmax = limits.array("q_lo"), limits.array("q_hi"), limits.array("qd_max")
+    q_ex, v_ex, q_at, v_at = -np.inf, -np.inf, None, None
+    T = res.t[-1] - res.t[0]
+    N = len(res.tau)
+    dt = T / N / samples
+
+    def f(x, u):
+        return np.concatenate([x[n:], accel(x[:n], x[n:], u)])
+    for k in range(N):
+        x = np.concatenate([res.q[k], res.qd[k]])
+        for s in range(samples):
+            k1 = f(x, res.tau[k])
+            k2 = f(x + dt / 2 * k1, res.tau[k])
+            k3 = f(x + dt / 2 * k2, res.tau[k])
+            k4 = f(x + dt * k3, res.tau[k])
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            qe = float(max(np.max(x[:n] - hi), np.max(lo - x[:n])))
+            ve = float(np.max(np.abs(x[n:]) - vmax))
+            if qe > q_ex:
+                q_ex, q_at = qe, (k, s + 1)
+            if ve > v_ex:
+                v_ex, v_at = ve, (k, s + 1)
+    return {"position_excess": q_ex, "position_at": q_at, "speed_excess": v_ex, "speed_at": v_at,
+            "samples_per_interval": samples}

@@ -70,6 +70,15 @@ def test_inner_rows_hold_the_speed_limit_between_nodes():
         peak = max(peak, float(np.max(np.abs(xm[robot.n:]) / vmax)))
     assert peak <= 1 + 1e-6, peak
     assert peak > 0.9          # the margin is what holds it: the plan uses the speed it has
+    # between the substep ends too, integrated finely by Pinocchio (check_between_nodes): the
+    # data-sheet limits hold with the margin left over
+    import pinocchio as pin
+    from benchmarks.control_robots import pinocchio_plant_model
+    from kindyngen.control.reach import check_between_nodes
+    pm, _ = pinocchio_plant_model("ur5", model)
+    pd = pm.createData()
+    out = check_between_nodes(lambda q, v, u: pin.aba(pm, pd, q, v, u), res, limits, 20)
+    assert out["speed_excess"] < 0 and out["position_excess"] < 0, out
 
 
 def test_lwr_native_and_baseline_agree():
