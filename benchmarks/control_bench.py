@@ -320,10 +320,21 @@ def plot(doc, path: Path):
     axes[0].bar(x - 0.25, [r["ours"]["cold_cpu_s_median"] for r in reach], 0.25, label="ours, cold")
     axes[0].bar(x, [r["warm"]["cpu_s_median"] for r in reach], 0.25, label="ours, warm re-solve")
     axes[0].bar(x + 0.25, [r["baseline"]["cold_cpu_s_median"] for r in reach], 0.25, label="Opti + IPOPT baseline")
+    labelled = set()
+
+    def mark(x, y, style, label):
+        axes[0].plot(x, y, style, label=None if label in labelled else label)
+        labelled.add(label)
     for i, r in enumerate(reach):
         rows = r.get("crocoddyl", {}).get("rows", [])
         if rows:
-            axes[0].plot(i + 0.25, rows[0]["solve_cpu_s"], "k^", label="Crocoddyl CSQP" if i == 0 else None)
+            ok = rows[0]["status"].startswith("converged")
+            mark(i + 0.25, rows[0]["solve_cpu_s"], "k^" if ok else "kx",
+                 "Crocoddyl CSQP" + ("" if ok else " (stopped, not converged)"))
+        ac = r.get("acados", {}).get("row")
+        if ac:
+            mark(i + 0.25, ac["solve_cpu_s"], "ms" if ac["success"] else "m+",
+                 "acados SQP" + ("" if ac["success"] else " (max iterations)"))
     axes[0].set_yscale("log")
     axes[0].set_xticks(x, names)
     axes[0].set_ylabel("reach solve CPU [s]")
