@@ -100,7 +100,7 @@ def plan_check(name, model, task, res) -> dict:
                              "qd": float(max(np.max(np.abs(res.qd[1:]) - lim.array("qd_max")), 0))}}
 
 
-def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, quick) -> dict:
+def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, acados_venv, quick, peers=True) -> dict:
     from kindyngen.control.reach import ReachNLP, solve_baseline
     model, robot, limits, task = cr.load(name)
     t0 = time.perf_counter()
@@ -132,8 +132,9 @@ def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, quick) -> dict:
         f"{1e3 * row['warm']['cpu_s_median']:.1f} ms, baseline {row['baseline']['iterations']} it "
         f"{row['baseline']['cold_cpu_s_median']:.2f} s: {row['speedup_cold']:.1f}x; objectives "
         f"{res.objective:.4f} / {row['baseline']['objective']:.4f}; plan step error {row['ours']['plan_step_error']:.1e}")
-    row["crocoddyl"] = crocoddyl_rows(name, model, task, crocoddyl_venv, quick)
-    row["acados"] = acados_rows(name, model, robot, task, crocoddyl_venv.parent / ".venv-acados", quick)
+    if peers:
+        row["crocoddyl"] = crocoddyl_rows(name, model, task, crocoddyl_venv, quick)
+        row["acados"] = acados_rows(name, model, robot, task, acados_venv, quick)
     return row
 
 
@@ -357,14 +358,20 @@ def plot(doc, path: Path):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "control.json"))
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "control.json"),
+                    help="the JSON (the plot beside it, .png)")
     ap.add_argument("--quick", action="store_true",
                     help="one solve per row, two torque-step joints per robot, Crocoddyl at 100 iterations")
     ap.add_argument("--robots", nargs="+", default=list(cr.ROBOTS), choices=list(cr.ROBOTS))
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--no-reach", action="store_true")
-    ap.add_argument("--no-mpc", action="store_true")
-    ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"))
+    ap.add_argument("--repeats", type=int, default=5, help="solves per reach row, median CPU (default 5)")
+    ap.add_argument("--no-reach", action="store_true", help="skip part 1 (the reach)")
+    ap.add_argument("--no-mpc", action="store_true", help="skip part 2 (the MPC suite)")
+    ap.add_argument("--no-peers", action="store_true", help="skip Crocoddyl and acados")
+    ap.add_argument("--crocoddyl-venv", default=str(ROOT / ".venv-crocoddyl"),
+                    help="environment with crocoddyl, mim-solvers (benchmarks/crocoddyl_reach.py)")
+    ap.add_argument("--acados-venv", default=str(ROOT / ".venv-acados"),
+                    help="environment with comma-deps-acados (benchmarks/acados_reach.py; the first run of each "
+                         "robot generates and compiles its solver, minutes)")
     args = ap.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     doc = {"machine": machine(), "uptime_start": uptime(), "quick": args.quick,
@@ -376,7 +383,8 @@ def main(argv=None) -> int:
             doc["reach"].append({"robot": name, "error": f"{cr.ROBOTS[name].description} not installed"})
             continue
         if not args.no_reach:
-            doc["reach"].append(reach_rows(name, repeats, 1 if args.quick else 3, Path(args.crocoddyl_venv), args.quick))
+            doc["reach"].append(reach_rows(name, repeats, 1 if args.quick else 3, Path(args.crocoddyl_venv),
+                                           Path(args.acados_venv), args.quick, not args.no_peers))
         if not args.no_mpc:
             doc["mpc"].append(mpc_suite(name, args.quick))
     doc["uptime_end"] = uptime()
