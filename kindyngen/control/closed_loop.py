@@ -1,11 +1,13 @@
 """The MPC in a closed loop at two rates: the tracking MPC (kindyngen/control/mpc.py) every
 interval h, and at the plant's rate (1 kHz) an inner loop that
 
-- estimates the torque disturbance from the last measured sample (inverse dynamics of the
-  generated ``tau`` at the finite-difference acceleration, minus the torque applied), low-pass
-  filtered: whatever acts on the joints that the model lacks (a payload, a push, a torque step,
-  wrong masses) is one torque d, which the MPC's model includes at every re-solve and the inner
-  loop cancels from the next sample on (the change since the MPC's solve);
+- estimates the state (each measurement blended with the model's one-sample prediction) and
+  the torque disturbance (inverse dynamics of the generated ``tau`` at the estimate's
+  finite-difference acceleration, minus the torque applied; a slow low-pass that jumps to a fast
+  one where they part, see LoopOptions): whatever acts on the joints that the model lacks (a
+  payload, a push, a torque step, wrong masses) is one torque d, which the MPC's model includes
+  at every re-solve (averaged over the last interval) and the inner loop cancels from the next
+  sample on (its change since the re-solve);
 - follows the MPC's prediction between its nodes (cubic Hermite between the measured state and
   the plan's node 1) with a joint-space PD scaled by the mass matrix (natural frequency
   ``feedback_hz``), so that a deviation is corrected within milliseconds, not at the next re-solve;
