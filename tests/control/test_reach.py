@@ -133,3 +133,17 @@ def test_time_optimal_over_the_ur5():
     assert np.all(np.abs(res["tau"]) <= limits.array("tau_max") + 1e-9)
     assert np.all(np.abs(res["qd"]) <= 0.95 * limits.array("qd_max") + 1e-7)
     assert np.abs(res["q"][-1] - qf).max() < 1e-9
+
+
+def test_two_robots_in_one_process():
+    """Two reach solvers (the UR5 and the LWR, each on its own library) solving in turn give the
+    iterates each gives alone: nothing is shared between libraries or calls."""
+    _, ur5, _, ur5_task = arm("ur5")
+    _, lwr, _, lwr_task = arm("lwr4")
+    a, b = ReachNLP(ur5, ur5_task), ReachNLP(lwr, lwr_task)
+    alone_a, alone_b = a.solve(), b.solve()
+    for _ in range(2):
+        ra, rb = a.solve(), b.solve()
+        np.testing.assert_array_equal(ra.z, alone_a.z)
+        np.testing.assert_array_equal(rb.z, alone_b.z)
+        assert (ra.iterations, rb.iterations) == (alone_a.iterations, alone_b.iterations)
