@@ -6,8 +6,8 @@ from their YAML DH tables, the UR5 from example-robot-data's URDF), one command:
 Part 1, the reach (kindyngen.control.reach, benchmarks/control_robots.py's tasks: start at rest,
 flange to a goal at rest at T = 1 s, N = 20, one RK4 step per interval, data-sheet limits):
 - ours: IPOPT on the native stage library (adaptive barrier), cold from rest with the gravity
-  torques (median CPU of --repeats), and warm re-solved from the solution shifted by one
-  interval with the start moved to its node 1 (the MPC's re-solve);
+  torques (median CPU of --repeats), and warm re-solved from the solution and its multipliers
+  shifted by one interval with the start moved to its node 1 (the MPC's re-solve);
 - the plain baseline in the same run: Opti + IPOPT with fd on MX symbols and IPOPT's defaults
   (what a new user writes); ratio of CPU times;
 - Crocoddyl + mim-solvers' CSQP on the same problem (benchmarks/crocoddyl_reach.py, in
@@ -112,9 +112,10 @@ def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, acados_venv, qui
                                                "ipopt.warm_start_bound_push": 1e-6,
                                                "ipopt.warm_start_mult_bound_push": 1e-6}))
     warm = []
+    lam_g, lam_x = nlp.shifted_multipliers(res.lam_g, res.lam_x)
     for _ in range(repeats):
         x1 = np.concatenate([res.q[1], res.qd[1]])
-        warm.append(nlp.solve(x1, z0=nlp.shifted(res.z), solver=warm_solver))
+        warm.append(nlp.solve(x1, z0=nlp.shifted(res.z), lam_g0=lam_g, lam_x0=lam_x, solver=warm_solver))
     base = [solve_baseline(robot, task) for _ in range(baseline_repeats)]
     row = {"robot": name, "n": robot.n, "N": task.N, "T": task.T, "goal": list(task.goal), "q0": list(task.q0),
            "build_s": build_s,

@@ -208,6 +208,24 @@ class ReachNLP:
         xN = z[N * L.nw:]
         return np.concatenate([z[L.nw:N * L.nw], xN, self.robot.gravity_torque(xN[:n]), xN])
 
+    def shifted_multipliers(self, lam_g: np.ndarray, lam_x: np.ndarray):
+        """The constraint and bound multipliers moved with :meth:`shifted`: every interval's rows
+        and bounds one interval earlier, the appended interval given the last one's; the row
+        x_0 = x_init takes the old first gap's multiplier, which carried x_1's stationarity
+        (without the multipliers IPOPT's warm start re-raises its barrier for every active
+        bound: docs/optimal_control.md, "The warm re-solve's settings")."""
+        L, N = self.layout, self.task.N
+        rows = [lam_g[L.row_gap(k):L.row_gap(k) + L.nx] for k in range(N)]
+        inner = [lam_g[L.row_inner(k):L.row_inner(k) + L.nin] for k in range(N)]
+        out = np.array(lam_g, float).copy()
+        for k in range(N):
+            src = min(k + 1, N - 1)
+            out[L.row_gap(k):L.row_gap(k) + L.nx] = rows[src]
+            out[L.row_inner(k):L.row_inner(k) + L.nin] = inner[src]
+        out[L.nx:2 * L.nx] = rows[0]
+        lx = np.concatenate([lam_x[L.nw:N * L.nw], lam_x[(N - 1) * L.nw:N * L.nw], lam_x[N * L.nw:]])
+        return out, lx
+
     def p(self, x_init=None, goal=None) -> np.ndarray:
         n = self.robot.n
         x = np.concatenate([np.asarray(self.task.q0, float), np.zeros(n)]) if x_init is None else np.asarray(x_init, float)
