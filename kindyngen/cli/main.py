@@ -467,6 +467,27 @@ def _cmd_excite(args) -> int:
     return 0
 
 
+def _cmd_plan(args) -> int:
+    """A reach (and with --track the MPC tracking it in a simulated loop): kindyngen/control."""
+    from ..control import plan_command
+    from ..control.robot import ControlError
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
+
+    def progress(text):
+        if not args.quiet:
+            print(f"plan: {text}", file=sys.stderr, flush=True)
+    model = load(args.robot, args)
+    try:
+        plan, robot, limits, task = plan_command.plan_reach(model, Path(args.robot), args, progress)
+        tracked = plan_command.track(robot, limits, task, args, progress) if args.track else None
+    except (ControlError, ValueError) as exc:
+        raise UsageError(str(exc).splitlines()[0]) from None
+    replace_outputs(Path(args.out), lambda folder: plan_command.write(folder, plan, tracked), plan_command.OUTPUTS)
+    progress(f"wrote {args.out}/plan.json" + (", track.json" if tracked else ""))
+    return 0
+
+
 def _log_arguments(command: argparse.ArgumentParser) -> None:
     """The preprocessing and output options every command that reads logs shares."""
     command.add_argument("--cutoff", type=_cutoff, default=5.0, metavar="HZ|none",
@@ -666,6 +687,41 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("--folds", type=_folds, default=5, help="cross-validation blocks, 2 to 50 (default 5)")
     _log_arguments(d)
     d.set_defaults(run=_cmd_discover)
+
+    pl = sub.add_parser("plan", help="plan a reach with joint limits (optimal control), optionally track it by MPC",
+                        description=("Plan a reach on a fixed-base arm: from rest at --q0, the flange to --goal (m, base "
+                                     "frame) and at rest after --T s, minimising the integral of |tau|^2 under the joint "
+                                     "position, speed and torque limits (the URDF's <limit>, or --limits FILE). The "
+                                     "robot's dynamics are generated and compiled once (cached). With --track the plan "
+                                     "is tracked by the MPC in a simulated 1 kHz loop. Writes plan.json (and "
+                                     "track.json) into --out."))
+    pl.add_argument("robot", metavar="ROBOT", help="robot description, YAML or URDF")
+    _robot_options(pl)
+    where = pl.add_mutually_exclusive_group(required=True)
+    where.add_argument("--goal", type=float, nargs=3, metavar=("X", "Y", "Z"), help="flange goal position in m")
+    where.add_argument("--offset", type=float, nargs=3, metavar=("DX", "DY", "DZ"),
+                       help="flange goal relative to its position at --q0, in m")
+    pl.add_argument("--q0", type=float, nargs="+", metavar="Q", help="start configuration (default: 0 clipped to the limits)")
+    pl.add_argument("--limits", metavar="FILE", help="YAML with velocity: [...] and effort: [...] (default: the URDF's)")
+    pl.add_argument("--T", type=_positive, default=1.0, help="duration in s (default 1)")
+    pl.add_argument("--N", type=_count, default=20, help="shooting intervals (default 20)")
+    pl.add_argument("--integrator", choices=("rk4", "midpoint", "euler"), default="rk4", help="default rk4")
+    pl.add_argument("--substeps", type=_count, default=1, help="integrator steps per interval (default 1)")
+    pl.add_argument("--speed-margin", type=_fraction, default=0.0, metavar="FRACTION",
+                    help="fraction of every speed limit the plan keeps free (default 0)")
+    pl.add_argument("--position-margin", type=float, default=0.0, metavar="RAD",
+                    help="rad the plan keeps from every position limit (default 0); plan.json's between_nodes "
+                         "says what the limits at the nodes leave between them")
+    pl.add_argument("--track", action="store_true", help="also track the plan by MPC in a simulated 1 kHz loop")
+    pl.add_argument("--settle", type=float, default=1.0, help="--track: seconds simulated after --T (default 1)")
+    pl.add_argument("--budget-ms", type=_positive, default=10.0, help="--track: CPU budget per re-solve (default 10)")
+    pl.add_argument("--noise", type=float, nargs=2, default=(0.0, 0.0), metavar=("RAD", "RAD_S"),
+                    help="--track: measurement noise (standard deviations)")
+    pl.add_argument("--torque-step", type=float, nargs=4, metavar=("JOINT", "NM", "START", "DURATION"),
+                    help="--track: a torque step on a joint (1-based) of NM newton metres from START for DURATION s")
+    pl.add_argument("--out", required=True, metavar="DIR")
+    pl.add_argument("--quiet", action="store_true", help="no progress output")
+    pl.set_defaults(run=_cmd_plan)
     return p
 
 

@@ -1,0 +1,169 @@
+"""The reach over any robot (kindyngen/control/reach.py), checked by Pinocchio (the arms' own
+models, benchmarks/control_robots.py: the UR5 by Pinocchio's URDF parser):
+
+- the native IPOPT solve converges; the plan satisfies its integrator steps of Pinocchio's ABA
+  (from each node, the RK4 steps land on the next node, 1e-8), the flange is at the goal by
+  Pinocchio's kinematics (1e-6 m) and at rest; torques within their limits, q and qd at the
+  nodes within the planned limits (IPOPT relaxes bounds by 1e-8 relative: 1e-7);
+- with two RK4 substeps and the inner states as rows, the inner speeds hold the limits too;
+- on the LWR the native solve and the Opti baseline reach the same objective (1e-6 relative);
+  the inverse-dynamics form (UR5) reaches a KKT point of the same discrete problem, fatrop the
+  native solve's optimum, and the time-optimal plan satisfies Pinocchio's steps.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kindyngen.control.integrators import Integrator
+from kindyngen.control.reach import ReachNLP, inverse_dynamics_reach, rollout, solve_baseline
+
+from .helpers import arm, pinocchio_step
+
+
+def _check_plan(name, model, task, res):
+    import pinocchio as pin
+    from benchmarks.control_robots import pinocchio_plant_model
+    step = pinocchio_step(name, model)
+    M = task.integrator.substeps
+    X = np.hstack([res.q, res.qd])
+    for k in range(task.N):
+        x = X[k]
+        for _ in range(M):
+            x = step(x, res.tau[k], task.h / M)
+        assert np.abs(x - X[k + 1]).max() < 1e-8 * max(1.0, np.abs(X[k + 1]).max()), k
+    pm, frame = pinocchio_plant_model(name, model)
+    pd = pm.createData()
+    pin.framesForwardKinematics(pm, pd, res.q[-1])
+    assert np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal)) < 1e-6
+    assert np.abs(res.qd[-1]).max() < 1e-7
+    lim = task.planned_limits
+    assert np.all(np.abs(res.tau) <= lim.array("tau_max") + 1e-9)
+    assert np.all(res.q[1:] >= lim.array("q_lo") - 1e-7) and np.all(res.q[1:] <= lim.array("q_hi") + 1e-7)
+    assert np.all(np.abs(res.qd[1:]) <= lim.array("qd_max") + 1e-7)
+
+
+@pytest.mark.parametrize("name", ["lwr4", "panda", "ur5"])
+def test_native_reach_against_pinocchio(name):
+    model, robot, limits, task = arm(name)
+    res = ReachNLP(robot, task).solve()
+    assert res.success, res.status
+    _check_plan(name, model, task, res)
+
+
+def test_inner_rows_hold_the_speed_limit_between_nodes():
+    """Two RK4 substeps with a 30 % speed margin: the plan's nodes and its inner substep ends
+    within 0.7 qd_max, checked by re-integrating each half interval with Pinocchio."""
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, integrator=Integrator("rk4", 2), inner=True, margin_speed=0.3)
+    res = ReachNLP(robot, task).solve()
+    assert res.success, res.status
+    _check_plan("ur5", model, task, res)
+    step = pinocchio_step("ur5", model)
+    vmax = task.planned_limits.array("qd_max")
+    X = np.hstack([res.q, res.qd])
+    peak = 0.0
+    for k in range(task.N):
+        xm = step(X[k], res.tau[k], task.h / 2)
+        peak = max(peak, float(np.max(np.abs(xm[robot.n:]) / vmax)))
+    assert peak <= 1 + 1e-6, peak
+    assert peak > 0.9          # the margin is what holds it: the plan uses the speed it has
+    # between the substep ends too, integrated finely by Pinocchio (check_between_nodes): the
+    # data-sheet limits hold with the margin left over
+    import pinocchio as pin
+    from benchmarks.control_robots import pinocchio_plant_model
+    from kindyngen.control.reach import check_between_nodes
+    pm, _ = pinocchio_plant_model("ur5", model)
+    pd = pm.createData()
+    out = check_between_nodes(lambda q, v, u: pin.aba(pm, pd, q, v, u), res, limits, 20)
+    assert out["speed_excess"] < 0 and out["position_excess"] < 0, out
+
+
+def test_lwr_native_and_baseline_agree():
+    """The native solve and the Opti baseline (fd on MX, IPOPT's defaults) reach the same optimum
+    (the native functions equal the SX graph's AD: test_native.py)."""
+    model, robot, limits, task = arm("lwr4")
+    nlp = ReachNLP(robot, task)
+    res = nlp.solve()
+    base = solve_baseline(robot, task)
+    assert base.success
+    assert abs(res.objective - base.objective) < 1e-6 * base.objective
+    # rollout of the plan's torques with the library's own step reproduces its nodes
+    X = rollout(lambda x, u, dt: nlp.lib.step(x, u), np.concatenate([res.q[0], res.qd[0]]), res.tau, 1, task.h)
+    assert np.abs(X - np.hstack([res.q, res.qd])).max() < 1e-7
+
+
+def test_inverse_dynamics_form_is_the_same_discrete_problem():
+    model, robot, limits, task = arm("ur5")
+    res = inverse_dynamics_reach(robot, task)
+    assert res.success, res.status
+    _check_plan("ur5", model, task, res)
+
+
+def test_fatrop_reaches_the_native_optimum():
+    from kindyngen.control.reach import solve_fatrop
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, N=10)         # the SX graph's size: fatrop's part of the suite's time
+    ref = ReachNLP(robot, task).solve()
+    res = solve_fatrop(robot, task)
+    assert res.success, res.status
+    assert abs(res.objective - ref.objective) < 1e-5 * ref.objective
+    step = pinocchio_step("ur5", model)
+    X = np.hstack([res.q, res.qd])
+    err = max(np.abs(step(X[k], res.tau[k], task.h) - X[k + 1]).max() for k in range(task.N))
+    assert err < 1e-5          # fatrop stops at tol 1e-4 (its dual residual stalls above 1e-6): gaps of ~3e-6
+
+
+def test_time_optimal_over_the_ur5():
+    """kindyngen.control.time_optimal: converges; Pinocchio's ABA, integrated by the plan's own
+    RK4 substeps from each node, lands on the next node; the limits hold at the nodes."""
+    from kindyngen.control.time_optimal import solve_time_optimal
+    model, robot, limits, task = arm("ur5")
+    qf = np.asarray(task.q0) + np.array([0.8, -0.4, 0.5, 0.3, -0.6, 0.9])
+    res = solve_time_optimal(robot, limits, task.q0, qf, N=8, integrator=Integrator("rk4", 2))
+    assert res["success"], res["status"]
+    step = pinocchio_step("ur5", model)
+    X = np.hstack([res["q"], res["qd"]])
+    h = res["T"] / 8
+    for k in range(8):
+        x = step(step(X[k], res["tau"][k], h / 2), res["tau"][k], h / 2)
+        assert np.abs(x - X[k + 1]).max() < 1e-7 * max(1.0, np.abs(x).max())
+    assert np.all(np.abs(res["tau"]) <= limits.array("tau_max") + 1e-9)
+    assert np.all(np.abs(res["qd"]) <= 0.95 * limits.array("qd_max") + 1e-7)
+    assert np.abs(res["q"][-1] - qf).max() < 1e-9
+
+
+def test_two_robots_in_one_process():
+    """Two reach solvers (the UR5 and the LWR, each on its own library) solving in turn give the
+    iterates each gives alone: nothing is shared between libraries or calls."""
+    _, ur5, _, ur5_task = arm("ur5")
+    _, lwr, _, lwr_task = arm("lwr4")
+    a, b = ReachNLP(ur5, ur5_task), ReachNLP(lwr, lwr_task)
+    alone_a, alone_b = a.solve(), b.solve()
+    for _ in range(2):
+        ra, rb = a.solve(), b.solve()
+        np.testing.assert_array_equal(ra.z, alone_a.z)
+        np.testing.assert_array_equal(rb.z, alone_b.z)
+        assert (ra.iterations, rb.iterations) == (alone_a.iterations, alone_b.iterations)
+
+
+def test_warm_resolve_from_the_shifted_solution():
+    """The MPC's re-solve of the reach: from the solution and its multipliers shifted by one
+    interval (ReachNLP.shifted, shifted_multipliers), the start moved to node 1, IPOPT's warm
+    start ends at the optimum a cold solve from that start finds, in fewer iterations."""
+    model, robot, limits, task = arm("ur5")
+    nlp = ReachNLP(robot, task)
+    res = nlp.solve()
+    x1 = np.concatenate([res.q[1], res.qd[1]])
+    cold = nlp.solve(x1)
+    warm_solver = nlp.build(dict(nlp.options, **{"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                                                 "ipopt.warm_start_bound_push": 1e-6,
+                                                 "ipopt.warm_start_mult_bound_push": 1e-6}))
+    lam_g, lam_x = nlp.shifted_multipliers(res.lam_g, res.lam_x)
+    warm = nlp.solve(x1, z0=nlp.shifted(res.z), lam_g0=lam_g, lam_x0=lam_x, solver=warm_solver)
+    assert cold.success and warm.success
+    assert abs(warm.objective - cold.objective) < 1e-8 * cold.objective
+    assert np.abs(warm.tau - cold.tau).max() < 1e-4 * np.abs(cold.tau).max()
+    assert warm.iterations < cold.iterations
