@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
-from .catalog import derive_all
+from .catalog import derive_all, mimic_notes
 from .interface import manifest
 from .optimize import Program, optimize
 from .render import RENDERERS
@@ -105,7 +105,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
     _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
-    for note in undecided_notes(model, only) if progress else ():
+    for note in undecided_notes(model, only) + mimic_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     if base_params is not None:
         _write(out / "base_params.json", strict_json(base_params, indent=1) + "\n")

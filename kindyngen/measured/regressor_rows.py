@@ -20,7 +20,7 @@ import symengine as se
 from ..model.inertial_parameters import parameter_vector
 from ..algorithms.effect_torques import effect_parameter_values
 from ..algorithms.regressors import base_parameters, regressor
-from ..model.robot_model import RobotModel
+from ..model.robot_model import RobotDescriptionError, RobotModel
 from .effect_columns import coulomb_eps, effect_columns
 
 
@@ -41,6 +41,12 @@ class BaseRegressor:
     the full parameters (as linear as the dynamics itself)."""
 
     def __init__(self, model: RobotModel, kind: str):
+        if model.has_mimics:
+            # logs, limits and effect columns here are per joint; a mimic joint is no coordinate
+            mimic = next(k for k, joint in enumerate(model.joints) if joint.mimic is not None)
+            raise RobotDescriptionError(model.source, f"joint '{model.joints[mimic].name}' mimic",
+                                        "identify, discover and excite take robots without mimic joints (the "
+                                        "generated functions of this one take its independent joints)")
         # rigid bodies only: the effects an identification fits are chosen by the caller
         # (kindyngen.measured.effect_columns), whatever the description declares
         model = rigid_body_model(model)
