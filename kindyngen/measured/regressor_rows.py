@@ -31,6 +31,16 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
     return replace(model, joints=joints, coulomb_smoothing=None)
 
 
+def refuse_mimic_joints(model: RobotModel) -> None:
+    """Logs, limits and effect columns of the measured side are per joint, and a mimic joint is
+    no coordinate: a robot with mimic joints is refused in one line naming the first."""
+    for joint in model.joints:
+        if joint.mimic is not None:
+            raise RobotDescriptionError(model.source, f"joint '{joint.name}' mimic",
+                                        "identify, discover and excite take robots without mimic joints (the "
+                                        "generated functions of this one take its independent joints)")
+
+
 class BaseRegressor:
     """A base regressor of ``model``'s rigid bodies (``kind`` "Y_g", "Y_m" or "Y", see
     :mod:`kindyngen.algorithms.regressors`) evaluated in batches: ``R(*inputs)`` -> (N, rows, columns).
@@ -41,12 +51,7 @@ class BaseRegressor:
     the full parameters (as linear as the dynamics itself)."""
 
     def __init__(self, model: RobotModel, kind: str):
-        if model.has_mimics:
-            # logs, limits and effect columns here are per joint; a mimic joint is no coordinate
-            mimic = next(k for k, joint in enumerate(model.joints) if joint.mimic is not None)
-            raise RobotDescriptionError(model.source, f"joint '{model.joints[mimic].name}' mimic",
-                                        "identify, discover and excite take robots without mimic joints (the "
-                                        "generated functions of this one take its independent joints)")
+        refuse_mimic_joints(model)
         # rigid bodies only: the effects an identification fits are chosen by the caller
         # (kindyngen.measured.effect_columns), whatever the description declares
         model = rigid_body_model(model)
