@@ -49,6 +49,7 @@ multiplier -1:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -115,8 +116,8 @@ class CoordinateMap:
         exprs, shape = list(exprs), tuple(shape)
         for axis in axes:
             assert shape[axis] == self.nv_full, f"axis {axis} of {shape} is no velocity axis"
-            outer = int(_product(shape[:axis]))
-            inner = int(_product(shape[axis + 1:]))
+            outer = math.prod(shape[:axis])
+            inner = math.prod(shape[axis + 1:])
             out = []
             for o in range(outer):
                 for a in range(self.nv):
@@ -132,13 +133,6 @@ class CoordinateMap:
         """``G^T M G`` of an nv_x x nv_x nested list, as nested lists."""
         flat = self.contract([e for row in M for e in row], (self.nv_full, self.nv_full), (0, 1))
         return [flat[r * self.nv:(r + 1) * self.nv] for r in range(self.nv)]
-
-
-def _product(values) -> int:
-    out = 1
-    for v in values:
-        out *= v
-    return out
 
 
 @lru_cache(maxsize=16)
@@ -216,8 +210,7 @@ def reduced_function(f: SymbolicFunction, model: RobotModel, inputs, input_symbo
     output_exprs = tuple(tuple(se.sympify(e).xreplace(sub) for e in exprs) for exprs in output_exprs)
     return replace(f, summary=f.summary + (" " + summary if summary else ""), inputs=tuple(inputs),
                    input_symbols=tuple(input_symbols), outputs=tuple(outputs), output_exprs=output_exprs,
-                   stages=stages, conventions=f"{f.conventions} {model.mimic_text}".strip(),
-                   metadata={**f.metadata, "mimic": True})
+                   stages=stages, conventions=f"{f.conventions} {model.mimic_text}".strip())
 
 
 def elimination_parents(M) -> tuple[int, ...]:

@@ -119,14 +119,19 @@ class _ReducedDynamics:
         self.qdd = tree_ldlt_substitute(self.factor, [t - b for t, b in zip(self.tau, self.bias)], name)
 
     def derivatives(self, qdd_full, stages: Stages):
-        """``(dtau_dq, dtau_dqd)`` of the full tree at (q_x, qd_x, ``qdd_full``), reduced to
-        ``G^T D G`` (G constant), with the description's friction derivative."""
-        free, cmap = self.cmap.free, self.cmap
-        dq, dqd = WorldPass(self.ts, self.qd, qdd_full, stages).derivatives()
-        base = FREE_FLYER_NV if free.floating_base else 0
-        if free.effects:
-            dqd = with_diagonal(dqd, [ZERO] * base + effect_velocity_derivatives(free, self.qd[base:]))
-        return cmap.congruence(dq), cmap.congruence(dqd)
+        """``(dtau_dq, dtau_dqd)`` reduced, at (q_x, qd_x, ``qdd_full``): :func:`_derivatives`."""
+        return _derivatives(self.cmap, self.ts, self.qd, qdd_full, stages)
+
+
+def _derivatives(cmap, ts, qd, qdd_full, stages: Stages):
+    """``(dtau_dq, dtau_dqd)`` of the full tree at (q_x, ``qd``, ``qdd_full``) by the world-frame
+    pass, with the description's friction derivative, reduced to ``G^T D G`` (G constant)."""
+    free = cmap.free
+    dq, dqd = WorldPass(ts, qd, qdd_full, stages).derivatives()
+    base = FREE_FLYER_NV if free.floating_base else 0
+    if free.effects:
+        dqd = with_diagonal(dqd, [ZERO] * base + effect_velocity_derivatives(free, qd[base:]))
+    return cmap.congruence(dq), cmap.congruence(dqd)
 
 
 def _ports(model: RobotModel, last: Port) -> tuple[Port, ...]:
@@ -166,19 +171,16 @@ def tau_derivatives_reduced(model: RobotModel, params: str = "numeric",
     free = cmap.free
     ts = setup(free, params)
     qd, qdd = port_symbols("qd", (free.nv,)), port_symbols("qdd", (free.nv,))
-    dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
-    base = FREE_FLYER_NV if free.floating_base else 0
-    if free.effects:
-        dqd = with_diagonal(dqd, [ZERO] * base + effect_velocity_derivatives(free, qd[base:]))
+    dq, dqd = _derivatives(cmap, ts, qd, qdd, stages)
     ports = _ports(model, reduced_input(model, qdd_port(free), free))
     f = dynamics_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the independent "
                           "joints: the world-frame derivatives of Carpentier and Mansard (RSS 2018) of the tree without "
                           "mimics at (q_x, G qd, G qdd), then G^T D G; dtau/dqdd is M.", ts, ports, _symbols(model, "qdd"),
                           (_matrix_port(model, "dtau_dq", "dtau_i / dq_j", "N m/rad and mixed units by coordinate"),
                            _matrix_port(model, "dtau_dqd", "dtau_i / dqd_j", "N m s/rad and mixed units by coordinate")),
-                          (_flat(cmap.congruence(dq)), _flat(cmap.congruence(dqd))), stages, route="world frame")
+                          (_flat(dq), _flat(dqd)), stages, route="world frame")
     f = reduced_function(f, model, f.inputs, f.input_symbols, f.outputs, f.output_exprs)
-    return _noted(f, model)
+    return _noted(f)
 
 
 def fd_derivatives_reduced(model: RobotModel, params: str = "numeric", name: str = "fd_derivatives",
@@ -210,8 +212,8 @@ def fd_derivatives_reduced(model: RobotModel, params: str = "numeric", name: str
                           _ports(model, force_port(model, "tau", "applied torque")), _symbols(model, "tau"),
                           tuple(ports), tuple(outputs), stages, route="world frame")
     f = reduced_function(f, model, f.inputs, f.input_symbols, f.outputs, f.output_exprs)
-    return _noted(f, model)
+    return _noted(f)
 
 
-def _noted(f: SymbolicFunction, model: RobotModel) -> SymbolicFunction:
+def _noted(f: SymbolicFunction) -> SymbolicFunction:
     return replace(f, conventions=f.conventions + DERIVATIVES_NOTE)
