@@ -27,9 +27,11 @@ offset 0 it reads the same symbol (``cos(q_7)`` is shared); with -1 ``cos(-q_7)`
 
 Closed kinematic loops are the nonlinear case of the same map: ``q_x = phi(q_y)`` solved from
 the loop constraints, ``G(q) = dphi/dq_y`` depending on q and ``qdd_x = G qdd_y + Gdot qd_y``
-(whose ``G^T M Gdot qd_y`` joins c). The contraction and substitution here serve that case as
-written; what assumes a constant G is marked (the derivatives: ``d(G^T tau)/dq = G^T dtau/dq G``
-holds only for constant G).
+(whose ``G^T M Gdot qd_y`` joins c). The contraction with G and the one substitution pass
+serve that case as written (G's entries may be expressions); what is linear here is marked:
+:meth:`CoordinateMap.configuration` (``G q + b`` where loops have ``phi``), the velocity map
+without ``Gdot qd``, and the derivatives of :mod:`kindyngen.algorithms.reduced_functions`
+(``d(G^T tau)/dq = G^T dtau/dq G`` holds only for constant G).
 
 Example: the two pendulums of :mod:`kindyngen.readers.urdf`, the right one following the left with
 multiplier -1:
