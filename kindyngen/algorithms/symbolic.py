@@ -176,6 +176,19 @@ class Stages:
     def definitions(self) -> tuple:
         return tuple(self._definitions)
 
+    def substitute(self, mapping: dict, start: int = 0) -> None:
+        """Rewrite the definitions from ``start`` on by one simultaneous ``xreplace`` with
+        ``mapping`` (a derivation in other coordinates:
+        :mod:`kindyngen.algorithms.reduced_coordinates`).
+
+        >>> stages = Stages()
+        >>> a, b = se.symbols("a b")
+        >>> _ = stages.cut(a * b + 1)
+        >>> stages.substitute({a: b, b: a}); stages.definitions
+        ((_s0, 1 + a*b),)
+        """
+        self._definitions[start:] = [(s, e.xreplace(mapping)) for s, e in self._definitions[start:]]
+
 
 def naming(stages: Stages | None):
     """``stages.cut``, or the identity when a derivation runs without named intermediates.

@@ -28,6 +28,7 @@ from ..algorithms.dynamics import (centre_of_mass_tree, coriolis_tree, forward_d
                                    inverse_dynamics_tree, mass_matrix_tree)
 from ..algorithms.kinematics import fk_hom_tree, jacobian_tree
 from ..algorithms.derivatives_world_frame import fd_derivatives_tree, tau_derivatives_tree
+from ..algorithms import reduced_functions as reduced
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -121,6 +122,25 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("Y", lambda model, params: regressor(model, "Y")),
 )
 
+# a model with mimic joints: these functions, in its independent coordinates
+# (kindyngen/algorithms/reduced_functions.py); the others (routes written for independent
+# chains, closed-form IK) are not generated for it, with a note (MIMIC_NOTE)
+MIMIC_BUILDERS: dict[str, Builder] = {
+    "fk_hom": lambda model, params: reduced.fk_hom_reduced(model),
+    "jacobian": lambda model, params: reduced.jacobian_reduced(model),
+    "M": reduced.mass_matrix_reduced,
+    "g": reduced.gravity_reduced,
+    "c": reduced.coriolis_reduced,
+    "tau": reduced.inverse_dynamics_reduced,
+    "fd": reduced.forward_dynamics_reduced,
+    "com": reduced.centre_of_mass_reduced,
+    "tau_derivatives": reduced.tau_derivatives_reduced,
+    "fd_derivatives": reduced.fd_derivatives_reduced,
+    "fd_derivatives_no_minv": lambda model, params: reduced.fd_derivatives_reduced(
+        model, params, "fd_derivatives_no_minv", with_minv=False),
+    "Y": lambda model, params: regressor(model, "Y"),
+}
+
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
 # the functions a branched tree (or a floating base) read as a tree gets
 TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
@@ -133,10 +153,22 @@ def derive_all(model: RobotModel, params: str = "numeric", only=None, scalar: st
     for name, build in BUILDERS:
         if only is not None and name not in only:
             continue
+        if model.has_mimics:
+            build = MIMIC_BUILDERS.get(name, lambda model, params: None)
         function = build(model, params, scalar) if getattr(build, "per_scalar", False) else build(model, params)
         if function is not None:
             out.append(with_lengths_port(function, model))
     return out
+
+
+def mimic_notes(model: RobotModel, only=None) -> list[str]:
+    """For a model with mimic joints whose tree without mimics is a chain: the functions a
+    chain gets that it does not (written for independent joints), as one note; else none."""
+    if not model.has_mimics or not model.without_mimics().is_chain:
+        return []
+    missing = [name for name, build in BUILDERS if name not in MIMIC_BUILDERS and (only is None or name in only)]
+    return [f"{model.identifier}: mimic joints: {', '.join(missing)} not generated (routes written for independent "
+            f"joints); every other function takes the independent joints"] if missing else []
 
 
 def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

@@ -28,6 +28,11 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
         "convention": model.convention,
         # a kinematic tree: what it is, and its configuration and velocity sizes
         **({"structure": model.structure_text, "nq": model.nq, "nv": model.nv} if model.structure_text else {}),
+        # mimic joints: the inputs are the independent joints, by name, and each mimic's rule
+        **({"coordinates": [joint.name for joint in model.coordinate_joints],
+            "mimics": [{"joint": joint.name, "mimics": model.joints[joint.mimic.joint].name,
+                        "multiplier": float(joint.mimic.multiplier), "offset": float(joint.mimic.offset)}
+                       for joint in model.joints if joint.mimic is not None]} if model.has_mimics else {}),
         "gravity": [float(v) for v in model.gravity],
         "params": params,
         "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/codegen/trig_kernel.py)

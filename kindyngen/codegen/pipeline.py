@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
-from .catalog import derive_all
+from .catalog import derive_all, mimic_notes
 from .interface import listed_files, manifest
 from .optimize import Program, optimize
 from .render import RENDERERS, casadi_builders
@@ -114,7 +114,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     programs = build_programs(model, params, only=only, progress=progress, scalar=scalar)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
     base_params = base_params_document(model)          # None for robots with symbolic lengths
-    for note in undecided_notes(model, only) if progress else ():
+    for note in undecided_notes(model, only) + mimic_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None
 

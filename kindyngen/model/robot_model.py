@@ -12,6 +12,13 @@ build it from a YAML description (:mod:`kindyngen.readers.yaml_description`) or 
 derivations read it and never change it. ``frames`` are the frames of interest of a tree
 (FK and Jacobians); an arm's is its flange moved by the tool.
 
+A joint may *mimic* another (:class:`Mimic`, URDF ``<mimic>``): its position is ``multiplier *
+q_k + offset`` of joint k, a linear holonomic constraint. The model's coordinates (``q``,
+``qd``, ``qdd``, ``tau`` of every generated function: :attr:`RobotModel.coordinates`, sizes
+:attr:`RobotModel.nq`, :attr:`RobotModel.nv`) are then the joints that mimic none; the
+derivations run on :meth:`RobotModel.without_mimics` (every joint a coordinate) and
+:mod:`kindyngen.algorithms.reduced_coordinates` folds the mimics in.
+
 Example:
 
 >>> from kindyngen.readers.yaml_description import load_robot
@@ -54,6 +61,18 @@ class DHRow:
 
 
 @dataclass(frozen=True)
+class Mimic:
+    """The joint follows joint ``joint`` (an index into ``RobotModel.joints``; that joint mimics
+    none): ``q = multiplier * q_joint + offset``, exact. The multiplier's unit is the ratio of
+    the two joints' units (m/rad for a prismatic joint following a revolute one); readers
+    resolve a mimic of a mimic into this form."""
+
+    joint: int
+    multiplier: sympy.Rational = sympy.Integer(1)
+    offset: sympy.Rational = sympy.Integer(0)   # rad (m for a prismatic joint)
+
+
+@dataclass(frozen=True)
 class Joint:
     """One joint: ``before * motion(q) * after`` (see :mod:`kindyngen.model.placement`).
 
@@ -77,6 +96,7 @@ class Joint:
     stiffness: sympy.Rational | None = None       # N m/rad (N/m): elasticity seen by a motor-side encoder
     encoder_offset: sympy.Rational | None = None  # rad (m): constant offset of the position reading
     torque_gain: sympy.Rational | None = None     # gain of the torque sensor (1: exact)
+    mimic: Mimic | None = None                    # None: the joint is a coordinate of the model
 
     @property
     def prismatic(self) -> bool:
@@ -173,6 +193,12 @@ class RobotModel:
             object.__setattr__(self, "parents", tuple(range(-1, len(self.joints) - 1)))
         assert len(self.parents) == len(self.joints) == len(self.links)
         assert all(-1 <= p < j for j, p in enumerate(self.parents)), "parents must come first"
+        for j, joint in enumerate(self.joints):
+            if joint.mimic is not None:
+                k = joint.mimic.joint
+                assert 0 <= k < len(self.joints) and k != j, f"joint {j} mimics joint {k}"
+                assert self.joints[k].mimic is None, f"joint {j} mimics joint {k}, itself a mimic (resolve chains)"
+                assert joint.mimic.multiplier != 0, f"joint {j}: mimic multiplier 0"
 
     @property
     def is_tree(self) -> bool:
@@ -272,34 +298,75 @@ class RobotModel:
 
     @property
     def n(self) -> int:
+        """The joints (bodies) of the tree, mimic joints included."""
         return len(self.joints)
 
     @property
+    def coordinates(self) -> tuple[int, ...]:
+        """The joints whose positions are inputs: those that mimic none (all of them without
+        mimic joints), in joint order."""
+        return tuple(j for j, joint in enumerate(self.joints) if joint.mimic is None)
+
+    @property
+    def coordinate_joints(self) -> tuple[Joint, ...]:
+        return tuple(self.joints[j] for j in self.coordinates)
+
+    @property
+    def has_mimics(self) -> bool:
+        return any(joint.mimic is not None for joint in self.joints)
+
+    def without_mimics(self) -> "RobotModel":
+        """The same tree with every joint a coordinate: what the derivations run on before
+        :mod:`kindyngen.algorithms.reduced_coordinates` folds the mimics in."""
+        if not self.has_mimics:
+            return self
+        return replace(self, joints=tuple(replace(joint, mimic=None) for joint in self.joints))
+
+    @property
+    def mimic_text(self) -> str:
+        """Which joints mimic which, and what the inputs are (headers, functions.json); empty
+        without mimic joints."""
+        if not self.has_mimics:
+            return ""
+        rules = "; ".join(f"{joint.name} = {_affine_text(joint.mimic, self.joints[joint.mimic.joint].name)}"
+                          for joint in self.joints if joint.mimic is not None)
+        names = ", ".join(joint.name for joint in self.coordinate_joints)
+        return (f"Mimic joints: {rules}. Inputs are the {len(self.coordinates)} independent joints ({names}); the "
+                f"mimic joints' motion (q, qd, qdd through the multiplier), torques and inertia are folded in: "
+                f"tau of a joint includes multiplier * tau of each joint mimicking it.")
+
+    @property
     def nq(self) -> int:
-        """Configuration coordinates: the joint positions (after the base pose's 7)."""
-        return self.n + (FREE_FLYER_NQ if self.floating_base else 0)
+        """Configuration coordinates: the independent joint positions (after the base pose's 7)."""
+        return len(self.coordinates) + (FREE_FLYER_NQ if self.floating_base else 0)
 
     @property
     def nv(self) -> int:
-        """Velocity coordinates: the joint velocities (after the base twist's 6)."""
-        return self.n + (FREE_FLYER_NV if self.floating_base else 0)
+        """Velocity coordinates: the independent joint velocities (after the base twist's 6)."""
+        return len(self.coordinates) + (FREE_FLYER_NV if self.floating_base else 0)
 
     @property
     def structure_text(self) -> str | None:
-        """What a tree's generated files say it is (an arm's state n and its convention)."""
-        if not self.is_tree:
+        """What a tree's (or a model with mimic joints') generated files say it is (an arm's:
+        its state n and its convention)."""
+        if not self.is_tree and not self.has_mimics:
             return None
         kinds = sorted({j.kind for j in self.joints})
         base = (f"floating base (nq {self.nq}, nv {self.nv})" if self.floating_base else "fixed base")
-        return f"{self.n} {' and '.join(kinds)} joints in a tree of depth {self.depth}, {base}"
+        shape = f"a tree of depth {self.depth}" if self.is_tree else "a chain"
+        mimics = self.n - len(self.coordinates)
+        coupled = (f"; {mimics} of them mimic{'s' if mimics == 1 else ''} another, inputs the "
+                   f"{len(self.coordinates)} independent joints" if mimics else "")
+        return f"{self.n} {' and '.join(kinds)} joints in {shape}, {base}{coupled}"
 
     @property
     def lower(self) -> np.ndarray:
-        return np.array([j.lower for j in self.joints])
+        """The lower limits of the coordinates (the independent joints)."""
+        return np.array([j.lower for j in self.coordinate_joints])
 
     @property
     def upper(self) -> np.ndarray:
-        return np.array([j.upper for j in self.joints])
+        return np.array([j.upper for j in self.coordinate_joints])
 
     @property
     def length_symbols(self) -> tuple:
@@ -328,6 +395,16 @@ class RobotModel:
         """The name as the identifier of the generated files and symbols (the output folder,
         ``<identifier>.h``, the prefix of every C function): :func:`kindyngen.model.user_text.identifier`."""
         return identifier(self.name)
+
+
+def _affine_text(mimic: Mimic, source: str) -> str:
+    """``multiplier * source + offset`` as text, exact numbers as decimals.
+
+    >>> _affine_text(Mimic(0, sympy.Integer(-1), sympy.Rational(1, 10)), "a"), _affine_text(Mimic(0), "a")
+    ('-1 * a + 0.1', '1 * a')
+    """
+    text = f"{float(mimic.multiplier):g} * {source}"
+    return text if mimic.offset == 0 else f"{text} {'+' if mimic.offset > 0 else '-'} {abs(float(mimic.offset)):g}"
 
 
 def _translations(placement: Placement) -> tuple:

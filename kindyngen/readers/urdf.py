@@ -12,6 +12,14 @@ the chain (a gripper's fingers) is locked at q = 0 with a note (its links join t
 hangs from, as in Pinocchio's ``buildReducedModel``), and links above the first moving joint
 are the base, which carries no dynamics.
 
+``<mimic joint multiplier offset>`` on a moving joint makes it follow another moving joint,
+``q = multiplier * q_joint + offset`` (defaults 1 and 0, exact as written;
+:class:`kindyngen.model.robot_model.Mimic`): a mimic of a mimic is resolved into the joint at
+the end of the chain, a cycle or a mimicked joint that is missing or fixed is an error. A chain
+(no ``--tree``) keeps a mimic joint whose joint is on it; an off-chain joint locked at 0 locks
+its mimics at their offsets; a mimic pair split by the chain's end is an error (read the tree).
+On a fixed joint ``<mimic>`` moves nothing and is ignored (as urdfdom does).
+
 Numbers are read as the decimals written (exact rationals); lengths below 1e-12 are 0 and
 angles are cleaned by :func:`kindyngen.model.placement.clean_angle` (1.5708 read as pi/2, with a
 note). An inertia entry that is not rational (rotated by an angle that is not a multiple of
@@ -54,8 +62,11 @@ from pathlib import Path
 import numpy as np     # only to check inertias as written: nothing in the model is computed with it
 import sympy
 
-from ..model.robot_model import Frame, Joint, Link, RobotDescriptionError, RobotModel, check_inertia, check_name
-from ..model.placement import Placement, Reading, axis_alignment, exact_length, rpy_xyz, unit_axis
+from dataclasses import replace
+
+from ..model.robot_model import Frame, Joint, Link, Mimic, RobotDescriptionError, RobotModel, check_inertia, check_name
+from ..model.placement import (Placement, Reading, axis_alignment, exact_length, rotation, rpy_xyz, translation,
+                               unit_axis)
 from .input_bounds import (MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded,
                            shown)
 
@@ -105,6 +116,15 @@ class _Inertial:
 
 
 @dataclass(frozen=True)
+class _UrdfMimic:
+    """A joint's ``<mimic>`` as written: the joint it follows, multiplier, offset (floats)."""
+
+    joint: str
+    multiplier: float
+    offset: float
+
+
+@dataclass(frozen=True)
 class _UrdfJoint:
     """A ``<joint>`` as written (numbers as floats, checked but not yet made exact)."""
 
@@ -115,7 +135,7 @@ class _UrdfJoint:
     origin: _Origin
     axis: tuple                 # as written, (1, 0, 0) when absent (the URDF default)
     limit: tuple | None         # (lower, upper) of <limit>, None without one
-    mimic: str | None
+    mimic: _UrdfMimic | None
 
 
 @dataclass(frozen=True)
@@ -237,8 +257,26 @@ def _read_joint(element: ET.Element, index: int, reading: Reading) -> _UrdfJoint
         limit = tuple(_attribute(limit, key, reading, f"{field} limit", default=0.0, quantity=quantity)
                       for key in ("lower", "upper"))
     mimic = element.find("mimic")
+    if mimic is not None and kind in MOVING:
+        mimic = _read_mimic(mimic, kind, reading, f"{field} mimic")
+    else:
+        mimic = None            # on a fixed joint <mimic> moves nothing (urdfdom keeps it unused)
     return _UrdfJoint(name, kind, ends[0], ends[1], _read_origin(element.find("origin"), reading, field),
-                      axis, limit, None if mimic is None else mimic.get("joint", "?"))
+                      axis, limit, mimic)
+
+
+def _read_mimic(element: ET.Element, kind: str, reading: Reading, field: str) -> _UrdfMimic:
+    """``<mimic joint multiplier offset>``: the joint named, multiplier (default 1, not 0) and
+    offset (default 0; an angle within a full turn, a prismatic joint's a length)."""
+    joint = element.get("joint")
+    if not joint:
+        raise _error(reading, f"{field} joint", "missing (the name of the joint this one follows)")
+    multiplier = _attribute(element, "multiplier", reading, field, default=1.0, quantity="coefficient")
+    if multiplier == 0:
+        raise _error(reading, f"{field} multiplier", "0 would hold the joint at its offset: write a fixed joint")
+    offset = _attribute(element, "offset", reading, field, default=0.0,
+                        quantity="length" if kind == "prismatic" else "angle")
+    return _UrdfMimic(joint, multiplier, offset)
 
 
 class _DocumentType(Exception):
@@ -428,9 +466,6 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Join
         raise _error(reading, f"joint '{joint.name}' type",
                             f"a {joint.kind} joint is not supported (only revolute, continuous, "
                             f"prismatic and fixed joints; a free root body is --floating-base)")
-    if joint.mimic is not None:
-        reading.note(f"{reading.source}: joint '{joint.name}' mimics '{joint.mimic}' in the URDF; "
-                     f"here it is an independent joint")
     align = axis_alignment(_axis(joint, reading))
     lower, upper = _limits(joint, reading)
     return Joint(before=fixed * _placement(joint.origin, reading) * align, after=align.inverse(),
@@ -442,7 +477,8 @@ def _moving_joint(joint: _UrdfJoint, fixed: Placement, reading: Reading) -> Join
 def _rigid_body(tree: _Tree, link: str, chain: set, reading: Reading) -> list:
     """(placement in ``link``'s frame, inertial, name) of ``link`` and every link fixed to it;
     a moving joint not in ``chain`` (a gripper's fingers) is locked at q = 0, with a note, so
-    its links count (the bodies of Pinocchio's ``buildReducedModel`` locking it at 0)."""
+    its links count (the bodies of Pinocchio's ``buildReducedModel`` locking it at 0); one that
+    mimics a locked joint is locked at its offset (:func:`_mimic_chains`)."""
     parts, stack = [], [(link, Placement())]
     while stack:
         name, placement = stack.pop()
@@ -453,11 +489,86 @@ def _rigid_body(tree: _Tree, link: str, chain: set, reading: Reading) -> list:
                 fixed.append((joint.child, placement * _placement(joint.origin, reading)))
             elif joint.name not in chain:
                 # at q = 0 a joint's transform is its origin (rotation and slide are zero)
-                fixed.append((joint.child, placement * _placement(joint.origin, reading)))
+                value = _mimic_chains(tree, reading)[joint.name][2] if joint.mimic is not None else 0
+                fixed.append((joint.child, placement * _placement(joint.origin, reading)
+                              * _locked_motion(joint, value, reading)))
+                at = "0" if value == 0 else f"{float(value):g}, its offset (it mimics a locked joint)"
                 reading.note(f"{reading.source}: joint '{joint.name}' ({joint.kind}) is not on the chain: "
-                             f"locked at 0, its links part of link '{link}'")
+                             f"locked at {at}, its links part of link '{link}'")
         stack.extend(reversed(fixed))       # depth first, in document order
     return parts
+
+
+def _locked_motion(joint: _UrdfJoint, value, reading: Reading) -> Placement:
+    """The joint's motion held at ``value`` (exact), about or along its axis."""
+    value = sympy.sympify(value)
+    if value == 0:
+        return Placement()
+    axis = _axis(joint, reading)
+    return translation(*(a * value for a in axis)) if joint.kind == "prismatic" else rotation(axis, value)
+
+
+def _mimic_chains(tree: _Tree, reading: Reading) -> dict:
+    """Every mimic joint's name -> (the name of the joint at the end of its chain of mimics,
+    multiplier, offset), composed exactly: ``q_a = m_a (m_b q_c + o_b) + o_a``. Errors: a
+    mimicked joint missing or fixed, a cycle.
+
+    >>> tree = _read_robot(TWO_PENDULUMS.replace('<axis xyz="1 0 0"/>', '<axis xyz="1 0 0"/><mimic joint="left_joint" '
+    ...                    'multiplier="-0.5" offset="0.1"/>'), Reading("f.urdf"))[1]
+    >>> _mimic_chains(tree, Reading("f.urdf"))
+    {'right_joint': ('left_joint', -1/2, 1/10)}
+    """
+    joints = {joint.name: joint for joint in tree.parent_joint.values()}
+    out = {}
+    for joint in joints.values():
+        if joint.mimic is None:
+            continue
+        multiplier, offset, path, current = sympy.Integer(1), sympy.Integer(0), [joint.name], joint
+        while current.mimic is not None:
+            field = f"joint '{current.name}' mimic joint"
+            target = current.mimic.joint
+            if target not in joints:
+                raise _error(reading, field, f"no joint named '{target}'{_closest(target, joints)}")
+            if joints[target].kind == "fixed":
+                raise _error(reading, field, f"'{target}' is a fixed joint: a mimic follows a moving one")
+            m, o = sympy.Rational(repr(current.mimic.multiplier)), sympy.Rational(repr(current.mimic.offset))
+            multiplier, offset = multiplier * m, offset + multiplier * o
+            if target in path:
+                raise _error(reading, f"joint '{joint.name}' mimic joint", "the mimic joints form a cycle: "
+                             + " -> ".join(path + [target]))
+            path.append(target)
+            current = joints[target]
+        out[joint.name] = (path[-1], multiplier, offset)
+    return out
+
+
+def _with_mimics(joints: list, tree: _Tree, reading: Reading, scope: str) -> list:
+    """``joints`` (of the model, in order) with their resolved mimics (:func:`_mimic_chains`),
+    each naming the joint it follows by index; a joint followed from outside the model
+    (``scope``: the chain, for the error) is an error, and so is a joint of the model that
+    follows one outside it. One note names the mimic joints."""
+    chains = _mimic_chains(tree, reading)
+    index = {joint.name: k for k, joint in enumerate(joints)}
+    out = []
+    for joint in joints:
+        if joint.name not in chains:
+            out.append(joint)
+            continue
+        target, multiplier, offset = chains[joint.name]
+        if target not in index:
+            raise _error(reading, f"joint '{joint.name}' mimic joint", f"follows '{target}', which is not on "
+                         f"{scope}: read the URDF as a tree (--tree) to have both")
+        out.append(replace(joint, mimic=Mimic(index[target], multiplier, offset)))
+    for name, (target, _, _) in chains.items():
+        if name not in index and target in index:
+            raise _error(reading, f"joint '{name}' mimic joint", f"'{name}' is not on {scope} but follows "
+                         f"'{target}', which is: its links would move; read the URDF as a tree (--tree)")
+    mimics = [joint.name for joint in out if joint.mimic is not None]
+    if mimics:
+        reading.note(f"{reading.source}: {len(mimics)} mimic joint(s) ({', '.join(mimics[:3])}"
+                     f"{', ...' if len(mimics) > 3 else ''}) follow others: the generated functions take the "
+                     f"{len(out) - len(mimics)} independent joints")
+    return out
 
 
 def _rational(value) -> sympy.Rational:
@@ -544,6 +655,7 @@ def _chain(name: str, tree: _Tree, base: str | None, tip: str | None, reading: R
         fixed, flange = Placement(), joint.child
     if not joints:
         raise _error(reading, "--tip", f"no moving joint between links '{base}' and '{tip}'")
+    joints = _with_mimics(joints, tree, reading, "the chain")
     _note_turns(joints, reading)
     return RobotModel(name=name, convention="frames", gravity=GRAVITY, joints=tuple(joints), links=tuple(links),
                       source=source, tool=fixed, base_name=base, flange_name=flange, notes=tuple(reading.notes))
@@ -581,6 +693,7 @@ def _whole_tree(name: str, tree: _Tree, frames, floating_base: bool, reading: Re
     visit(tree.root, -1, Placement())
     if not joints:
         raise _error(reading, "<robot>", "no moving joint (revolute, continuous or prismatic)")
+    joints = _with_mimics(joints, tree, reading, "the tree")
     _note_turns(joints, reading)
     links = tuple(_combine(_rigid_body(tree, child, moving, reading), reading) for child in bodies)
     root = _combine(_rigid_body(tree, tree.root, moving, reading), reading)

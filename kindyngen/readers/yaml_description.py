@@ -18,12 +18,13 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import sympy
 
-from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
-                                 check_inertia, check_name)
+from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, Mimic, RobotDescriptionError,
+                                 RobotModel, check_inertia, check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
 from .constant_expressions import NAMESPACE, parse_constant
@@ -85,13 +86,15 @@ TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoo
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
 SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
-JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature", "mimic") + SENSING_KEYS
 # a joint given by origin and axis (dh: none)
-FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature",
+                    "mimic") + SENSING_KEYS
 ORIGIN_KEYS = ("xyz", "rpy")
 FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
 FRICTION_KEYS = ("viscous", "coulomb", "offset")
+MIMIC_KEYS = ("joint", "multiplier", "offset")
 
 
 def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
@@ -310,7 +313,7 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
 
 
 TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
-TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent")
+TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent", "mimic")
 BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
 
 
@@ -351,6 +354,7 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
         joints, parents, index = _tree_joints(rows, reading)
     else:
         joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
+    joints = _with_mimics(rows, joints, reading)
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
@@ -391,6 +395,61 @@ def _check_unique_names(rows: list, source: str) -> None:
             raise RobotDescriptionError(source, f"joints[{k}].name", f"{shown(name)} is also the name of "
                                                                      f"joints[{first[name]}]: joint names are unique")
         first[name] = k
+
+
+def _mimic_entry(row: dict, kind: str, source: str, field: str) -> tuple:
+    """A joint's ``mimic: {joint: NAME, multiplier: 1, offset: 0}`` as (name, multiplier,
+    offset), exact; the multiplier not 0, the offset an angle within a full turn (a prismatic
+    joint's a length).
+
+    >>> _mimic_entry({"joint": "a", "multiplier": -1, "offset": 0.1}, "revolute", "f.yaml", "joints[1].mimic")
+    ('a', -1, 1/10)
+    """
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(MIMIC_KEYS)}, got {shown(row)}")
+    _check_keys(row, MIMIC_KEYS, source, field + ".")
+    name = _require(row, "joint", source, field + ".")
+    if not isinstance(name, str) or not name:
+        raise RobotDescriptionError(source, f"{field}.joint", f"expected a joint's name, got {shown(name)}")
+    multiplier = _rational(row.get("multiplier", 1), source, f"{field}.multiplier")
+    if multiplier == 0:
+        raise RobotDescriptionError(source, f"{field}.multiplier", "0 would hold the joint at its offset")
+    quantity = "length" if kind == "prismatic" else "coefficient"
+    offset = _rational(row.get("offset", 0), source, f"{field}.offset", quantity)
+    if kind != "prismatic":
+        check_angle(float(offset), source, f"{field}.offset")
+    return name, multiplier, offset
+
+
+def _with_mimics(rows: list, joints: tuple, reading: Reading) -> tuple:
+    """``joints`` with the ``mimic`` entries of their ``rows`` resolved: the joint named must
+    exist (by ``name``), a mimic of a mimic is composed into the joint at the end of the chain
+    (``q_a = m_a (m_b q_c + o_b) + o_a``), a cycle is an error. Joints of any kinds may be
+    coupled: the multiplier's unit is the ratio of theirs (m/rad: a rack on a pinion)."""
+    source = reading.source
+    entries = {k: _mimic_entry(row["mimic"], joints[k].kind, source, f"joints[{k}].mimic")
+               for k, row in enumerate(rows) if isinstance(row, dict) and "mimic" in row}
+    if not entries:
+        return joints
+    index = {joint.name: k for k, joint in enumerate(joints) if joint.name}
+    out = list(joints)
+    for k in entries:
+        multiplier, offset, path, current = sympy.Integer(1), sympy.Integer(0), [k], k
+        while current in entries:
+            target, m, o = entries[current]
+            field = f"joints[{current}].mimic.joint"
+            if target not in index:
+                close = difflib.get_close_matches(target, list(index), n=1)
+                raise RobotDescriptionError(source, field, f"no joint named {shown(target)}"
+                                            + (f"; closest: {close[0]}" if close else ""))
+            multiplier, offset = multiplier * m, offset + multiplier * o
+            if index[target] in path:
+                cycle = " -> ".join(joints[j].name or f"joints[{j}]" for j in path + [index[target]])
+                raise RobotDescriptionError(source, f"joints[{k}].mimic.joint", f"the mimic joints form a cycle: {cycle}")
+            path.append(index[target])
+            current = index[target]
+        out[k] = replace(joints[k], mimic=Mimic(current, multiplier, offset))
+    return tuple(out)
 
 
 def _tree_joints(rows: list, reading: Reading) -> tuple[tuple, tuple, dict]:
