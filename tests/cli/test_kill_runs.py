@@ -317,3 +317,37 @@ def test_ctrl_c_in_the_terminal_during_identify_with_workers(tmp_path):
     assert code == 130 and err.splitlines()[-1] == "interrupted", err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == []
+
+
+SWALLOWED = """
+import gc, os, signal, sys
+from kindyngen.cli.interrupts import ending_on_signals
+
+class Finalised:
+    def __del__(self):                       # the signal's handler runs inside a finaliser,
+        os.kill(os.getpid(), signal.{sig})  # where Python can only print what it raises
+        sum(range(1000))
+
+def run():
+    Finalised()
+    gc.collect()
+    sum(range({work}))
+    print("finished", file=sys.stderr)
+    return 0
+
+sys.exit(ending_on_signals(run))
+"""
+
+
+@pytest.mark.parametrize("sig, word, code", [("SIGTERM", "terminated", 143), ("SIGINT", "interrupted", 130)])
+@pytest.mark.parametrize("work", [10, 10 ** 8])
+def test_a_signal_landing_in_a_finaliser_still_ends_the_command(sig, word, code, work):
+    """A SIGTERM or Ctrl-C whose exception is raised inside a garbage-collector callback (a
+    discover run printed "Exception ignored in ... Terminated" with a traceback and went on) is
+    sent again and ends the command with one line and its exit code, whether the command's end
+    comes first (work 10) or the resent signal does (work 1e8)."""
+    done = subprocess.run([sys.executable, "-c", SWALLOWED.format(sig=sig, work=work)], capture_output=True,
+                          text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=600)
+    assert done.returncode == code, done.stderr
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
+    assert done.stderr.splitlines()[-1] == word
