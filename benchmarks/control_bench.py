@@ -222,20 +222,41 @@ def cases(limits, n, quick) -> list[tuple[str, Disturbance]]:
     return out
 
 
-def admissible(plant, limits, x, dist) -> dict:
-    """Can any controller sampling at 1 kHz keep the speed limits under a torque step at state x?
-    In the first millisecond nothing can react: the speeds change by M^-1 e_j d dt; compare with
-    the margin each joint has left. And is the step within the joint's torque limit?"""
+def admissible(plant, limits, x, joint, torque, when) -> dict:
+    """Can any controller sampling at 1 kHz keep the speed limits when a torque step of ``torque``
+    N m starts (or ends) on ``joint`` at state x? The command in force during the first
+    millisecond was chosen before the step could be seen, so whatever the controller does, the
+    step changes the joint speeds by M^-1 e_joint torque (1 ms) against the motion that command
+    would have made (M^-1: Pinocchio's, at x); compared with the margin each joint has left under
+    its limit at x. (Holding the limit would need a command that already opposed the step before
+    it began: a controller that knew it in advance.)"""
     n = plant.n
     Minv = plant.mass_matrix_inverse(x[:n])
-    dv = np.abs(Minv[:, dist.joint] * dist.torque * 1e-3)
+    acc = np.abs(Minv[:, joint] * torque)
+    dv = acc * 1e-3
     margin = limits.array("qd_max") - np.abs(x[n:])
     worst = int(np.argmax(dv - margin))
     ok = bool(np.all(dv <= margin))
-    return {"speed_change_first_ms": dv.tolist(), "speed_margin": margin.tolist(), "keeps_speed_limits": ok,
-            "note": "admissible at 1 kHz" if ok else
-            (f"no 1 kHz controller keeps joint {worst + 1}'s speed limit: the step changes its speed by "
-             f"{dv[worst]:.2f} rad/s in the first millisecond, {margin[worst]:.2f} rad/s were left")}
+    text = (f"at the {when}: the step accelerates joint {worst + 1} by {acc[worst]:.4g} rad/s^2 (Pinocchio's M^-1); "
+            f"in the millisecond before any 1 kHz sample can see it its speed moves by {dv[worst]:.3g} rad/s; "
+            f"{margin[worst]:.3g} rad/s were left under its limit")
+    return {"when": when, "acceleration_rad_s2": acc.tolist(), "speed_change_first_ms": dv.tolist(),
+            "speed_margin": margin.tolist(), "keeps_speed_limits": ok,
+            "note": (f"admissible at 1 kHz ({text})" if ok else
+                     f"no admissible motion exists: {text}, so no controller that does not know the step in advance "
+                     f"keeps it")}
+
+
+def recovery(t, qd, limits, start, stop) -> float | None:
+    """Milliseconds from ``start`` until every speed is back within its limit for the rest of
+    [start, stop) (None: not before ``stop``)."""
+    over = np.any(np.abs(qd) > limits.array("qd_max") + TOL, axis=1)
+    window = np.flatnonzero((t >= start - 1e-9) & (t < stop - 1e-9))
+    bad = window[over[window]]
+    if bad.size == 0:
+        return 0.0
+    last = int(bad.max())
+    return None if last + 1 > window.max() else 1e3 * (t[last + 1] - start)
 
 
 def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05) -> dict:
@@ -277,19 +298,45 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float =
            # the steps past the budget, to see what the time went to
            "slow_steps": [{k: s[k] for k in ("step", "t", "cpu_ms", "iterations", "qp_iterations", "status", "mode")}
                           for s in steps if s["cpu_ms"] > 10.0]}
-    if dist.kind == "torque":
-        # the true state at the last sample before the step (log entry i holds the state at t_i + 1 ms,
-        # and the RK4 step ending at the onset already sees it in its last stage)
-        k = int(round(dist.start * 1000))
-        out["admissibility"] = admissible(plant, limits, X[k - 2], dist)
+    guard = np.array(lg.guard)
+    out["guard_samples"] = int(np.count_nonzero(guard))
     held = viol["q"] == 0 and viol["qd"] == 0 and viol["tau"] == 0
     out["limits_held"] = held
     out["goal_within_1mm"] = goal_err < 1e-3
+    if dist.kind == "torque":
+        # the true state at the last sample before the step starts and before it ends (log entry i
+        # holds the state at t_i + 1 ms, and the RK4 step ending at the onset already sees the step
+        # in its last stage); at the end the controller is cancelling the step, so its removal is
+        # a step of the same size the other way
+        t = np.arange(len(X)) * 1e-3 + 1e-3
+        checks = []
+        for when, t0, t1 in (("onset", dist.start, dist.end), ("release", dist.end, SUITE_T)):
+            k = int(round(t0 * 1000))
+            c = admissible(plant, limits, X[k - 2], dist.joint, dist.torque, when)
+            c["back_inside_speed_limits_ms"] = recovery(t, qd, limits, t0, t1)
+            checks.append(c)
+        out["admissibility"] = checks
+        inadmissible = not all(c["keeps_speed_limits"] for c in checks)
+        back = [c["back_inside_speed_limits_ms"] for c in checks]
+        safe = viol["q"] == 0 and viol["tau"] == 0 and all(b is not None for b in back)
+        if not inadmissible:
+            out["verdict"] = "admissible: " + ("every limit held" if held else "LIMITS NOT HELD")
+        elif safe:
+            out["verdict"] = (f"no admissible motion exists; stopped safely: back inside the speed limits "
+                              f"{back[0]:.0f} ms after the onset and {back[1]:.0f} ms after the release, "
+                              f"no position or torque limit passed")
+        else:
+            out["verdict"] = ("no admissible motion exists; NOT stopped safely: "
+                              + ", ".join(f"{k} {v} samples past" for k, v in viol.items() if v and k != "qd")
+                              + ("" if all(b is not None for b in back) else ", speeds not back inside"))
+    else:
+        out["verdict"] = "every limit held" if held else "LIMITS NOT HELD"
     log(f"{name} {label}: prediction error {out['prediction_error']['median'] if pred_err else float('nan'):.1e} "
         f"(median), violations {viol}, peak qd {max(out['speed_peak_fraction']):.2f} qd_max, re-solve CPU "
         f"median {out['resolve_cpu_ms']['median']:.2f} p99 {out['resolve_cpu_ms']['p99']:.2f} worst "
         f"{out['resolve_cpu_ms']['worst']:.2f} ms, modes {modes}, goal {1e3 * goal_err:.3f} mm"
-        + (f"; {out['admissibility']['note']}" if "admissibility" in out else ""))
+        + f"; {out['verdict']}" + "".join(f"; {c['note']}" for c in out.get("admissibility", [])
+                                         if not c["keeps_speed_limits"]))
     return out
 
 
