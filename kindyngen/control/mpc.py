@@ -239,14 +239,16 @@ class TrackingMPC:
                 prev = np.concatenate([active[:nb + 1], active[nb + 1:nb + 1 + m][il], active[nb + 1 + m:][ih]])
                 sense |= (prev != 0).astype(np.int32) | (2 * (prev < 0)).astype(np.int32)
             A = np.ascontiguousarray(A) if len(A) else np.zeros((0, nb + 1))
-            x, _, flag, info = daqp.solve(H, f, A, bu, bl, sense, iter_limit=self.options.qp_iter_limit,
-                                          time_limit=time_limit)
+            # one cap on DAQP's iterations for the whole step (the lazy rows' re-solves and a cold
+            # restart share it): it bounds the QP's time where the active set changes most
+            left = max(self.options.qp_iter_limit - iters, 1)
+            x, _, flag, info = daqp.solve(H, f, A, bu, bl, sense, iter_limit=left, time_limit=time_limit)
             iters += int(info["iterations"])
             # the shifted working set did not fit (infeasible, cycling, overdetermined): start cold;
             # not after the iteration cap (-4), which bounds the step's time
-            if flag in (-1, -2, -6) and sense.any():
+            if flag in (-1, -2, -6) and sense.any() and iters < self.options.qp_iter_limit:
                 x, _, flag, info = daqp.solve(H, f, A, bu, bl, np.zeros_like(sense),
-                                              iter_limit=self.options.qp_iter_limit, time_limit=time_limit)
+                                              iter_limit=self.options.qp_iter_limit - iters, time_limit=time_limit)
                 iters += int(info["iterations"])
             x = np.asarray(x)
             if flag < 0 or not np.all(np.isfinite(x)):
