@@ -9,7 +9,10 @@ What it serves:
   (docs/control.md): the stage multipliers by back substitution through the mass matrices
   (M^-1 and the Jacobians from the analytic fd_derivatives), then sum_i dY_i' H_i dY_i;
 - ``linearise`` (ctypes): every interval's end state, [A B] and the inner substep states with
-  their Jacobians, for the tracking MPC; ``fd``, ``tau``, ``step`` for observers and rollouts.
+  their Jacobians, for the tracking MPC; ``hessians``: every interval's Hessian of a weighted
+  sum of its substep ends (the exact-Hessian SQP, kindyngen/control/reach_sqp.py); ``terminal``:
+  the terminal rows with their Jacobian and Hessian; ``fd``, ``tau``, ``step`` for observers and
+  rollouts.
 
 Every entry point is re-entrant (no state between calls: each call computes its intervals'
 forward chains on its own stack), so any number of libraries and solvers live in one process.
@@ -223,6 +226,10 @@ class StageLibrary:
             getattr(lib, name).restype = None
         lib.kdg_step.argtypes = [dp] * 3
         lib.kdg_step.restype = None
+        lib.kdg_hessians.argtypes = [dp] * 6
+        lib.kdg_hessians.restype = None
+        lib.kdg_terminal.argtypes = [dp] * 6
+        lib.kdg_terminal.restype = None
         return lib
 
     @functools.cached_property
@@ -249,6 +256,30 @@ class StageLibrary:
         p = ctypes.POINTER(ctypes.c_double)
         self._cdll.kdg_linearise(*(a.ctypes.data_as(p) for a in (x0, X, U, d, F, AB, XI, AXI)))
         return F, AB[:, :, :nx], AB[:, :, nx:], XI[:, :nin], AXI[:, :nin]
+
+    def hessians(self, x0, X, U, MU, d=None) -> np.ndarray:
+        """H (N x 3n x 3n): per interval the Hessian over (x_k, u_k) of sum_o MU[k, o]' x_o, the
+        substep ends x_o of the interval from x_k (x0, then X[k-1]) under U[k] + d, MU (N x substeps
+        x 2n) their multipliers (the last: the interval's end)."""
+        L = self.layout
+        n, N, nw = L.n, L.N, L.nw
+        MU = np.ascontiguousarray(np.broadcast_to(np.asarray(MU, float).reshape(N, -1, L.nx), (N, L.substeps, L.nx)))
+        H = np.empty((N, nw, nw))
+        d = np.zeros(n) if d is None else np.ascontiguousarray(d, float)
+        p = ctypes.POINTER(ctypes.c_double)
+        args = [np.ascontiguousarray(a, float) for a in (x0, X, U)] + [d, MU, H]
+        self._cdll.kdg_hessians(*(a.ctypes.data_as(p) for a in args))
+        return H
+
+    def terminal(self, xN, goal, lt):
+        """The terminal rows t = (flange position - goal, qd) at xN, their Jacobian (3 + n x 2n) and
+        the Hessian (2n x 2n) of lt' t."""
+        n = self.layout.n
+        t, J, H = np.empty(3 + n), np.empty((3 + n, 2 * n)), np.empty((2 * n, 2 * n))
+        p = ctypes.POINTER(ctypes.c_double)
+        args = [np.ascontiguousarray(a, float) for a in (xN, goal, lt)] + [t, J, H]
+        self._cdll.kdg_terminal(*(a.ctypes.data_as(p) for a in args))
+        return t, J, H
 
     def step(self, x, u) -> np.ndarray:
         out = np.empty(2 * self.robot.n)
