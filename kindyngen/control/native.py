@@ -352,3 +352,145 @@ def stage_library(robot: ControlRobot, N: int, h: float, integrator: Integrator 
                 raise ControlError(f"linking the native stage library failed:\n{done.stderr[-2000:]}")
             os.replace(out, so)
     return StageLibrary(robot, N, float(h), integrator, layout.inner, so, layout)
+
+
+TIME_TEMPLATE = Path(__file__).resolve().parent / "time_library.c"
+
+
+@dataclass(frozen=True)
+class TimeLayout:
+    """The time-optimal NLP's sizes (kindyngen/control/time_optimal.py) and the CasADi sparsity
+    patterns of its Jacobian and Hessian, in the order kindyngen/control/time_library.c writes
+    them: V = (T, vec X, vec U); rows: the gaps of every interval, then the inner substep states.
+
+    >>> L = TimeLayout(n=1, N=2, substeps=1)
+    >>> L.nv, L.ng, L.jacobian_pattern()[0].tolist()
+    (9, 4, [0, 4, 6, 8, 11, 14, 15, 16, 18, 20])
+    """
+    n: int
+    N: int
+    substeps: int
+
+    @property
+    def nx(self):
+        return 2 * self.n
+
+    @property
+    def nin(self):
+        return self.nx * (self.substeps - 1)
+
+    @property
+    def nv(self):
+        return 1 + self.nx * (self.N + 1) + self.n * self.N
+
+    @property
+    def ng(self):
+        return self.N * (self.nx + self.nin)
+
+    def x_index(self, k: int) -> int:
+        return 1 + self.nx * k
+
+    def u_index(self, k: int) -> int:
+        return 1 + self.nx * (self.N + 1) + self.n * k
+
+    def interval_rows(self, k: int) -> list[int]:
+        return [k * self.nx + r for r in range(self.nx)] + [self.N * self.nx + k * self.nin + r for r in range(self.nin)]
+
+    def jacobian_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        colind, rows = [0], list(range(self.ng))          # the column of T: every row
+        colind.append(len(rows))
+        for k in range(self.N + 1):
+            for col in range(self.nx):
+                if k > 0:
+                    rows.append((k - 1) * self.nx + col)
+                if k < self.N:
+                    rows.extend(self.interval_rows(k))
+                colind.append(len(rows))
+        for k in range(self.N):
+            for col in range(self.n):
+                rows.extend(self.interval_rows(k))
+                colind.append(len(rows))
+        return np.array(colind), np.array(rows)
+
+    def hessian_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """Upper triangle: (T, T); x_k's columns: T and x_k's rows up to the diagonal; x_N's none;
+        u_k's: T, all of x_k and u_k's up to the diagonal."""
+        colind, rows = [0, 1], [0]
+        for k in range(self.N + 1):
+            for col in range(self.nx):
+                if k < self.N:
+                    rows.append(0)
+                    rows.extend(self.x_index(k) + r for r in range(col + 1))
+                colind.append(len(rows))
+        for k in range(self.N):
+            for col in range(self.n):
+                rows.append(0)
+                rows.extend(self.x_index(k) + r for r in range(self.nx))
+                rows.extend(self.u_index(k) + r for r in range(col + 1))
+                colind.append(len(rows))
+        return np.array(colind), np.array(rows)
+
+
+@dataclass(frozen=True)
+class TimeLibrary:
+    """A compiled time-optimal library: CasADi external functions topt_nlp_g(V, p),
+    topt_nlp_jac_g(V, p), topt_nlp_hess(V, p, lam_f, lam_g)."""
+    robot: ControlRobot
+    N: int
+    integrator: Integrator
+    path: Path
+    layout: TimeLayout = field(repr=False)
+
+    @functools.cached_property
+    def externals(self) -> dict:
+        import casadi as ca
+        return {name: ca.external(name, str(self.path)) for name in ("topt_nlp_g", "topt_nlp_jac_g", "topt_nlp_hess")}
+
+
+@functools.lru_cache(maxsize=32)
+def time_optimal_library(robot: ControlRobot, N: int, integrator: Integrator = Integrator("rk4", 4),
+                         progress=None) -> TimeLibrary:
+    """Compile (or load from the cache) the time-optimal NLP's library of ``robot`` for N
+    intervals and ``integrator`` (the inner substep states are rows)."""
+    if N < 1:
+        raise ControlError(f"N = {N}: at least one interval")
+    cc = compiler()
+    if progress:
+        progress(f"native time-optimal library for {robot.name}, N = {N}, {integrator.tag} (compiled once, cached)")
+    obj, (szarg, szres, sziw, szw) = _robot_object(robot, cc)
+    n = robot.n
+    layout = TimeLayout(n, N, integrator.substeps)
+    t = stage_tables(integrator, 1.0)
+    ident = robot.name
+    decl = "int {0}(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem);"
+    glue = "\n".join([
+        "#define casadi_real double", "#define casadi_int long long int",
+        '#define CASADI_SYMBOL_EXPORT __attribute__((visibility("default")))',
+        decl.format("kdg_idh"),
+        f"void {ident}_fd(const double *q, const double *qd, const double *tau, double *qdd);",
+        f"void {ident}_fd_derivatives(const double *q, const double *qd, const double *tau, double *dq, double *dqd, "
+        "double *Minv);",
+        f"#define NDOF {n}", f"#define NINT {N}", f"#define NSTAGE {integrator.stages}",
+        f"#define NSUB {integrator.substeps}", f"#define NIN {layout.nin}",
+        f"#define KDG_FD {ident}_fd", f"#define KDG_FDD {ident}_fd_derivatives",
+        f"#define KDG_SZARG {max(szarg, 2)}", f"#define KDG_SZRES {max(szres, 1)}",
+        f"#define KDG_SZIW {sziw}", f"#define KDG_SZW {szw}",
+        _c_array("kdg_gq", t["gq"]), _c_matrix("kdg_aq", t["aq"]), _c_matrix("kdg_bv", t["bv"]),
+        _c_array("kdg_ogq", t["ogq"]), _c_matrix("kdg_oaq", t["oaq"]), _c_matrix("kdg_obv", t["obv"]),
+        _sparsity("kdg_sp_jac", layout.ng, layout.nv, layout.jacobian_pattern()),
+        _sparsity("kdg_sp_hess", layout.nv, layout.nv, layout.hessian_pattern()),
+        _sparsity("kdg_sp_jp", layout.ng, n, (np.zeros(n + 1, int), np.zeros(0, int))),
+        TIME_TEMPLATE.read_text(), ""])
+    command = [cc, *CFLAGS, "-c"]
+    key = hashlib.sha256((obj.name + glue + "\0".join(command)).encode()).hexdigest()[:16]
+    glue_obj = _build(robot.folder / "lib" / f"time_{key}.o", glue, command, ".c")
+    so = robot.folder / "lib" / f"time_{key}.so"
+    if not so.is_file():
+        with tempfile.TemporaryDirectory(dir=so.parent) as tmp:
+            out = Path(tmp) / so.name
+            done = subprocess.run([cc, "-shared", "-Wl,-Bsymbolic", "-o", str(out), str(obj), str(glue_obj), "-lm"],
+                                  capture_output=True, text=True)
+            if done.returncode != 0:
+                raise ControlError(f"linking the native time-optimal library failed:\n{done.stderr[-2000:]}")
+            os.replace(out, so)
+    return TimeLibrary(robot, N, integrator, so, layout)

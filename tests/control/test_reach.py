@@ -8,7 +8,7 @@ models, benchmarks/control_robots.py: the UR5 by Pinocchio's URDF parser):
 - with two RK4 substeps and the inner states as rows, the inner speeds hold the limits too;
 - on the LWR the native solve and the Opti baseline reach the same objective (1e-6 relative);
   the inverse-dynamics form (UR5) reaches a KKT point of the same discrete problem, fatrop the
-  native solve's optimum, and the time-optimal plan satisfies Pinocchio's steps.
+  native solve's optimum (the time-optimal NLP: test_time_optimal.py).
 """
 from __future__ import annotations
 
@@ -114,25 +114,6 @@ def test_fatrop_reaches_the_native_optimum():
     X = np.hstack([res.q, res.qd])
     err = max(np.abs(step(X[k], res.tau[k], task.h) - X[k + 1]).max() for k in range(task.N))
     assert err < 1e-5          # fatrop stops at tol 1e-4 (its dual residual stalls above 1e-6): gaps of ~3e-6
-
-
-def test_time_optimal_over_the_ur5():
-    """kindyngen.control.time_optimal: converges; Pinocchio's ABA, integrated by the plan's own
-    RK4 substeps from each node, lands on the next node; the limits hold at the nodes."""
-    from kindyngen.control.time_optimal import solve_time_optimal
-    model, robot, limits, task = arm("ur5")
-    qf = np.asarray(task.q0) + np.array([0.8, -0.4, 0.5, 0.3, -0.6, 0.9])
-    res = solve_time_optimal(robot, limits, task.q0, qf, N=8, integrator=Integrator("rk4", 2))
-    assert res["success"], res["status"]
-    step = pinocchio_step("ur5", model)
-    X = np.hstack([res["q"], res["qd"]])
-    h = res["T"] / 8
-    for k in range(8):
-        x = step(step(X[k], res["tau"][k], h / 2), res["tau"][k], h / 2)
-        assert np.abs(x - X[k + 1]).max() < 1e-7 * max(1.0, np.abs(x).max())
-    assert np.all(np.abs(res["tau"]) <= limits.array("tau_max") + 1e-9)
-    assert np.all(np.abs(res["qd"]) <= 0.95 * limits.array("qd_max") + 1e-7)
-    assert np.abs(res["q"][-1] - qf).max() < 1e-9
 
 
 def test_two_robots_in_one_process():
