@@ -37,7 +37,6 @@ The plant is the caller's: ``step(x, tau, dt, t) -> x`` and ``measure(x, t) -> x
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np

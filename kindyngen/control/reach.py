@@ -6,7 +6,7 @@ over any prepared robot:
   derivatives from the native stage library (:mod:`kindyngen.control.native`), IPOPT given
   the compiled Jacobian and Hessian (the fast path);
 - :func:`sx_reach_nlp`: the same NLP as one CasADi SX graph (the reference the native library
-  is checked against);
+  is checked against), :func:`solve_sx` solves it by IPOPT;
 - :func:`inverse_dynamics_reach`: the inverse-dynamics form (the stage accelerations unknowns,
   tied to the torque by the generated ``tau``), IPOPT on the SX graph;
 - :func:`solve_baseline`: what a new user writes, Opti + IPOPT with ``fd`` on MX symbols.
@@ -147,9 +147,12 @@ def _result(z, n, N, nu, T, status, success, iterations, wall, cpu, g_violation,
 
 class ReachNLP:
     """The reach on the native stage library, solved by IPOPT (see the module docstring).
-    Parameters p = (initial state, goal) so that one built solver re-solves from any state."""
+    Parameters p = (initial state, goal) so that one built solver re-solves from any state.
+    ``adaptive``: IPOPT's adaptive barrier (FAST; False: IPOPT's monotone default), ``ipopt``:
+    further options (``ipopt.`` prefixed)."""
 
-    def __init__(self, robot: ControlRobot, task: ReachTask, ipopt: dict | None = None, progress=None):
+    def __init__(self, robot: ControlRobot, task: ReachTask, ipopt: dict | None = None, progress=None,
+                 adaptive: bool = True):
         import casadi as ca
         t0 = time.perf_counter()
         self.robot, self.task = robot, task
@@ -171,7 +174,7 @@ class ReachNLP:
         self.f_g = ca.Function("g", [Z, P], [g])
         self.lbx, self.ubx = _bounds(task)
         self.lbg, self.ubg = self.row_bounds()
-        opts = dict(BASE_OPTIONS, **FAST)
+        opts = dict(BASE_OPTIONS, **(FAST if adaptive else {}))
         opts.update(ipopt or {})
         self.options = opts
         self.solver = self.build(opts)
@@ -185,15 +188,7 @@ class ReachNLP:
 
     def row_bounds(self):
         """Gap, initial-state and terminal rows equal 0; inner substep states within the planned limits."""
-        L, lim = self.layout, self.task.planned_limits
-        lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
-        xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
-        xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
-        for k in range(self.task.N):
-            r = L.row_inner(k)
-            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx) if L.nin else []
-            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx) if L.nin else []
-        return lbg, ubg
+        return _row_bounds(self.task, self.layout)
 
     def guess(self, x_init=None) -> np.ndarray:
         """Rest at the initial state's configuration with the gravity torque."""
@@ -271,6 +266,44 @@ def sx_reach_nlp(robot: ControlRobot, task: ReachTask):
     g[L.ng - 3 - n:] = ca.vertcat(robot.fk_hom(xN[:n])[:3, 3] - P[L.nx:], xN[n:])
     f = task.h * sum(ca.sumsqr(Z[k * L.nw + L.nx:(k + 1) * L.nw]) for k in range(N))
     return Z, P, g, f
+
+
+def solve_sx(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
+    """IPOPT on :func:`sx_reach_nlp`'s SX graph (CasADi's AD for the derivatives, IPOPT's
+    defaults): the native NLP's reference route, the same variables, rows and bounds."""
+    import casadi as ca
+    Z, P, g, f = sx_reach_nlp(robot, task)
+    lib = stage_library(robot, task.N, task.h, task.integrator, task.inner)
+    lbg, ubg = _row_bounds(task, lib.layout)
+    opts = dict(BASE_OPTIONS, **(ipopt or {}))
+    solver = ca.nlpsol("reach_sx", "ipopt", {"x": Z, "p": P, "f": f, "g": g}, opts)
+    lbx, ubx = _bounds(task)
+    q0 = np.asarray(task.q0, float)
+    xr = np.concatenate([q0, np.zeros(robot.n)])
+    z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * task.N + [xr])
+    t0, c0 = time.perf_counter(), time.process_time()
+    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.concatenate([xr, np.asarray(task.goal, float)]))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    st = solver.stats()
+    gv = np.array(sol["g"]).ravel()
+    viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
+    return _result(np.array(sol["x"]).ravel(), robot.n, task.N, robot.n, task.T, st["return_status"], st["success"],
+                   st["iter_count"], wall, cpu, viol, "ipopt (SX graph, CasADi's AD)",
+                   np.array(sol["lam_g"]).ravel(), np.array(sol["lam_x"]).ravel())
+
+
+def _row_bounds(task: ReachTask, L):
+    """Row bounds of the native layout L: gaps, x_0 and terminal rows 0, inner states within the planned limits."""
+    lim = task.planned_limits
+    lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
+    xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
+    xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
+    for k in range(task.N):
+        r = L.row_inner(k)
+        if L.nin:
+            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx)
+            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx)
+    return lbg, ubg
 
 
 def solve_baseline(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
@@ -420,15 +453,7 @@ def solve_fatrop(robot: ControlRobot, task: ReachTask, options: dict | None = No
     opts.update(options or {})
     solver = ca.nlpsol("reach_fatrop", "fatrop", {"x": Z, "p": P, "f": f, "g": g}, opts)
     lbx, ubx = _bounds(task)
-    lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
-    lim = task.planned_limits
-    xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
-    xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
-    for k in range(N):
-        r = L.row_inner(k)
-        if L.nin:
-            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx)
-            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx)
+    lbg, ubg = _row_bounds(task, L)
     q0 = np.asarray(task.q0, float)
     xr = np.concatenate([q0, np.zeros(n)])
     z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * N + [xr])

@@ -89,14 +89,16 @@ class TimeOptimalProblem:
             g = ca.vec(mapped - X[:, 1:])
         return {"x": V, "f": self.cost(V), "g": g}
 
-    def result(self, v, st, wall, cpu, route) -> dict:
+    def result(self, sol, st, wall, cpu, route) -> dict:
         n, N = self.robot.n, self.N
+        v = np.array(sol["x"]).ravel()
         Tv = float(v[0])
         Xv = v[1:1 + 2 * n * (N + 1)].reshape(N + 1, 2 * n)
         Uv = v[1 + 2 * n * (N + 1):].reshape(N, n)
         return {"success": bool(st["success"]), "status": st["return_status"], "iterations": int(st["iter_count"]),
                 "solve_s": wall, "solve_cpu_s": cpu, "T": Tv, "t": np.linspace(0, Tv, N + 1), "q": Xv[:, :n],
-                "qd": Xv[:, n:], "tau": Uv, "integrator": self.integrator.tag, "route": route}
+                "qd": Xv[:, n:], "tau": Uv, "integrator": self.integrator.tag, "route": route,
+                "objective": float(sol["f"]), "max_defect": float(np.abs(np.array(sol["g"]).ravel()[:2 * n * N]).max())}
 
 
 class TimeOptimalNLP(TimeOptimalProblem):
@@ -127,15 +129,16 @@ class TimeOptimalNLP(TimeOptimalProblem):
         t0, c0 = time.perf_counter(), time.process_time()
         sol = self.solver(x0=self.guess, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg, p=self.p)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        return self.result(np.array(sol["x"]).ravel(), self.solver.stats(), wall, cpu, "native")
+        return self.result(sol, self.solver.stats(), wall, cpu, "native")
 
 
 def solve_time_optimal(robot: ControlRobot, limits: Limits, q0, qf, N: int = 20,
                        integrator: Integrator = Integrator("rk4", 4), weight: float = 1e-2,
                        speed_margin: float = 0.05, T_guess: float = 1.5, T_bounds=(0.05, 10.0),
                        ipopt: dict | None = None, native: bool = True) -> dict:
-    """Solve; returns success, status, iterations, solve_cpu_s, T, t, q, qd, tau (native: the
-    native library's derivatives; else CasADi's AD of the mapped SX step)."""
+    """Solve; returns success, status, iterations, solve_cpu_s, T, t, q, qd, tau, objective,
+    max_defect (the largest gap) (native: the native library's derivatives; else CasADi's AD of
+    the mapped SX step)."""
     kwargs = dict(N=N, integrator=integrator, weight=weight, speed_margin=speed_margin, T_guess=T_guess,
                   T_bounds=T_bounds)
     if native:
@@ -146,4 +149,4 @@ def solve_time_optimal(robot: ControlRobot, limits: Limits, q0, qf, N: int = 20,
     t0, c0 = time.perf_counter(), time.process_time()
     sol = solver(x0=prob.guess, lbx=prob.lbx, ubx=prob.ubx, lbg=prob.lbg, ubg=prob.ubg)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    return prob.result(np.array(sol["x"]).ravel(), solver.stats(), wall, cpu, "mx_map")
+    return prob.result(sol, solver.stats(), wall, cpu, "mx_map")
