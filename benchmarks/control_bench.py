@@ -100,6 +100,27 @@ def plan_check(name, model, task, res) -> dict:
                              "qd": float(max(np.max(np.abs(res.qd[1:]) - lim.array("qd_max")), 0))}}
 
 
+def resimulation(name, model, task, res, substeps: int = 20) -> dict:
+    """The plan's torques applied to Pinocchio's ABA, RK4 with ``substeps`` steps per interval
+    (the discretisation's own error): the largest state difference at the nodes, the flange's
+    distance from the goal at T."""
+    import pinocchio as pin
+    from kindyngen.control.reach import rollout
+    pm, frame = cr.pinocchio_plant_model(name, model)
+    pd = pm.createData()
+    n = model.n
+
+    def step(x, u, dt):
+        def f(z):
+            return np.concatenate([z[n:], pin.aba(pm, pd, z[:n], z[n:], u)])
+        k1 = f(x); k2 = f(x + dt / 2 * k1); k3 = f(x + dt / 2 * k2); k4 = f(x + dt * k3)
+        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    X = rollout(step, np.concatenate([res.q[0], res.qd[0]]), res.tau, substeps, task.h)
+    pin.framesForwardKinematics(pm, pd, X[-1, :n])
+    return {"resim_error": float(np.abs(X - np.hstack([res.q, res.qd])).max()), "resim_substeps": substeps,
+            "resim_goal_error_m": float(np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal)))}
+
+
 def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, acados_venv, quick, peers=True) -> dict:
     from kindyngen.control.reach import ReachNLP, solve_baseline
     model, robot, limits, task = cr.load(name)
@@ -184,6 +205,7 @@ def acados_rows(name, model, robot, task, venv: Path, quick: bool) -> dict:
     problem = {"q0": list(task.q0), "goal": [float(v) for v in task.goal], "tau_max": list(lim.tau_max),
                "qd_max": list(lim.qd_max), "q_lo": list(lim.q_lo), "q_hi": list(lim.q_hi), "N": task.N, "T": task.T}
     module = robot.folder / "casadi" / f"{robot.name}_casadi.py"
+    (ROOT / "benchmarks" / "build").mkdir(parents=True, exist_ok=True)      # acados writes its solver there
     r = subprocess.run([str(py), str(ROOT / "benchmarks" / "acados_reach.py"), "--module", str(module), "--problem",
                         json.dumps(problem), "--repeats", "1" if quick else "3",
                         "--build", str(ROOT / "benchmarks" / "build" / "acados")], capture_output=True, text=True,
@@ -259,14 +281,18 @@ def recovery(t, qd, limits, start, stop) -> float | None:
     return None if last + 1 > window.max() else 1e3 * (t[last + 1] - start)
 
 
-def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05) -> dict:
+def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05, options=None,
+             duration: float = SUITE_T, keep_log: bool = False) -> dict:
+    """One case of the suite: the MPC (``options``, default MPCOptions()) tracking ``ref`` for
+    ``duration`` s against the Pinocchio plant under ``dist``; with ``keep_log`` the 1 kHz states
+    and torques are returned too (under "log")."""
     from kindyngen.control.closed_loop import Controller, simulate
     from kindyngen.control.mpc import MPCOptions, TrackingMPC
-    mpc = TrackingMPC(robot, limits, ref["X"], ref["U"], MPCOptions())
+    mpc = TrackingMPC(robot, limits, ref["X"], ref["U"], options or MPCOptions())
     plant = PinocchioPlant(name, model, dist)
     ctl = Controller(mpc)
     t0 = time.perf_counter()
-    lg = simulate(ctl, plant, ref["X"][0].copy(), SUITE_T)
+    lg = simulate(ctl, plant, ref["X"][0].copy(), duration)
     X, tau = np.array(lg.x), np.array(lg.tau)
     n = model.n
     q, qd = X[:, :n], X[:, n:]
@@ -310,7 +336,7 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float =
         # a step of the same size the other way
         t = np.arange(len(X)) * 1e-3 + 1e-3
         checks = []
-        for when, t0, t1 in (("onset", dist.start, dist.end), ("release", dist.end, SUITE_T)):
+        for when, t0, t1 in (("onset", dist.start, dist.end), ("release", dist.end, duration)):
             k = int(round(t0 * 1000))
             c = admissible(plant, limits, X[k - 2], dist.joint, dist.torque, when)
             c["back_inside_speed_limits_ms"] = recovery(t, qd, limits, t0, t1)
@@ -331,6 +357,8 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float =
                               + ("" if all(b is not None for b in back) else ", speeds not back inside"))
     else:
         out["verdict"] = "every limit held" if held else "LIMITS NOT HELD"
+    if keep_log:
+        out["log"] = {"x": X, "tau": tau}
     log(f"{name} {label}: prediction error {out['prediction_error']['median'] if pred_err else float('nan'):.1e} "
         f"(median), violations {viol}, peak qd {max(out['speed_peak_fraction']):.2f} qd_max, re-solve CPU "
         f"median {out['resolve_cpu_ms']['median']:.2f} p99 {out['resolve_cpu_ms']['p99']:.2f} worst "
