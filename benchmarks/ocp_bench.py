@@ -11,7 +11,8 @@ Rows (kindyngen/control/reach.py): ``baseline`` (Opti + IPOPT, fd on MX symbols,
 defaults: what a new user writes), ``baseline adaptive`` (the same with FAST, for a like-for-like
 ratio), ``sx`` (IPOPT on the NLP as one SX graph), ``inverse-dynamics`` and ``inverse-dynamics x2``
 (the stage accelerations as unknowns, one and two RK4 steps per interval, SX graph), ``fatrop``
-(the SX graph, structure by hand), ``native monotone`` and ``native`` (IPOPT on the native stage
+and ``fatrop inverse-dynamics`` (fatrop on either SX graph, structure by hand; tol 1e-4 and
+1e-6), ``native monotone`` and ``native`` (IPOPT on the native stage
 library, with IPOPT's monotone barrier and with FAST, the package's default); ``native warm``:
 the re-solve from the native solution and its multipliers shifted by one interval (the
 receding-horizon step). The baseline and the native rows are solved --repeats times and the
@@ -57,6 +58,7 @@ ROWS = {
     "inverse-dynamics": lambda robot, task: reach.inverse_dynamics_reach(robot, task),
     "inverse-dynamics x2": lambda robot, task: reach.inverse_dynamics_reach(robot, task),
     "fatrop": lambda robot, task: reach.solve_fatrop(robot, task),
+    "fatrop inverse-dynamics": lambda robot, task: reach.solve_fatrop(robot, task, formulation="inverse-dynamics"),
     "native monotone": None,          # built once, solved --repeats times
     "native": None,
 }

@@ -12,7 +12,9 @@ Solvers (kindyngen/control/reach.py, reach_sqp.py):
   baseline         Opti + IPOPT with fd on MX symbols, IPOPT's defaults: what a new user writes
   sx               IPOPT on the same NLP as one SX graph (CasADi's AD)
   inverse-dynamics the stage accelerations as unknowns tied by the generated tau (SX graph, IPOPT)
-  fatrop           fatrop (structure declared by hand) on the SX graph
+  fatrop           fatrop (structure declared by hand) on the SX graph, to tol 1e-4 (its dual
+                   residual stalls above that at N = 20: kindyngen.control.reach.solve_fatrop)
+  fatrop-inverse-dynamics  fatrop on the inverse-dynamics form's SX graph, to tol 1e-6
   sqp              the exact-Hessian SQP (DAQP on the condensed QP), from the native solution
                    shifted by one interval, the start moved to its node 1 (the receding-horizon
                    re-solve; from the cold start it does not converge)
@@ -51,7 +53,7 @@ from benchmarks.control_bench import plan_check, resimulation  # noqa: E402
 from kindyngen.control import reach  # noqa: E402
 from kindyngen.control.integrators import Integrator  # noqa: E402
 
-SOLVERS = ("native", "native-monotone", "baseline", "sx", "inverse-dynamics", "fatrop", "sqp")
+SOLVERS = ("native", "native-monotone", "baseline", "sx", "inverse-dynamics", "fatrop", "fatrop-inverse-dynamics", "sqp")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -74,6 +76,8 @@ def solve(name: str, robot, task):
         return reach.inverse_dynamics_reach(robot, task)
     if name == "fatrop":
         return reach.solve_fatrop(robot, task)
+    if name == "fatrop-inverse-dynamics":
+        return reach.solve_fatrop(robot, task, formulation="inverse-dynamics")
     from kindyngen.control.reach_sqp import ReachSQP
     task = replace(task, inner=False)
     nlp = reach.ReachNLP(robot, task)

@@ -163,6 +163,21 @@ def test_fatrop_reaches_the_native_optimum():
     assert err < 1e-5          # fatrop stops at tol 1e-4 (its dual residual stalls above 1e-6): gaps of ~3e-6
 
 
+def test_fatrop_on_the_inverse_dynamics_form_converges():
+    """fatrop on the inverse-dynamics form converges to tol 1e-6 at IPOPT's KKT point of the
+    same NLP (1e-7 relative), its plan on Pinocchio's RK4 steps (1e-7)."""
+    from kindyngen.control.reach import solve_fatrop
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, N=10)
+    ref = inverse_dynamics_reach(robot, task)
+    res = solve_fatrop(robot, task, formulation="inverse-dynamics")
+    assert ref.success and res.success, res.status
+    assert abs(res.objective - ref.objective) < 1e-7 * ref.objective
+    step = pinocchio_step("ur5", model)
+    X = np.hstack([res.q, res.qd])
+    assert max(np.abs(step(X[k], res.tau[k], task.h) - X[k + 1]).max() for k in range(task.N)) < 1e-7
+
+
 def test_two_robots_in_one_process():
     """Two reach solvers (the UR5 and the LWR, each on its own library) solving in turn give the
     iterates each gives alone: nothing is shared between libraries or calls."""
