@@ -95,20 +95,29 @@ def test_lwr_native_and_baseline_agree():
     assert np.abs(X - np.hstack([res.q, res.qd])).max() < 1e-7
 
 
-def test_adaptive_barrier_and_sx_graph_reach_the_same_optimum():
+def test_adaptive_barrier_reaches_the_defaults_optimum_in_fewer_iterations():
     """IPOPT's adaptive barrier (FAST, ReachNLP's default) ends at the KKT point of IPOPT's
-    defaults in fewer iterations (LWR: 23 against 45), and IPOPT on the same NLP as one SX graph
-    (CasADi's AD) at that point too (objective 1e-8 relative, torques 1e-3 N m of up to 100)."""
+    defaults in fewer iterations (LWR: 23 against 45; objective 1e-8 relative, torques 1e-3 N m of
+    up to 176)."""
     model, robot, limits, task = arm("lwr4")
     fast = ReachNLP(robot, task).solve()
     plain = ReachNLP(robot, task, adaptive=False).solve()
-    sx = solve_sx(robot, task)
-    assert fast.success and plain.success and sx.success
+    assert fast.success and plain.success
     assert fast.iterations < plain.iterations
-    for other in (plain, sx):
-        assert abs(fast.objective - other.objective) < 1e-8 * other.objective
-        assert np.abs(fast.tau - other.tau).max() < 1e-3
+    assert abs(fast.objective - plain.objective) < 1e-8 * plain.objective
+    assert np.abs(fast.tau - plain.tau).max() < 1e-3
     _check_plan("lwr4", model, task, fast)
+
+
+def test_sx_graph_reaches_the_native_optimum():
+    """IPOPT on the same NLP as one SX graph (CasADi's AD, solve_sx) ends where the native
+    library's solve does (UR5, N = 10: the SX graph's Hessian is most of the test's time)."""
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, N=10)
+    native, sx = ReachNLP(robot, task).solve(), solve_sx(robot, task)
+    assert native.success and sx.success
+    assert abs(native.objective - sx.objective) < 1e-8 * sx.objective
+    assert np.abs(native.tau - sx.tau).max() < 1e-4 * np.abs(sx.tau).max()
 
 
 def test_shifted_warm_start_is_stationary():
