@@ -24,9 +24,14 @@ measurement noise (1e-4 rad, 1e-3 rad/s), a payload 0 -> 5 kg at 0.5 s, a 60 N p
 for 0.3 s, 10 % heavier links, and for every joint a torque step of 80 % of its limit for 0.3 s.
 Recorded per case: 1 kHz plant samples past a position, speed or torque limit (tolerance 1e-6),
 peak speeds, the re-solve's CPU time (median, p95, p99, worst), iterations, fallbacks, the
-flange's distance from the goal at the end; for torque steps, whether any sampled controller
-could keep the speed limit (the speed change of the first millisecond, before any 1 kHz
-controller can react, from Pinocchio's M^-1 against the speed margin left).
+samples the limit guard took over, the flange's distance from the goal at the end, and a
+verdict. For torque steps, at the onset and at the release (where the controller's cancelling
+torque meets the step's end: a step of the same size the other way), whether any controller
+sampling at 1 kHz could keep the speed limits: the step's acceleration from Pinocchio's M^-1,
+the speed change of the first millisecond (before any sample can see the step) against the
+margin left; where none could, the verdict is "no admissible motion exists; stopped safely"
+when no position or torque limit was passed and the speeds came back inside their limits (the
+milliseconds it took are recorded), else "NOT stopped safely".
 
 Writes the JSON (with the machine and `uptime` at the start and end) and a plot beside it.
 """
@@ -271,14 +276,21 @@ def admissible(plant, limits, x, joint, torque, when) -> dict:
 
 def recovery(t, qd, limits, start, stop) -> float | None:
     """Milliseconds from ``start`` until every speed is back within its limit for the rest of
-    [start, stop) (None: not before ``stop``)."""
+    [start, stop) (None: not before ``stop``).
+
+    >>> from kindyngen.control.robot import Limits
+    >>> lim = Limits((-1.0,), (1.0,), (1.0,), (1.0,))
+    >>> t = np.arange(1, 11) * 1e-3; qd = np.array([[0.5], [2.0], [1.5], [0.9]] + [[0.5]] * 6)
+    >>> recovery(t, qd, lim, 0.002, 0.01), recovery(t, qd, lim, 0.0, 0.0025)
+    (2.0, None)
+    """
     over = np.any(np.abs(qd) > limits.array("qd_max") + TOL, axis=1)
     window = np.flatnonzero((t >= start - 1e-9) & (t < stop - 1e-9))
     bad = window[over[window]]
     if bad.size == 0:
         return 0.0
     last = int(bad.max())
-    return None if last + 1 > window.max() else 1e3 * (t[last + 1] - start)
+    return None if last + 1 > window.max() else float(1e3 * (t[last + 1] - start))
 
 
 def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05, options=None,
