@@ -294,10 +294,21 @@ class Controller:
 def simulate(controller: Controller, plant, x0, duration: float) -> LoopLog:
     """Run the loop for ``duration`` seconds from the true state x0, with BLAS on one thread
     (a re-solve of a few milliseconds gains nothing from a second one, whose spinning doubled
-    its CPU time on a 2-core machine and, on a loaded one, made every step miss its budget)."""
+    its CPU time on a 2-core machine and, on a loaded one, made every step miss its budget) and
+    Python's cyclic garbage collector paused (a full collection in a process holding the solvers
+    took 31 ms, measured, three budgets' worth, and landed in a re-solve: the control benchmark's
+    two p99s over 10 ms were single-iteration steps of 14 and 33 ms; reference counting still
+    frees everything but cycles, which the collector takes when it resumes after the loop)."""
+    import gc
     from threadpoolctl import threadpool_limits
-    with threadpool_limits(1):
-        return _simulate(controller, plant, x0, duration)
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        with threadpool_limits(1):
+            return _simulate(controller, plant, x0, duration)
+    finally:
+        if collecting:
+            gc.enable()
 
 
 def _simulate(controller, plant, x0, duration):

@@ -168,6 +168,26 @@ def test_closed_loop_lwr_payload():
     assert err < 1e-3
 
 
+def test_the_loop_runs_without_the_cyclic_garbage_collector(ur5):
+    """simulate pauses Python's cyclic garbage collector for the loop (a full collection took
+    31 ms, three re-solve budgets) and resumes it after."""
+    import gc
+    from benchmarks.control_plant import PinocchioPlant
+    model, robot, limits, task, X, U = ur5
+    plant = PinocchioPlant("ur5", model)
+    seen = []
+    step = plant.step
+
+    def recording(*args):
+        seen.append(gc.isenabled())
+        return step(*args)
+    plant.step = recording
+    assert gc.isenabled()
+    simulate(Controller(TrackingMPC(robot, limits, X, U, RELAXED)), plant, X[0].copy(), 0.01)
+    assert seen and not any(seen)
+    assert gc.isenabled()
+
+
 def test_fallback_then_brake(ur5, monkeypatch):
     from benchmarks.control_plant import PinocchioPlant
     model, robot, limits, task, X, U = ur5
