@@ -24,9 +24,14 @@ measurement noise (1e-4 rad, 1e-3 rad/s), a payload 0 -> 5 kg at 0.5 s, a 60 N p
 for 0.3 s, 10 % heavier links, and for every joint a torque step of 80 % of its limit for 0.3 s.
 Recorded per case: 1 kHz plant samples past a position, speed or torque limit (tolerance 1e-6),
 peak speeds, the re-solve's CPU time (median, p95, p99, worst), iterations, fallbacks, the
-flange's distance from the goal at the end; for torque steps, whether any sampled controller
-could keep the speed limit (the speed change of the first millisecond, before any 1 kHz
-controller can react, from Pinocchio's M^-1 against the speed margin left).
+samples the limit guard took over, the flange's distance from the goal at the end, and a
+verdict. For torque steps, at the onset and at the release (where the controller's cancelling
+torque meets the step's end: a step of the same size the other way), whether any controller
+sampling at 1 kHz could keep the speed limits: the step's acceleration from Pinocchio's M^-1,
+the speed change of the first millisecond (before any sample can see the step) against the
+margin left; where none could, the verdict is "no admissible motion exists; stopped safely"
+when no position or torque limit was passed and the speeds came back inside their limits (the
+milliseconds it took are recorded), else "NOT stopped safely".
 
 Writes the JSON (with the machine and `uptime` at the start and end) and a plot beside it.
 """
@@ -98,6 +103,27 @@ def plan_check(name, model, task, res) -> dict:
             "limit_excess": {"tau": float(np.max(np.abs(res.tau) - lim.array("tau_max"), initial=0)),
                              "q": float(max(np.max(res.q[1:] - lim.array("q_hi")), np.max(lim.array("q_lo") - res.q[1:]), 0)),
                              "qd": float(max(np.max(np.abs(res.qd[1:]) - lim.array("qd_max")), 0))}}
+
+
+def resimulation(name, model, task, res, substeps: int = 20) -> dict:
+    """The plan's torques applied to Pinocchio's ABA, RK4 with ``substeps`` steps per interval
+    (the discretisation's own error): the largest state difference at the nodes, the flange's
+    distance from the goal at T."""
+    import pinocchio as pin
+    from kindyngen.control.reach import rollout
+    pm, frame = cr.pinocchio_plant_model(name, model)
+    pd = pm.createData()
+    n = model.n
+
+    def step(x, u, dt):
+        def f(z):
+            return np.concatenate([z[n:], pin.aba(pm, pd, z[:n], z[n:], u)])
+        k1 = f(x); k2 = f(x + dt / 2 * k1); k3 = f(x + dt / 2 * k2); k4 = f(x + dt * k3)
+        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    X = rollout(step, np.concatenate([res.q[0], res.qd[0]]), res.tau, substeps, task.h)
+    pin.framesForwardKinematics(pm, pd, X[-1, :n])
+    return {"resim_error": float(np.abs(X - np.hstack([res.q, res.qd])).max()), "resim_substeps": substeps,
+            "resim_goal_error_m": float(np.linalg.norm(pd.oMf[frame].translation - np.asarray(task.goal)))}
 
 
 def reach_rows(name, repeats, baseline_repeats, crocoddyl_venv, acados_venv, quick, peers=True) -> dict:
@@ -184,6 +210,7 @@ def acados_rows(name, model, robot, task, venv: Path, quick: bool) -> dict:
     problem = {"q0": list(task.q0), "goal": [float(v) for v in task.goal], "tau_max": list(lim.tau_max),
                "qd_max": list(lim.qd_max), "q_lo": list(lim.q_lo), "q_hi": list(lim.q_hi), "N": task.N, "T": task.T}
     module = robot.folder / "casadi" / f"{robot.name}_casadi.py"
+    (ROOT / "benchmarks" / "build").mkdir(parents=True, exist_ok=True)      # acados writes its solver there
     r = subprocess.run([str(py), str(ROOT / "benchmarks" / "acados_reach.py"), "--module", str(module), "--problem",
                         json.dumps(problem), "--repeats", "1" if quick else "3",
                         "--build", str(ROOT / "benchmarks" / "build" / "acados")], capture_output=True, text=True,
@@ -222,30 +249,62 @@ def cases(limits, n, quick) -> list[tuple[str, Disturbance]]:
     return out
 
 
-def admissible(plant, limits, x, dist) -> dict:
-    """Can any controller sampling at 1 kHz keep the speed limits under a torque step at state x?
-    In the first millisecond nothing can react: the speeds change by M^-1 e_j d dt; compare with
-    the margin each joint has left. And is the step within the joint's torque limit?"""
+def admissible(plant, limits, x, joint, torque, when) -> dict:
+    """Can any controller sampling at 1 kHz keep the speed limits when a torque step of ``torque``
+    N m starts (or ends) on ``joint`` at state x? The command in force during the first
+    millisecond was chosen before the step could be seen, so whatever the controller does, the
+    step changes the joint speeds by M^-1 e_joint torque (1 ms) against the motion that command
+    would have made (M^-1: Pinocchio's, at x); compared with the margin each joint has left under
+    its limit at x. (Holding the limit would need a command that already opposed the step before
+    it began: a controller that knew it in advance.)"""
     n = plant.n
     Minv = plant.mass_matrix_inverse(x[:n])
-    dv = np.abs(Minv[:, dist.joint] * dist.torque * 1e-3)
+    acc = np.abs(Minv[:, joint] * torque)
+    dv = acc * 1e-3
     margin = limits.array("qd_max") - np.abs(x[n:])
     worst = int(np.argmax(dv - margin))
     ok = bool(np.all(dv <= margin))
-    return {"speed_change_first_ms": dv.tolist(), "speed_margin": margin.tolist(), "keeps_speed_limits": ok,
-            "note": "admissible at 1 kHz" if ok else
-            (f"no 1 kHz controller keeps joint {worst + 1}'s speed limit: the step changes its speed by "
-             f"{dv[worst]:.2f} rad/s in the first millisecond, {margin[worst]:.2f} rad/s were left")}
+    text = (f"at the {when}: the step accelerates joint {worst + 1} by {acc[worst]:.4g} rad/s^2 (Pinocchio's M^-1); "
+            f"in the millisecond before any 1 kHz sample can see it its speed moves by {dv[worst]:.3g} rad/s; "
+            f"{margin[worst]:.3g} rad/s were left under its limit")
+    return {"when": when, "acceleration_rad_s2": acc.tolist(), "speed_change_first_ms": dv.tolist(),
+            "speed_margin": margin.tolist(), "keeps_speed_limits": ok,
+            "note": (f"admissible at 1 kHz ({text})" if ok else
+                     f"no admissible motion exists: {text}, so no controller that does not know the step in advance "
+                     f"keeps it")}
 
 
-def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05) -> dict:
+def recovery(t, qd, limits, start, stop) -> float | None:
+    """Milliseconds from ``start`` until every speed is back within its limit for the rest of
+    [start, stop) (None: not before ``stop``).
+
+    >>> from kindyngen.control.robot import Limits
+    >>> lim = Limits((-1.0,), (1.0,), (1.0,), (1.0,))
+    >>> t = np.arange(1, 11) * 1e-3; qd = np.array([[0.5], [2.0], [1.5], [0.9]] + [[0.5]] * 6)
+    >>> recovery(t, qd, lim, 0.002, 0.01), recovery(t, qd, lim, 0.0, 0.0025)
+    (2.0, None)
+    """
+    over = np.any(np.abs(qd) > limits.array("qd_max") + TOL, axis=1)
+    window = np.flatnonzero((t >= start - 1e-9) & (t < stop - 1e-9))
+    bad = window[over[window]]
+    if bad.size == 0:
+        return 0.0
+    last = int(bad.max())
+    return None if last + 1 > window.max() else float(1e3 * (t[last + 1] - start))
+
+
+def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float = 0.05, options=None,
+             duration: float = SUITE_T, keep_log: bool = False) -> dict:
+    """One case of the suite: the MPC (``options``, default MPCOptions()) tracking ``ref`` for
+    ``duration`` s against the Pinocchio plant under ``dist``; with ``keep_log`` the 1 kHz states
+    and torques are returned too (under "log")."""
     from kindyngen.control.closed_loop import Controller, simulate
     from kindyngen.control.mpc import MPCOptions, TrackingMPC
-    mpc = TrackingMPC(robot, limits, ref["X"], ref["U"], MPCOptions())
+    mpc = TrackingMPC(robot, limits, ref["X"], ref["U"], options or MPCOptions())
     plant = PinocchioPlant(name, model, dist)
     ctl = Controller(mpc)
     t0 = time.perf_counter()
-    lg = simulate(ctl, plant, ref["X"][0].copy(), SUITE_T)
+    lg = simulate(ctl, plant, ref["X"][0].copy(), duration)
     X, tau = np.array(lg.x), np.array(lg.tau)
     n = model.n
     q, qd = X[:, :n], X[:, n:]
@@ -277,19 +336,47 @@ def mpc_case(name, model, robot, limits, ref, label, dist, quick, ref_h: float =
            # the steps past the budget, to see what the time went to
            "slow_steps": [{k: s[k] for k in ("step", "t", "cpu_ms", "iterations", "qp_iterations", "status", "mode")}
                           for s in steps if s["cpu_ms"] > 10.0]}
-    if dist.kind == "torque":
-        # the true state at the last sample before the step (log entry i holds the state at t_i + 1 ms,
-        # and the RK4 step ending at the onset already sees it in its last stage)
-        k = int(round(dist.start * 1000))
-        out["admissibility"] = admissible(plant, limits, X[k - 2], dist)
+    guard = np.array(lg.guard)
+    out["guard_samples"] = int(np.count_nonzero(guard))
     held = viol["q"] == 0 and viol["qd"] == 0 and viol["tau"] == 0
     out["limits_held"] = held
     out["goal_within_1mm"] = goal_err < 1e-3
+    if dist.kind == "torque":
+        # the true state at the last sample before the step starts and before it ends (log entry i
+        # holds the state at t_i + 1 ms, and the RK4 step ending at the onset already sees the step
+        # in its last stage); at the end the controller is cancelling the step, so its removal is
+        # a step of the same size the other way
+        t = np.arange(len(X)) * 1e-3 + 1e-3
+        checks = []
+        for when, t0, t1 in (("onset", dist.start, dist.end), ("release", dist.end, duration)):
+            k = int(round(t0 * 1000))
+            c = admissible(plant, limits, X[k - 2], dist.joint, dist.torque, when)
+            c["back_inside_speed_limits_ms"] = recovery(t, qd, limits, t0, t1)
+            checks.append(c)
+        out["admissibility"] = checks
+        inadmissible = not all(c["keeps_speed_limits"] for c in checks)
+        back = [c["back_inside_speed_limits_ms"] for c in checks]
+        safe = viol["q"] == 0 and viol["tau"] == 0 and all(b is not None for b in back)
+        if not inadmissible:
+            out["verdict"] = "admissible: " + ("every limit held" if held else "LIMITS NOT HELD")
+        elif safe:
+            out["verdict"] = (f"no admissible motion exists; stopped safely: back inside the speed limits "
+                              f"{back[0]:.0f} ms after the onset and {back[1]:.0f} ms after the release, "
+                              f"no position or torque limit passed")
+        else:
+            out["verdict"] = ("no admissible motion exists; NOT stopped safely: "
+                              + ", ".join(f"{k} {v} samples past" for k, v in viol.items() if v and k != "qd")
+                              + ("" if all(b is not None for b in back) else ", speeds not back inside"))
+    else:
+        out["verdict"] = "every limit held" if held else "LIMITS NOT HELD"
+    if keep_log:
+        out["log"] = {"x": X, "tau": tau}
     log(f"{name} {label}: prediction error {out['prediction_error']['median'] if pred_err else float('nan'):.1e} "
         f"(median), violations {viol}, peak qd {max(out['speed_peak_fraction']):.2f} qd_max, re-solve CPU "
         f"median {out['resolve_cpu_ms']['median']:.2f} p99 {out['resolve_cpu_ms']['p99']:.2f} worst "
         f"{out['resolve_cpu_ms']['worst']:.2f} ms, modes {modes}, goal {1e3 * goal_err:.3f} mm"
-        + (f"; {out['admissibility']['note']}" if "admissibility" in out else ""))
+        + f"; {out['verdict']}" + "".join(f"; {c['note']}" for c in out.get("admissibility", [])
+                                         if not c["keeps_speed_limits"]))
     return out
 
 

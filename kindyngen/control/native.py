@@ -9,7 +9,10 @@ What it serves:
   (docs/control.md): the stage multipliers by back substitution through the mass matrices
   (M^-1 and the Jacobians from the analytic fd_derivatives), then sum_i dY_i' H_i dY_i;
 - ``linearise`` (ctypes): every interval's end state, [A B] and the inner substep states with
-  their Jacobians, for the tracking MPC; ``fd``, ``tau``, ``step`` for observers and rollouts.
+  their Jacobians, for the tracking MPC; ``hessians``: every interval's Hessian of a weighted
+  sum of its substep ends (the exact-Hessian SQP, kindyngen/control/reach_sqp.py); ``terminal``:
+  the terminal rows with their Jacobian and Hessian; ``fd``, ``tau``, ``step`` for observers and
+  rollouts.
 
 Every entry point is re-entrant (no state between calls: each call computes its intervals'
 forward chains on its own stack), so any number of libraries and solvers live in one process.
@@ -223,6 +226,10 @@ class StageLibrary:
             getattr(lib, name).restype = None
         lib.kdg_step.argtypes = [dp] * 3
         lib.kdg_step.restype = None
+        lib.kdg_hessians.argtypes = [dp] * 6
+        lib.kdg_hessians.restype = None
+        lib.kdg_terminal.argtypes = [dp] * 6
+        lib.kdg_terminal.restype = None
         return lib
 
     @functools.cached_property
@@ -249,6 +256,30 @@ class StageLibrary:
         p = ctypes.POINTER(ctypes.c_double)
         self._cdll.kdg_linearise(*(a.ctypes.data_as(p) for a in (x0, X, U, d, F, AB, XI, AXI)))
         return F, AB[:, :, :nx], AB[:, :, nx:], XI[:, :nin], AXI[:, :nin]
+
+    def hessians(self, x0, X, U, MU, d=None) -> np.ndarray:
+        """H (N x 3n x 3n): per interval the Hessian over (x_k, u_k) of sum_o MU[k, o]' x_o, the
+        substep ends x_o of the interval from x_k (x0, then X[k-1]) under U[k] + d, MU (N x substeps
+        x 2n) their multipliers (the last: the interval's end)."""
+        L = self.layout
+        n, N, nw = L.n, L.N, L.nw
+        MU = np.ascontiguousarray(np.broadcast_to(np.asarray(MU, float).reshape(N, -1, L.nx), (N, L.substeps, L.nx)))
+        H = np.empty((N, nw, nw))
+        d = np.zeros(n) if d is None else np.ascontiguousarray(d, float)
+        p = ctypes.POINTER(ctypes.c_double)
+        args = [np.ascontiguousarray(a, float) for a in (x0, X, U)] + [d, MU, H]
+        self._cdll.kdg_hessians(*(a.ctypes.data_as(p) for a in args))
+        return H
+
+    def terminal(self, xN, goal, lt):
+        """The terminal rows t = (flange position - goal, qd) at xN, their Jacobian (3 + n x 2n) and
+        the Hessian (2n x 2n) of lt' t."""
+        n = self.layout.n
+        t, J, H = np.empty(3 + n), np.empty((3 + n, 2 * n)), np.empty((2 * n, 2 * n))
+        p = ctypes.POINTER(ctypes.c_double)
+        args = [np.ascontiguousarray(a, float) for a in (xN, goal, lt)] + [t, J, H]
+        self._cdll.kdg_terminal(*(a.ctypes.data_as(p) for a in args))
+        return t, J, H
 
     def step(self, x, u) -> np.ndarray:
         out = np.empty(2 * self.robot.n)
@@ -321,3 +352,145 @@ def stage_library(robot: ControlRobot, N: int, h: float, integrator: Integrator 
                 raise ControlError(f"linking the native stage library failed:\n{done.stderr[-2000:]}")
             os.replace(out, so)
     return StageLibrary(robot, N, float(h), integrator, layout.inner, so, layout)
+
+
+TIME_TEMPLATE = Path(__file__).resolve().parent / "time_library.c"
+
+
+@dataclass(frozen=True)
+class TimeLayout:
+    """The time-optimal NLP's sizes (kindyngen/control/time_optimal.py) and the CasADi sparsity
+    patterns of its Jacobian and Hessian, in the order kindyngen/control/time_library.c writes
+    them: V = (T, vec X, vec U); rows: the gaps of every interval, then the inner substep states.
+
+    >>> L = TimeLayout(n=1, N=2, substeps=1)
+    >>> L.nv, L.ng, L.jacobian_pattern()[0].tolist()
+    (9, 4, [0, 4, 6, 8, 11, 14, 15, 16, 18, 20])
+    """
+    n: int
+    N: int
+    substeps: int
+
+    @property
+    def nx(self):
+        return 2 * self.n
+
+    @property
+    def nin(self):
+        return self.nx * (self.substeps - 1)
+
+    @property
+    def nv(self):
+        return 1 + self.nx * (self.N + 1) + self.n * self.N
+
+    @property
+    def ng(self):
+        return self.N * (self.nx + self.nin)
+
+    def x_index(self, k: int) -> int:
+        return 1 + self.nx * k
+
+    def u_index(self, k: int) -> int:
+        return 1 + self.nx * (self.N + 1) + self.n * k
+
+    def interval_rows(self, k: int) -> list[int]:
+        return [k * self.nx + r for r in range(self.nx)] + [self.N * self.nx + k * self.nin + r for r in range(self.nin)]
+
+    def jacobian_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        colind, rows = [0], list(range(self.ng))          # the column of T: every row
+        colind.append(len(rows))
+        for k in range(self.N + 1):
+            for col in range(self.nx):
+                if k > 0:
+                    rows.append((k - 1) * self.nx + col)
+                if k < self.N:
+                    rows.extend(self.interval_rows(k))
+                colind.append(len(rows))
+        for k in range(self.N):
+            for col in range(self.n):
+                rows.extend(self.interval_rows(k))
+                colind.append(len(rows))
+        return np.array(colind), np.array(rows)
+
+    def hessian_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """Upper triangle: (T, T); x_k's columns: T and x_k's rows up to the diagonal; x_N's none;
+        u_k's: T, all of x_k and u_k's up to the diagonal."""
+        colind, rows = [0, 1], [0]
+        for k in range(self.N + 1):
+            for col in range(self.nx):
+                if k < self.N:
+                    rows.append(0)
+                    rows.extend(self.x_index(k) + r for r in range(col + 1))
+                colind.append(len(rows))
+        for k in range(self.N):
+            for col in range(self.n):
+                rows.append(0)
+                rows.extend(self.x_index(k) + r for r in range(self.nx))
+                rows.extend(self.u_index(k) + r for r in range(col + 1))
+                colind.append(len(rows))
+        return np.array(colind), np.array(rows)
+
+
+@dataclass(frozen=True)
+class TimeLibrary:
+    """A compiled time-optimal library: CasADi external functions topt_nlp_g(V, p),
+    topt_nlp_jac_g(V, p), topt_nlp_hess(V, p, lam_f, lam_g)."""
+    robot: ControlRobot
+    N: int
+    integrator: Integrator
+    path: Path
+    layout: TimeLayout = field(repr=False)
+
+    @functools.cached_property
+    def externals(self) -> dict:
+        import casadi as ca
+        return {name: ca.external(name, str(self.path)) for name in ("topt_nlp_g", "topt_nlp_jac_g", "topt_nlp_hess")}
+
+
+@functools.lru_cache(maxsize=32)
+def time_optimal_library(robot: ControlRobot, N: int, integrator: Integrator = Integrator("rk4", 4),
+                         progress=None) -> TimeLibrary:
+    """Compile (or load from the cache) the time-optimal NLP's library of ``robot`` for N
+    intervals and ``integrator`` (the inner substep states are rows)."""
+    if N < 1:
+        raise ControlError(f"N = {N}: at least one interval")
+    cc = compiler()
+    if progress:
+        progress(f"native time-optimal library for {robot.name}, N = {N}, {integrator.tag} (compiled once, cached)")
+    obj, (szarg, szres, sziw, szw) = _robot_object(robot, cc)
+    n = robot.n
+    layout = TimeLayout(n, N, integrator.substeps)
+    t = stage_tables(integrator, 1.0)
+    ident = robot.name
+    decl = "int {0}(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem);"
+    glue = "\n".join([
+        "#define casadi_real double", "#define casadi_int long long int",
+        '#define CASADI_SYMBOL_EXPORT __attribute__((visibility("default")))',
+        decl.format("kdg_idh"),
+        f"void {ident}_fd(const double *q, const double *qd, const double *tau, double *qdd);",
+        f"void {ident}_fd_derivatives(const double *q, const double *qd, const double *tau, double *dq, double *dqd, "
+        "double *Minv);",
+        f"#define NDOF {n}", f"#define NINT {N}", f"#define NSTAGE {integrator.stages}",
+        f"#define NSUB {integrator.substeps}", f"#define NIN {layout.nin}",
+        f"#define KDG_FD {ident}_fd", f"#define KDG_FDD {ident}_fd_derivatives",
+        f"#define KDG_SZARG {max(szarg, 2)}", f"#define KDG_SZRES {max(szres, 1)}",
+        f"#define KDG_SZIW {sziw}", f"#define KDG_SZW {szw}",
+        _c_array("kdg_gq", t["gq"]), _c_matrix("kdg_aq", t["aq"]), _c_matrix("kdg_bv", t["bv"]),
+        _c_array("kdg_ogq", t["ogq"]), _c_matrix("kdg_oaq", t["oaq"]), _c_matrix("kdg_obv", t["obv"]),
+        _sparsity("kdg_sp_jac", layout.ng, layout.nv, layout.jacobian_pattern()),
+        _sparsity("kdg_sp_hess", layout.nv, layout.nv, layout.hessian_pattern()),
+        _sparsity("kdg_sp_jp", layout.ng, n, (np.zeros(n + 1, int), np.zeros(0, int))),
+        TIME_TEMPLATE.read_text(), ""])
+    command = [cc, *CFLAGS, "-c"]
+    key = hashlib.sha256((obj.name + glue + "\0".join(command)).encode()).hexdigest()[:16]
+    glue_obj = _build(robot.folder / "lib" / f"time_{key}.o", glue, command, ".c")
+    so = robot.folder / "lib" / f"time_{key}.so"
+    if not so.is_file():
+        with tempfile.TemporaryDirectory(dir=so.parent) as tmp:
+            out = Path(tmp) / so.name
+            done = subprocess.run([cc, "-shared", "-Wl,-Bsymbolic", "-o", str(out), str(obj), str(glue_obj), "-lm"],
+                                  capture_output=True, text=True)
+            if done.returncode != 0:
+                raise ControlError(f"linking the native time-optimal library failed:\n{done.stderr[-2000:]}")
+            os.replace(out, so)
+    return TimeLibrary(robot, N, integrator, so, layout)

@@ -6,9 +6,10 @@ over any prepared robot:
   derivatives from the native stage library (:mod:`kindyngen.control.native`), IPOPT given
   the compiled Jacobian and Hessian (the fast path);
 - :func:`sx_reach_nlp`: the same NLP as one CasADi SX graph (the reference the native library
-  is checked against);
+  is checked against), :func:`solve_sx` solves it by IPOPT;
 - :func:`inverse_dynamics_reach`: the inverse-dynamics form (the stage accelerations unknowns,
   tied to the torque by the generated ``tau``), IPOPT on the SX graph;
+- :func:`solve_fatrop`: fatrop on either SX graph;
 - :func:`solve_baseline`: what a new user writes, Opti + IPOPT with ``fd`` on MX symbols.
 
 Limits: torques as bounds; positions and speeds at every node 1..N within the limits backed off
@@ -147,9 +148,12 @@ def _result(z, n, N, nu, T, status, success, iterations, wall, cpu, g_violation,
 
 class ReachNLP:
     """The reach on the native stage library, solved by IPOPT (see the module docstring).
-    Parameters p = (initial state, goal) so that one built solver re-solves from any state."""
+    Parameters p = (initial state, goal) so that one built solver re-solves from any state.
+    ``adaptive``: IPOPT's adaptive barrier (FAST; False: IPOPT's monotone default), ``ipopt``:
+    further options (``ipopt.`` prefixed)."""
 
-    def __init__(self, robot: ControlRobot, task: ReachTask, ipopt: dict | None = None, progress=None):
+    def __init__(self, robot: ControlRobot, task: ReachTask, ipopt: dict | None = None, progress=None,
+                 adaptive: bool = True):
         import casadi as ca
         t0 = time.perf_counter()
         self.robot, self.task = robot, task
@@ -157,7 +161,7 @@ class ReachNLP:
             raise ControlError(f"limits for {task.limits.n} joints, robot {robot.name} has {robot.n}")
         self.lib = stage_library(robot, task.N, task.h, task.integrator, task.inner, progress)
         L = self.layout = self.lib.layout
-        n, N, h = robot.n, task.N, task.h
+        N, h = task.N, task.h
         Z, P = ca.MX.sym("z", L.nz), ca.MX.sym("p", L.nx + 3)
         e = self.lib.externals
         g = e["kdg_nlp_g"](Z, P)
@@ -171,7 +175,7 @@ class ReachNLP:
         self.f_g = ca.Function("g", [Z, P], [g])
         self.lbx, self.ubx = _bounds(task)
         self.lbg, self.ubg = self.row_bounds()
-        opts = dict(BASE_OPTIONS, **FAST)
+        opts = dict(BASE_OPTIONS, **(FAST if adaptive else {}))
         opts.update(ipopt or {})
         self.options = opts
         self.solver = self.build(opts)
@@ -185,15 +189,7 @@ class ReachNLP:
 
     def row_bounds(self):
         """Gap, initial-state and terminal rows equal 0; inner substep states within the planned limits."""
-        L, lim = self.layout, self.task.planned_limits
-        lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
-        xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
-        xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
-        for k in range(self.task.N):
-            r = L.row_inner(k)
-            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx) if L.nin else []
-            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx) if L.nin else []
-        return lbg, ubg
+        return _row_bounds(self.task, self.layout)
 
     def guess(self, x_init=None) -> np.ndarray:
         """Rest at the initial state's configuration with the gravity torque."""
@@ -273,6 +269,44 @@ def sx_reach_nlp(robot: ControlRobot, task: ReachTask):
     return Z, P, g, f
 
 
+def solve_sx(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
+    """IPOPT on :func:`sx_reach_nlp`'s SX graph (CasADi's AD for the derivatives, IPOPT's
+    defaults): the native NLP's reference route, the same variables, rows and bounds."""
+    import casadi as ca
+    Z, P, g, f = sx_reach_nlp(robot, task)
+    lib = stage_library(robot, task.N, task.h, task.integrator, task.inner)
+    lbg, ubg = _row_bounds(task, lib.layout)
+    opts = dict(BASE_OPTIONS, **(ipopt or {}))
+    solver = ca.nlpsol("reach_sx", "ipopt", {"x": Z, "p": P, "f": f, "g": g}, opts)
+    lbx, ubx = _bounds(task)
+    q0 = np.asarray(task.q0, float)
+    xr = np.concatenate([q0, np.zeros(robot.n)])
+    z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * task.N + [xr])
+    t0, c0 = time.perf_counter(), time.process_time()
+    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.concatenate([xr, np.asarray(task.goal, float)]))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    st = solver.stats()
+    gv = np.array(sol["g"]).ravel()
+    viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
+    return _result(np.array(sol["x"]).ravel(), robot.n, task.N, robot.n, task.T, st["return_status"], st["success"],
+                   st["iter_count"], wall, cpu, viol, "ipopt (SX graph, CasADi's AD)",
+                   np.array(sol["lam_g"]).ravel(), np.array(sol["lam_x"]).ravel())
+
+
+def _row_bounds(task: ReachTask, L):
+    """Row bounds of the native layout L: gaps, x_0 and terminal rows 0, inner states within the planned limits."""
+    lim = task.planned_limits
+    lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
+    xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
+    xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
+    for k in range(task.N):
+        r = L.row_inner(k)
+        if L.nin:
+            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx)
+            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx)
+    return lbg, ubg
+
+
 def solve_baseline(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
     """The plain baseline: Opti + IPOPT (exact Hessian, MUMPS, IPOPT's defaults), ``fd`` called
     on MX symbols in the integrator's step, constraints in the order a user writes them; the
@@ -318,11 +352,14 @@ def solve_baseline(robot: ControlRobot, task: ReachTask, ipopt: dict | None = No
                    0.0, "ipopt (Opti, fd on MX)")
 
 
-def inverse_dynamics_reach(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
-    """The inverse-dynamics form: per interval the torque and the integrator's stage
-    accelerations are unknowns, tied by tau(q_i, qd_i, a_i) = u at every stage (the stage states
-    and the next node are then linear in the unknowns; no mass matrix is inverted in the NLP).
-    One SX graph, IPOPT. At a solution it is the explicit step of the forward dynamics."""
+def inverse_dynamics_nlp(robot: ControlRobot, task: ReachTask) -> dict:
+    """The inverse-dynamics form of the reach as one SX graph: per interval the torque and the
+    integrator's stage accelerations are unknowns (u_k = (tau_k, a_0..a_{S-1})), tied by
+    tau(q_i, qd_i, a_i) = tau_k at every stage (the stage states and the next node are then linear
+    in the unknowns; no mass matrix is inverted). Rows in fatrop's stage layout: per interval the
+    gap, the S n inverse-dynamics residuals, the inner substep states (``task.inner``), and at
+    interval 0 x_0 - x_init; the terminal rows last. Returns the nlp dict, the bounds, the start
+    (rest with the gravity torques), p, and fatrop's structure (nu, ng per stage)."""
     import casadi as ca
     from .integrators import TABLEAUX
     n, N, h = robot.n, task.N, task.h
@@ -334,20 +371,17 @@ def inverse_dynamics_reach(robot: ControlRobot, task: ReachTask, ipopt: dict | N
     st = 2 * n + nu
     lim = task.planned_limits
     Z, P = ca.SX.sym("z", (N + 1) * 2 * n + N * nu), ca.SX.sym("p", 2 * n + 3)
-    g, lbg, ubg = [], [], []
+    g, lbg, ubg, ng = [], [], [], []
     xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
     xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
     for k in range(N):
         x, u = Z[k * st:k * st + 2 * n], Z[k * st + 2 * n:(k + 1) * st]
         q, v, tk = x[:n], x[n:], u[:n]
         acc = [u[n * (1 + i):n * (2 + i)] for i in range(S)]
-        res = []
+        res, inner = [], []
         for m in range(M):
-            if m:
-                if task.inner:
-                    g.append(ca.vertcat(q, v))
-                    lbg.append(xlo)
-                    ubg.append(xhi)
+            if m and task.inner:
+                inner.append(ca.vertcat(q, v))
             a = acc[m * len(b):(m + 1) * len(b)]
             vs, qs = [], []
             for i in range(len(b)):
@@ -361,31 +395,47 @@ def inverse_dynamics_reach(robot: ControlRobot, task: ReachTask, ipopt: dict | N
             res += [robot.tau(qs[i], vs[i], a[i]) - tk for i in range(len(b))]
             q = q + hs * sum(float(b[i]) * vs[i] for i in range(len(b)) if b[i])
             v = v + hs * sum(float(b[i]) * a[i] for i in range(len(b)) if b[i])
-        g += [Z[(k + 1) * st:(k + 1) * st + 2 * n] - ca.vertcat(q, v), ca.vertcat(*res)]
-        lbg += [np.zeros(2 * n), np.zeros(S * n)]
-        ubg += [np.zeros(2 * n), np.zeros(S * n)]
-    g.append(Z[:2 * n] - P[:2 * n])
+        g += [Z[(k + 1) * st:(k + 1) * st + 2 * n] - ca.vertcat(q, v), ca.vertcat(*res), *inner]
+        lbg += [np.zeros(2 * n), np.zeros(S * n)] + [xlo] * len(inner)
+        ubg += [np.zeros(2 * n), np.zeros(S * n)] + [xhi] * len(inner)
+        ng.append(S * n + 2 * n * len(inner))
+        if k == 0:
+            g.append(Z[:2 * n] - P[:2 * n])
+            lbg.append(np.zeros(2 * n))
+            ubg.append(np.zeros(2 * n))
+            ng[0] += 2 * n
     xN = Z[N * st:]
     g.append(ca.vertcat(robot.fk_hom(xN[:n])[:3, 3] - P[2 * n:], xN[n:]))
-    lbg += [np.zeros(2 * n), np.zeros(3 + n)]
-    ubg += [np.zeros(2 * n), np.zeros(3 + n)]
+    lbg.append(np.zeros(3 + n))
+    ubg.append(np.zeros(3 + n))
     f = h * sum(ca.sumsqr(Z[k * st + 2 * n:k * st + 3 * n]) for k in range(N))
-    opts = dict(BASE_OPTIONS)
-    opts.update(ipopt or {})
-    solver = ca.nlpsol("reach_id", "ipopt", {"x": Z, "p": P, "f": f, "g": ca.vertcat(*g)}, opts)
     lbx, ubx = _bounds(task, nu - n)
     q0 = np.asarray(task.q0, float)
     xr = np.concatenate([q0, np.zeros(n)])
     z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0), np.zeros(S * n)])] * N + [xr])
-    lbg, ubg = np.concatenate(lbg), np.concatenate(ubg)
+    return {"nlp": {"x": Z, "p": P, "f": f, "g": ca.vertcat(*g)}, "lbx": lbx, "ubx": ubx,
+            "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg), "x0": z0,
+            "p": np.concatenate([xr, np.asarray(task.goal, float)]), "nu": nu, "ng": ng + [3 + n]}
+
+
+def _solve_built(solver, d: dict, n: int, task: ReachTask, label: str) -> ReachResult:
     t0, c0 = time.perf_counter(), time.process_time()
-    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.concatenate([xr, np.asarray(task.goal, float)]))
+    sol = solver(x0=d["x0"], lbx=d["lbx"], ubx=d["ubx"], lbg=d["lbg"], ubg=d["ubg"], p=d["p"])
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    s = solver.stats()
+    st = solver.stats()
     gv = np.array(sol["g"]).ravel()
-    viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
-    return _result(np.array(sol["x"]).ravel(), n, N, nu, task.T, s["return_status"], s["success"], s["iter_count"],
-                   wall, cpu, viol, "ipopt, inverse-dynamics form (SX graph)")
+    viol = float(max(np.max(gv - d["ubg"], initial=0), np.max(d["lbg"] - gv, initial=0)))
+    return _result(np.array(sol["x"]).ravel(), n, task.N, d["nu"], task.T, st.get("return_status", st["success"]),
+                   st["success"], st.get("iter_count", -1), wall, cpu, viol, label)
+
+
+def inverse_dynamics_reach(robot: ControlRobot, task: ReachTask, ipopt: dict | None = None) -> ReachResult:
+    """The inverse-dynamics form (:func:`inverse_dynamics_nlp`) solved by IPOPT. At a solution
+    it is the explicit step of the forward dynamics."""
+    import casadi as ca
+    d = inverse_dynamics_nlp(robot, task)
+    solver = ca.nlpsol("reach_id", "ipopt", d["nlp"], dict(BASE_OPTIONS, **(ipopt or {})))
+    return _solve_built(solver, d, robot.n, task, "ipopt, inverse-dynamics form (SX graph)")
 
 
 def rollout(step, x0, tau, substeps: int, h: float) -> np.ndarray:
@@ -400,46 +450,48 @@ def rollout(step, x0, tau, substeps: int, h: float) -> np.ndarray:
     return np.array(xs)
 
 
-def solve_fatrop(robot: ControlRobot, task: ReachTask, options: dict | None = None) -> ReachResult:
-    """The reach (:func:`sx_reach_nlp`'s SX graph) solved by fatrop, CasADi's structure-exploiting
-    interior point (a Riccati recursion stage by stage): the NLP's rows are already in fatrop's
-    stage layout (per interval the gap first, then the stage's rows: x_0 - x_init at stage 0
-    and the inner substep states; the terminal rows last), declared by hand. Started from a
-    barrier of 1e-2 (from IPOPT's default 0.1 fatrop's iterates crept on the LWR reach,
-    docs/optimal_control.md), to tol 1e-4: its dual residual stalls above 1e-6 (UR5: 18
-    iterations to 1e-4, the native IPOPT's objective to 3e-7 relative; 1000 iterations, 21 s,
-    not to 1e-6)."""
+def solve_fatrop(robot: ControlRobot, task: ReachTask, options: dict | None = None,
+                 formulation: str = "forward") -> ReachResult:
+    """The reach solved by fatrop, CasADi's structure-exploiting interior point (a Riccati
+    recursion stage by stage), on an SX graph whose rows are in fatrop's stage layout (per
+    interval the gap first, then the stage's rows; the terminal rows last), the structure
+    declared by hand. ``formulation``: "forward" (:func:`sx_reach_nlp`, u = tau) or
+    "inverse-dynamics" (:func:`inverse_dynamics_nlp`, u = (tau, stage accelerations)).
+
+    Started from a barrier of 1e-2 (from IPOPT's default 0.1 its iterates crept on the LWR reach,
+    docs/optimal_control.md). Default tolerance: 1e-4 for the forward form, where fatrop's dual
+    residual stalls (UR5 and LWR at N = 20: the primal residual 1e-12, the dual 3.9e-4 falling by
+    0.2 % an iteration under an inertia correction of 10^0.5-10^1.3 at every iteration, status 1
+    after 300 iterations; the stage-wise Riccati needs each stage's reduced Hessian positive
+    definite, which the exact Lagrangian's is not here: it is positive only on the null space of
+    the terminal rows, IPOPT's factorisation of the whole KKT system needs only that; at N = 10
+    the UR5 converged to 1e-6 in 20 iterations); 1e-6 for the inverse-dynamics form, which
+    converges there (the example it was ported from: LWR, 63 iterations)."""
     import casadi as ca
-    Z, P, g, f = sx_reach_nlp(robot, task)
-    lib = stage_library(robot, task.N, task.h, task.integrator, task.inner)
-    L = lib.layout
-    N, n = task.N, robot.n
-    opts = {"print_time": False, "structure_detection": "manual", "N": N, "nx": [L.nx] * (N + 1),
-            "nu": [n] * N + [0], "ng": [L.nx + L.nin] + [L.nin] * (N - 1) + [3 + n],
-            "fatrop.print_level": 0, "fatrop.mu_init": 1e-2, "fatrop.tol": 1e-4, "fatrop.max_iter": 300}
+    n, N = robot.n, task.N
+    if formulation == "forward":
+        Z, P, g, f = sx_reach_nlp(robot, task)
+        L = stage_library(robot, task.N, task.h, task.integrator, task.inner).layout
+        lbx, ubx = _bounds(task)
+        lbg, ubg = _row_bounds(task, L)
+        q0 = np.asarray(task.q0, float)
+        xr = np.concatenate([q0, np.zeros(n)])
+        d = {"nlp": {"x": Z, "p": P, "f": f, "g": g}, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg,
+             "x0": np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * N + [xr]),
+             "p": np.concatenate([xr, np.asarray(task.goal, float)]), "nu": n,
+             "ng": [L.nx + L.nin] + [L.nin] * (N - 1) + [3 + n]}
+        tol = 1e-4
+    elif formulation == "inverse-dynamics":
+        d = inverse_dynamics_nlp(robot, task)
+        tol = 1e-6
+    else:
+        raise ControlError(f"fatrop formulation {formulation!r}: 'forward' or 'inverse-dynamics'")
+    opts = {"print_time": False, "structure_detection": "manual", "N": N, "nx": [2 * n] * (N + 1),
+            "nu": [d["nu"]] * N + [0], "ng": d["ng"],
+            "fatrop.print_level": 0, "fatrop.mu_init": 1e-2, "fatrop.tol": tol, "fatrop.max_iter": 300}
     opts.update(options or {})
-    solver = ca.nlpsol("reach_fatrop", "fatrop", {"x": Z, "p": P, "f": f, "g": g}, opts)
-    lbx, ubx = _bounds(task)
-    lbg, ubg = np.zeros(L.ng), np.zeros(L.ng)
-    lim = task.planned_limits
-    xlo = np.concatenate([lim.array("q_lo"), -lim.array("qd_max")])
-    xhi = np.concatenate([lim.array("q_hi"), lim.array("qd_max")])
-    for k in range(N):
-        r = L.row_inner(k)
-        if L.nin:
-            lbg[r:r + L.nin] = np.tile(xlo, L.nin // L.nx)
-            ubg[r:r + L.nin] = np.tile(xhi, L.nin // L.nx)
-    q0 = np.asarray(task.q0, float)
-    xr = np.concatenate([q0, np.zeros(n)])
-    z0 = np.concatenate([np.concatenate([xr, robot.gravity_torque(q0)])] * N + [xr])
-    t0, c0 = time.perf_counter(), time.process_time()
-    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.concatenate([xr, np.asarray(task.goal, float)]))
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    st = solver.stats()
-    gv = np.array(sol["g"]).ravel()
-    viol = float(max(np.max(gv - ubg, initial=0), np.max(lbg - gv, initial=0)))
-    return _result(np.array(sol["x"]).ravel(), n, N, n, task.T, st.get("return_status", st["success"]), st["success"],
-                   st.get("iter_count", -1), wall, cpu, viol, "fatrop (SX graph, stage structure by hand)")
+    solver = ca.nlpsol("reach_fatrop", "fatrop", d["nlp"], opts)
+    return _solve_built(solver, d, n, task, f"fatrop ({formulation} form, SX graph, stage structure by hand)")
 
 
 def check_between_nodes(accel, res: ReachResult, limits: Limits, samples: int = 50) -> dict:

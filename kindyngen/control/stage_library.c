@@ -173,13 +173,82 @@ static void eval_jac(const double *zz, const double *p, double *J)
     }
 }
 
+/* upper triangle (row-major, Hw[r * NW + col] for col >= r) of the Hessian over w = (x, u) of
+ * sum_o mu[o]' x_o(w): the substep ends' multipliers mu (the last: the interval's end F), from
+ * the inverse dynamics' Hessian with the stage multipliers by back substitution */
+static void interval_hessian(const chain_t *c, const double mu[NSUB][NX], double *Hw)
+{
+    double Hid[NW * NW];
+    double T[NQ * NW], U[NQ * NW], W[NQ * NW];
+    double b[NSTAGE][NQ], rho[NSTAGE][NQ], lam[NSTAGE][NQ];
+    int i, j, r, m, o, col;
+    /* b = -F_a' mu over every substep end */
+    for (i = 0; i < NSTAGE; i++)
+        for (r = 0; r < NQ; r++) {
+            double s = 0.0;
+            for (o = 0; o < NSUB; o++) s += kdg_oaq[o][i] * mu[o][r] + kdg_obv[o][i] * mu[o][NQ + r];
+            b[i][r] = -s;
+        }
+    /* back substitution R_a' lam = b: rho_i = b_i + sum_{j > i} (aq_ji Dq_j' + bv_ji Dv_j') rho_j,
+     * lam_i = Minv_i rho_i */
+    for (i = NSTAGE - 1; i >= 0; i--) {
+        for (r = 0; r < NQ; r++) rho[i][r] = b[i][r];
+        for (j = i + 1; j < NSTAGE; j++) {
+            const double ca = kdg_aq[j][i], cb = kdg_bv[j][i];
+            if (ca != 0.0)
+                for (r = 0; r < NQ; r++)
+                    for (m = 0; m < NQ; m++) rho[i][r] += ca * c->dq[j][m * NQ + r] * rho[j][m];
+            if (cb != 0.0)
+                for (r = 0; r < NQ; r++)
+                    for (m = 0; m < NQ; m++) rho[i][r] += cb * c->dv[j][m * NQ + r] * rho[j][m];
+        }
+        for (r = 0; r < NQ; r++) {
+            double s = 0.0;
+            for (m = 0; m < NQ; m++) s += c->minv[i][r * NQ + m] * rho[i][m];
+            lam[i][r] = s;
+        }
+    }
+    memset(Hw, 0, NW * NW * sizeof(double));
+    for (i = 0; i < NSTAGE; i++) {
+        const double *dY = c->dy[i];
+        const double *dQ = dY, *dV = dY + NQ * NW, *dA = dY + NX * NW;
+        call_helper(kdg_idh, c->y[i], lam[i], Hid);         /* symmetric, dense */
+        /* blocks of Hid: qq, qv, qa, vv (tau is linear in qdd, no qd-qdd terms: checked
+         * when the library is written) */
+        for (r = 0; r < NQ; r++) {
+            double *t = T + r * NW, *u_ = U + r * NW, *w = W + r * NW;
+            for (col = 0; col < NW; col++) t[col] = u_[col] = w[col] = 0.0;
+            for (m = 0; m < NQ; m++) {
+                const double hqq = Hid[r * NW + m], hqv = Hid[r * NW + NQ + m], hqa = Hid[r * NW + NX + m];
+                const double hvq = Hid[(NQ + r) * NW + m], hvv = Hid[(NQ + r) * NW + NQ + m];
+                const double haq = Hid[(NX + r) * NW + m];
+                const double *q_ = dQ + m * NW, *v_ = dV + m * NW, *a_ = dA + m * NW;
+                for (col = 0; col < NW; col++) {
+                    t[col] += hqq * q_[col] + hqv * v_[col] + hqa * a_[col];
+                    u_[col] += hvq * q_[col] + hvv * v_[col];
+                    w[col] += haq * q_[col];
+                }
+            }
+        }
+        for (m = 0; m < NQ; m++) {
+            const double *q_ = dQ + m * NW, *v_ = dV + m * NW, *a_ = dA + m * NW;
+            const double *t = T + m * NW, *u_ = U + m * NW, *w = W + m * NW;
+            for (o = 0; o < NW; o++) {
+                const double qa = q_[o], va = v_[o], aa = a_[o];
+                double *hr = Hw + o * NW;
+                if (qa == 0.0 && va == 0.0 && aa == 0.0) continue;
+                for (col = o; col < NW; col++) hr[col] += qa * t[col] + va * u_[col] + aa * w[col];
+            }
+        }
+    }
+}
+
 /* upper triangle of the Hessian of lam_f f + lam_g' g (f = h sum |u_k|^2), block by block */
 static void eval_hess(const double *zz, const double *p, double lam_f, const double *lam_g, double *Hnz)
 {
-    double Hw[NW * NW], Hid[NW * NW], ht[NX * NX];
-    double T[NQ * NW], U[NQ * NW], W[NQ * NW];
-    double mu[NSUB][NX], b[NSTAGE][NQ], rho[NSTAGE][NQ], lam[NSTAGE][NQ];
-    int k, i, j, r, m, o, col;
+    double Hw[NW * NW], ht[NX * NX];
+    double mu[NSUB][NX];
+    int k, r, o;
     long nz = 0;
     chain_t c;
     (void)p;
@@ -190,65 +259,9 @@ static void eval_hess(const double *zz, const double *p, double lam_f, const dou
         for (r = 0; r < NX; r++) mu[NSUB - 1][r] = -lam_g[row_gap(k) + r];
         for (o = 0; o < NSUB - 1 && NIN > 0; o++)
             for (r = 0; r < NX; r++) mu[o][r] = lam_g[row_inner(k) + o * NX + r];
-        /* b = -F_a' mu over every substep end */
-        for (i = 0; i < NSTAGE; i++)
-            for (r = 0; r < NQ; r++) {
-                double s = 0.0;
-                for (o = 0; o < NSUB; o++) s += kdg_oaq[o][i] * mu[o][r] + kdg_obv[o][i] * mu[o][NQ + r];
-                b[i][r] = -s;
-            }
-        /* back substitution R_a' lam = b: rho_i = b_i + sum_{j > i} (aq_ji Dq_j' + bv_ji Dv_j') rho_j,
-         * lam_i = Minv_i rho_i */
-        for (i = NSTAGE - 1; i >= 0; i--) {
-            for (r = 0; r < NQ; r++) rho[i][r] = b[i][r];
-            for (j = i + 1; j < NSTAGE; j++) {
-                const double ca = kdg_aq[j][i], cb = kdg_bv[j][i];
-                if (ca != 0.0)
-                    for (r = 0; r < NQ; r++)
-                        for (m = 0; m < NQ; m++) rho[i][r] += ca * c.dq[j][m * NQ + r] * rho[j][m];
-                if (cb != 0.0)
-                    for (r = 0; r < NQ; r++)
-                        for (m = 0; m < NQ; m++) rho[i][r] += cb * c.dv[j][m * NQ + r] * rho[j][m];
-            }
-            for (r = 0; r < NQ; r++) {
-                double s = 0.0;
-                for (m = 0; m < NQ; m++) s += c.minv[i][r * NQ + m] * rho[i][m];
-                lam[i][r] = s;
-            }
-        }
-        memset(Hw, 0, sizeof Hw);
-        for (i = 0; i < NSTAGE; i++) {
-            const double *dY = c.dy[i];
-            const double *dQ = dY, *dV = dY + NQ * NW, *dA = dY + NX * NW;
-            call_helper(kdg_idh, c.y[i], lam[i], Hid);         /* symmetric, dense */
-            /* blocks of Hid: qq, qv, qa, vv (tau is linear in qdd, no qd-qdd terms: checked
-             * when the library is written) */
-            for (r = 0; r < NQ; r++) {
-                double *t = T + r * NW, *u_ = U + r * NW, *w = W + r * NW;
-                for (col = 0; col < NW; col++) t[col] = u_[col] = w[col] = 0.0;
-                for (m = 0; m < NQ; m++) {
-                    const double hqq = Hid[r * NW + m], hqv = Hid[r * NW + NQ + m], hqa = Hid[r * NW + NX + m];
-                    const double hvq = Hid[(NQ + r) * NW + m], hvv = Hid[(NQ + r) * NW + NQ + m];
-                    const double haq = Hid[(NX + r) * NW + m];
-                    const double *q_ = dQ + m * NW, *v_ = dV + m * NW, *a_ = dA + m * NW;
-                    for (col = 0; col < NW; col++) {
-                        t[col] += hqq * q_[col] + hqv * v_[col] + hqa * a_[col];
-                        u_[col] += hvq * q_[col] + hvv * v_[col];
-                        w[col] += haq * q_[col];
-                    }
-                }
-            }
-            for (m = 0; m < NQ; m++) {
-                const double *q_ = dQ + m * NW, *v_ = dV + m * NW, *a_ = dA + m * NW;
-                const double *t = T + m * NW, *u_ = U + m * NW, *w = W + m * NW;
-                for (o = 0; o < NW; o++) {
-                    const double qa = q_[o], va = v_[o], aa = a_[o];
-                    double *hr = Hw + o * NW;
-                    if (qa == 0.0 && va == 0.0 && aa == 0.0) continue;
-                    for (col = o; col < NW; col++) hr[col] += qa * t[col] + va * u_[col] + aa * w[col];
-                }
-            }
-        }
+        for (o = 0; o < NSUB - 1 && NIN == 0; o++)
+            for (r = 0; r < NX; r++) mu[o][r] = 0.0;
+        interval_hessian(&c, mu, Hw);
         for (r = 0; r < NQ; r++) Hw[(NX + r) * NW + NX + r] += 2 * HSTEP * lam_f;
         for (o = 0; o < NW; o++)
             for (r = 0; r <= o; r++) Hnz[nz++] = Hw[r * NW + o];
@@ -359,6 +372,42 @@ EXPORT void kdg_step(const double *x, const double *u, double *xn)
     chain_t c;
     chain(x, u, &c, 0);
     memcpy(xn, c.xo[NSUB - 1], NX * sizeof(double));
+}
+
+/* For every interval k (x_k = x0 for k = 0, else X[k-1]; u_k = U[k] + d): H[k] (NW x NW,
+ * row-major, symmetric) = the Hessian over (x_k, u_k) of sum_o MU[k][o]' x_o, MU[k] (NSUB x NX)
+ * the multipliers of the substep ends (the last: the interval's end F). */
+EXPORT void kdg_hessians(const double *x0, const double *X, const double *U, const double *d, const double *MU,
+                         double *H)
+{
+    int k, r, col;
+    chain_t c;
+    double u[NQ], mu[NSUB][NX];
+    for (k = 0; k < NINT; k++) {
+        const double *xk = k == 0 ? x0 : X + (k - 1) * NX;
+        double *Hk = H + (long)k * NW * NW;
+        for (r = 0; r < NQ; r++) u[r] = U[k * NQ + r] + d[r];
+        memcpy(mu, MU + (long)k * NSUB * NX, sizeof mu);
+        chain(xk, u, &c, 1);
+        interval_hessian(&c, (const double (*)[NX])mu, Hk);
+        for (r = 0; r < NW; r++)
+            for (col = 0; col < r; col++) Hk[r * NW + col] = Hk[col * NW + r];
+    }
+}
+
+/* the terminal rows at xN: t = (flange position - goal, qd), their Jacobian J (NTERM x NX,
+ * row-major) and the Hessian H (NX x NX, row-major) of lt' t */
+EXPORT void kdg_terminal(const double *xN, const double *goal, const double *lt, double *t, double *J, double *H)
+{
+    double jt[NTERM * NX], ht[NX * NX];
+    int r, col;
+    call_helper(kdg_term, xN, goal, t);
+    call_helper(kdg_jterm, xN, goal, jt);
+    call_helper(kdg_hterm, xN, lt, ht);
+    for (r = 0; r < NTERM; r++)
+        for (col = 0; col < NX; col++) J[r * NX + col] = jt[r + NTERM * col];
+    for (r = 0; r < NX; r++)
+        for (col = 0; col < NX; col++) H[r * NX + col] = ht[r + NX * col];
 }
 
 EXPORT void kdg_fd(const double *q, const double *qd, const double *tau, double *qdd) { KDG_FD(q, qd, tau, qdd); }

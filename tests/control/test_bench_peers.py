@@ -67,6 +67,31 @@ def test_acados_gets_the_task_and_its_plan_is_checked(ur5_plan, tmp_path):
     assert got["row"]["plan_step_error"] > 1e-4
 
 
+def test_crocoddyl_gets_the_task_and_its_plans_are_checked(ur5_plan, tmp_path):
+    model, robot, task, res = ur5_plan
+    bad = res.tau.copy()
+    bad[5, 4] += 1.0
+
+    def peer_row(solver, tau):
+        return {"solver": solver, "status": "converged", "success": True, "iterations": 7, "solve_s": 0.6,
+                "solve_cpu_s": 0.5, "objective": res.objective, "kkt": 1e-9, "warm_resolve_cpu_s": 0.1,
+                "warm_iterations": 3, "q": res.q.tolist(), "qd": res.qd.tolist(), "tau": np.asarray(tau).tolist()}
+    out = {"versions": {"crocoddyl": "9.9", "mim-solvers": "8.8"}, "rows": [peer_row("csqp", res.tau),
+                                                                            peer_row("csqp tol=1e-2", bad)]}
+    venv = _fake_venv(tmp_path, "some log line\n" + json.dumps(out) + "\n")
+    got = control_bench.crocoddyl_rows("ur5", model, task, venv, True)
+    args = (tmp_path / "args.txt").read_text().splitlines()
+    problem = json.loads(args[args.index("--problem") + 1])
+    lim = task.planned_limits
+    assert problem["q0"] == list(task.q0) and problem["goal"] == pytest.approx(list(task.goal), abs=0)
+    assert problem["qd_max"] == list(lim.qd_max) and problem["frame"] == "tool0"
+    assert (problem["N"], problem["T"]) == (task.N, task.T)
+    assert got["versions"] == out["versions"]
+    good, moved = got["rows"]
+    assert good["plan_step_error"] < 1e-8 and good["goal_error_m"] < 1e-6
+    assert moved["plan_step_error"] > 1e-4
+
+
 def test_a_crashing_or_missing_peer_is_reported(ur5_plan, tmp_path):
     model, robot, task, res = ur5_plan
     venv = _fake_venv(tmp_path, "", "Segmentation fault\n", 139)

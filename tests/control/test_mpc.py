@@ -100,6 +100,23 @@ def test_exact_penalty(ur5):
     assert abs(excess - t) < 1e-6 * max(1.0, t)       # t is the worst violation, nothing exceeds it
 
 
+def test_shifted_warm_start_keeps_the_gaps_closed_under_a_disturbance(ur5):
+    """The converged plan under a disturbance estimate d, shifted by one interval from the
+    state it predicts: every gap is closed, the appended interval's too (it holds the last node
+    with the reference torque less d; with the reference torque itself the model's arm falls
+    under d there)."""
+    model, robot, limits, task, X, U = ur5
+    mpc = TrackingMPC(robot, limits, X, U, RELAXED)
+    mpc.d = np.array([0.0, 8.0, -5.0, 2.0, 1.0, -1.0])
+    i = len(U) - 3                      # near the reference's end: the appended interval holds
+    Xg, Ug = mpc.initial_guess(i)
+    sol = mpc.solve(X[i], i, Xg, Ug)
+    assert sol.status == "converged"
+    Xs, Us = mpc.shifted(sol.X, sol.U, i)
+    F = mpc.lib.linearise(mpc.predict(X[i], sol.U[0]), Xs, Us, mpc.d)[0]
+    assert np.abs(F - Xs).max() < 1e-3
+
+
 def test_disturbance_estimate_converges(ur5):
     from benchmarks.control_plant import Disturbance, PinocchioPlant
     model, robot, limits, task, X, U = ur5
@@ -151,6 +168,26 @@ def test_closed_loop_lwr_payload():
     assert err < 1e-3
 
 
+def test_the_loop_runs_without_the_cyclic_garbage_collector(ur5):
+    """simulate pauses Python's cyclic garbage collector for the loop (a full collection took
+    31 ms, three re-solve budgets) and resumes it after."""
+    import gc
+    from benchmarks.control_plant import PinocchioPlant
+    model, robot, limits, task, X, U = ur5
+    plant = PinocchioPlant("ur5", model)
+    seen = []
+    step = plant.step
+
+    def recording(*args):
+        seen.append(gc.isenabled())
+        return step(*args)
+    plant.step = recording
+    assert gc.isenabled()
+    simulate(Controller(TrackingMPC(robot, limits, X, U, RELAXED)), plant, X[0].copy(), 0.01)
+    assert seen and not any(seen)
+    assert gc.isenabled()
+
+
 def test_fallback_then_brake(ur5, monkeypatch):
     from benchmarks.control_plant import PinocchioPlant
     model, robot, limits, task, X, U = ur5
@@ -175,3 +212,51 @@ def test_fallback_then_brake(ur5, monkeypatch):
     assert np.abs(xs[-1, n:]).max() < 1e-2                 # stopped
     assert np.all(np.abs(xs[:, n:]) <= limits.array("qd_max") + 1e-6)
     assert np.all(xs[:, :n] >= limits.array("q_lo")) and np.all(xs[:, :n] <= limits.array("q_hi"))
+
+
+def _brake_only(robot, limits, x0, plant, monkeypatch, duration, **loop):
+    """The loop with every re-solve failing from the start: the brake (and the limit guard) alone."""
+    from kindyngen.control.closed_loop import LoopOptions
+    n = robot.n
+    X = np.tile(np.concatenate([x0[:n], np.zeros(n)]), (21, 1))
+    U = np.tile(robot.gravity_torque(x0[:n]), (20, 1))
+    mpc = TrackingMPC(robot, limits, X, U, RELAXED)
+    original = TrackingMPC.solve
+
+    def failing(self, *args, **kwargs):
+        sol = original(self, *args, **kwargs)
+        sol.status = "fallback"
+        return sol
+    monkeypatch.setattr(TrackingMPC, "solve", failing)
+    ctl = Controller(mpc, LoopOptions(**loop))
+    lg = simulate(ctl, plant, x0, duration)
+    assert {s["mode"] for s in lg.steps} == {"brake"}
+    return np.array(lg.x), np.array(lg.tau)
+
+
+def test_brake_stops_short_of_a_position_limit(monkeypatch):
+    """No plan, the wrist heading for its position limit at 0.93 of its speed limit, 0.1 rad from
+    it: the brake alone (deceleration qd / 50 ms) would need 0.15 rad; the limit guard stops it
+    short of the limit, within the torque limits (the plant is Pinocchio's)."""
+    from benchmarks.control_plant import PinocchioPlant
+    model, robot, limits, task = arm("lwr4")
+    n = robot.n
+    x0 = np.concatenate([np.asarray(task.q0, float), np.zeros(n)])
+    x0[6] = limits.q_hi[6] - 0.1
+    x0[n + 6] = 0.93 * limits.qd_max[6]
+    xs, tau = _brake_only(robot, limits, x0, PinocchioPlant("lwr4", model), monkeypatch, 0.3)
+    assert np.all(xs[:, :n] <= limits.array("q_hi")) and np.all(xs[:, :n] >= limits.array("q_lo"))
+    assert np.all(np.abs(tau) <= limits.array("tau_max") + 1e-9)
+    assert np.abs(xs[-1, n:]).max() < 1e-2
+
+
+def test_brake_brings_a_joint_back_inside_its_position_limit(monkeypatch):
+    from benchmarks.control_plant import PinocchioPlant
+    model, robot, limits, task = arm("lwr4")
+    n = robot.n
+    x0 = np.concatenate([np.asarray(task.q0, float), np.zeros(n)])
+    x0[6] = limits.q_hi[6] + 0.02
+    xs, tau = _brake_only(robot, limits, x0, PinocchioPlant("lwr4", model), monkeypatch, 0.5)
+    assert xs[-1, 6] <= limits.q_hi[6]
+    assert np.all(np.abs(xs[:, n:]) <= limits.array("qd_max") + 1e-6)
+    assert np.all(np.abs(tau) <= limits.array("tau_max") + 1e-9)

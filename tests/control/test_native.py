@@ -28,7 +28,8 @@ from kindyngen.control.reach import sx_reach_nlp
 
 from .helpers import arm, pinocchio_step
 
-CASES = [("lwr4", Integrator("rk4", 1), False), ("ur5", Integrator("rk4", 2), True), ("panda", Integrator("midpoint", 2), True)]
+CASES = [("lwr4", Integrator("rk4", 1), False), ("ur5", Integrator("rk4", 2), True), ("panda", Integrator("midpoint", 2), True),
+         ("ur5", Integrator("rk4", 2), False)]
 
 
 def _random_point(robot, task, L, rng):
@@ -40,7 +41,8 @@ def _random_point(robot, task, L, rng):
     return z, p, 100 * rng.standard_normal(L.ng)
 
 
-@pytest.mark.parametrize("name, integrator, inner", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("name, integrator, inner", CASES, ids=[f"{c[0]}-{c[1].tag}-{'inner' if c[2] else 'nodes'}"
+                                                                  for c in CASES])
 def test_nlp_functions_equal_casadi_ad(name, integrator, inner):
     import casadi as ca
     from dataclasses import replace
@@ -99,6 +101,39 @@ def test_linearisation_equals_ad_and_pinocchio(name, integrator):
             for _ in range(integrator.substeps):
                 x = step(x, U[k] + d, h / integrator.substeps)
             assert np.abs(F[k] - x).max() < 1e-8 * max(1, np.abs(x).max())
+
+
+@pytest.mark.parametrize("name, integrator", [("lwr4", Integrator("rk4", 1)), ("ur5", Integrator("rk4", 2))])
+def test_interval_hessians_and_terminal_equal_ad(name, integrator):
+    """``hessians``: per interval the Hessian over (x, u) of the multipliers' sum of the substep
+    ends (the exact-Hessian SQP's blocks), and ``terminal``, against CasADi's AD of the
+    integrator's step and of the flange position."""
+    import casadi as ca
+    model, robot, limits, task = arm(name)
+    n, N, h = robot.n, 3, 0.05
+    lib = stage_library(robot, N, h, integrator, False)
+    xs, us, ms = ca.SX.sym("x", 2 * n), ca.SX.sym("u", n), ca.SX.sym("m", 2 * n * integrator.substeps)
+    end, inner = integrator.step(robot.fd, n, h, xs, us)
+    ends = ca.vertcat(*inner, end)
+    w = ca.vertcat(xs, us)
+    ref = ca.Function("ref", [xs, us, ms], [ca.hessian(ca.dot(ms, ends), w)[0]])
+    rng = np.random.default_rng(4)
+    x0 = np.concatenate([np.asarray(task.q0) + 0.2 * rng.standard_normal(n), rng.standard_normal(n)])
+    X = np.array([x0 + 0.1 * rng.standard_normal(2 * n) for _ in range(N)])
+    U, d = 5 * rng.standard_normal((N, n)), rng.standard_normal(n)
+    MU = 50 * rng.standard_normal((N, integrator.substeps, 2 * n))
+    H = lib.hessians(x0, X, U, MU, d)
+    for k in range(N):
+        Hr = np.array(ref(x0 if k == 0 else X[k - 1], U[k] + d, MU[k].ravel()))
+        assert np.abs(H[k] - Hr).max() <= 1e-9 * np.abs(Hr).max()
+    goal, lt = np.array([0.3, 0.2, 0.5]), rng.standard_normal(3 + n)
+    p = robot.fk_hom(xs[:n])[:3, 3]
+    t_ref = ca.vertcat(p - goal, xs[n:])
+    fr = ca.Function("t", [xs], [t_ref, ca.jacobian(t_ref, xs), ca.hessian(ca.dot(lt, t_ref), xs)[0]])
+    t, J, Ht = lib.terminal(X[-1], goal, lt)
+    for mine, theirs in zip((t, J, Ht), fr(X[-1])):
+        theirs = np.array(theirs).reshape(np.shape(mine))
+        assert np.abs(mine - theirs).max() <= 1e-10 * max(1.0, np.abs(theirs).max())
 
 
 def test_libraries_are_reentrant():

@@ -8,7 +8,7 @@ models, benchmarks/control_robots.py: the UR5 by Pinocchio's URDF parser):
 - with two RK4 substeps and the inner states as rows, the inner speeds hold the limits too;
 - on the LWR the native solve and the Opti baseline reach the same objective (1e-6 relative);
   the inverse-dynamics form (UR5) reaches a KKT point of the same discrete problem, fatrop the
-  native solve's optimum, and the time-optimal plan satisfies Pinocchio's steps.
+  native solve's optimum (the time-optimal NLP: test_time_optimal.py).
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from kindyngen.control.integrators import Integrator
-from kindyngen.control.reach import ReachNLP, inverse_dynamics_reach, rollout, solve_baseline
+from kindyngen.control.reach import ReachNLP, inverse_dynamics_reach, rollout, solve_baseline, solve_sx
 
 from .helpers import arm, pinocchio_step
 
@@ -95,6 +95,62 @@ def test_lwr_native_and_baseline_agree():
     assert np.abs(X - np.hstack([res.q, res.qd])).max() < 1e-7
 
 
+def test_adaptive_barrier_reaches_the_defaults_optimum_in_fewer_iterations():
+    """IPOPT's adaptive barrier (FAST, ReachNLP's default) ends at the KKT point of IPOPT's
+    defaults in fewer iterations (LWR: 23 against 45; objective 1e-8 relative, torques 1e-3 N m of
+    up to 176)."""
+    model, robot, limits, task = arm("lwr4")
+    fast = ReachNLP(robot, task).solve()
+    plain = ReachNLP(robot, task, adaptive=False).solve()
+    assert fast.success and plain.success
+    assert fast.iterations < plain.iterations
+    assert abs(fast.objective - plain.objective) < 1e-8 * plain.objective
+    assert np.abs(fast.tau - plain.tau).max() < 1e-3
+    _check_plan("lwr4", model, task, fast)
+
+
+def test_sx_graph_reaches_the_native_optimum():
+    """IPOPT on the same NLP as one SX graph (CasADi's AD, solve_sx) ends where the native
+    library's solve does (UR5, N = 10: the SX graph's Hessian is most of the test's time)."""
+    model, robot, limits, task = arm("ur5")
+    task = replace(task, N=10)
+    native, sx = ReachNLP(robot, task).solve(), solve_sx(robot, task)
+    assert native.success and sx.success
+    assert abs(native.objective - sx.objective) < 1e-8 * sx.objective
+    assert np.abs(native.tau - sx.tau).max() < 1e-4 * np.abs(sx.tau).max()
+
+
+def test_shifted_warm_start_is_stationary():
+    """ReachNLP.shifted and shifted_multipliers: the converged plan and its constraint and bound
+    multipliers moved one interval earlier, the start moved to the plan's node 1, satisfy the
+    Lagrangian's stationarity grad f + J' lam_g + lam_x = 0 on every variable but the appended
+    interval's (grad f written here in numpy, J' lam_g by central differences of the
+    constraints), and the constraints themselves."""
+    model, robot, limits, task = arm("ur5")
+    nlp = ReachNLP(robot, task)
+    res = nlp.solve()
+    L = nlp.layout
+    z = nlp.shifted(res.z)
+    p = nlp.p(np.concatenate([res.q[1], res.qd[1]]))
+    lam_g, lam_x = nlp.shifted_multipliers(res.lam_g, res.lam_x)
+    grad = np.zeros(L.nz)
+    for k in range(task.N):
+        i = k * L.nw + L.nx
+        grad[i:i + robot.n] = 2 * task.h * z[i:i + robot.n]
+
+    def g(zz):
+        return np.array(nlp.f_g(zz, p)).ravel()
+    kept = (task.N - 1) * L.nw
+    eps, jt_lam = 1e-6, np.zeros(kept)
+    for i in range(kept):
+        e = np.zeros(L.nz)
+        e[i] = eps
+        jt_lam[i] = lam_g @ (g(z + e) - g(z - e)) / (2 * eps)
+    resid = grad[:kept] + jt_lam + lam_x[:kept]
+    assert np.abs(resid).max() < 1e-4 * max(1.0, np.abs(grad).max())
+    assert np.abs(g(z)).max() < 1e-6
+
+
 def test_inverse_dynamics_form_is_the_same_discrete_problem():
     model, robot, limits, task = arm("ur5")
     res = inverse_dynamics_reach(robot, task)
@@ -116,23 +172,19 @@ def test_fatrop_reaches_the_native_optimum():
     assert err < 1e-5          # fatrop stops at tol 1e-4 (its dual residual stalls above 1e-6): gaps of ~3e-6
 
 
-def test_time_optimal_over_the_ur5():
-    """kindyngen.control.time_optimal: converges; Pinocchio's ABA, integrated by the plan's own
-    RK4 substeps from each node, lands on the next node; the limits hold at the nodes."""
-    from kindyngen.control.time_optimal import solve_time_optimal
+def test_fatrop_on_the_inverse_dynamics_form_converges():
+    """fatrop on the inverse-dynamics form converges to tol 1e-6 at IPOPT's KKT point of the
+    same NLP (1e-7 relative), its plan on Pinocchio's RK4 steps (1e-7)."""
+    from kindyngen.control.reach import solve_fatrop
     model, robot, limits, task = arm("ur5")
-    qf = np.asarray(task.q0) + np.array([0.8, -0.4, 0.5, 0.3, -0.6, 0.9])
-    res = solve_time_optimal(robot, limits, task.q0, qf, N=8, integrator=Integrator("rk4", 2))
-    assert res["success"], res["status"]
+    task = replace(task, N=10)
+    ref = inverse_dynamics_reach(robot, task)
+    res = solve_fatrop(robot, task, formulation="inverse-dynamics")
+    assert ref.success and res.success, res.status
+    assert abs(res.objective - ref.objective) < 1e-7 * ref.objective
     step = pinocchio_step("ur5", model)
-    X = np.hstack([res["q"], res["qd"]])
-    h = res["T"] / 8
-    for k in range(8):
-        x = step(step(X[k], res["tau"][k], h / 2), res["tau"][k], h / 2)
-        assert np.abs(x - X[k + 1]).max() < 1e-7 * max(1.0, np.abs(x).max())
-    assert np.all(np.abs(res["tau"]) <= limits.array("tau_max") + 1e-9)
-    assert np.all(np.abs(res["qd"]) <= 0.95 * limits.array("qd_max") + 1e-7)
-    assert np.abs(res["q"][-1] - qf).max() < 1e-9
+    X = np.hstack([res.q, res.qd])
+    assert max(np.abs(step(X[k], res.tau[k], task.h) - X[k + 1]).max() for k in range(task.N)) < 1e-7
 
 
 def test_two_robots_in_one_process():
