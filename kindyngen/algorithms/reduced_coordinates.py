@@ -151,7 +151,8 @@ def coordinate_map(model: RobotModel) -> CoordinateMap:
             row[column[j]] = sympy.Integer(1)
             offsets.append(sympy.Integer(0))
         else:
-            row[column[joint.mimic.joint]] = joint.mimic.multiplier
+            for source, multiplier in joint.mimic.sources:
+                row[column[source]] += multiplier
             offsets.append(joint.mimic.offset)
         rows.append(row)
     return CoordinateMap(model, free, tuple(tuple(row) for row in rows), tuple(offsets))
