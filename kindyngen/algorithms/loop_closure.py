@@ -251,12 +251,12 @@ def loop_system(model: RobotModel) -> LoopSystem:
     n, m = free.n, numeric.m
     q = np.array([float(v) for v in model.reference_values])
     _, K = numeric.evaluate(q)
-    if m >= n:
-        raise _error(model, "loops", f"{m} constrained directions leave no motion to the {n} joints")
-    if _regular(_svd_ratio(K)) is not True:
+    if m > n or _regular(_svd_ratio(K)) is not True:
         raise _error(model, "loops", f"the {m} constrained directions ({', '.join(row_names(model))}) are not "
                      "independent at the reference configuration (a planar loop constrains only the two translations "
                      "in its plane: 'directions: [x, y]'; else give another 'reference')")
+    if m == n:
+        raise _error(model, "loops", f"{m} constrained directions leave no motion to the {n} joints")
     independent = _choose(model, K, n, m)
     dependent = tuple(j for j in range(n) if j not in independent)
     q = _assemble(model, numeric, q, dependent)
