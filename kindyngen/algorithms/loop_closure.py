@@ -45,8 +45,8 @@ about an axis parallel to that normal. After dropping its links of zero length i
   not its crank's, a palletiser's rod).
 
 Loops are solved in turn, each from the joints already known. Without a closed form the
-dependent joints are an input (a configuration closing the loops, e.g. by Newton's method on
-``loop_residual`` and ``loop_jacobian``).
+functions take every joint's position (a configuration closing the loops: the generated
+``loop_solve`` runs unrolled Newton steps from a guess, :mod:`kindyngen.algorithms.loop_functions`).
 
 Example: the planar four-bar of :data:`FOUR_BAR`, its crank the coordinate:
 
@@ -204,7 +204,8 @@ class LoopSystem:
                           f"constraining {', '.join(loop.directions)} of frame A" for loop in self.model.loops)
         how = ("the dependent joints in closed form from them (" + ", ".join(
             f"{self.model.loops[step[1]].name}: {step[0]}" for step in self.closed.steps) + ")"
-               if self.closed else "every joint an input, the configuration closing the loops")
+               if self.closed else "no closed form: q is every joint, a configuration closing the loops (loop_solve: "
+               "Newton steps from a guess)")
         return (f"Closed loops ({loops}). Independent joints: {', '.join(self.names)}; dependent: "
                 f"{', '.join(self.dependent_names)}; {how}. Velocities qd_x = G(q) qd with G = [I; -Jd^-1 Ji] "
                 f"(K = dr/dq, pivot order fixed at the reference configuration), qdd_x = G qdd + Gdot qd; forces "

@@ -7,7 +7,8 @@ through ``G(q) = [I; -Jd^-1 Ji]`` before any code exists:
   ``dr/dq`` at any configuration of the n joints (a Newton step on the dependent joints is
   ``q_d -= Jd^-1 r``);
 * ``loop_solve(q) -> q_all`` (n): every joint from the independent ones, where the loops have a
-  closed form (four-bar dyads, parallelograms);
+  closed form (four-bar dyads, parallelograms); without one ``loop_solve(q, q_guess) -> q_all,
+  r``: :data:`NEWTON_STEPS` Newton steps from a guess, unrolled, and the residual at the result;
 * ``fk_hom``, ``jacobian`` (``J G``), ``com`` (``J_com G``, ``A_g G``): the tree's;
 * ``M = G^T M_x G``, ``g = G^T g_x``, ``c = G^T tau_x(q, G qd, Gdot qd)`` without gravity,
   ``tau = G^T tau_x(q, G qd, G qdd + Gdot qd)`` by one Newton-Euler pass, ``fd``: ``M qdd =
@@ -41,8 +42,8 @@ from .dynamics import (ROUTE, centre_of_mass_tree, conventions as tree_conventio
                        gravity_composite, rnea, setup)
 from .kinematics import fk_hom_tree, jacobian_tree
 from .ldlt import tree_ldlt_solve
-from .loop_closure import (LoopSystem, closed_form_expressions, constraint_jacobian, loop_system, residual,
-                           row_names, velocity_map)
+from .loop_closure import (LoopSystem, closed_form_expressions, constraint_jacobian, eliminate, loop_system,
+                           residual, row_names, solve, velocity_map)
 from .reduced_coordinates import elimination_parents
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from ..model.robot_model import RobotModel
@@ -155,11 +156,15 @@ def loop_jacobian(model: RobotModel, name: str = "loop_jacobian") -> SymbolicFun
     return replace(f, conventions=system.text)
 
 
-def loop_solve(model: RobotModel, name: str = "loop_solve") -> SymbolicFunction | None:
-    """Every joint from the independent ones (None without a closed form)."""
+NEWTON_STEPS = 8     # Newton steps of loop_solve without a closed form (quadratic convergence)
+
+
+def loop_solve(model: RobotModel, name: str = "loop_solve") -> SymbolicFunction:
+    """Every joint from the independent ones: the closed form, or (without one)
+    :func:`loop_newton`."""
     system = loop_system(model)
     if system.closed is None:
-        return None
+        return loop_newton(model, name)
     stages = Stages()
     reduced = port_symbols("q", (len(system.independent),))
     full = closed_form_expressions(system, reduced, stages.cut)
@@ -171,6 +176,51 @@ def loop_solve(model: RobotModel, name: str = "loop_solve") -> SymbolicFunction 
                                f"({', '.join(j.name for j in system.free.joints)}), {system.free.order_text}",
                                _units(system.free.joints, "rad", "m")),), (reduced,), (tuple(full),),
                          stages=stages.definitions)
+    return replace(f, conventions=system.text)
+
+
+def loop_newton(model: RobotModel, name: str = "loop_solve", steps: int = NEWTON_STEPS) -> SymbolicFunction:
+    """``loop_solve(q, q_guess) -> q_all, r`` of loops without a closed form: ``steps`` Newton
+    steps on the dependent joints ``q_d -= Jd^-1 r`` from ``q_guess`` (every joint; its
+    independent entries are replaced by ``q``), unrolled, each through the elimination of Jd in
+    the pivot order fixed at the reference (:func:`kindyngen.algorithms.loop_closure.eliminate`);
+    ``r`` is the residual at the result, for the caller to judge convergence (a guess near the
+    solution, such as the previous control step's, converges in two or three steps)."""
+    system = loop_system(model)
+    free = system.free
+    stages = Stages()
+    tree = port_symbols("q", (free.n,))
+    reduced = port_symbols("q", (len(system.independent),))
+    guess = port_symbols("q_guess", (free.n,))
+    rows = residual(free, model.loops, tree)
+    K = constraint_jacobian(rows, tree)
+    Jd = [[row[j] for j in system.dependent] for row in K]
+    current = list(guess)
+    for a, j in enumerate(system.independent):
+        current[j] = reduced[a]
+
+    def at(exprs, values):
+        mapping = dict(zip(tree, values))
+        return [stages.cut(se.sympify(e).xreplace(mapping)) if e != 0 else e for e in exprs]
+
+    for _ in range(steps):
+        r = at(rows, current)
+        A = [at(row, current) for row in Jd]
+        step = solve(eliminate(A, system.pivots, stages.cut), system.pivots, r, stages.cut)
+        for j, d in zip(system.dependent, step):
+            current[j] = stages.cut(current[j] - d)
+    f = SymbolicFunction(name, f"Dependent joints by {steps} Newton steps on the loop constraints (no closed form "
+                         "recognised): q_d -= Jd^-1 r from q_guess, unrolled; r is the residual at the result.",
+                         (independent_port(system),
+                          Port("q_guess", (free.n,), "a configuration near the solution (every joint; its independent "
+                               "entries are ignored): the previous solution, or 0, the reference",
+                               _units(free.joints, "rad", "m"))),
+                         (Port("q_all", (free.n,), f"positions of every joint "
+                               f"({', '.join(j.name for j in free.joints)}), {free.order_text}",
+                               _units(free.joints, "rad", "m")),
+                          Port("r", (len(rows),), f"loop residual at q_all (rows {', '.join(row_names(model))}): "
+                               "converged where it is at rounding level", "m (translations), 1 (rotations)")),
+                         (reduced, guess), (tuple(current), tuple(at(rows, current))), stages=stages.definitions)
     return replace(f, conventions=system.text)
 
 

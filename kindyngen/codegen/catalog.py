@@ -222,10 +222,10 @@ def loop_notes(model: RobotModel, only=None) -> list[str]:
     system = loop_system(model)
     wanted = (lambda name: only is None or name in only)
     notes = []
-    if system.closed is None and wanted("loop_solve"):
+    if system.closed is None:
         notes.append(f"{model.identifier}: closed loops: no closed form recognised for the dependent joints "
-                     f"({', '.join(system.dependent_names)}): loop_solve not generated; every function takes the "
-                     "positions of all joints (solve them by Newton's method on loop_residual and loop_jacobian)")
+                     f"({', '.join(system.dependent_names)}): loop_solve runs {loops.NEWTON_STEPS} Newton steps from "
+                     "q_guess; every function takes the positions of all joints")
     if system.closed is None or not system.closed.linear:
         missing = [name for name in loops.NOT_GENERATED if wanted(name)]
         if missing:

@@ -306,7 +306,7 @@ PORTS = {"fk_hom": ("q",), "jacobian": ("q",), "M": ("q",), "g": ("q",), "com": 
 EXPECTED_FUNCTIONS = {
     "four_bar": {"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "loop_residual", "loop_jacobian", "loop_solve"},
     "palletiser": set(OUTPUTS) | {"Y", "loop_residual", "loop_jacobian", "loop_solve"},
-    "delta": {"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "loop_residual", "loop_jacobian"},
+    "delta": {"fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "loop_residual", "loop_jacobian", "loop_solve"},
 }
 
 
@@ -337,25 +337,32 @@ def test_every_function_equals_the_projection(case, lang):
 
 
 def test_loop_solve_closes_the_loops(case):
-    """The generated closed form gives the dependent joints Newton's method finds along the path
+    """The generated loop_solve (the closed form; the delta's: eight unrolled Newton steps from
+    q_guess = 0, the reference) gives the dependent joints Newton's method finds along the path
     (angles to within a turn), and over the whole range of the independent joints (1000 random
-    states) its configurations close every loop: Pinocchio's residual below 1e-12."""
-    if "loop_solve" not in EXPECTED_FUNCTIONS[case["key"]]:
-        pytest.skip("no closed form: loop_solve is not generated for this robot")
-    library = load_generated(case["folder"], "python")
+    states) its configurations close every loop: Pinocchio's residual below 1e-12 (and the
+    Newton form's own r says so)."""
     reference = case["reference"]
-    got = library.call("loop_solve", {"q": case["inputs"]["q"]})["q_all"]
-    turns = (got - case["Q"]) / (2 * np.pi)
+    newton = case["key"] == "delta"
+    Q = case["Q"]
+    path_inputs = {"q": Q[:, reference.independent], **({"q_guess": np.zeros_like(Q)} if newton else {})}
+    got = load_generated(case["folder"], "python").call("loop_solve", path_inputs)["q_all"]
+    turns = (got - Q) / (2 * np.pi)
     assert np.abs(turns - np.round(turns)).max() * 2 * np.pi < 1e-10
     rng = np.random.default_rng(7)
     independent = [case["model"].joints[j] for j in reference.independent]
     lower = np.array([max(j.lower, -np.pi) for j in independent])
     upper = np.array([min(j.upper, np.pi) for j in independent])
+    if newton:
+        lower, upper = np.full(3, -0.3), np.full(3, 0.7)
     samples = rng.uniform(lower, upper, (1000, len(independent)))
-    configurations = load_generated(case["folder"], "c").call("loop_solve", {"q": samples})["q_all"]
-    worst = max(np.abs(reference.residual(q)).max() for q in configurations)
+    inputs = {"q": samples, **({"q_guess": np.zeros((1000, reference.nq))} if newton else {})}
+    out = load_generated(case["folder"], "c").call("loop_solve", inputs)
+    worst = max(np.abs(reference.residual(q)).max() for q in out["q_all"])
     print(case["key"], f"largest residual {worst:.1e}")
     assert worst < 1e-12
+    if newton:
+        assert np.abs(out["r"]).max() < 1e-12
 
 
 def test_loop_residual_and_jacobian(case):
