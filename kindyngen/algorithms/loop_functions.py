@@ -99,8 +99,15 @@ def qdd_input(system, name="qdd"):
 
 
 def force_input(system, name, what):
+    """An applied force: what drives the independent joints."""
     return _velocity_port(system, name, f"{what} (generalised forces: the driving torques where these joints are the "
                           f"driven ones; G^T of the joints' torques in general)", "N m", "N")
+
+
+def force_output(system, name, what):
+    """A computed force in the independent coordinates: G^T of the tree's joint torques."""
+    return _velocity_port(system, name, f"{what} (G^T of the tree's joint torques: the driving torques needed)",
+                          "N m", "N")
 
 
 # ----------------------------------------------------------------------------- the rewriting
@@ -307,7 +314,7 @@ def gravity_loop(model: RobotModel, params: str = "numeric", name: str = "g") ->
     dyn = _LoopDynamics(model, params, stages)
     g = dyn.map.transpose_times(gravity_composite(dyn.ts))
     return _function(name, "gravity forces g = G^T g_x (composite first moments on the tree).", dyn, (),
-                     (), (force_input(dyn.system, "g", "gravity torques"),), (g,), stages)
+                     (), (force_output(dyn.system, "g", "gravity torques"),), (g,), stages)
 
 
 def coriolis_loop(model: RobotModel, params: str = "numeric", name: str = "c") -> SymbolicFunction:
@@ -316,7 +323,7 @@ def coriolis_loop(model: RobotModel, params: str = "numeric", name: str = "c") -
     c = dyn.map.transpose_times(rnea(dyn.ts, dyn.qd_full, dyn.drift, False, stages))
     return _function(name, "Coriolis and centrifugal forces c = G^T tau_x(q, G qd, Gdot qd) without gravity "
                      "(one Newton-Euler pass).", dyn, (qd_input(dyn.system),), (dyn.qd,),
-                     (force_input(dyn.system, "c", "Coriolis and centrifugal torques"),), (c,), stages)
+                     (force_output(dyn.system, "c", "Coriolis and centrifugal torques"),), (c,), stages)
 
 
 def inverse_dynamics_loop(model: RobotModel, params: str = "numeric", name: str = "tau") -> SymbolicFunction:
@@ -326,7 +333,7 @@ def inverse_dynamics_loop(model: RobotModel, params: str = "numeric", name: str 
     tau = dyn.map.transpose_times(rnea(dyn.ts, dyn.qd_full, dyn.accelerations(qdd), True, stages))
     return _function(name, "inverse dynamics tau = M qdd + c + g in the independent joints: G^T tau_x(q, G qd, "
                      "G qdd + Gdot qd) by one Newton-Euler pass.", dyn, (qd_input(dyn.system), qdd_input(dyn.system)),
-                     (dyn.qd, qdd), (force_input(dyn.system, "tau", "torques"),), (tau,), stages)
+                     (dyn.qd, qdd), (force_output(dyn.system, "tau", "torques"),), (tau,), stages)
 
 
 def forward_dynamics_loop(model: RobotModel, params: str = "numeric", name: str = "fd") -> SymbolicFunction:
