@@ -109,7 +109,7 @@ def random_inputs(model, double_lib, spec: dict, rng: np.random.Generator, count
         loop constraint itself at any configuration: closed ones would leave it only rounding)."""
         if shape == lower.shape or "loop_solve" not in double_lib.functions:
             return angles()
-        if spec["name"] in ("loop_residual", "loop_jacobian"):
+        if spec.get("name") in ("loop_residual", "loop_jacobian"):
             return rng.uniform(-1.0, 1.0, size=(count,) + shape)
         return double_lib.call("loop_solve", {"q": angles(), "q_guess": np.zeros((count,) + shape)})["q_all"]
 
@@ -154,7 +154,7 @@ def compare(double_out: dict, float_out: dict, spec: dict, count: int, given_sca
         scale = np.max(np.abs(d[np.isfinite(d)])) if np.isfinite(d).any() else 1.0
         scale = _round2(float(scale)) if scale > 0 else 1.0
         scale = given_scales[port["name"]] if given_scales else scale
-        if spec["name"] == "loop_solve" and port["name"] == "r":
+        if spec.get("name") == "loop_solve" and port["name"] == "r":
             scale = 1.0         # the residual reached, exactly 0: its error in m (rad), not relative
         scales.append((port["name"], scale))
         e = np.abs(f - d) / scale
