@@ -65,7 +65,7 @@ import symengine as se
 import sympy
 
 from ..model.robot_model import LOOP_DIRECTIONS, Mimic, RobotDescriptionError, RobotModel
-from .geometry import constant
+from .geometry import compose, constant, constant_transform
 from .kinematics import link_poses
 from .symbolic import port_symbols
 
@@ -100,10 +100,9 @@ def _error(model: RobotModel, field: str, reason: str) -> RobotDescriptionError:
     return RobotDescriptionError(model.source, field, reason)
 
 
-def frame_pose(free: RobotModel, links, body: int, placement):
+def _frame_pose(links, body: int, placement):
     """(R, p) of ``placement`` on ``body``'s link frame (-1: the root) in the world (root)
     frame, from :func:`kindyngen.algorithms.kinematics.link_poses`' link poses."""
-    from .geometry import compose, constant_transform
     above = links[body] if body >= 0 else (se.eye(3), se.zeros(3, 1))
     return compose(above, constant_transform(placement))
 
@@ -114,8 +113,8 @@ def residual(free: RobotModel, loops, q) -> list:
     _, links, _ = link_poses(free, q)
     rows = []
     for loop in loops:
-        Ra, pa = frame_pose(free, links, loop.body_a, loop.placement_a)
-        Rb, pb = frame_pose(free, links, loop.body_b, loop.placement_b)
+        Ra, pa = _frame_pose(links, loop.body_a, loop.placement_a)
+        Rb, pb = _frame_pose(links, loop.body_b, loop.placement_b)
         d = pb - pa
         for direction in loop.directions:
             if direction in ("x", "y", "z"):
@@ -159,9 +158,10 @@ class ClosedForm:
 
 @dataclass(frozen=True)
 class Dyad:
-    """A dyad's constants: the joints ``p`` (on body a's side) and ``r`` (body b's), the loop
-    point's distance from each axis in the plane and its angle in each joint's moving frame,
-    the branch sign."""
+    """A dyad's constants: its two dependent joints (those of the loop joint's bodies a and
+    b), the loop point's distance from each one's axis in the plane and its angle about it in
+    the joint's moving frame (exact), and the branch's sign (the side of the line from joint a's
+    axis to joint b's the loop point is on at the reference)."""
 
     joint_a: int
     joint_b: int
@@ -449,8 +449,8 @@ def velocity_map(system: LoopSystem, name) -> VelocityMap:
     """G of ``system`` in the tree's symbols, its intermediates named by ``name`` (module text)."""
     free = system.free
     q = port_symbols("q", (free.n,))
-    rows = residual(free, system.model.loops, q)
-    K = [[name(e) if e != 0 else e for e in row] for row in constraint_jacobian(rows, q)]
+    raw = constraint_jacobian(residual(free, system.model.loops, q), q)
+    K = [[name(e) if e != 0 else e for e in row] for row in raw]
     Jd = [[row[j] for j in system.dependent] for row in K]
     factor = eliminate(Jd, system.pivots, name)
     ny = len(system.independent)
@@ -461,8 +461,8 @@ def velocity_map(system: LoopSystem, name) -> VelocityMap:
     for d, j in enumerate(system.dependent):
         for a in range(ny):
             G[j][a] = name(-X[a][d]) if X[a][d] != 0 else se.Integer(0)
-    # the elimination reads the raw K (with se.diff's structure); K as rows of named entries
-    return VelocityMap(system, [[e for e in row] for row in constraint_jacobian(rows, q)], G, factor, name)
+    # the drift differentiates K again: the raw expressions, not the named ones
+    return VelocityMap(system, raw, G, factor, name)
 
 
 # ----------------------------------------------------------------------------- closed forms
@@ -522,7 +522,6 @@ class _Planar:
 
     side_a: tuple
     side_b: tuple
-    ancestor: int
     normal: sympy.Matrix
     sense: dict
     links: tuple          # ((vector, joints of its orientation), ...), zero-length ones dropped
@@ -533,7 +532,7 @@ def _planar(free: RobotModel, loop, q_exact) -> _Planar | None:
     a planar loop of revolute joints."""
     if loop.directions != ("x", "y") or loop.kind == "fixed":
         return None
-    side_a, side_b, common = _path(free, loop)
+    side_a, side_b, _ = _path(free, loop)
     joints = side_a + side_b
     if any(free.joints[j].prismatic for j in joints):
         return None
@@ -577,7 +576,7 @@ def _planar(free: RobotModel, loop, q_exact) -> _Planar | None:
             return None
         if not zero:
             vectors.append((v, path))
-    return _Planar(tuple(side_a), tuple(side_b), common, normal, sense, tuple(vectors))
+    return _Planar(tuple(side_a), tuple(side_b), normal, sense, tuple(vectors))
 
 
 def _parallelogram(planar: _Planar, q_exact) -> tuple | None:
@@ -807,7 +806,6 @@ def closed_form_expressions(system: LoopSystem, q_reduced, name, trig: dict | No
 
 def _joint_frame_rotation(free: RobotModel, links, j: int):
     """The world rotation of joint j's frame before its motion (z: its axis)."""
-    from .geometry import compose, constant_transform
     parent = free.parents[j]
     above = links[parent] if parent >= 0 else (se.eye(3), se.zeros(3, 1))
     frame = compose(above, constant_transform(free.joints[j].before))

@@ -48,9 +48,6 @@ from .reduced_coordinates import elimination_parents
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from ..model.robot_model import RobotModel
 
-LOOP_NAMES = ("loop_residual", "loop_jacobian", "loop_solve")
-
-
 # ----------------------------------------------------------------------------- ports
 
 def _units(joints, revolute: str, prismatic: str) -> str:

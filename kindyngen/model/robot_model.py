@@ -431,7 +431,9 @@ class RobotModel:
                    f"{len(self.coordinates)} independent joints" if mimics and not self.loops else "")
         if self.loops:
             closed = ", ".join(f"{loop.name} ({loop.kind}, {' '.join(loop.directions)})" for loop in self.loops)
-            coupled = f"; closed by the loop joints {closed}"
+            inputs = (f", inputs the {len(self.coordinates)} independent joints"
+                      if self.independent is not None or self.has_mimics else "")
+            coupled = f"; closed by the loop joints {closed}{inputs}"
         return f"{self.n} {' and '.join(kinds)} joints in {shape}, {base}{coupled}"
 
     @property

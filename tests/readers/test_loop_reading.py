@@ -181,7 +181,8 @@ def test_urdf_loops_need_the_tree():
 
 def test_command_line(tmp_path):
     """generate writes the loop functions (exit 0); describe refuses a robot with loops in one
-    line, exit 2, and so do generate and identify reading the YAML without --tree."""
+    line, exit 2, and so do generate and identify reading the YAML without --tree, and generate
+    a planar loop constraining three translations."""
     def run(*args):
         return subprocess.run([sys.executable, "-m", "kindyngen", *args], capture_output=True, text=True,
                               cwd=tmp_path, timeout=600)
@@ -190,7 +191,10 @@ def test_command_line(tmp_path):
     done = run("generate", four, "--tree", "--out", str(tmp_path / "out"), "--lang", "python", "--quiet")
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "out" / "four_bar" / "python" / "four_bar.py").exists()
-    for args in (("describe", four, "--tree"), ("generate", four, "--out", str(tmp_path / "o2"))):
+    planar = tmp_path / "three_rows.yaml"
+    planar.write_text((EXAMPLES / "four_bar.yaml").read_text().replace("directions: [x, y]}", "directions: [x, y, z]}"))
+    for args in (("describe", four, "--tree"), ("generate", four, "--out", str(tmp_path / "o2")),
+                 ("generate", str(planar), "--tree", "--out", str(tmp_path / "o3"))):
         refused = run(*args)
         assert refused.returncode == 2 and "Traceback" not in refused.stderr, refused.stderr
         assert len(refused.stderr.strip().splitlines()) == 1, refused.stderr
