@@ -247,6 +247,13 @@ def loop_system(model: RobotModel) -> LoopSystem:
     """The coordinates, reference and closed form of ``model``'s loops (module text); a
     description whose loops cannot be reduced is a RobotDescriptionError naming the field."""
     assert model.has_loops and not model.has_mimics and not model.floating_base
+    named = [str(s) for s in model.length_symbols] + [str(s) for loop in model.loops
+                                                      for placement in (loop.placement_a, loop.placement_b)
+                                                      for kind, *rest in placement.factors if kind == "trans"
+                                                      for s in rest[0] if isinstance(s, sympy.Symbol)]
+    if named:
+        raise _error(model, "loops", f"closed loops need numeric lengths (the coordinates and closed forms are decided "
+                     f"at the reference configuration), got the names {', '.join(dict.fromkeys(named))}")
     free = model.without_mimics()
     numeric = _Numeric(free, model.loops)
     n, m = free.n, numeric.m

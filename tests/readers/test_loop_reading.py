@@ -73,6 +73,7 @@ def test_loops_read_and_the_rule_chooses_the_crank():
     ({"loops": None, "independent": ["crank"]}, "independent", "no 'loops' given"),
     ({"loops": [loop(origin2={"xyz": [0, 2.0, 0]})]}, "reference", "do not close near the reference"),
     ({"reference": {"rockr": 0.1}}, "reference.rockr", "closest: rocker"),
+    ({"loops": [loop(origin2={"xyz": [0, "L3", 0]})]}, "loops", "numeric lengths"),
 ])
 def test_refused_loops(changes, field, reason):
     """Every problem is one RobotDescriptionError naming the file and the field."""
