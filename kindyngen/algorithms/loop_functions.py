@@ -188,8 +188,7 @@ def loop_newton(model: RobotModel, name: str = "loop_solve", steps: int = NEWTON
     steps on the dependent joints ``q_d -= Jd^-1 r`` from ``q_guess`` (every joint; its
     independent entries are replaced by ``q``), unrolled, each through the elimination of Jd in
     the pivot order fixed at the reference (:func:`kindyngen.algorithms.loop_closure.eliminate`);
-    ``r`` is the residual at the result, for the caller to judge convergence (a guess near the
-    solution, such as the previous control step's, converges in two or three steps)."""
+    ``r`` is the residual at the result, for the caller to judge convergence."""
     system = loop_system(model)
     free = system.free
     stages = Stages()
