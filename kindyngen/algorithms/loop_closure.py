@@ -199,7 +199,7 @@ class LoopSystem:
     @property
     def text(self) -> str:
         """What every loop function's header says about the loops and the coordinates."""
-        loops = "; ".join(f"{loop.name}: {loop.kind} joint between "
+        loops = "; ".join(f"{loop.name}: {loop.kind} joint between the bodies of "
                           f"{_body_name(self.free, loop.body_a)} and {_body_name(self.free, loop.body_b)}, "
                           f"constraining {', '.join(loop.directions)} of frame A" for loop in self.model.loops)
         how = ("the dependent joints in closed form from them (" + ", ".join(

@@ -68,7 +68,8 @@ def _loops(model: RobotModel) -> dict:
         "coordinates": list(system.names),
         "dependent": list(system.dependent_names),
         "q_input": "independent joints" if system.closed is not None else "all joints",
-        "loops": [{"name": loop.name, "type": loop.kind, "link1": body(loop.body_a), "link2": body(loop.body_b),
+        # each loop joint's two bodies named by the joint that moves them (the root: its link's name)
+        "loops": [{"name": loop.name, "type": loop.kind, "body1": body(loop.body_a), "body2": body(loop.body_b),
                    "directions": list(loop.directions),
                    "closed_form": next((step[0] for step in system.closed.steps if step[1] == k), None)
                    if system.closed is not None else None}
