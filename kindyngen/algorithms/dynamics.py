@@ -194,9 +194,9 @@ def setup(model: RobotModel, params: str = "numeric") -> TreeSetup:
     starts from it (its exact constant transforms cost a tenth of a second on a humanoid) and
     nothing changes it. A model with mimic joints is derived as the same tree without them and
     then reduced (:mod:`kindyngen.algorithms.reduced_coordinates`)."""
-    if model.has_mimics:
-        raise ValueError(f"{model.name}: mimic joints: derive on model.without_mimics() and reduce "
-                         f"(kindyngen.algorithms.reduced_coordinates)")
+    if model.has_mimics or model.has_loops:
+        raise ValueError(f"{model.name}: mimic joints or loops: derive on model.without_mimics() and reduce "
+                         f"(kindyngen.algorithms.reduced_coordinates, loop_closure)")
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)

@@ -27,11 +27,13 @@ offset 0 it reads the same symbol (``cos(q_7)`` is shared); with -1 ``cos(-q_7)`
 
 Closed kinematic loops are the nonlinear case of the same map: ``q_x = phi(q_y)`` solved from
 the loop constraints, ``G(q) = dphi/dq_y`` depending on q and ``qdd_x = G qdd_y + Gdot qd_y``
-(whose ``G^T M Gdot qd_y`` joins c). The contraction with G and the one substitution pass
-serve that case as written (G's entries may be expressions); what is linear here is marked:
-:meth:`CoordinateMap.configuration` (``G q + b`` where loops have ``phi``), the velocity map
-without ``Gdot qd``, and the derivatives of :mod:`kindyngen.algorithms.reduced_functions`
-(``d(G^T tau)/dq = G^T dtau/dq G`` holds only for constant G).
+(whose ``G^T M Gdot qd_y`` joins c): :mod:`kindyngen.algorithms.loop_closure` and
+``loop_functions`` derive it, passing ``G qd`` and ``G qdd + Gdot qd`` into the recursions.
+Loops that are all parallelograms have a constant G and are reduced here, as mimic joints whose
+couplings have several terms (:attr:`kindyngen.model.robot_model.Mimic.terms`). What is linear
+here: :meth:`CoordinateMap.configuration` (``G q + b``), the velocity map without ``Gdot qd``,
+and the derivatives of :mod:`kindyngen.algorithms.reduced_functions` (``d(G^T tau)/dq = G^T
+dtau/dq G`` holds only for constant G).
 
 Example: the two pendulums of :mod:`kindyngen.readers.urdf`, the right one following the left with
 multiplier -1:
@@ -151,7 +153,8 @@ def coordinate_map(model: RobotModel) -> CoordinateMap:
             row[column[j]] = sympy.Integer(1)
             offsets.append(sympy.Integer(0))
         else:
-            row[column[joint.mimic.joint]] = joint.mimic.multiplier
+            for source, multiplier in joint.mimic.sources:
+                row[column[source]] += multiplier
             offsets.append(joint.mimic.offset)
         rows.append(row)
     return CoordinateMap(model, free, tuple(tuple(row) for row in rows), tuple(offsets))

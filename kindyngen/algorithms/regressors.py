@@ -53,6 +53,7 @@ from .effect_torques import effect_columns, effect_parameter_names, effect_param
 from .joint_frame_steps import mat3
 from .kinematics_conventions import q_port
 from .lagrange import gravity_lagrange, mass_matrix_lagrange
+from .loop_closure import coupled_model, loop_system
 from .reduced_coordinates import coordinate_map, reduced_input
 from .rigid_bodies import ZERO, cross, qd_port, qdd_port, vadd, vscale
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
@@ -83,7 +84,18 @@ def kinds(model: RobotModel) -> tuple[str, ...]:
     """The regressors ``model`` has: Y always, Y_g and Y_m for a chain without mimic joints,
     however it was read (their sources, :data:`SOURCES`, are written for chains of independent
     joints)."""
-    return KINDS if model.is_chain and not model.has_mimics else ("Y",)
+    return KINDS if model.is_chain and not model.has_mimics and not model.has_loops else ("Y",)
+
+
+def reduced_model(model: RobotModel) -> RobotModel | None:
+    """The model the regressor is derived on: ``model``, or for a tree closed by loops that
+    are all parallelograms its coupled model (constant G:
+    :func:`kindyngen.algorithms.loop_closure.coupled_model`, itself: its mimic joints are
+    the loops' linear relations); None for other loops."""
+    if not model.has_loops or model.has_mimics:
+        return model
+    system = loop_system(model)
+    return coupled_model(system) if system.closed is not None and system.closed.linear else None
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -278,7 +290,7 @@ def _select(*args):
     return np.select(values[1::2], values[0::2])
 
 
-_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "piecewise": _select,
+_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "atan2": np.arctan2, "piecewise": _select,
               "strictlessthan": np.less, "booleantrue": lambda: True}
 
 
@@ -359,7 +371,7 @@ def common_denominator(model: RobotModel) -> int | None:
                 if v not in (0, 1, -1):
                     return None
         if joint.mimic is not None:
-            dens.append(int(sympy.Rational(joint.mimic.multiplier).q))
+            dens += [int(sympy.Rational(multiplier).q) for _, multiplier in joint.mimic.sources]
         lengths = offsets if joint.prismatic else []
         for placement in (joint.before, joint.after):
             R, p = placement.matrix()
@@ -400,6 +412,10 @@ def unavailable(model: RobotModel, kind: str = "Y") -> str | None:
     functions are generated all the same."""
     if not supported(model):
         return "symbolic lengths"
+    if reduced_model(model) is None:
+        return ("closed loops with a configuration-dependent G (the base parameters are decided on samples, and "
+                "only parallelogram loops are reduced with a constant G)")
+    model = reduced_model(model)
     try:
         base_parameters(model, kind)
     except BaseParameterError as exc:
@@ -422,6 +438,7 @@ def regressor(model: RobotModel, kind: str = "Y", name: str | None = None) -> Sy
     None where :func:`unavailable` says why not."""
     if unavailable(model, kind):
         return None
+    model = reduced_model(model)
     full = full_regressor(model, kind)
     base = base_parameters(model, kind)
     rows, cols = len(full.row_names), len(base.base)
@@ -465,6 +482,7 @@ def base_params_document(model: RobotModel) -> dict | None:
         if unavailable(model, kind):
             out[kind] = {"unavailable": unavailable(model, kind)}
             continue
+        model = reduced_model(model)
         b = base_parameters(model, kind)
         out[kind] = {
             "names": list(b.names),

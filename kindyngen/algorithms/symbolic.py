@@ -155,8 +155,9 @@ class Stages:
     ((_s0, 1 + a*b),)
     """
 
-    def __init__(self):
+    def __init__(self, prefix: str = "_s"):
         self._definitions: list = []
+        self._prefix = prefix         # another prefix: intermediates joined to another function's
 
     def cut(self, expr):
         expr = se.sympify(expr)
@@ -165,7 +166,7 @@ class Stages:
         if isinstance(expr, se.Mul) and len(expr.args) == 2 and expr.args[0].is_Number \
                 and expr.args[1].is_Symbol:
             return expr          # c * s: one multiplication wherever it is used
-        symbol = se.Symbol(f"_s{len(self._definitions)}")
+        symbol = se.Symbol(f"{self._prefix}{len(self._definitions)}")
         self._definitions.append((symbol, expr))
         return symbol
 

@@ -5,6 +5,7 @@ renderer builds its wrappers from it (so the extension follows exactly what the 
 """
 from __future__ import annotations
 
+from ..algorithms.loop_closure import loop_system
 from ..ik.damped_least_squares import applies as dls_applies, dls_manifest_entry
 from ..model.robot_model import RobotModel
 from .optimize import Program
@@ -33,6 +34,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "mimics": [{"joint": joint.name, "mimics": model.joints[joint.mimic.joint].name,
                         "multiplier": float(joint.mimic.multiplier), "offset": float(joint.mimic.offset)}
                        for joint in model.joints if joint.mimic is not None]} if model.has_mimics else {}),
+        **(_loops(model) if model.has_loops else {}),
         "gravity": [float(v) for v in model.gravity],
         "params": params,
         "trig": trig,    # how the C computes sin/cos of joint angles (kindyngen/codegen/trig_kernel.py)
@@ -49,6 +51,29 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
                         **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
         } for p in programs] + dls,
+    }
+
+
+def _loops(model: RobotModel) -> dict:
+    """A tree closed by loops: its loop joints, the independent joints (the inputs ``qd``,
+    ``qdd``, ``tau``; ``q`` too where the loops have a closed form, else every joint), the
+    dependent ones and how they are solved."""
+    system = loop_system(model)
+    free = system.free
+
+    def body(index):
+        return free.joints[index].name if index >= 0 else (free.base_name or "base")
+
+    return {
+        "coordinates": list(system.names),
+        "dependent": list(system.dependent_names),
+        "q_input": "independent joints" if system.closed is not None else "all joints",
+        # each loop joint's two bodies named by the joint that moves them (the root: its link's name)
+        "loops": [{"name": loop.name, "type": loop.kind, "body1": body(loop.body_a), "body2": body(loop.body_b),
+                   "directions": list(loop.directions),
+                   "closed_form": next((step[0] for step in system.closed.steps if step[1] == k), None)
+                   if system.closed is not None else None}
+                  for k, loop in enumerate(model.loops)],
     }
 
 

@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..algorithms.loop_closure import resolved
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
 from .catalog import derive_all, mimic_notes
@@ -108,6 +109,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     ``out_root/<robot>/`` whole (kindyngen.output_folder.replace_folder): a failed or killed run
     leaves the previous folder as it was; a finished one leaves exactly the files that
     functions.json's "files" lists, plus the files the user added (not listed last time)."""
+    model = resolved(model)           # a tree closed by loops: its coordinates chosen (nq, nv)
     out = Path(out_root) / model.identifier
     # --scalar float: the IK with float's tolerances, in every language written (the python
     # module beside float C is its double reference) and in both builds the float error compares

@@ -33,7 +33,12 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
 
 def refuse_mimic_joints(model: RobotModel) -> None:
     """Logs, limits and effect columns of the measured side are per joint, and a mimic joint is
-    no coordinate: a robot with mimic joints is refused in one line naming the first."""
+    no coordinate: a robot with mimic joints is refused in one line naming the first, and so is
+    a tree closed by loops (its dependent joints are none either)."""
+    if model.loops:
+        raise RobotDescriptionError(model.source, "loops", "identify, discover and excite take robots without closed "
+                                    "loops (the regressor Y of a parallelogram linkage is generated in its independent "
+                                    "joints: fit it by least squares, docs/tutorials/closed_loops.md)")
     for joint in model.joints:
         if joint.mimic is not None:
             raise RobotDescriptionError(model.source, f"joint '{joint.name}' mimic",

@@ -64,7 +64,8 @@ import sympy
 
 from dataclasses import replace
 
-from ..model.robot_model import Frame, Joint, Link, Mimic, RobotDescriptionError, RobotModel, check_inertia, check_name
+from ..model.robot_model import (DIRECTIONS, Frame, Joint, Link, LOOP_DIRECTIONS, LOOP_TYPES, LoopClosure, Mimic,
+                                 RobotDescriptionError, RobotModel, check_inertia, check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, exact_length, rotation, rpy_xyz, translation,
                                unit_axis)
 from .input_bounds import (MAX_URDF_BYTES, check_angle, check_number, check_quantity, degrees_hint, read_bounded,
@@ -147,6 +148,19 @@ class _Tree:
     parent_joint: dict
     child_joints: dict
     root: str
+    loop_joints: tuple = ()     # <loop_joint> elements (:class:`_UrdfLoop`), in document order
+    actuated: tuple = ()        # joints named by <transmission> elements, in document order
+
+
+@dataclass(frozen=True)
+class _UrdfLoop:
+    """A ``<loop_joint name type [directions]>`` with its ``<link1 link xyz rpy/>`` and
+    ``<link2 .../>`` (Isaac Sim's URDF extension for closed chains), as written."""
+
+    name: str
+    kind: str
+    links: tuple                # (link name, _Origin) of link1, link2
+    directions: tuple | None    # as written, None: the type's
 
 
 # ------------------------------------------------------------------ numbers and elements
@@ -193,8 +207,9 @@ def _attribute(element: ET.Element, name: str, reading: Reading, field: str, def
 
 
 def _read_origin(element: ET.Element | None, reading: Reading, field: str) -> _Origin:
-    """An optional ``<origin xyz rpy>`` (absent parts zero)."""
-    field = f"{field} origin"
+    """An optional ``<origin xyz rpy>`` (absent parts zero; a loop joint's link element
+    carries the same attributes)."""
+    field = f"{field} origin" if element is None or element.tag == "origin" else field
     if element is None:
         return _Origin((0.0,) * 3, (0.0,) * 3, field)
     return _Origin(_floats(element.get("xyz", "0 0 0"), 3, reading, f"{field} xyz", "length"),
@@ -349,6 +364,9 @@ def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
                                 f"(joint '{parent_joint[joint.child].name}'): not a tree")
         parent_joint[joint.child] = joint
         child_joints[joint.parent].append(joint)
+    loops = tuple(_read_loop(element, index, links, reading) for index, element in enumerate(robot.findall("loop_joint")))
+    actuated = tuple(joint.get("name") for element in robot.findall("transmission")
+                     for joint in element.findall("joint") if joint.get("name"))
     roots = [name for name in links if name not in parent_joint]
     if len(roots) > 1:
         raise _error(reading, "<robot>", f"several root links, not connected by joints: {', '.join(roots)}")
@@ -356,7 +374,41 @@ def _read_tree(robot: ET.Element, reading: Reading) -> _Tree:
     if len(reached) < len(links):
         cycle = [name for name in links if name not in reached]
         raise _error(reading, "<robot>", f"the joints between links {', '.join(cycle)} form a cycle")
-    return _Tree(links, parent_joint, child_joints, roots[0])
+    return _Tree(links, parent_joint, child_joints, roots[0], loops, actuated)
+
+
+def _read_loop(element: ET.Element, index: int, links: dict, reading: Reading) -> _UrdfLoop:
+    """A ``<loop_joint>``: its type (``spherical``, as Isaac Sim's importer reads; ``revolute``
+    and ``fixed`` too), the two links with the loop frame's origin on each (``xyz``, ``rpy``;
+    the second element may be written ``<link2>`` or, as Isaac Sim's documentation does, a
+    second ``<link1>``), and optionally ``directions="x y"`` (a planar linkage's two in-plane
+    translations)."""
+    name = _name(element, "loop_joint", index, reading)
+    field = f"loop_joint '{name}'"
+    kind = element.get("type")
+    if kind not in LOOP_TYPES:
+        raise _error(reading, f"{field} type", f"expected one of {', '.join(LOOP_TYPES)}, got {kind!r}")
+    ends = element.findall("link1") + element.findall("link2")
+    if len(ends) != 2:
+        raise _error(reading, field, f"expected two links (<link1 link=\"...\"/> and <link2 .../>), got {len(ends)}")
+    placed = []
+    for k, end in enumerate(ends):
+        where = f"{field} link{k + 1}"
+        link = end.get("link")
+        if not link or link not in links:
+            raise _error(reading, f"{where} link", f"link {shown(link)} is not defined{_closest(link or '', links)}")
+        placed.append((link, _read_origin(end, reading, where)))
+    if placed[0][0] == placed[1][0]:
+        raise _error(reading, f"{field} link2", "a loop joint joins two different links")
+    directions = element.get("directions")
+    if directions is not None:
+        directions = tuple(directions.split())
+        allowed = LOOP_DIRECTIONS[kind]
+        wrong = [d for d in directions if d not in allowed]
+        if wrong or not directions or len(set(directions)) != len(directions):
+            raise _error(reading, f"{field} directions", f"expected distinct directions among "
+                         f"{', '.join(allowed)} (a {kind} loop joint), got {shown(element.get('directions'))}")
+    return _UrdfLoop(name, kind, tuple(placed), directions)
 
 
 def _read_robot(text: str | bytes, reading: Reading) -> tuple[str, _Tree]:
@@ -641,6 +693,9 @@ def _chain(name: str, tree: _Tree, base: str | None, tip: str | None, reading: R
     """The serial chain from ``base`` to ``tip``: fixed joints merged into the next moving
     joint or, after the last one, into the tool; moving joints off the chain locked at 0."""
     source = reading.source
+    if tree.loop_joints:
+        raise _error(reading, f"loop_joint '{tree.loop_joints[0].name}'", "loop joints close the tree: read the URDF "
+                     "as a tree (--tree)")
     base = tree.root if base is None else _link_name(tree, base, "--base", reading)
     tip = _default_tip(tree, base, reading) if tip is None else _link_name(tree, tip, "--tip", reading)
     path = _path(tree, base, tip, reading)
@@ -705,9 +760,47 @@ def _whole_tree(name: str, tree: _Tree, frames, floating_base: bool, reading: Re
         if frame not in placed:
             raise _error(reading, "--frames", f"no link named '{frame}' in the URDF{_closest(frame, placed)}")
         chosen.append(placed[frame])
+    loops, independent = _loops(tree, joints, placed, floating_base, reading)
     return RobotModel(name=name, convention="tree", joints=tuple(joints), parents=tuple(parents), links=links,
                       root=root, frames=tuple(chosen), floating_base=floating_base, gravity=GRAVITY, source=source,
-                      base_name=tree.root, notes=tuple(reading.notes))
+                      base_name=tree.root, notes=tuple(reading.notes), loops=loops, independent=independent)
+
+
+def _loops(tree: _Tree, joints: list, placed: dict, floating_base: bool, reading: Reading) -> tuple:
+    """The tree's ``<loop_joint>`` s as :class:`LoopClosure` s (each frame on the body its
+    link is lumped into) and the independent joints: those a ``<transmission>`` drives (the
+    actuated ones), None without transmissions (the loops' rule decides). The model is
+    assembled at q = 0 (as Isaac Sim's and SDFormat's closed chains are written)."""
+    if not tree.loop_joints:
+        return (), None
+    first = f"loop_joint '{tree.loop_joints[0].name}'"
+    if floating_base:
+        raise _error(reading, first, "closed loops on a floating base are not supported (yet): read the tree with a "
+                     "fixed base")
+    if any(joint.mimic is not None for joint in joints):
+        raise _error(reading, first, "mimic joints and closed loops in one tree are not supported (yet)")
+    names = {joint.name for joint in joints}
+    loops = []
+    for loop in tree.loop_joints:
+        if loop.name in names or loop.name in {other.name for other in loops}:
+            raise _error(reading, f"loop_joint '{loop.name}' name", "already names a joint or another loop joint")
+        frames = [placed[link] for link, _ in loop.links]
+        if frames[0].body == frames[1].body:
+            raise _error(reading, f"loop_joint '{loop.name}'", f"links '{loop.links[0][0]}' and '{loop.links[1][0]}' "
+                         "are one rigid body (fixed to each other): the loop joint closes nothing")
+        placements = [frame.placement * _placement(origin, reading) for frame, (_, origin) in zip(frames, loop.links)]
+        directions = loop.directions or LOOP_DIRECTIONS[loop.kind]
+        loops.append(LoopClosure(loop.name, loop.kind, frames[0].body, placements[0], frames[1].body, placements[1],
+                                 tuple(d for d in DIRECTIONS if d in directions)))
+    independent = None
+    if tree.actuated:
+        index = {joint.name: k for k, joint in enumerate(joints)}
+        for name in tree.actuated:
+            if name not in index:
+                raise _error(reading, f"transmission joint '{name}'", "names no moving joint of the tree "
+                             "(the transmissions' joints are the loops' independent coordinates)")
+        independent = tuple(sorted({index[name] for name in tree.actuated}))
+    return tuple(loops), independent
 
 
 def load_urdf(path: str | Path, base: str | None = None, tip: str | None = None, snap_angles: bool = True, *,

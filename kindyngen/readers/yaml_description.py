@@ -23,8 +23,9 @@ from pathlib import Path
 
 import sympy
 
-from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, Mimic, RobotDescriptionError,
-                                 RobotModel, check_inertia, check_name)
+from ..model.robot_model import (CONVENTIONS, DHRow, DIRECTIONS, Frame, Friction, Joint, Link, LOOP_DIRECTIONS,
+                                 LOOP_TYPES, LoopClosure, Mimic, RobotDescriptionError, RobotModel, check_inertia,
+                                 check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
 from .constant_expressions import NAMESPACE, parse_constant
@@ -312,7 +313,8 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
     return check_name(name, source, "name")
 
 
-TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
+TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base", "loops", "independent", "reference")
+LOOP_KEYS = ("name", "type", "link1", "origin1", "link2", "origin2", "directions")
 TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent", "mimic")
 BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
 
@@ -339,6 +341,9 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     """
     tree = tree or frames is not None or floating_base
     reading = Reading(source, snap_angles)
+    if not tree and isinstance(data, dict) and "loops" in data:
+        raise RobotDescriptionError(source, "loops", "closed loops join the bodies of a tree: read the description "
+                                    "as a tree (--tree), its joints named and placed by parent")
     name = _named_mapping(data, TREE_TOP_KEYS if tree else TOP_KEYS, source)
     convention = _require(data, "dh", source, "")
     if tree and convention != FRAMES:
@@ -489,10 +494,115 @@ def _tree_model(data, name, gravity, joints, parents, index, links, frames, floa
             close = difflib.get_close_matches(str(frame), list(named), n=1)
             raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
                                         + (f"; closest: {close[0]}" if close else ""))
+    loops, independent, reference = _loops(data, joints, named, floating_base, reading)
     return RobotModel(name=name.strip(), convention="tree", joints=joints, parents=parents,
                       links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
                       floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
-                      notes=tuple(reading.notes))
+                      notes=tuple(reading.notes), loops=loops, independent=independent, reference=reference)
+
+
+def _loops(data: dict, joints: tuple, named: dict, floating_base: bool, reading: Reading) -> tuple:
+    """``(loops, independent, reference)`` of a tree: its ``loops`` entries as
+    :class:`LoopClosure` s (each body named by its joint, or ``base``), the joints named in
+    ``independent`` (indices, in joint order) and the ``reference`` configuration (exact, per
+    joint; None: all zero). Without ``loops`` the other two keys are refused."""
+    source = reading.source
+    if "loops" not in data:
+        for key in ("independent", "reference"):
+            if key in data:
+                raise RobotDescriptionError(source, key, "applies to a tree closed by loops (no 'loops' given)")
+        return (), None, None
+    if floating_base:
+        raise RobotDescriptionError(source, "loops", "closed loops on a floating base are not supported (yet): "
+                                    "read the tree with a fixed base")
+    if any(joint.mimic is not None for joint in joints):
+        first = next(k for k, joint in enumerate(joints) if joint.mimic is not None)
+        raise RobotDescriptionError(source, f"joints[{first}].mimic", "mimic joints and closed loops in one tree are "
+                                    "not supported (yet): write the coupling as a loop or drop the loops")
+    rows = data["loops"]
+    if not isinstance(rows, list) or not rows:
+        raise RobotDescriptionError(source, "loops", f"expected a non-empty list of loop joints, got {shown(rows)}")
+    loops, names = [], set()
+    for k, row in enumerate(rows):
+        loop = _loop(row, named, reading, f"loops[{k}]")
+        if loop.name in names or loop.name in named:
+            raise RobotDescriptionError(source, f"loops[{k}].name", f"{shown(loop.name)} already names a joint or "
+                                        "another loop: names are unique")
+        names.add(loop.name)
+        loops.append(loop)
+    independent = None
+    if "independent" in data:
+        value = data["independent"]
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise RobotDescriptionError(source, "independent", f"expected a list of joint names, got {shown(value)}")
+        for k, joint_name in enumerate(value):
+            if joint_name not in named or joint_name == BASE_NAME:
+                close = difflib.get_close_matches(joint_name, [n for n in named if n != BASE_NAME], n=1)
+                raise RobotDescriptionError(source, f"independent[{k}]", f"no joint named {shown(joint_name)}"
+                                            + (f"; closest: {close[0]}" if close else ""))
+        if len(set(value)) != len(value):
+            raise RobotDescriptionError(source, "independent", "a joint is named twice")
+        independent = tuple(sorted(named[v] for v in value))
+    reference = None
+    if "reference" in data:
+        value = data["reference"]
+        if not isinstance(value, dict):
+            raise RobotDescriptionError(source, "reference", f"expected a mapping of joint names to positions, got "
+                                        f"{shown(value)}")
+        values = [sympy.Integer(0)] * len(joints)
+        for joint_name, position in value.items():
+            field = f"reference.{joint_name}"
+            if joint_name not in named or joint_name == BASE_NAME:
+                close = difflib.get_close_matches(str(joint_name), [n for n in named if n != BASE_NAME], n=1)
+                raise RobotDescriptionError(source, field, "no joint of that name"
+                                            + (f"; closest: {close[0]}" if close else ""))
+            j = named[joint_name]
+            quantity = "length" if joints[j].prismatic else "coefficient"
+            values[j] = _rational(position, source, field, quantity)
+            if not joints[j].prismatic:
+                check_angle(float(values[j]), source, field)
+        reference = tuple(values)
+    return tuple(loops), independent, reference
+
+
+def _loop(row, named: dict, reading: Reading, field: str) -> LoopClosure:
+    """One ``loops`` entry: ``{name, type, link1, origin1, link2, origin2, directions}``."""
+    source = reading.source
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(LOOP_KEYS)}, got {shown(row)}")
+    _check_keys(row, LOOP_KEYS, source, field + ".")
+    name = _require(row, "name", source, field + ".")
+    if not isinstance(name, str) or not name:
+        raise RobotDescriptionError(source, f"{field}.name", f"expected a non-empty string, got {shown(name)}")
+    check_name(name, source, f"{field}.name")
+    kind = _require(row, "type", source, field + ".")
+    if kind not in LOOP_TYPES:
+        raise RobotDescriptionError(source, f"{field}.type", f"expected one of {LOOP_TYPES}, got {shown(kind)}")
+    bodies = []
+    for key in ("link1", "link2"):
+        body = _require(row, key, source, field + ".")
+        if not isinstance(body, str) or body not in named:
+            close = difflib.get_close_matches(str(body), list(named), n=1)
+            raise RobotDescriptionError(source, f"{field}.{key}", f"no link named {shown(body)} (a joint's link, or "
+                                        f"'{BASE_NAME}')" + (f"; closest: {close[0]}" if close else ""))
+        bodies.append(named[body])
+    if bodies[0] == bodies[1]:
+        raise RobotDescriptionError(source, f"{field}.link2", "a loop joint joins two different links")
+    placements = [parse_origin(row.get(key, {}), reading, f"{field}.{key}") for key in ("origin1", "origin2")]
+    allowed = LOOP_DIRECTIONS[kind]
+    directions = row.get("directions", list(allowed))
+    if not isinstance(directions, list) or not directions or not all(isinstance(d, str) for d in directions):
+        raise RobotDescriptionError(source, f"{field}.directions", f"expected a non-empty list of {', '.join(allowed)}, "
+                                    f"got {shown(directions)}")
+    for k, direction in enumerate(directions):
+        if direction not in allowed:
+            reason = (f"a {kind} loop joint constrains {', '.join(allowed)}" if direction in DIRECTIONS
+                      else f"expected one of {', '.join(DIRECTIONS)}")
+            raise RobotDescriptionError(source, f"{field}.directions[{k}]", f"{shown(direction)}: {reason}")
+    if len(set(directions)) != len(directions):
+        raise RobotDescriptionError(source, f"{field}.directions", "a direction is named twice")
+    return LoopClosure(name=name, kind=kind, body_a=bodies[0], placement_a=placements[0], body_b=bodies[1],
+                       placement_b=placements[1], directions=tuple(d for d in DIRECTIONS if d in directions))
 
 
 def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = None,

@@ -138,7 +138,10 @@ def _link(link: Link) -> dict:
 
 def describe(model: RobotModel) -> dict:
     """The YAML data (``dh: none``) of ``model``: joints by origin and axis, links, payload,
-    tool, effects. Frames and joint order are the model's."""
+    tool, effects. Frames and joint order are the model's. A tree closed by loops is refused
+    (ValueError): its loops would be lost."""
+    if model.has_loops:
+        raise ValueError("closed loops (loop joints) are not written by describe: keep the description as it is")
     data = {"name": model.name, "dh": "none", "gravity": [_number(v) for v in model.gravity],
             "joints": [_joint(j, {**_effects(j.friction, j.armature, j), **_mimic(j, model.joints)})
                        for j in model.joints],
