@@ -12,10 +12,11 @@ from .optimize import Program
 def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
              scalar: str = "double", batch: bool = True, lanes: bool = True) -> dict:
     """The interface document. A C library generated with ``--scalar float`` says so
-    ("c_scalar": "float": every C port is float; Python and CasADi stay double) and has no
-    ik_dls in C; ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false. Default
-    (double, batch, lanes) documents carry none of these keys. A function whose C single call
-    is a lane program has its cost in "opcount": "c_lanes"."""
+    ("c_scalar": "float", and "dtype": "float" for every port that is not an int; Python and
+    CasADi stay double) and has no ik_dls in C (its entry lists the languages it is in, whose
+    ports are double); ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false.
+    Default (double, batch, lanes) documents carry none of these keys. A function whose C
+    single call is a lane program has its cost in "opcount": "c_lanes"."""
     dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
     if scalar == "float":
         for entry in dls:
@@ -38,9 +39,23 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "summary": p.function.summary,
             "conventions": p.function.conventions,
             "c_symbol": f"{model.identifier}_{p.function.name}",
-            "inputs": [port.to_json() for port in p.function.inputs],
-            "outputs": [port.to_json() for port in p.function.outputs],
+            "inputs": [_port(port, scalar) for port in p.function.inputs],
+            "outputs": [_port(port, scalar) for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
                         **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
         } for p in programs] + dls,
     }
+
+
+def _port(port, scalar: str) -> dict:
+    """A port's entry; its "dtype" is the C's scalar (``float`` in a float build) or "int".
+    The Python, CasADi, JAX and MATLAB modules compute in double whatever the C's type.
+
+    >>> from kindyngen.algorithms.symbolic import Port
+    >>> _port(Port("q", (7,), "joint angles", "rad"), "float")["dtype"], _port(Port("s", (8,), "", "", "int"), "float")["dtype"]
+    ('float', 'int')
+    """
+    entry = port.to_json()
+    if entry["dtype"] == "double":
+        entry["dtype"] = scalar
+    return entry
