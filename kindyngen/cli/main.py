@@ -98,6 +98,7 @@ def load(path, args):
 
 
 def _cmd_generate(args) -> int:
+    from ..codegen.catalog import derived_names
     from ..codegen.pipeline import generate
     only = set(args.functions) if args.functions else None
     if args.scalar == "float" and "python_c" in args.lang:
@@ -112,6 +113,8 @@ def _cmd_generate(args) -> int:
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
+        for name in sorted((derived_names(only) or set()) - (only or set())):
+            print(f"note: --functions: {name} generated too (ik_dls iterates it)", file=sys.stderr)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -209,8 +212,8 @@ def _cmd_build_python(args) -> int:
 
 
 def _all_function_names() -> tuple[str, ...]:
-    from ..codegen.catalog import NAMES
-    return NAMES
+    from ..codegen.catalog import SELECTABLE_NAMES
+    return SELECTABLE_NAMES
 
 
 def _names_argument(what: str, known, allow_empty: bool = False):
@@ -474,7 +477,8 @@ def parser() -> argparse.ArgumentParser:
                         "Cortex-M4F (float literals, sinf/cosf/sqrtf, a float sincos kernel; no ik_dls; "
                         "python_c is left out)")
     g.add_argument("--functions", type=_function_names, metavar="NAME,NAME,...",
-                   help="generate only these functions, e.g. fk_hom,jacobian,tau (default: all that apply)")
+                   help="generate only these functions, e.g. fk_hom,jacobian,tau; ik_dls brings the fk_hom and "
+                        "jacobian it iterates (default: all that apply)")
     g.add_argument("--no-batch", action="store_true",
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--no-lanes", action="store_true",

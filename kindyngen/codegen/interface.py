@@ -10,14 +10,15 @@ from .optimize import Program
 
 
 def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
-             scalar: str = "double", batch: bool = True, lanes: bool = True) -> dict:
+             scalar: str = "double", batch: bool = True, lanes: bool = True, ik_dls: bool = True) -> dict:
     """The interface document. A C library generated with ``--scalar float`` says so
     ("c_scalar": "float", and "dtype": "float" for every port that is not an int; Python and
     CasADi stay double) and has no ik_dls in C (its entry lists the languages it is in, whose
     ports are double); ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false.
     Default (double, batch, lanes) documents carry none of these keys. A function whose C
-    single call is a lane program has its cost in "opcount": "c_lanes"."""
-    dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
+    single call is a lane program has its cost in "opcount": "c_lanes". ``ik_dls``: whether the
+    iterative IK was asked for (``--functions``); it is listed where it applies."""
+    dls = [dls_manifest_entry(model, programs)] if ik_dls and dls_applies(model, programs) else []
     if scalar == "float":
         for entry in dls:
             entry["languages"] = [lang for lang in entry["languages"] if lang != "c"]
@@ -59,3 +60,4 @@ def _port(port, scalar: str) -> dict:
     if entry["dtype"] == "double":
         entry["dtype"] = scalar
     return entry
+

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
-from .catalog import derive_all
+from .catalog import derive_all, derived_names, wants_ik_dls
 from .interface import manifest
 from .optimize import Program, optimize
 from .render import RENDERERS, casadi_builders
@@ -103,8 +103,10 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     # --scalar float: the IK with float's tolerances, in every language written (the python
     # module beside float C is its double reference) and in both builds the float error compares
-    programs = build_programs(model, params, only=only, progress=progress, scalar=scalar)
-    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
+    # --functions ik_dls: fk_hom and jacobian too (it iterates them); ik_dls only where asked for
+    dls = wants_ik_dls(only)
+    programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar)
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes, ik_dls=dls)
     _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) if progress else ():
@@ -118,8 +120,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     for lang in languages:
         options = ({"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error, "lanes": lanes}
                    if lang == "c" else {})
+        options["ik_dls"] = dls
         for filename, text in RENDERERS[lang](model, programs, **options).items():
             _write(out / lang / filename, text)
         if lang == "casadi":
-            save_casadi_functions(casadi_builders(model, programs), out / lang)
+            save_casadi_functions(casadi_builders(model, programs, ik_dls=dls), out / lang)
     return out
