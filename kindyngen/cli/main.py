@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..algorithms.base_parameters import BaseParameterError
+from ..codegen.bundles import BundleError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
 from ..json_text import strict_json
@@ -109,7 +110,8 @@ def _cmd_generate(args) -> int:
     for path in args.robots:
         model = load(path, args)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
+                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
+                       bundles=tuple(args.bundle or ()))
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
@@ -242,6 +244,15 @@ def _candidate_names():
 
 _languages = _names_argument("language", lambda: GENERATE_LANGS)
 _function_names = _names_argument("function", _all_function_names)
+
+
+def _bundle(text: str):
+    """An argparse type: ``NAME=FUNCTION,FUNCTION,...`` (kindyngen.codegen.bundles.parse_option)."""
+    from ..codegen.bundles import parse_option
+    try:
+        return parse_option(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 _effects = _names_argument("effect", _effect_names, allow_empty=True)
 _candidates = _names_argument("candidate", _candidate_names)
 
@@ -479,6 +490,10 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--functions", type=_function_names, metavar="NAME,NAME,...",
                    help="generate only these functions, e.g. fk_hom,jacobian,tau; ik_dls brings the fk_hom and "
                         "jacobian it iterates (default: all that apply)")
+    g.add_argument("--bundle", type=_bundle, action="append", metavar="NAME=FUNCTION,FUNCTION,...",
+                   help="also generate NAME, one function computing all these functions' outputs with one CSE "
+                        "over them (the sin/cos of q once), e.g. step=fk_hom,jacobian,M,g,tau (repeatable; a "
+                        "description's bundles: section adds its own)")
     g.add_argument("--no-batch", action="store_true",
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--no-lanes", action="store_true",
@@ -646,7 +661,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
         return args.run(args)
-    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError, BundleError) as exc:
         message = str(exc)
     except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)

@@ -16,7 +16,8 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
     CasADi stay double) and has no ik_dls in C (its entry lists the languages it is in, whose
     ports are double); ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false.
     Default (double, batch, lanes) documents carry none of these keys. A function whose C
-    single call is a lane program has its cost in "opcount": "c_lanes". ``ik_dls``: whether the
+    single call is a lane program has its cost in "opcount": "c_lanes"; a bundle says what it
+    bundles in "bundle" (:func:`_bundle`). ``ik_dls``: whether the
     iterative IK was asked for (``--functions``); it is listed where it applies."""
     dls = [dls_manifest_entry(model, programs)] if ik_dls and dls_applies(model, programs) else []
     if scalar == "float":
@@ -44,6 +45,7 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "outputs": [_port(port, scalar) for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
                         **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
+            **_bundle(p),
         } for p in programs] + dls,
     }
 
@@ -61,3 +63,11 @@ def _port(port, scalar: str) -> dict:
         entry["dtype"] = scalar
     return entry
 
+
+def _bundle(program: Program) -> dict:
+    """A bundle's "bundle" entry: its members (their outputs' order) and their count after CSE
+    called one by one (kindyngen/codegen/bundles.py); nothing for other functions."""
+    metadata = program.function.metadata
+    if "members" not in metadata:
+        return {}
+    return {"bundle": {"members": list(metadata["members"]), "members_after": metadata["members_after"].to_json()}}

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
+from .bundles import bundle_programs, requested
 from .catalog import derive_all, derived_names, wants_ik_dls
 from .interface import manifest
 from .optimize import Program, optimize
@@ -48,15 +49,18 @@ class Progress:
 
 
 def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True,
-                   scalar: str = "double") -> list[Program]:
-    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``)."""
+                   scalar: str = "double", bundles=()) -> list[Program]:
+    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``),
+    then its description's bundles and ``bundles`` (--bundle: kindyngen/codegen/bundles.py)."""
+    bundles = requested(model, bundles)          # checked before anything is derived
     functions = derive_all(model, params, only, scalar)
-    bar = Progress(f"{model.identifier}", len(functions)) if progress else None
+    bar = Progress(f"{model.identifier}", len(functions) + len(bundles)) if progress else None
     programs = []
     for f in functions:
         programs.append(optimize(f))
         if bar:
             bar.step(f.name)
+    programs += bundle_programs(model, bundles, programs, params, scalar, bar.step if bar else None)
     if bar:
         bar.close()
     return programs
@@ -95,17 +99,19 @@ def measure_float_error(model, programs, document: dict, trig: str, lanes: bool 
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, lanes: bool = True) -> Path:
+             batch: bool = True, lanes: bool = True, bundles=()) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
-    of lane programs as loops over lanes): see render.render_c."""
+    of lane programs as loops over lanes): see render.render_c; ``bundles``: bundles.Bundle
+    requests (--bundle) besides the description's."""
     out = Path(out_root) / model.identifier
     # --scalar float: the IK with float's tolerances, in every language written (the python
     # module beside float C is its double reference) and in both builds the float error compares
     # --functions ik_dls: fk_hom and jacobian too (it iterates them); ik_dls only where asked for
     dls = wants_ik_dls(only)
-    programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar)
+    programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar,
+                              bundles=bundles)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes, ik_dls=dls)
     _write(out / "functions.json", strict_json(document, indent=1) + "\n")
     base_params = base_params_document(model)          # None for robots with symbolic lengths

@@ -167,6 +167,9 @@ class RobotModel:
     base_name: str = ""                             # the base frame's name (URDF root link)
     flange_name: str = ""                           # the last link's name
     notes: tuple[str, ...] = ()                     # what reading the description changed, for the user
+    # the description's bundles: (name, member function names), each generated as one function
+    # (kindyngen/codegen/bundles.py checks the names against the function catalog)
+    bundles: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self):
         if self.parents is None:

@@ -119,7 +119,7 @@ def _link(link: Link) -> dict:
 
 def describe(model: RobotModel) -> dict:
     """The YAML data (``dh: none``) of ``model``: joints by origin and axis, links, payload,
-    tool, effects. Frames and joint order are the model's."""
+    tool, effects, bundles. Frames and joint order are the model's."""
     data = {"name": model.name, "dh": "none", "gravity": [_number(v) for v in model.gravity],
             "joints": [_joint(j, _effects(j.friction, j.armature, j)) for j in model.joints],
             "links": [_link(link) for link in model.links]}
@@ -129,4 +129,6 @@ def describe(model: RobotModel) -> dict:
         data["coulomb_smoothing"] = _number(model.coulomb_smoothing)
     if not model.tool.is_identity:
         data["tool"] = origin(model.tool)
+    if model.bundles:
+        data["bundles"] = {name: list(members) for name, members in model.bundles}
     return data
