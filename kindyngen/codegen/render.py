@@ -508,13 +508,21 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
                sincos="kdg_sincosf" if single else "kdg_sincos", sincos_half=HALF_KERNEL,
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
-               sincos_kernel=kernel_c_float() if single else _kernels(ctx["functions"], batch),
+               sincos_kernel=_float_kernel(ctx["functions"], batch) if single else _kernels(ctx["functions"], batch),
                float_error={name: e.text() for name, e in (float_error or {}).items()})
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
             f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
             "CMakeLists.txt": _environment(cmake_comment).get_template("c/CMakeLists.txt.j2").render(ctx)}
+
+
+def _float_kernel(functions, batch: bool) -> str:
+    """The float sincos kernel where a single call or a batch variant calls it, else nothing (a
+    static function no call uses is a compiler warning: a float library of ik_hom alone)."""
+    used = any(f.half or f.angles or f.arguments for f in functions) or (
+        batch and any(f.batch.angles or f.batch.arguments for f in functions))
+    return kernel_c_float() if used else ""
 
 
 def _kernels(functions, batch: bool) -> str:
