@@ -329,3 +329,13 @@ def test_cmake_build_is_bit_exact_with_the_strict_build(builds, tmp_path):
                                        timeout=HANG_GUARD_S).stdout.split()
     assert len(outputs["strict"]) == 121
     assert outputs["cmake"] == outputs["strict"]
+
+
+def test_float_library_without_sin_of_q_compiles_strictly(tmp_path):
+    """A float library whose functions take no joint angles (ik_hom alone) has no sincos kernel
+    to leave unused: strict C99 with -Wall -Werror compiles it (the kernel was printed anyway,
+    an unused static function)."""
+    folder, _ = _generate(tmp_path, "--scalar", "float", "--functions", "ik_hom")
+    subprocess.run(["cc", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", "-c",
+                    str(folder / "c" / "lwr4.c"), "-o", "/dev/null"], check=True, timeout=HANG_GUARD_S)
+    assert "kdg_sincosf" not in (folder / "c" / "lwr4.c").read_text()
