@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..algorithms.base_parameters import BaseParameterError
+from ..codegen.bundles import BundleError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
 from ..json_text import strict_json
@@ -117,6 +118,7 @@ def writable_out(out, replaced: bool = True) -> Path:
 
 def _cmd_generate(args) -> int:
     from ..codegen.float32 import FloatRangeError
+    from ..codegen.catalog import derived_names
     from ..codegen.pipeline import generate
     writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
@@ -129,12 +131,15 @@ def _cmd_generate(args) -> int:
         model = load(path, args)
         try:
             out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                           only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
+                           only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
+                           bundles=tuple(args.bundle or ()))
         except FloatRangeError as exc:      # a derived constant float cannot hold: the description's numbers
             raise UsageError(f"{path}: --scalar float: {exc}; generate it with --scalar double") from None
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
+        for name in sorted((derived_names(only) or set()) - (only or set())):
+            print(f"note: --functions: {name} generated too (ik_dls iterates it)", file=sys.stderr)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -233,8 +238,8 @@ def _cmd_build_python(args) -> int:
 
 
 def _all_function_names() -> tuple[str, ...]:
-    from ..codegen.catalog import NAMES
-    return NAMES
+    from ..codegen.catalog import SELECTABLE_NAMES
+    return SELECTABLE_NAMES
 
 
 def _names_argument(what: str, known, allow_empty: bool = False):
@@ -263,6 +268,15 @@ def _candidate_names():
 
 _languages = _names_argument("language", lambda: GENERATE_LANGS)
 _function_names = _names_argument("function", _all_function_names)
+
+
+def _bundle(text: str):
+    """An argparse type: ``NAME=FUNCTION,FUNCTION,...`` (kindyngen.codegen.bundles.parse_option)."""
+    from ..codegen.bundles import parse_option
+    try:
+        return parse_option(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 _effects = _names_argument("effect", _effect_names, allow_empty=True)
 _candidates = _names_argument("candidate", _candidate_names)
 
@@ -526,7 +540,12 @@ def parser() -> argparse.ArgumentParser:
                         "Cortex-M4F (float literals, sinf/cosf/sqrtf, a float sincos kernel; no ik_dls; "
                         "python_c is left out)")
     g.add_argument("--functions", type=_function_names, metavar="NAME,NAME,...",
-                   help="generate only these functions, e.g. fk_hom,jacobian,tau (default: all that apply)")
+                   help="generate only these functions, e.g. fk_hom,jacobian,tau; ik_dls brings the fk_hom and "
+                        "jacobian it iterates (default: all that apply)")
+    g.add_argument("--bundle", type=_bundle, action="append", metavar="NAME=FUNCTION,FUNCTION,...",
+                   help="also generate NAME, one function computing all these functions' outputs with one CSE "
+                        "over them (the sin/cos of q once), e.g. step=fk_hom,jacobian,M,g,tau (repeatable; a "
+                        "description's bundles: section adds its own)")
     g.add_argument("--no-batch", action="store_true",
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--no-lanes", action="store_true",
@@ -734,7 +753,7 @@ def _run(argv) -> int:
     args = parser().parse_args(argv)
     try:
         return args.run(args)
-    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError, BundleError) as exc:
         message = str(exc)
     except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)

@@ -164,6 +164,12 @@ LOOP_FUNCTIONS: tuple[tuple[str, Builder], ...] = (
 )
 
 NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS) + tuple(name for name, _ in LOOP_FUNCTIONS)
+# the iterative IK (kindyngen/ik/damped_least_squares.py): no derivation of its own, it iterates the
+# generated fk_hom and jacobian, and is written wherever those are (an arm's one flange pose)
+ITERATIVE_NAMES: tuple[str, ...] = ("ik_dls",)
+ITERATED = {"ik_dls": ("fk_hom", "jacobian")}
+# every name ``generate --functions`` takes
+SELECTABLE_NAMES: tuple[str, ...] = NAMES + ITERATIVE_NAMES
 # the functions a branched tree (or a floating base) read as a tree gets
 TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
 
@@ -232,6 +238,26 @@ def loop_notes(model: RobotModel, only=None) -> list[str]:
             notes.append(f"{model.identifier}: closed loops with a configuration-dependent G: {', '.join(missing)} "
                          "not generated")
     return notes
+def derived_names(only):
+    """The derivations a selection ``only`` (None: everything) needs: its own, and those the
+    iterative functions it names iterate.
+
+    >>> sorted(derived_names({"ik_dls", "M"})), derived_names(None)
+    (['M', 'fk_hom', 'ik_dls', 'jacobian'], None)
+    """
+    if only is None:
+        return None
+    return set(only).union(*(ITERATED.get(name, ()) for name in only))
+
+
+def wants_ik_dls(only) -> bool:
+    """Whether a selection ``only`` (None: everything) asks for ik_dls, which is then written
+    where it applies (an arm's flange: kindyngen.ik.damped_least_squares.applies).
+
+    >>> wants_ik_dls(None), wants_ik_dls({"fk_hom", "jacobian"}), wants_ik_dls({"ik_dls"})
+    (True, False, True)
+    """
+    return only is None or "ik_dls" in only
 
 
 def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

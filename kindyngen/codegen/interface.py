@@ -12,13 +12,16 @@ from .optimize import Program
 
 
 def manifest(model: RobotModel, programs: list[Program], params: str, trig: str = "kernel",
-             scalar: str = "double", batch: bool = True, lanes: bool = True) -> dict:
+             scalar: str = "double", batch: bool = True, lanes: bool = True, ik_dls: bool = True) -> dict:
     """The interface document. A C library generated with ``--scalar float`` says so
-    ("c_scalar": "float": every C port is float; Python and CasADi stay double) and has no
-    ik_dls in C; ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false. Default
-    (double, batch, lanes) documents carry none of these keys. A function whose C single call
-    is a lane program has its cost in "opcount": "c_lanes"."""
-    dls = [dls_manifest_entry(model, programs)] if dls_applies(model, programs) else []
+    ("c_scalar": "float", and "dtype": "float" for every port that is not an int; Python and
+    CasADi stay double) and has no ik_dls in C (its entry lists the languages it is in, whose
+    ports are double); ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false.
+    Default (double, batch, lanes) documents carry none of these keys. A function whose C
+    single call is a lane program has its cost in "opcount": "c_lanes"; a bundle says what it
+    bundles in "bundle" (:func:`_bundle`). ``ik_dls``: whether the
+    iterative IK was asked for (``--functions``); it is listed where it applies."""
+    dls = [dls_manifest_entry(model, programs)] if ik_dls and dls_applies(model, programs) else []
     if scalar == "float":
         for entry in dls:
             entry["languages"] = [lang for lang in entry["languages"] if lang != "c"]
@@ -46,10 +49,11 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "summary": p.function.summary,
             "conventions": p.function.conventions,
             "c_symbol": f"{model.identifier}_{p.function.name}",
-            "inputs": [port.to_json() for port in p.function.inputs],
-            "outputs": [port.to_json() for port in p.function.outputs],
+            "inputs": [_port(port, scalar) for port in p.function.inputs],
+            "outputs": [_port(port, scalar) for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
                         **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
+            **_bundle(p),
         } for p in programs] + dls,
     }
 
@@ -92,3 +96,24 @@ def listed_files(document) -> list[str] | None:
     if not isinstance(files, list):
         return None
     return [f for f in files if isinstance(f, str)]
+def _port(port, scalar: str) -> dict:
+    """A port's entry; its "dtype" is the C's scalar (``float`` in a float build) or "int".
+    The Python, CasADi, JAX and MATLAB modules compute in double whatever the C's type.
+
+    >>> from kindyngen.algorithms.symbolic import Port
+    >>> _port(Port("q", (7,), "joint angles", "rad"), "float")["dtype"], _port(Port("s", (8,), "", "", "int"), "float")["dtype"]
+    ('float', 'int')
+    """
+    entry = port.to_json()
+    if entry["dtype"] == "double":
+        entry["dtype"] = scalar
+    return entry
+
+
+def _bundle(program: Program) -> dict:
+    """A bundle's "bundle" entry: its members (their outputs' order) and their count after CSE
+    called one by one (kindyngen/codegen/bundles.py); nothing for other functions."""
+    metadata = program.function.metadata
+    if "members" not in metadata:
+        return {}
+    return {"bundle": {"members": list(metadata["members"]), "members_after": metadata["members_after"].to_json()}}

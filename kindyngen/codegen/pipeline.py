@@ -15,7 +15,8 @@ from pathlib import Path
 from ..algorithms.loop_closure import resolved
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
-from .catalog import derive_all, mimic_notes
+from .bundles import bundle_programs, requested
+from .catalog import derive_all, derived_names, mimic_notes, wants_ik_dls
 from .interface import listed_files, manifest
 from .optimize import Program, optimize
 from .render import RENDERERS, casadi_builders
@@ -52,15 +53,18 @@ class Progress:
 
 
 def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True,
-                   scalar: str = "double") -> list[Program]:
-    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``)."""
+                   scalar: str = "double", bundles=()) -> list[Program]:
+    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``),
+    then its description's bundles and ``bundles`` (--bundle: kindyngen/codegen/bundles.py)."""
+    bundles = requested(model, bundles)          # checked before anything is derived
     functions = derive_all(model, params, only, scalar)
-    bar = Progress(f"{model.identifier}", len(functions)) if progress else None
+    bar = Progress(f"{model.identifier}", len(functions) + len(bundles)) if progress else None
     programs = []
     for f in functions:
         programs.append(optimize(f))
         if bar:
             bar.step(f.name)
+    programs += bundle_programs(model, bundles, programs, params, scalar, bar.step if bar else None)
     if bar:
         bar.close()
     return programs
@@ -99,11 +103,12 @@ def measure_float_error(model, programs, document: dict, trig: str, lanes: bool 
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, lanes: bool = True) -> Path:
+             batch: bool = True, lanes: bool = True, bundles=()) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
-    of lane programs as loops over lanes): see render.render_c.
+    of lane programs as loops over lanes): see render.render_c; ``bundles``: bundles.Bundle
+    requests (--bundle) besides the description's.
 
     Everything is derived first, then written into a staging folder that replaces
     ``out_root/<robot>/`` whole (kindyngen.output_folder.replace_folder): a failed or killed run
@@ -113,8 +118,11 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     out = Path(out_root) / model.identifier
     # --scalar float: the IK with float's tolerances, in every language written (the python
     # module beside float C is its double reference) and in both builds the float error compares
-    programs = build_programs(model, params, only=only, progress=progress, scalar=scalar)
-    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes)
+    # --functions ik_dls: fk_hom and jacobian too (it iterates them); ik_dls only where asked for
+    dls = wants_ik_dls(only)
+    programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar,
+                              bundles=bundles)
+    document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes, ik_dls=dls)
     base_params = base_params_document(model)          # None for robots with symbolic lengths
     for note in undecided_notes(model, only) + mimic_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
@@ -129,10 +137,11 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
         for lang in languages:
             options = ({"trig": trig, "scalar": scalar, "batch": batch, "float_error": float_error, "lanes": lanes}
                        if lang == "c" else {})
+            options["ik_dls"] = dls
             for filename, text in RENDERERS[lang](model, programs, **options).items():
                 _write(folder / lang / filename, text)
             if lang == "casadi":
-                save_casadi_functions(casadi_builders(model, programs), folder / lang)
+                save_casadi_functions(casadi_builders(model, programs, ik_dls=dls), folder / lang)
         # written last, listing every file of the output (itself included)
         written = [p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()]
         document["files"] = sorted(written + ["functions.json"])

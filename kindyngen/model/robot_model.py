@@ -234,6 +234,9 @@ class RobotModel:
     loops: tuple[LoopClosure, ...] = ()             # loop joints closing the tree
     independent: tuple[int, ...] | None = None      # the joints the user chose as coordinates (loops)
     reference: tuple | None = None                  # exact joint values the loops close near (None: 0)
+    # the description's bundles: (name, member function names), each generated as one function
+    # (kindyngen/codegen/bundles.py checks the names against the function catalog)
+    bundles: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self):
         if self.parents is None:

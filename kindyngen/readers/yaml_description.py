@@ -28,6 +28,7 @@ from ..model.robot_model import (CONVENTIONS, DHRow, DIRECTIONS, Frame, Friction
                                  check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
+from ..model.user_text import is_identifier
 from .constant_expressions import NAMESPACE, parse_constant
 from .input_bounds import beyond_turn, check_angle, check_number, check_quantity, degrees_hint, shown
 from .urdf import load_urdf
@@ -83,7 +84,7 @@ def _vector(value, length: int, source: str, field: str, quantity: str) -> tuple
 
 
 # every key a description may hold; anything else is refused with the closest known key
-TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool")
+TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool", "bundles")
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
 SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
@@ -313,7 +314,7 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
     return check_name(name, source, "name")
 
 
-TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base", "loops", "independent", "reference")
+TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base", "loops", "independent", "reference", "bundles")
 LOOP_KEYS = ("name", "type", "link1", "origin1", "link2", "origin2", "directions")
 TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent", "mimic")
 BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
@@ -379,7 +380,39 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     tool = parse_origin(data["tool"], reading, "tool") if "tool" in data else Placement()
     return RobotModel(name=name.strip(), convention=convention if convention in CONVENTIONS else "frames",
                       gravity=gravity, joints=joints, links=links, source=source, payload=payload,
-                      coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes))
+                      coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes),
+                      bundles=_parse_bundles(data.get("bundles"), source))
+
+
+def _parse_bundles(data, source: str) -> tuple:
+    """The ``bundles:`` section: a mapping of bundle names to lists of function names (or one
+    comma-separated string), each generated as one function (kindyngen/codegen/bundles.py,
+    which checks the names against the function catalog when generating).
+
+    >>> _parse_bundles({"step": ["fk_hom", "M"], "row": "Y, tau"}, "f.yaml")
+    (('step', ('fk_hom', 'M')), ('row', ('Y', 'tau')))
+    >>> _parse_bundles({"step": [1, 2]}, "f.yaml")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'bundles.step': expected function names, got [1, 2]
+    """
+    if data is None:
+        return ()
+    if not isinstance(data, dict) or not data:
+        raise RobotDescriptionError(source, "bundles", f"expected a mapping of bundle names to lists of function "
+                                                       f"names, e.g. step: [fk_hom, jacobian, M, g, tau]; got {shown(data)}")
+    out = []
+    for name, members in data.items():
+        if not isinstance(name, str) or not is_identifier(name):
+            raise RobotDescriptionError(source, "bundles", f"a bundle's name must be ASCII letters, digits and _ "
+                                                           f"with a letter first, got {shown(name)}")
+        field = f"bundles.{name}"
+        if isinstance(members, str):
+            members = [m.strip() for m in members.split(",") if m.strip()]
+        if not isinstance(members, list) or not members or not all(isinstance(m, str) and m for m in members):
+            raise RobotDescriptionError(source, field, f"expected function names, got {shown(members)}")
+        out.append((name, tuple(members)))
+    return tuple(out)
 
 
 def _check_unique_names(rows: list, source: str) -> None:
@@ -498,7 +531,8 @@ def _tree_model(data, name, gravity, joints, parents, index, links, frames, floa
     return RobotModel(name=name.strip(), convention="tree", joints=joints, parents=parents,
                       links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
                       floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
-                      notes=tuple(reading.notes), loops=loops, independent=independent, reference=reference)
+                      notes=tuple(reading.notes), loops=loops, independent=independent, reference=reference,
+                      bundles=_parse_bundles(data.get("bundles"), source))
 
 
 def _loops(data: dict, joints: tuple, named: dict, floating_base: bool, reading: Reading) -> tuple:

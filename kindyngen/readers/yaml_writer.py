@@ -138,7 +138,7 @@ def _link(link: Link) -> dict:
 
 def describe(model: RobotModel) -> dict:
     """The YAML data (``dh: none``) of ``model``: joints by origin and axis, links, payload,
-    tool, effects. Frames and joint order are the model's. A tree closed by loops is refused
+    tool, effects, bundles. Frames and joint order are the model's. A tree closed by loops is refused
     (ValueError): its loops would be lost."""
     if model.has_loops:
         raise ValueError("closed loops (loop joints) are not written by describe: keep the description as it is")
@@ -152,4 +152,6 @@ def describe(model: RobotModel) -> dict:
         data["coulomb_smoothing"] = _number(model.coulomb_smoothing)
     if not model.tool.is_identity:
         data["tool"] = origin(model.tool)
+    if model.bundles:
+        data["bundles"] = {name: list(members) for name, members in model.bundles}
     return data
