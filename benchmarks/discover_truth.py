@@ -12,10 +12,13 @@ trial is one ``discover`` process (10-60 s on a shared 2-core machine).
 
 Trial ``i`` is a function of ``(seed, i)`` only: its family (:data:`truth_families.CYCLE`, in
 turn; a pair of single families drawn at random), robot (:data:`truth_robots.ROBOTS`), sample
-rate (200, 500, 1000 Hz), one or two recordings (25-40 s, or 15-25 s each, each from t = 0), its
-own excitation per recording (sums of sines inside the joint limits), torque noise (0.01-0.3 N m)
-and encoder noise (2e-6 - 2e-5 rad), both log-uniform, and each hidden law's size (3-100 noise
-floors, log-uniform; see :mod:`benchmarks.truth_simulator`).  Nothing here imports
+rate (200, 500, 1000 Hz), one or two recordings (30-45 s, or 20-30 s each, each from t = 0), its
+own excitation per recording (sums of sines inside the joint limits, from rest to rest or cut
+out of a longer motion), torque noise (0.01-0.3 N m) and encoder noise (2e-6 - 2e-5 rad, capped
+where its torque through the estimated acceleration would reach 0.3 noise floors), both
+log-uniform, and each hidden law's size (3-100 noise floors, log-uniform; see
+:mod:`benchmarks.truth_simulator`).  ``--quick``: one 25 s recording at 200 Hz per trial (about
+a third of the full setting's cost), the rest drawn the same way.  Nothing here imports
 ``kindyngen.measured``: the simulator is Pinocchio plus the laws written in
 :mod:`benchmarks.truth_simulator`, ``discover`` is run as a subprocess, the scoring reads its
 JSON (:mod:`benchmarks.truth_families`).
@@ -54,7 +57,7 @@ from .truth_robots import ROBOTS
 ROOT = Path(__file__).resolve().parents[1]
 NAME = "discover_truth"
 DEFAULT_TRIALS = 200
-QUICK_TRIALS = 6
+QUICK_TRIALS = len(CYCLE)
 RATES = (200.0, 500.0, 1000.0)
 SIZE_RANGE = (3.0, 100.0)            # noise floors, log-uniform
 TORQUE_NOISE = (0.01, 0.3)           # N m, log-uniform
@@ -72,6 +75,7 @@ class Settings:
     quick: bool
     robots: tuple[str, ...]
     families: tuple[str, ...]        # the cycle's entries used ("pair" included)
+    ends: str = "both"               # recordings from rest to rest, cut from a longer motion, or either
 
 
 def log_uniform(rng, low, high) -> float:
@@ -93,13 +97,15 @@ def draw_trial(index: int, settings: Settings) -> dict:
     family = family_of(name)
     robot = ROBOTS[str(rng.choice(settings.robots))]
     if settings.quick:
-        rate, seconds = 200.0, [20.0]
+        rate, seconds = 200.0, [25.0]
     else:
         rate = float(rng.choice(RATES))
         files = int(rng.integers(1, 3))
         seconds = [round(float(rng.uniform(30, 45)), 1)] if files == 1 else \
             [round(float(rng.uniform(20, 30)), 1) for _ in range(files)]
-    at_rest = True if settings.quick else bool(rng.integers(0, 2))
+    at_rest = bool(rng.integers(0, 2))
+    if settings.ends != "both":
+        at_rest = settings.ends == "rest"
     lower, upper = robot.limits()
     excitations = [asdict(sim.draw_excitation(rng, robot.home, lower, upper, length, at_rest)) for length in seconds]
     laws = {law: {"shape": sim.draw_shape(law, rng, robot.n, family.options.get(law)),
@@ -404,12 +410,14 @@ def parse(argv):
     p.add_argument("--trials", type=int, default=None,
                    help=f"trials (default {DEFAULT_TRIALS}, {QUICK_TRIALS} with --quick); trials 0..N-1 are run")
     p.add_argument("--quick", action="store_true",
-                   help="the smoke setting: one 15 s recording at 200 Hz per trial, on ur5 unless --robots says")
+                   help="one 25 s recording at 200 Hz per trial (a third of the full setting's cost)")
     p.add_argument("--workers", type=int, default=1, help="trials run in parallel processes (default 1)")
     p.add_argument("--seed", type=int, default=2024, help="the seed every trial is drawn from (default 2024)")
     p.add_argument("--out", type=Path, default=RESULTS, help="results folder (default benchmarks/results)")
-    p.add_argument("--robots", default=None, help=f"comma-separated, from {', '.join(ROBOTS)} (default: all; "
-                                                  "--quick: ur5)")
+    p.add_argument("--robots", default=None, help=f"comma-separated, from {', '.join(ROBOTS)} (default: all)")
+    p.add_argument("--ends", choices=("both", "rest", "cut"), default="both",
+                   help="recordings from rest to rest, cut out of a longer motion (moving at both ends), or "
+                        "either at random (default)")
     p.add_argument("--families", default=None,
                    help=f"comma-separated, from {', '.join(list(FAMILIES) + ['pair'])} (default: all)")
     p.add_argument("--kindyngen", type=Path, default=ROOT, help="the checkout whose discover is measured "
@@ -417,7 +425,7 @@ def parse(argv):
     p.add_argument("--fresh", action="store_true", help="discard the trials already in the results file")
     p.add_argument("--keep", type=Path, default=None, help="keep every trial's logs and discover output here")
     args = p.parse_args(argv)
-    robots = tuple(args.robots.split(",")) if args.robots else (("ur5",) if args.quick else tuple(ROBOTS))
+    robots = tuple(args.robots.split(",")) if args.robots else tuple(ROBOTS)
     families = tuple(args.families.split(",")) if args.families else tuple(dict.fromkeys(CYCLE))
     for r in robots:
         if r not in ROBOTS:
@@ -430,7 +438,7 @@ def parse(argv):
     trials = args.trials if args.trials is not None else (QUICK_TRIALS if args.quick else DEFAULT_TRIALS)
     if trials < 1:
         p.error("--trials: at least 1")
-    return args, Settings(args.seed, args.quick, robots, families), trials
+    return args, Settings(args.seed, args.quick, robots, families, args.ends), trials
 
 
 def main(argv=None) -> int:
@@ -441,7 +449,7 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"{NAME}.json"
     header = {"seed": settings.seed, "quick": settings.quick, "robots": list(settings.robots),
-              "families": list(settings.families)}
+              "families": list(settings.families), "ends": settings.ends}
     done = {}
     if path.exists() and not args.fresh:
         old = json.loads(path.read_text())

@@ -134,7 +134,7 @@ class Excitation:
     >>> e = Excitation((0.0,), ((0.5, 0.1),), ((0.2, 0.3),), ((0.0, 1.0),))
     >>> q, qd, qdd = e.motion(np.array([0.0]))
     >>> round(float(q[0, 0]), 4), round(float(qd[0, 0]), 4)
-    (0.0841, 0.7981)
+    (0.0841, 0.7302)
     >>> rest = Excitation((0.0,), ((0.5, 0.1),), ((0.2, 0.3),), ((0.0, 1.0),), ramp=2.0, duration=10.0)
     >>> [float(abs(v[0, 0])) for v in rest.motion(np.array([0.2]))[1:]]
     [0.0, 0.0]
