@@ -208,7 +208,12 @@ def run_trial(spec: dict, seed: int, folder: str, known: tuple, keep: str | None
                            "spurious": [], "missed": list(family.answer), "coefficients": []})
             return record
         doc = json.loads(path.read_text())
-    record.update(score_trial(family, truth, sizes, doc, floor, known, robot.model().gravity.linear.tolist()))
+    try:
+        record.update(score_trial(family, truth, sizes, doc, floor, known, robot.model().gravity.linear.tolist()))
+    except (KeyError, TypeError, ValueError) as exc:     # a discovery.json of another layout: one trial lost
+        record.update({"error": f"discovery.json not scored: {type(exc).__name__}: {exc}", "correct": False,
+                       "exact": False, "verdict_ok": False, "named": list(doc.get("effects") or []),
+                       "spurious": [], "missed": list(family.answer), "coefficients": []})
     return record
 
 
@@ -236,6 +241,7 @@ def group_summary(trials: list[dict]) -> dict:
             "spurious_rate": _rate(t.get("spurious") for t in trials),
             "missed_rate": _rate(t.get("missed") for t in trials if t["scoring"] == "exact"),
             "verdict_accuracy": _rate(t["verdict_ok"] for t in trials),
+            "indistinguishable_rate": _rate(t.get("indistinguishable") for t in trials),
             "coefficient_rel_error": _quantiles(coefficients),
             "discover_wall_s": _quantiles([t["time"]["discover_wall_s"] for t in trials]),
             "discover_cpu_s": _quantiles([t["time"]["discover_cpu_s"] for t in trials]),
@@ -341,6 +347,12 @@ def markdown(doc: dict) -> str:
                        ("torque noise (N m)", "by_torque_noise")):
         cells = "; ".join(f"{k}: {_pct(v['correct'])} of {v['trials']}" for k, v in s[key].items())
         lines.append(f"- {title}: {cells}")
+    if s["overall_exact_scored"]:
+        for label, key in (("Spurious names", "spurious_names"), ("Missed names", "missed_names")):
+            counts = sorted(s["overall_exact_scored"][key].items(), key=lambda kv: (-kv[1], kv[0]))
+            lines.append(f"- {label} (trials scored *exact*): " + (", ".join(f"{k} {v}" for k, v in counts) or "none"))
+        lines.append(f"- Trials with a pair reported indistinguishable: "
+                     f"{_pct(s['overall_exact_scored']['indistinguishable_rate'])}")
     wrong = [t for t in doc["trials"] if not t["correct"] or not t["verdict_ok"]]
     if wrong:
         lines += ["", "Trials not right (set or verdict):", "",
@@ -375,8 +387,9 @@ def figure(doc: dict, path: Path) -> Path:
     ax.axhline(100 * AIMS["exact_set_overall"], color="k", lw=0.8, ls=":", label="aim: 95 % overall")
     ax.set_xticks(x, [f"{n}\n({s['families'][n]['trials']})" for n in names], rotation=60, ha="right", fontsize=7)
     ax.set_ylabel("% of trials")
-    ax.set_ylim(0, 105)
-    ax.legend(fontsize=7, loc="lower left")
+    ax.set_ylim(0, 125)
+    ax.set_yticks(range(0, 101, 20))
+    ax.legend(fontsize=7, loc="upper center", ncol=4, frameon=False)
     ax.set_title("discover against known truth, per family (trials)", fontsize=9, loc="left")
     bins = s["by_size_floors"]
     labels = list(bins)
@@ -424,6 +437,9 @@ def parse(argv):
                                                                 "(default: this one)")
     p.add_argument("--fresh", action="store_true", help="discard the trials already in the results file")
     p.add_argument("--keep", type=Path, default=None, help="keep every trial's logs and discover output here")
+    p.add_argument("--only", default=None, metavar="I,J,...",
+                   help="run only these trial numbers (of 0..N-1; e.g. to look at one again with --keep and "
+                        "another --out)")
     args = p.parse_args(argv)
     robots = tuple(args.robots.split(",")) if args.robots else tuple(ROBOTS)
     families = tuple(args.families.split(",")) if args.families else tuple(dict.fromkeys(CYCLE))
@@ -438,6 +454,12 @@ def parse(argv):
     trials = args.trials if args.trials is not None else (QUICK_TRIALS if args.quick else DEFAULT_TRIALS)
     if trials < 1:
         p.error("--trials: at least 1")
+    try:
+        args.only = None if args.only is None else {int(i) for i in args.only.split(",")}
+    except ValueError:
+        p.error(f"--only: trial numbers separated by commas, not {args.only!r}")
+    if args.only and not all(0 <= i < trials for i in args.only):
+        p.error(f"--only: trial numbers from 0 to {trials - 1}")
     return args, Settings(args.seed, args.quick, robots, families, args.ends), trials
 
 
@@ -465,7 +487,8 @@ def main(argv=None) -> int:
     else:
         load_samples = []
     specs = [draw_trial(i, settings) for i in range(count)]
-    pending = [s for s in specs if s["index"] not in done or done[s["index"]]["spec_hash"] != spec_hash(s)]
+    pending = [s for s in specs if (s["index"] not in done or done[s["index"]]["spec_hash"] != spec_hash(s))
+               and (args.only is None or s["index"] in args.only)]
     print(f"discover_truth: {len(specs)} trials, {len(specs) - len(pending)} already scored, {len(pending)} to run "
           f"with {args.workers} worker(s); discover of {folder} ({len(known)} candidates)", file=sys.stderr, flush=True)
     niceness = os.nice(0)

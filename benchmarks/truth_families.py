@@ -149,8 +149,10 @@ def score_names(family: Family, named, known, drift=None) -> dict:
 
 
 def fitted_value(doc: dict, name: str):
-    """The final fit's value of coefficient ``name`` in a discovery.json, or None."""
-    for key in ("fitted_values", "values", "model_yaml_values"):
+    """The final fit's value of coefficient ``name`` in a discovery.json, or None (the final joint
+    fit's table first, under the names discover's versions give it, then the not-determined
+    ones' fitted values, then the last step that fitted it)."""
+    for key in ("coefficients", "fitted_values", "values", "model_yaml_values"):
         if isinstance(doc.get(key), dict) and name in doc[key] and doc[key][name] is not None:
             return float(doc[key][name])
     entry = (doc.get("not_determined") or {}).get(name)
@@ -214,7 +216,8 @@ def score_trial(family: Family, truth: dict, sizes: dict, doc: dict, floor: floa
     return {**names, "correct": correct, "named": named, "explained": said, "truth_explained": truth_explained,
             "verdict_ok": said == truth_explained, "at_floor": at_floor,
             "rms_before_floors": (before / floor).tolist(), "rms_after_floors": (after / floor).tolist(),
-            "noise_floor_ratio": float(np.median(np.asarray(doc["noise_floor"]["per_joint"], float)) / floor),
+            "noise_floor_ratio": float(np.median(np.asarray(doc["noise_floor"]["per_joint"], float)) / floor)
+            if isinstance(doc.get("noise_floor"), dict) else None,
             "indistinguishable": [g.get("candidates", g) if isinstance(g, dict) else g
                                   for g in doc.get("indistinguishable") or []],
             "drift": None if drift is None else sorted(drift),
