@@ -245,6 +245,8 @@ def group_summary(trials: list[dict]) -> dict:
             "coefficient_rel_error": _quantiles(coefficients),
             "discover_wall_s": _quantiles([t["time"]["discover_wall_s"] for t in trials]),
             "discover_cpu_s": _quantiles([t["time"]["discover_cpu_s"] for t in trials]),
+            "simulate_s": _quantiles([t["time"]["simulate_s"] for t in trials]),
+            "total_s": sum(t["time"]["simulate_s"] + t["time"]["discover_wall_s"] for t in trials),
             "errors": sum("error" in t for t in trials),
             "spurious_names": dict(Counter(n for t in trials for n in t.get("spurious", []))),
             "missed_names": dict(Counter(n for t in trials for n in t.get("missed", []) if t["scoring"] == "exact"))}
@@ -320,7 +322,11 @@ def markdown(doc: dict) -> str:
              + ").", "",
              f"Machine: {m.get('cpu')}, {m.get('cores')} cores; load average (1 min) during the run "
              f"{_num(load.get('min'))}-{_num(load.get('max'))} (median {_num(load.get('median'))}); workers "
-             f"{doc['settings']['workers']}, niceness {doc['settings']['niceness']}.", ""]
+             f"{doc['settings']['workers']}, niceness {doc['settings']['niceness']}; the trials took "
+             f"{s['all']['total_s'] / 60:.0f} min together (simulation and discover, wall clock), discover "
+             f"{_num(s['all']['discover_wall_s']['median'], '.1f')} s a trial by the median "
+             f"({_num(s['all']['discover_cpu_s']['median'], '.1f')} s of CPU), the simulation "
+             f"{_num(s['all']['simulate_s']['median'], '.2f')} s.", ""]
     if s["aims"]:
         lines += ["Aims (trials scored *exact*): " + "; ".join(
             f"{k.replace('_', ' ')} {v['aim']}: {_pct(v['value'])}{' (' + v['family'] + ')' if 'family' in v else ''} "
@@ -492,7 +498,8 @@ def main(argv=None) -> int:
     print(f"discover_truth: {len(specs)} trials, {len(specs) - len(pending)} already scored, {len(pending)} to run "
           f"with {args.workers} worker(s); discover of {folder} ({len(known)} candidates)", file=sys.stderr, flush=True)
     niceness = os.nice(0)
-    load_samples.append(load_average())
+    if pending:                     # the load while trials run (a re-rendering adds none)
+        load_samples.append(load_average())
 
     def save():
         trials = sorted((t for t in done.values() if t["index"] < count), key=lambda t: t["index"])
