@@ -127,8 +127,14 @@ def _cmd_generate(args) -> int:
             raise UsageError("--lang python_c: the CPython extension wraps double C; "
                              "drop python_c from --lang or use --scalar double")
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
-    for path in args.robots:
-        model = load(path, args)
+    models = [(path, load(path, args)) for path in args.robots]      # every file read before any work
+    seen = {}
+    for path, model in models:
+        if model.identifier in seen:
+            raise UsageError(f"{path}: the robot's identifier {model.identifier} is that of {seen[model.identifier]} "
+                             f"too: both would be written to {Path(args.out) / model.identifier}; rename one")
+        seen[model.identifier] = path
+    for path, model in models:
         try:
             out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
                            only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,

@@ -170,3 +170,16 @@ def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
     code = main(["discover", "--robot", str(tmp_path / "absent.yaml"), "--data", str(tmp_path / "absent.csv"),
                  "--out", str(tmp_path / "results")])
     assert code == 2 and capsys.readouterr().err == f"error: --out {tmp_path / 'results'}: exists and is not a folder\n"
+
+
+def test_two_robots_with_one_identifier_are_refused_before_any_work(tmp_path, capsys):
+    """'ARM3' and 'arm3' are both arm3: the second would replace the first's folder."""
+    first = arm3(tmp_path)
+    (tmp_path / "other").mkdir()
+    second = tmp_path / "other" / "arm3.yaml"
+    second.write_text(ARM3.replace("name: arm3", "name: ARM3"))
+    code = main(["generate", first, str(second), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith(f"error: {second}: the robot's identifier arm3 is that of {first} too"), err
+    assert not (tmp_path / "out" / "arm3").exists()
