@@ -8,6 +8,7 @@ deterministic: the same description gives the same bytes.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -96,9 +97,27 @@ def measure_float_error(model, programs, document: dict, trig: str, lanes: bool 
     try:
         return measure(model, double, single, document)
     except (EvaluationError, OSError) as exc:
+        if host_compiler_works():      # the generated C itself failed: a defect, never a note
+            raise
         print(f"note: float error not measured (no working host C compiler): {str(exc).splitlines()[0]}",
               file=sys.stderr)
         return {}
+
+
+def host_compiler_works() -> bool:
+    """Whether ``$CC`` (else ``cc``) builds a shared library of a one-line C file, as the float
+    measurement does."""
+    import subprocess
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="kindyngen-cc-") as tmp:
+        source = Path(tmp) / "probe.c"
+        source.write_text("double kdg_probe(double x) { return x + 1.0; }\n")
+        try:
+            done = subprocess.run([os.environ.get("CC", "cc"), "-std=c99", "-shared", "-fPIC", "-o",
+                                   str(Path(tmp) / "probe.so"), str(source)], capture_output=True)
+        except OSError:
+            return False
+        return done.returncode == 0
 
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
