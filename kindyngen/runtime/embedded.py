@@ -364,7 +364,9 @@ def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper
     from .evaluate import load_generated
     generated_dir = Path(generated_dir)
     manifest = json.loads((generated_dir / "functions.json").read_text())
-    n = manifest["n"]
+    # the coordinates the functions take: a tree with mimic joints or closed by loops has fewer
+    # than its joints ("nq"); loop_solve closes a tree's other joints from them
+    n = manifest.get("nq", manifest["n"])
     lower = np.full(n, -1.0) if lower is None else np.asarray(lower, float)
     upper = np.full(n, 1.0) if upper is None else np.asarray(upper, float)
     inputs = fixed_inputs(manifest, load_generated(generated_dir, "c"), lower, upper)

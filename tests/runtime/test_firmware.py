@@ -339,3 +339,30 @@ def test_float_library_without_sin_of_q_compiles_strictly(tmp_path):
     subprocess.run(["cc", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", "-c",
                     str(folder / "c" / "lwr4.c"), "-o", "/dev/null"], check=True, timeout=HANG_GUARD_S)
     assert "kdg_sincosf" not in (folder / "c" / "lwr4.c").read_text()
+
+
+def test_a_tree_closed_by_loops_runs_on_the_m4f(tmp_path):
+    """The delta robot (3 drives, 12 joints, no closed form) as float firmware: the board's inputs
+    are sized by its coordinates ("nq"), not its joints, its loop_solve closes the loops there as
+    on the host (the loop residual of the board's q_all evaluated in double by the host's
+    loop_residual); fk_hom and loop_residual equal the host's float C bit for bit, loop_solve's
+    q_all within float rounding (its Newton steps take sinf/cosf of the dependent joints from the
+    C library: newlib's and glibc's differ in the last bit)."""
+    if SKIP_BOARD:
+        pytest.skip(SKIP_BOARD)
+    from kindyngen.runtime.evaluate import load_generated
+    model = load_robot(ROOT / "examples" / "loops" / "delta.urdf", tree=True)
+    folder = generate(model, tmp_path / "gen", ("c",), progress=False, only={"loop_solve", "loop_residual", "fk_hom"},
+                      scalar="float", batch=False)
+    manifest = json.loads((folder / "functions.json").read_text())
+    assert manifest["nq"] == 3 and manifest["n"] == 12
+    r = embedded.figures(folder, "m4f", tmp_path / "work")
+    assert r["inputs"]["loop_solve"]["q"].shape == (3,)
+    agreement = embedded.agreement(r)
+    assert agreement["fk_hom"] == agreement["loop_residual"] == "bit-exact", agreement
+    assert r["libm"]["loop_solve"] == ["cosf", "sinf"]
+    q_all = r["outputs"]["loop_solve"]["q_all"].astype(float)
+    assert np.max(np.abs(q_all - np.ravel(r["host"]["loop_solve"]["q_all"]))) < 1e-6
+    double = load_generated(folder, "c")        # the float build: residual of the float solution
+    residual = double.call("loop_residual", {"q": q_all[None]})
+    assert np.max(np.abs(next(iter(residual.values())))) < 1e-5
