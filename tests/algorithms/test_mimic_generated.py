@@ -1,7 +1,8 @@
 """Code generated for robots with mimic joints equals Pinocchio, in the independent coordinates.
 
-Robots: ``example-robot-data``'s ``panda.urdf`` read as a tree (the arm and its hand, whose
-``panda_finger_joint2`` mimics ``panda_finger_joint1``), ``tests/data/urdf/mimic_gripper.urdf``
+Robots: ``examples/mimic/panda_hand.urdf`` (example-robot-data's ``panda.urdf``) read as a tree
+(the arm and its hand, whose ``panda_finger_joint2`` mimics ``panda_finger_joint1``),
+``examples/mimic/gripper.urdf``
 (a Robotiq-2F-85-like gripper: ``finger_joint`` and five joints mimicking it with multipliers
 +1 and -1), fixed and floating, and ``tests/data/urdf/mimic_coupled_tree.urdf`` (a prismatic
 joint following a revolute one at 0.05 m/rad with an offset, a joint following a joint of
@@ -31,7 +32,6 @@ fd against those too, see FAMILY); tolerance 1e-12.
 """
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -42,6 +42,7 @@ import pytest
 from kindyngen.codegen.pipeline import generate
 from kindyngen.readers.urdf import load_urdf
 from kindyngen.runtime.evaluate import load_generated
+from tests.harness import ROOT
 
 pin = pytest.importorskip("pinocchio")
 
@@ -49,13 +50,13 @@ N = 300
 TOLERANCE = 1e-12
 DATA = Path(__file__).resolve().parents[1] / "data" / "urdf"
 
-# (id, file (example-robot-data's robots folder for the Panda), frames (None: the tips), floating, languages)
+# (id, file (in the checkout), frames (None: the tips), floating, languages)
 CASES = [
-    ("panda_hand", None, ["panda_hand", "panda_leftfinger", "panda_rightfinger"], False, ("c", "python")),
-    ("gripper", "mimic_gripper.urdf", ["left_pad", "right_pad", "left_inner_knuckle", "right_outer_finger"], False,
+    ("panda_hand", "examples/mimic/panda_hand.urdf", ["panda_hand", "panda_leftfinger", "panda_rightfinger"], False, ("c", "python")),
+    ("gripper", "examples/mimic/gripper.urdf", ["left_pad", "right_pad", "left_inner_knuckle", "right_outer_finger"], False,
      ("c", "python", "casadi")),
-    ("gripper", "mimic_gripper.urdf", ["left_pad", "right_pad"], True, ("c", "python")),
-    ("coupled", "mimic_coupled_tree.urdf", ["l4", "m3", "l3"], False, ("c", "python")),
+    ("gripper", "examples/mimic/gripper.urdf", ["left_pad", "right_pad"], True, ("c", "python")),
+    ("coupled", "tests/data/urdf/mimic_coupled_tree.urdf", ["l4", "m3", "l3"], False, ("c", "python")),
 ]
 OUTPUTS = {"fk_hom": ("T",), "jacobian": ("J",), "M": ("M",), "g": ("g",), "c": ("c",), "tau": ("tau",), "fd": ("qdd",),
            "com": ("com", "J_com", "A_g"), "tau_derivatives": ("dtau_dq", "dtau_dqd"),
@@ -63,13 +64,7 @@ OUTPUTS = {"fk_hom": ("T",), "jacobian": ("J",), "M": ("M",), "g": ("g",), "c": 
 
 
 def _path(file) -> Path:
-    if file is not None:
-        return DATA / file
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / "panda_description/urdf/panda.urdf"
+    return ROOT / file
 
 
 # an output that is a part of another (c of tau) or its derivative is measured against the

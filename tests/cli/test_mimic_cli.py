@@ -11,9 +11,10 @@ from pathlib import Path
 import yaml
 
 from kindyngen.cli.main import main
+from tests.harness import ROOT
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "urdf"
-GRIPPER = str(DATA / "mimic_gripper.urdf")
+GRIPPER = str(ROOT / "examples" / "mimic" / "gripper.urdf")
 COUPLED = str(DATA / "mimic_coupled_tree.urdf")
 
 

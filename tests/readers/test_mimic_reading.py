@@ -20,6 +20,7 @@ from kindyngen.model.robot_model import Mimic, RobotDescriptionError
 from kindyngen.readers.urdf import load_urdf, parse_urdf
 from kindyngen.readers.yaml_description import parse_robot
 from kindyngen.readers.yaml_writer import describe
+from tests.harness import ROOT
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "urdf"
 R = sympy.Rational
@@ -42,7 +43,7 @@ def test_urdf_mimics_resolved_exactly():
 
 def test_yaml_tree_equals_the_urdf():
     """The gripper written as a YAML tree gives the mimics of the URDF."""
-    urdf = load_urdf(DATA / "mimic_gripper.urdf", tree=True)
+    urdf = load_urdf(ROOT / "examples" / "mimic" / "gripper.urdf", tree=True)
     data = {"name": "g", "dh": "none", "gravity": [0, 0, -9.81], "joints": [], "links": []}
     for j, joint in enumerate(urdf.joints):
         row = {"name": joint.name, "lower": joint.lower, "upper": joint.upper}
