@@ -83,6 +83,17 @@ def fixed_inputs(manifest: dict, host_lib, lower, upper, seed: int = 7) -> dict:
     return out
 
 
+def _main(scalar: str, body: list) -> list:
+    """A harness's main(): SysTick started, ``body`` (the calls and their timed loops), then
+    the empty function's loop ("ticks - ...") and "done"."""
+    return (["", "int main(void)", "{", "    uint32_t start;", "    int r;", f"    static {scalar} a[1], b[1];",
+             "    SYST_RVR = 0xFFFFFFu;", "    SYST_CVR = 0u;", "    SYST_CSR = 5u;   /* enable, processor clock */"]
+            + body
+            + ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", "        kdg_empty(a, b);", "    }",
+               '    printf("ticks - %lu\\n", (unsigned long)elapsed(start));', '    printf("done\\n");',
+               "    return 0;", "}", ""])
+
+
 def _literal(value, real) -> str:
     if real is np.float32:
         return f"{float(value).hex()}f"
@@ -129,13 +140,7 @@ def harness_source(manifest: dict, inputs: dict) -> str:
                  for p in spec["outputs"]]
         body += ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", f"        {call};", "    }",
                  f'    printf("ticks {name} %lu\\n", (unsigned long)elapsed(start));']
-    lines += ["", "int main(void)", "{", "    uint32_t start;", "    int r;", f"    static {scalar} a[1], b[1];",
-              "    SYST_RVR = 0xFFFFFFu;", "    SYST_CVR = 0u;", "    SYST_CSR = 5u;   /* enable, processor clock */"]
-    lines += body
-    lines += ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", "        kdg_empty(a, b);", "    }",
-              '    printf("ticks - %lu\\n", (unsigned long)elapsed(start));', '    printf("done\\n");',
-              "    return 0;", "}", ""]
-    return "\n".join(lines)
+    return "\n".join(lines + _main(scalar, body))
 
 
 def empty_source(scalar: str) -> str:
@@ -282,13 +287,7 @@ def kernel_source(arguments: dict) -> str:
                  "    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{",
                  f"        kdg_kernel_call({n}, x{k}, s{k}, c{k});", "    }",
                  f'    printf("ticks {name} %lu\\n", (unsigned long)elapsed(start));']
-    lines += ["", "int main(void)", "{", "    uint32_t start;", "    int r;", "    static float a[1], b[1];",
-              "    SYST_RVR = 0xFFFFFFu;", "    SYST_CVR = 0u;", "    SYST_CSR = 5u;"]
-    lines += body
-    lines += ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", "        kdg_empty(a, b);", "    }",
-              '    printf("ticks - %lu\\n", (unsigned long)elapsed(start));', '    printf("done\\n");',
-              "    return 0;", "}", ""]
-    return "\n".join(lines)
+    return "\n".join(lines + _main("float", body))
 
 
 def kernel_figures(arguments: dict, work: Path) -> dict:
