@@ -50,7 +50,8 @@ def libraries(tmp_path_factory):
     out = {}
     for key, data in (("reduced", ARM), ("free", free)):
         model = parse_robot(data, f"{key}.yaml")
-        folder = generate(model, tmp_path_factory.mktemp(key), languages=("python",), progress=False, only=FUNCTIONS)
+        folder = generate(model, tmp_path_factory.mktemp(key), languages=("python",), progress=False,
+                          only=FUNCTIONS | {"ik_dls"})
         out[key] = (model, folder, load_generated(folder, "python"))
     return out
 
