@@ -320,6 +320,28 @@ TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent",
 BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
 
 
+def _refuse_tree_keys(data: dict, source: str) -> None:
+    """A description read as an arm that holds a tree's keys: the reason is the reading, not a
+    typo (an arm knows no ``base``, ``parent`` or ``loops``).
+
+    >>> _refuse_tree_keys({"joints": [{"name": "a"}, {"name": "b", "parent": "a"}]}, "f.yaml")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'joints[1].parent': a key of a tree description: read it as a tree (--tree)
+    """
+    if "loops" in data:
+        raise RobotDescriptionError(source, "loops", "closed loops join the bodies of a tree: read the description "
+                                    "as a tree (--tree), its joints named and placed by parent")
+    for key in ("base", "independent", "reference"):
+        if key in data:
+            raise RobotDescriptionError(source, key, "a key of a tree description: read it as a tree (--tree)")
+    rows = data.get("joints")
+    for k, row in enumerate(rows if isinstance(rows, list) else ()):
+        if isinstance(row, dict) and "parent" in row:
+            raise RobotDescriptionError(source, f"joints[{k}].parent", "a key of a tree description: read it as a "
+                                        "tree (--tree)")
+
+
 def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tree: bool = False,
                 frames=None, floating_base: bool = False) -> RobotModel:
     """Build a :class:`RobotModel` from already-parsed YAML data (``snap_angles``: see
@@ -342,9 +364,8 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     """
     tree = tree or frames is not None or floating_base
     reading = Reading(source, snap_angles)
-    if not tree and isinstance(data, dict) and "loops" in data:
-        raise RobotDescriptionError(source, "loops", "closed loops join the bodies of a tree: read the description "
-                                    "as a tree (--tree), its joints named and placed by parent")
+    if not tree and isinstance(data, dict):
+        _refuse_tree_keys(data, source)
     name = _named_mapping(data, TREE_TOP_KEYS if tree else TOP_KEYS, source)
     convention = _require(data, "dh", source, "")
     if tree and convention != FRAMES:
