@@ -140,7 +140,7 @@ def _cmd_describe(args) -> int:
 
 def _cmd_count(args) -> int:
     from ..algorithms.regressors import undecided_notes
-    from ..codegen.catalog import NAMES
+    from ..codegen.catalog import NAMES, applicable_names
     from ..codegen.pipeline import build_programs
     from ..codegen.count_report import opcounts_json, opcounts_markdown
     only = None
@@ -154,13 +154,16 @@ def _cmd_count(args) -> int:
         only = set(args.only)
     for path in args.robots:
         model = load(path, args)
-        programs = build_programs(model, args.params, only=only, progress=False)
-        for note in undecided_notes(model, only):
-            print(f"note: {note}", file=sys.stderr)
-        missing = sorted(only - {p.function.name for p in programs}) if only else []
+        missing = sorted(only - set(applicable_names(model, only))) if only else []
         if missing:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
                              f"(does not apply to this arm; see the README's function table)")
+        programs = build_programs(model, args.params, only=only, progress=not args.quiet)
+        for note in undecided_notes(model, only):
+            print(f"note: {note}", file=sys.stderr)
+        undecided = sorted(only - {p.function.name for p in programs}) if only else []
+        if undecided:                       # asked for, base parameters undecided (the note above)
+            raise UsageError(f"--only: {', '.join(undecided)} not generated for {model.name}")
         if args.format == "json":
             print(strict_json({model.identifier: opcounts_json(programs)}, indent=1))
         else:
@@ -493,6 +496,7 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")
+    c.add_argument("--quiet", action="store_true", help="no progress output")
     c.set_defaults(run=_cmd_count)
 
     w = sub.add_parser("describe", help="write a robot (a URDF's chain, say) as a YAML description",
