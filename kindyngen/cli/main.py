@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..algorithms.base_parameters import BaseParameterError
+from ..codegen.budget import GenerationMemoryError, LimitError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
 from ..json_text import strict_json
@@ -97,7 +98,57 @@ def load(path, args):
     return model
 
 
+def _large_robot_options(command: argparse.ArgumentParser) -> None:
+    """The limits of a run on a large robot (kindyngen/codegen/budget.py)."""
+    command.add_argument("--allow-large", action="store_true",
+                         help="derive also the functions estimated above the limits of 60 s CPU and 2 GB each, "
+                              "which a large robot leaves out (named) or refuses when asked for (docs/reference/"
+                              "cli.md, 'Large robots')")
+    command.add_argument("--max-memory", type=_gigabytes, metavar="GB",
+                         help="stop with an error naming the function when deriving needs more memory than this "
+                              "(default: the memory available when the run starts)")
+
+
+def _gigabytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of gigabytes, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number of gigabytes, got {text!r}")
+    return value
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now (/proc/meminfo's MemAvailable), or None where unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _planned(model, requested, args) -> tuple:
+    """The functions of ``model`` to derive, of ``requested`` (names the user gave, or None for
+    all), decided before anything is derived (kindyngen/codegen/budget.py): the estimate and
+    what is left out printed as notes, a function asked for above its limit refused."""
+    from ..codegen.budget import plan
+    from ..codegen.catalog import applicable_names
+    names = applicable_names(model, requested)
+    chosen = plan(model, names, asked=requested is not None, allow_large=args.allow_large)
+    for note in chosen.notes(model.name):
+        print(f"note: {one_line(note)}", file=sys.stderr)
+    return chosen.names
+
+
+def _memory_limit(args) -> int | None:
+    return int(args.max_memory * 2 ** 30) if args.max_memory else available_memory()
+
+
 def _cmd_generate(args) -> int:
+    from ..codegen.catalog import applicable_names
     from ..codegen.pipeline import generate
     only = set(args.functions) if args.functions else None
     if args.scalar == "float" and "python_c" in args.lang:
@@ -107,11 +158,12 @@ def _cmd_generate(args) -> int:
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
     for path in args.robots:
         model = load(path, args)
+        for name in sorted((only or set()) - set(applicable_names(model, only))):
+            print(f"note: --functions: {name} does not apply to {one_line(model.name)}; not generated", file=sys.stderr)
+        names = _planned(model, only, args)
         out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
-        written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
-        for name in sorted((only or set()) - written):
-            print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
+                       only=set(names), scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
+                       memory_limit=_memory_limit(args))
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -158,11 +210,13 @@ def _cmd_count(args) -> int:
         if missing:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
                              f"(does not apply to this arm; see the README's function table)")
-        programs = build_programs(model, args.params, only=only, progress=not args.quiet)
+        names = _planned(model, only, args)
+        programs = build_programs(model, args.params, only=set(names), progress=not args.quiet,
+                                  memory_limit=_memory_limit(args))
         for note in undecided_notes(model, only):
             print(f"note: {note}", file=sys.stderr)
-        undecided = sorted(only - {p.function.name for p in programs}) if only else []
-        if undecided:                       # asked for, base parameters undecided (the note above)
+        undecided = sorted(set(names) - {p.function.name for p in programs})
+        if only and undecided:              # asked for, base parameters undecided (the note above)
             raise UsageError(f"--only: {', '.join(undecided)} not generated for {model.name}")
         if args.format == "json":
             print(strict_json({model.identifier: opcounts_json(programs)}, indent=1))
@@ -484,6 +538,7 @@ def parser() -> argparse.ArgumentParser:
                    help="C: print the derivatives' single calls as their scalar program instead of a loop over "
                         "lanes (fewer operations; for cores without vector units, e.g. Cortex-M)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
+    _large_robot_options(g)
     g.set_defaults(run=_cmd_generate)
 
     c = sub.add_parser("count", help="print the operation-count table (before and after CSE)",
@@ -497,6 +552,7 @@ def parser() -> argparse.ArgumentParser:
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")
     c.add_argument("--quiet", action="store_true", help="no progress output")
+    _large_robot_options(c)
     c.set_defaults(run=_cmd_count)
 
     w = sub.add_parser("describe", help="write a robot (a URDF's chain, say) as a YAML description",
@@ -647,6 +703,8 @@ def main(argv=None) -> int:
     try:
         return args.run(args)
     except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+        message = str(exc)
+    except (LimitError, GenerationMemoryError) as exc:     # a large robot (codegen/budget.py)
         message = str(exc)
     except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
-from .budget import GenerationMemoryError
+from .budget import GenerationMemoryError, memory
 from .catalog import applicable_names, derive
 from .interface import manifest
 from .optimize import Program, optimize
@@ -109,9 +109,8 @@ def build_programs(model: RobotModel, params: str = "numeric", only=None, progre
             failed = None
     if failed is not None:
         raise GenerationMemoryError(
-            f"{model.name}: {failed} ({where[0]}) needed more than the memory limit of {limit / 2 ** 30:.1f} GB "
-            f"(the memory available when the run started, or --max-memory); see the estimate above or "
-            f"docs/reference/cli.md, 'Large robots'")
+            f"{model.name}: {failed} ({where[0]}) needed more than the memory limit of {memory(limit / 2 ** 20)} "
+            f"(the memory available when the run started, or --max-memory; docs/reference/cli.md, 'Large robots')")
     if bar:
         bar.close()
     return programs
