@@ -132,9 +132,10 @@ def estimate(name: str, size: int, tree_route: bool = False) -> Estimate:
 
 
 def size_of(model) -> int:
-    """The size the costs are measured against: velocity coordinates (joints, plus 6 for a
-    floating base)."""
-    return model.nv
+    """The size the costs are measured against: the joints (mimic joints and the joints of
+    closed loops included: their derivations run over the whole tree), plus 6 for a floating
+    base; a chain's nv."""
+    return model.n + (6 if model.floating_base else 0)
 
 
 def uses_tree_route(model) -> bool:

@@ -152,9 +152,10 @@ def render_extension(interface: dict) -> dict[str, str]:
     return {f"{robot}_ext.c": environment(c_comment).get_template("python_c/extension.c.j2").render(ctx)}
 
 
-def render_python_c(model, programs) -> dict[str, str]:
-    """The extension source of ``model``'s optimised ``programs`` (render.RENDERERS entry)."""
+def render_python_c(model, programs, ik_dls: bool = True) -> dict[str, str]:
+    """The extension source of ``model``'s optimised ``programs`` (render.RENDERERS entry);
+    ``ik_dls``: whether the iterative IK is wrapped (where it applies)."""
     # the renderer reads no top-level entry but robot, name, n, convention, gravity, functions and
     # a tree's structure, nq and nv:
     # "params" (and how the C computes sin/cos) are in the ports and the C already
-    return render_extension(manifest(model, programs, params="numeric"))
+    return render_extension(manifest(model, programs, params="numeric", ik_dls=ik_dls))

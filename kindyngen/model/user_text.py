@@ -251,23 +251,30 @@ imports, MATLAB/Octave keywords and common functions, Windows device names, and 
 prefix of the generated C's own names)."""
 
 _IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+# C99 7.26.2 and 7.26.11 (future library directions, reserved for external linkage whatever is
+# included, 7.1.3): function names beginning with is, to, str, mem or wcs and a lowercase letter.
+# The C symbols <identifier>_fk_hom, ... have external linkage.
+_C_RESERVED_PREFIX = re.compile(r"(is|to|str|mem|wcs)[a-z]")
 
 
 def identifier(name: str) -> str:
     """The one identifier of a robot's files and symbols (``<identifier>.h``,
     ``<identifier>_fk_hom``, ``<identifier>.py``, the output folder): the name's letters and
     digits in ASCII lower case (accents dropped), every other run of characters one ``_``, none
-    at either end, at most MAX_IDENTIFIER characters; ``r_`` before a leading digit, ``robot``
-    for a name with no letter or digit, ``_robot`` after a RESERVED word.
+    at either end, at most MAX_IDENTIFIER characters; ``r_`` before a leading digit or a prefix
+    the C standard reserves for external names (``is``, ``to``, ``str``, ``mem``, ``wcs`` and a
+    letter), ``robot`` for a name with no letter or digit, ``_robot`` after a RESERVED word.
 
     >>> [identifier(n) for n in ("lwr4", "LWR4_Hartl", "test-arm", "Roboter Ünï", "7dof", "")]
     ['lwr4', 'lwr4_hartl', 'test_arm', 'roboter_uni', 'r_7dof', 'robot']
     >>> [identifier(n) for n in ("math", "struct", 'x\"\"\"', "x*/ int evil; /*", "机器人")]
-    ['math_robot', 'struct_robot', 'x', 'x_int_evil', 'robot']
+    ['math_robot', 'r_struct', 'x', 'x_int_evil', 'robot']
+    >>> [identifier(n) for n in ("Stretch", "tool arm", "is_1", "to", "memo", "wcsx")]
+    ['r_stretch', 'r_tool_arm', 'is_1', 'to', 'r_memo', 'r_wcsx']
     """
     letters = "".join(ch for ch in unicodedata.normalize("NFKD", name) if not unicodedata.combining(ch))
     ident = re.sub(r"[^a-z0-9]+", "_", letters.lower()).strip("_")
-    if ident[:1].isdigit():
+    if ident[:1].isdigit() or _C_RESERVED_PREFIX.match(ident):
         ident = "r_" + ident
     ident = ident[:MAX_IDENTIFIER].rstrip("_") or "robot"
     return ident + "_robot" if ident in RESERVED else ident

@@ -18,14 +18,17 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import sympy
 
-from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
-                                 check_inertia, check_name)
+from ..model.robot_model import (CONVENTIONS, DHRow, DIRECTIONS, Frame, Friction, Joint, Link, LOOP_DIRECTIONS,
+                                 LOOP_TYPES, LoopClosure, Mimic, RobotDescriptionError, RobotModel, check_inertia,
+                                 check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
+from ..model.user_text import is_identifier
 from .constant_expressions import NAMESPACE, parse_constant
 from .input_bounds import beyond_turn, check_angle, check_number, check_quantity, degrees_hint, shown
 from .urdf import load_urdf
@@ -81,17 +84,19 @@ def _vector(value, length: int, source: str, field: str, quantity: str) -> tuple
 
 
 # every key a description may hold; anything else is refused with the closest known key
-TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool")
+TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoothing", "tool", "bundles")
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
 SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
-JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature", "mimic") + SENSING_KEYS
 # a joint given by origin and axis (dh: none)
-FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature",
+                    "mimic") + SENSING_KEYS
 ORIGIN_KEYS = ("xyz", "rpy")
 FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
 FRICTION_KEYS = ("viscous", "coulomb", "offset")
+MIMIC_KEYS = ("joint", "multiplier", "offset")
 
 
 def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
@@ -309,8 +314,9 @@ def _named_mapping(data, keys: tuple[str, ...], source: str) -> str:
     return check_name(name, source, "name")
 
 
-TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base")
-TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent")
+TREE_TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "base", "loops", "independent", "reference", "bundles")
+LOOP_KEYS = ("name", "type", "link1", "origin1", "link2", "origin2", "directions")
+TREE_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "parent", "mimic")
 BASE_NAME = "base"      # the root body's name in a YAML tree (its frame is the base frame)
 
 
@@ -336,6 +342,9 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     """
     tree = tree or frames is not None or floating_base
     reading = Reading(source, snap_angles)
+    if not tree and isinstance(data, dict) and "loops" in data:
+        raise RobotDescriptionError(source, "loops", "closed loops join the bodies of a tree: read the description "
+                                    "as a tree (--tree), its joints named and placed by parent")
     name = _named_mapping(data, TREE_TOP_KEYS if tree else TOP_KEYS, source)
     convention = _require(data, "dh", source, "")
     if tree and convention != FRAMES:
@@ -351,6 +360,7 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
         joints, parents, index = _tree_joints(rows, reading)
     else:
         joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
+    joints = _with_mimics(rows, joints, reading)
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
@@ -370,7 +380,39 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     tool = parse_origin(data["tool"], reading, "tool") if "tool" in data else Placement()
     return RobotModel(name=name.strip(), convention=convention if convention in CONVENTIONS else "frames",
                       gravity=gravity, joints=joints, links=links, source=source, payload=payload,
-                      coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes))
+                      coulomb_smoothing=smoothing, tool=tool, notes=tuple(reading.notes),
+                      bundles=_parse_bundles(data.get("bundles"), source))
+
+
+def _parse_bundles(data, source: str) -> tuple:
+    """The ``bundles:`` section: a mapping of bundle names to lists of function names (or one
+    comma-separated string), each generated as one function (kindyngen/codegen/bundles.py,
+    which checks the names against the function catalog when generating).
+
+    >>> _parse_bundles({"step": ["fk_hom", "M"], "row": "Y, tau"}, "f.yaml")
+    (('step', ('fk_hom', 'M')), ('row', ('Y', 'tau')))
+    >>> _parse_bundles({"step": [1, 2]}, "f.yaml")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'bundles.step': expected function names, got [1, 2]
+    """
+    if data is None:
+        return ()
+    if not isinstance(data, dict) or not data:
+        raise RobotDescriptionError(source, "bundles", f"expected a mapping of bundle names to lists of function "
+                                                       f"names, e.g. step: [fk_hom, jacobian, M, g, tau]; got {shown(data)}")
+    out = []
+    for name, members in data.items():
+        if not isinstance(name, str) or not is_identifier(name):
+            raise RobotDescriptionError(source, "bundles", f"a bundle's name must be ASCII letters, digits and _ "
+                                                           f"with a letter first, got {shown(name)}")
+        field = f"bundles.{name}"
+        if isinstance(members, str):
+            members = [m.strip() for m in members.split(",") if m.strip()]
+        if not isinstance(members, list) or not members or not all(isinstance(m, str) and m for m in members):
+            raise RobotDescriptionError(source, field, f"expected function names, got {shown(members)}")
+        out.append((name, tuple(members)))
+    return tuple(out)
 
 
 def _check_unique_names(rows: list, source: str) -> None:
@@ -391,6 +433,61 @@ def _check_unique_names(rows: list, source: str) -> None:
             raise RobotDescriptionError(source, f"joints[{k}].name", f"{shown(name)} is also the name of "
                                                                      f"joints[{first[name]}]: joint names are unique")
         first[name] = k
+
+
+def _mimic_entry(row: dict, kind: str, source: str, field: str) -> tuple:
+    """A joint's ``mimic: {joint: NAME, multiplier: 1, offset: 0}`` as (name, multiplier,
+    offset), exact; the multiplier not 0, the offset an angle within a full turn (a prismatic
+    joint's a length).
+
+    >>> _mimic_entry({"joint": "a", "multiplier": -1, "offset": 0.1}, "revolute", "f.yaml", "joints[1].mimic")
+    ('a', -1, 1/10)
+    """
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(MIMIC_KEYS)}, got {shown(row)}")
+    _check_keys(row, MIMIC_KEYS, source, field + ".")
+    name = _require(row, "joint", source, field + ".")
+    if not isinstance(name, str) or not name:
+        raise RobotDescriptionError(source, f"{field}.joint", f"expected a joint's name, got {shown(name)}")
+    multiplier = _rational(row.get("multiplier", 1), source, f"{field}.multiplier")
+    if multiplier == 0:
+        raise RobotDescriptionError(source, f"{field}.multiplier", "0 would hold the joint at its offset")
+    quantity = "length" if kind == "prismatic" else "coefficient"
+    offset = _rational(row.get("offset", 0), source, f"{field}.offset", quantity)
+    if kind != "prismatic":
+        check_angle(float(offset), source, f"{field}.offset")
+    return name, multiplier, offset
+
+
+def _with_mimics(rows: list, joints: tuple, reading: Reading) -> tuple:
+    """``joints`` with the ``mimic`` entries of their ``rows`` resolved: the joint named must
+    exist (by ``name``), a mimic of a mimic is composed into the joint at the end of the chain
+    (``q_a = m_a (m_b q_c + o_b) + o_a``), a cycle is an error. Joints of any kinds may be
+    coupled: the multiplier's unit is the ratio of theirs (m/rad: a rack on a pinion)."""
+    source = reading.source
+    entries = {k: _mimic_entry(row["mimic"], joints[k].kind, source, f"joints[{k}].mimic")
+               for k, row in enumerate(rows) if isinstance(row, dict) and "mimic" in row}
+    if not entries:
+        return joints
+    index = {joint.name: k for k, joint in enumerate(joints) if joint.name}
+    out = list(joints)
+    for k in entries:
+        multiplier, offset, path, current = sympy.Integer(1), sympy.Integer(0), [k], k
+        while current in entries:
+            target, m, o = entries[current]
+            field = f"joints[{current}].mimic.joint"
+            if target not in index:
+                close = difflib.get_close_matches(target, list(index), n=1)
+                raise RobotDescriptionError(source, field, f"no joint named {shown(target)}"
+                                            + (f"; closest: {close[0]}" if close else ""))
+            multiplier, offset = multiplier * m, offset + multiplier * o
+            if index[target] in path:
+                cycle = " -> ".join(joints[j].name or f"joints[{j}]" for j in path + [index[target]])
+                raise RobotDescriptionError(source, f"joints[{k}].mimic.joint", f"the mimic joints form a cycle: {cycle}")
+            path.append(index[target])
+            current = index[target]
+        out[k] = replace(joints[k], mimic=Mimic(current, multiplier, offset))
+    return tuple(out)
 
 
 def _tree_joints(rows: list, reading: Reading) -> tuple[tuple, tuple, dict]:
@@ -430,10 +527,116 @@ def _tree_model(data, name, gravity, joints, parents, index, links, frames, floa
             close = difflib.get_close_matches(str(frame), list(named), n=1)
             raise RobotDescriptionError(source, "--frames", f"no joint named '{frame}'"
                                         + (f"; closest: {close[0]}" if close else ""))
+    loops, independent, reference = _loops(data, joints, named, floating_base, reading)
     return RobotModel(name=name.strip(), convention="tree", joints=joints, parents=parents,
                       links=links, root=root, frames=tuple(Frame(frame, named[frame]) for frame in wanted),
                       floating_base=floating_base, gravity=gravity, source=source, base_name=BASE_NAME,
-                      notes=tuple(reading.notes))
+                      notes=tuple(reading.notes), loops=loops, independent=independent, reference=reference,
+                      bundles=_parse_bundles(data.get("bundles"), source))
+
+
+def _loops(data: dict, joints: tuple, named: dict, floating_base: bool, reading: Reading) -> tuple:
+    """``(loops, independent, reference)`` of a tree: its ``loops`` entries as
+    :class:`LoopClosure` s (each body named by its joint, or ``base``), the joints named in
+    ``independent`` (indices, in joint order) and the ``reference`` configuration (exact, per
+    joint; None: all zero). Without ``loops`` the other two keys are refused."""
+    source = reading.source
+    if "loops" not in data:
+        for key in ("independent", "reference"):
+            if key in data:
+                raise RobotDescriptionError(source, key, "applies to a tree closed by loops (no 'loops' given)")
+        return (), None, None
+    if floating_base:
+        raise RobotDescriptionError(source, "loops", "closed loops on a floating base are not supported (yet): "
+                                    "read the tree with a fixed base")
+    if any(joint.mimic is not None for joint in joints):
+        first = next(k for k, joint in enumerate(joints) if joint.mimic is not None)
+        raise RobotDescriptionError(source, f"joints[{first}].mimic", "mimic joints and closed loops in one tree are "
+                                    "not supported (yet): write the coupling as a loop or drop the loops")
+    rows = data["loops"]
+    if not isinstance(rows, list) or not rows:
+        raise RobotDescriptionError(source, "loops", f"expected a non-empty list of loop joints, got {shown(rows)}")
+    loops, names = [], set()
+    for k, row in enumerate(rows):
+        loop = _loop(row, named, reading, f"loops[{k}]")
+        if loop.name in names or loop.name in named:
+            raise RobotDescriptionError(source, f"loops[{k}].name", f"{shown(loop.name)} already names a joint or "
+                                        "another loop: names are unique")
+        names.add(loop.name)
+        loops.append(loop)
+    independent = None
+    if "independent" in data:
+        value = data["independent"]
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise RobotDescriptionError(source, "independent", f"expected a list of joint names, got {shown(value)}")
+        for k, joint_name in enumerate(value):
+            if joint_name not in named or joint_name == BASE_NAME:
+                close = difflib.get_close_matches(joint_name, [n for n in named if n != BASE_NAME], n=1)
+                raise RobotDescriptionError(source, f"independent[{k}]", f"no joint named {shown(joint_name)}"
+                                            + (f"; closest: {close[0]}" if close else ""))
+        if len(set(value)) != len(value):
+            raise RobotDescriptionError(source, "independent", "a joint is named twice")
+        independent = tuple(sorted(named[v] for v in value))
+    reference = None
+    if "reference" in data:
+        value = data["reference"]
+        if not isinstance(value, dict):
+            raise RobotDescriptionError(source, "reference", f"expected a mapping of joint names to positions, got "
+                                        f"{shown(value)}")
+        values = [sympy.Integer(0)] * len(joints)
+        for joint_name, position in value.items():
+            field = f"reference.{joint_name}"
+            if joint_name not in named or joint_name == BASE_NAME:
+                close = difflib.get_close_matches(str(joint_name), [n for n in named if n != BASE_NAME], n=1)
+                raise RobotDescriptionError(source, field, "no joint of that name"
+                                            + (f"; closest: {close[0]}" if close else ""))
+            j = named[joint_name]
+            quantity = "length" if joints[j].prismatic else "coefficient"
+            values[j] = _rational(position, source, field, quantity)
+            if not joints[j].prismatic:
+                check_angle(float(values[j]), source, field)
+        reference = tuple(values)
+    return tuple(loops), independent, reference
+
+
+def _loop(row, named: dict, reading: Reading, field: str) -> LoopClosure:
+    """One ``loops`` entry: ``{name, type, link1, origin1, link2, origin2, directions}``."""
+    source = reading.source
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(LOOP_KEYS)}, got {shown(row)}")
+    _check_keys(row, LOOP_KEYS, source, field + ".")
+    name = _require(row, "name", source, field + ".")
+    if not isinstance(name, str) or not name:
+        raise RobotDescriptionError(source, f"{field}.name", f"expected a non-empty string, got {shown(name)}")
+    check_name(name, source, f"{field}.name")
+    kind = _require(row, "type", source, field + ".")
+    if kind not in LOOP_TYPES:
+        raise RobotDescriptionError(source, f"{field}.type", f"expected one of {LOOP_TYPES}, got {shown(kind)}")
+    bodies = []
+    for key in ("link1", "link2"):
+        body = _require(row, key, source, field + ".")
+        if not isinstance(body, str) or body not in named:
+            close = difflib.get_close_matches(str(body), list(named), n=1)
+            raise RobotDescriptionError(source, f"{field}.{key}", f"no link named {shown(body)} (a joint's link, or "
+                                        f"'{BASE_NAME}')" + (f"; closest: {close[0]}" if close else ""))
+        bodies.append(named[body])
+    if bodies[0] == bodies[1]:
+        raise RobotDescriptionError(source, f"{field}.link2", "a loop joint joins two different links")
+    placements = [parse_origin(row.get(key, {}), reading, f"{field}.{key}") for key in ("origin1", "origin2")]
+    allowed = LOOP_DIRECTIONS[kind]
+    directions = row.get("directions", list(allowed))
+    if not isinstance(directions, list) or not directions or not all(isinstance(d, str) for d in directions):
+        raise RobotDescriptionError(source, f"{field}.directions", f"expected a non-empty list of {', '.join(allowed)}, "
+                                    f"got {shown(directions)}")
+    for k, direction in enumerate(directions):
+        if direction not in allowed:
+            reason = (f"a {kind} loop joint constrains {', '.join(allowed)}" if direction in DIRECTIONS
+                      else f"expected one of {', '.join(DIRECTIONS)}")
+            raise RobotDescriptionError(source, f"{field}.directions[{k}]", f"{shown(direction)}: {reason}")
+    if len(set(directions)) != len(directions):
+        raise RobotDescriptionError(source, f"{field}.directions", "a direction is named twice")
+    return LoopClosure(name=name, kind=kind, body_a=bodies[0], placement_a=placements[0], body_b=bodies[1],
+                       placement_b=placements[1], directions=tuple(d for d in DIRECTIONS if d in directions))
 
 
 def load_robot(path: str | Path, snap_angles: bool = True, base: str | None = None,

@@ -73,10 +73,12 @@ def test_c_has_no_globals_or_allocation(robot):
     calls = source[source.index("\nvoid "):]                 # the generated functions
     assert any(s in statics for s in half[1]) is ("kdg_sincos_half" in calls)
     assert any(s in statics for s in plain[1]) is bool(re.search(r"kdg_sincos(_split)?\(", calls))
-    # every statement lives inside a function body: nothing at file scope but includes and functions
+    # every statement lives inside a function body: nothing at file scope but includes, the
+    # -ffast-math guard and functions (the int one: <robot>_rounds_to_nearest)
     depth, file_scope = 0, []
     for line in source.splitlines():
-        if depth == 0 and line.strip() and not line.startswith(("#", "/*", " *", "void ", "static void ", "static int ", "{", "}")):
+        if depth == 0 and line.strip() and not line.startswith(("#", "/*", " *", "void ", "int ", "static void ", "static int ",
+                                                                 "{", "}")):
             file_scope.append(line)
         depth += line.count("{") - line.count("}")
     assert file_scope == []

@@ -332,7 +332,8 @@ def test_identifiers_of_the_shipped_robots_are_unchanged():
 
 NAMES = ["math", "struct", "os", "string", "sys", "time", "signal", "test", "numpy", "Python", "mex", "stdio",
          "class", "int", "end", "function", "def", "import", "true", "con", "kdg", "", "___", "7dof", "机器人",
-         'x"""', "x*/ int evil; /*", "a" * 100, "é" * 40, "Lwr4 -- Hartl!", "_private_", "?" * 5]
+         'x"""', "x*/ int evil; /*", "a" * 100, "é" * 40, "Lwr4 -- Hartl!", "_private_", "?" * 5,
+         "Stretch", "tool arm", "isaac", "memory", "wcsx", "to", "is 2"]
 
 
 C_HEADERS = {"assert", "complex", "ctype", "errno", "fenv", "float", "inttypes", "iso646", "limits", "locale", "math",
@@ -355,6 +356,10 @@ def test_identifiers_are_ascii_bounded_and_shadow_nothing(name):
     assert not keyword.iskeyword(ident) and not keyword.issoftkeyword(ident)
     assert ident not in {m.lower() for m in sys.stdlib_module_names} | C_HEADERS | C_KEYWORDS
     assert ident not in {"numpy", "casadi", "jax", "python", "mex", "end", "function", "con", "kdg"}
+    # C99 7.26.2 / 7.26.11: is, to, str, mem, wcs and a lowercase letter begin names the C library
+    # may take for external linkage, such as the symbol <identifier>_fk_hom
+    assert not any(ident.startswith(p) and ident[len(p)].islower() for p in ("is", "to", "str", "mem", "wcs")
+                   if len(ident) > len(p))
 
 
 def test_reserved_words_cover_this_pythons_standard_library_and_keywords():
