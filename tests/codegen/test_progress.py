@@ -7,9 +7,13 @@ from __future__ import annotations
 import io
 import re
 import sys
+from pathlib import Path
+
+import pytest
 
 from kindyngen.codegen import pipeline
 from kindyngen.codegen.pipeline import build_programs
+from kindyngen.readers.yaml_description import load_robot
 from tests.harness import robot
 
 NAMES = ("fk_hom", "M", "fd", "tau_derivatives")
@@ -48,3 +52,33 @@ def test_each_line_names_the_function_that_is_starting(monkeypatch):
     # numbered in order, never a function named after it is done
     assert [int(k) for k, _, _, _ in phases] == sorted(int(k) for k, _, _, _ in phases)
     assert re.fullmatch(r"lwr4: 4 functions derived and optimised in \d+\.\d s", lines[-1]), lines[-1]
+
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+
+
+@pytest.mark.parametrize("path, only", [
+    ("mimic/gripper.urdf", None),                       # mimic joints: the reduced functions
+    ("loops/four_bar.yaml", {"fk_hom", "M", "fd", "loop_residual", "loop_solve", "S", "fk_dq"}),
+])
+def test_mimic_and_loop_models_count_what_they_derive(monkeypatch, path, only):
+    """The k/N of each line counts the functions the run derives: a model with mimic joints or
+    closed loops numbers exactly the programs it gets (not the chain's list of functions), a
+    description's bundles after them."""
+    stream = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", stream)
+    model = load_robot(EXAMPLES / path, tree=True)
+    programs = build_programs(model, only=only, progress=True)
+    lines = stream.getvalue().splitlines()
+    started = [re.search(r" (\d+)/(\d+) (\w+): deriving", line) for line in lines]
+    started = [m.groups() for m in started if m]
+    assert [name for _, _, name in started] == [p.function.name for p in programs]
+    assert [int(k) for k, _, _ in started] == list(range(1, len(programs) + 1))
+    assert {int(total) for _, total, _ in started} == {len(programs)}
+    assert lines[-1].endswith(f"{len(programs)} functions derived and optimised in " + lines[-1].split(" in ")[-1])
+    names = {p.function.name for p in programs}
+    if model.has_loops:
+        assert {"loop_residual", "loop_solve", "fk_hom", "M", "fd"} <= names and not {"S", "fk_dq"} & names
+    else:
+        assert {"fk_hom", "M", "fd_derivatives", "Y"} <= names and not {"S", "M_lagrange", "fk_dq"} & names
