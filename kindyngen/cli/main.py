@@ -151,14 +151,18 @@ def available_memory() -> int | None:
     return None
 
 
-def _planned(model, requested, args) -> tuple:
+def _planned(model, requested, args, bundles=()) -> tuple:
     """The functions of ``model`` to derive, of ``requested`` (names the user gave, or None for
     all), decided before anything is derived (kindyngen/codegen/budget.py): the estimate and
-    what is left out printed as notes, a function asked for above its limit refused."""
+    what is left out printed as notes, a function asked for (or a member of the description's
+    bundles and ``bundles``) above its limit refused."""
     from ..codegen.budget import plan
+    from ..codegen.bundles import requested as requested_bundles
     from ..codegen.catalog import applicable_names
     names = applicable_names(model, requested)
-    chosen = plan(model, names, asked=requested is not None, allow_large=args.allow_large)
+    members = tuple(m for bundle in requested_bundles(model, bundles) for m in bundle.members)
+    chosen = plan(model, names, asked=requested is not None, allow_large=args.allow_large,
+                  required=applicable_names(model, set(members)))
     for note in chosen.notes(model.name):
         print(f"note: {one_line(note)}", file=sys.stderr)
     return chosen.names
@@ -187,7 +191,8 @@ def _cmd_generate(args) -> int:
                              f"too: both would be written to {Path(args.out) / model.identifier}; rename one")
         seen[model.identifier] = path
     # every robot's plan (estimate, what is left out or refused) before any work
-    plans = [_planned(model, derived_names(only), args) for _, model in models]
+    bundles = tuple(args.bundle or ())
+    plans = [_planned(model, derived_names(only), args, bundles) for _, model in models]
     for (path, model), names in zip(models, plans):
         left_out = set(applicable_names(model, derived_names(only))) - set(names)
         # the selection without what the plan leaves out (ik_dls where it was wanted)
@@ -195,7 +200,7 @@ def _cmd_generate(args) -> int:
         try:
             out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
                            only=chosen, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
-                           bundles=tuple(args.bundle or ()), memory_limit=_memory_limit(args))
+                           bundles=bundles, memory_limit=_memory_limit(args), left_out=tuple(sorted(left_out)))
         except FloatRangeError as exc:      # a derived constant float cannot hold: the description's numbers
             raise UsageError(f"{path}: --scalar float: {exc}; generate it with --scalar double") from None
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
@@ -253,7 +258,7 @@ def _cmd_count(args) -> int:
         names = _planned(model, only, args)
         programs = build_programs(model, args.params, only=set(names), progress=not args.quiet,
                                   memory_limit=_memory_limit(args))
-        for note in undecided_notes(model, only):
+        for note in undecided_notes(model, set(names)):    # not of what the plan left out: costly to decide
             print(f"note: {note}", file=sys.stderr)
         undecided = sorted(set(names) - {p.function.name for p in programs})
         if only and undecided:              # asked for, base parameters undecided (the note above)

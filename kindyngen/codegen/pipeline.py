@@ -205,12 +205,15 @@ def host_compiler_works() -> bool:
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, lanes: bool = True, bundles=(), memory_limit: int | None = None) -> Path:
+             batch: bool = True, lanes: bool = True, bundles=(), memory_limit: int | None = None,
+             left_out=()) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
     of lane programs as loops over lanes): see render.render_c; ``bundles``: bundles.Bundle
-    requests (--bundle) besides the description's; ``memory_limit``: see :func:`build_programs`.
+    requests (--bundle) besides the description's; ``memory_limit``: see :func:`build_programs`;
+    ``left_out``: functions the run's plan left out (kindyngen/codegen/budget.py), not in
+    ``only``, whose base parameters (a regressor's) are not analysed either.
 
     Everything is derived first, then written into a staging folder that replaces
     ``out_root/<robot>/`` whole (kindyngen.output_folder.replace_folder): a failed or killed run
@@ -225,7 +228,7 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar,
                               bundles=bundles, memory_limit=memory_limit)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes, ik_dls=dls)
-    base_params = base_params_document(model)          # None for robots with symbolic lengths
+    base_params = base_params_document(model, left_out)  # None for robots with symbolic lengths
     for note in undecided_notes(model, only) + mimic_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None
