@@ -10,7 +10,7 @@ import pytest
 
 from kindyngen.codegen.budget import (COSTS, CPU_LIMIT_S, MEMORY_LIMIT_MB, LimitError, estimate, plan,
                                       power_law)
-from kindyngen.codegen.catalog import NAMES, applicable_names
+from kindyngen.codegen.catalog import BUILDERS, applicable_names
 from kindyngen.readers.yaml_description import load_robot
 from benchmarks.generation_cost import TREE_FUNCTIONS, write_chain
 from tests.harness import ROOT
@@ -33,7 +33,9 @@ def test_the_table_is_the_measurement():
 
 
 def test_every_function_that_grows_has_a_cost():
-    assert set(COSTS) == ({n for n in NAMES if n not in ("ik_hom", "ik_dq")}
+    # every function a chain or a tree can get, but the closed-form IK (7 joints, no more) and a
+    # closed mechanism's loop functions (catalog.LOOP_FUNCTIONS, not in BUILDERS)
+    assert set(COSTS) == ({n for n, _ in BUILDERS if n not in ("ik_hom", "ik_dq")}
                           | {f"{n} (world frame)" for n in TREE_FUNCTIONS})
 
 
@@ -77,3 +79,14 @@ def test_a_long_chain_leaves_out_what_is_above_the_limits(tmp_path):
     assert all(name in str(refused.value) for name in left)
     assert plan(model, names, asked=True, allow_large=True).names == names
     assert estimate("fk_hom", 40).within_limit
+
+
+def test_a_bundle_member_above_its_limit_is_refused_whatever_the_selection(tmp_path):
+    model = load_robot(write_chain(20, tmp_path))     # fd_derivatives did not finish at 20 joints
+    assert not estimate("fd_derivatives", 20).within_limit
+    with pytest.raises(LimitError, match="fd_derivatives: did not finish at 20"):
+        plan(model, ("fk_hom",), asked=True, required=("fk_hom", "fd_derivatives"))
+    with pytest.raises(LimitError, match="fd_derivatives"):      # left out of the selection, a bundle needs it
+        plan(model, applicable_names(model), asked=False, required=("fd_derivatives",))
+    chosen = plan(model, ("fk_hom",), asked=True, required=("fd_derivatives",), allow_large=True)
+    assert chosen.names == ("fk_hom",)
