@@ -20,6 +20,8 @@ Example:
 """
 from __future__ import annotations
 
+from fractions import Fraction
+
 import sympy
 import symengine as se
 
@@ -79,13 +81,25 @@ def constant_parts(placement: Placement) -> tuple[list, list]:
 def constant(value) -> se.Basic:
     """The one sympy-to-symengine conversion of constants (placements, IK geometry, joint
     frames): exact where sympy has a closed form (rationals, sqrt(2)/2, symbols), else the
-    double of its 30-digit value (cos(3/10)): evaluated by
-    mpmath, the same on every machine."""
+    double nearest its 30-digit value (cos(3/10); evaluated by mpmath, the same on every
+    machine), held as the exact rational of that double. Exact, not a symengine RealDouble,
+    because everything computed from it after is then exact arithmetic too (rounded once, where
+    the code is printed), and because symengine 0.15 hashes a RealDouble by the low 32 bits of
+    its bits alone: 1.0, -1.0, 2.0 and 0.5 hash alike, so do x and -x, and c*X and -c*X with
+    them; CSE's hash maps then fall back to structural comparisons that are not shared over the
+    DAG and took exponential time (the UR5's right angles kept as 1.57079632679 never finished
+    fd_derivatives' CSE; docs/measurements/trees.md).
+
+    >>> c = constant(sympy.cos(sympy.Rational(3, 10)))
+    >>> c.is_Rational, float(c) == float(sympy.cos(sympy.Rational(3, 10)).evalf(50))
+    (True, True)
+    """
     value = sympy.sympify(value)
     if value.free_symbols or not value.has(sympy.cos, sympy.sin, sympy.acos, sympy.asin, sympy.atan, sympy.atan2,
                                            sympy.tan):
         return se.sympify(value)
-    return se.RealDouble(float(value.evalf(30)))
+    nearest = Fraction(float(value.evalf(30)))
+    return se.Integer(nearest.numerator) / se.Integer(nearest.denominator)
 
 
 def motion(joint: Joint, q: se.Symbol, cos_sin=None) -> tuple[se.Matrix, se.Matrix]:

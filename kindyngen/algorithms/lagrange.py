@@ -92,24 +92,28 @@ def christoffel_S(M, q, qd):
 class LagrangeModel:
     q: tuple
     qd: tuple
-    M: list
+    M: list | None    # None: not derived (lagrange_model(mass=False))
     g: list
     T: se.Basic
     U: se.Basic
     ts: TreeSetup     # what it was derived from (the parameter ports)
 
 
-def lagrange_model(model: RobotModel, params: str = "numeric") -> LagrangeModel:
+def lagrange_model(model: RobotModel, params: str = "numeric", mass: bool = True) -> LagrangeModel:
+    """T, U and their derivatives; ``mass=False`` leaves M (the n^2 second derivatives of T,
+    None) out for what needs only g: a 29-joint chain's g_lagrange took 7.5 s CPU with it."""
     ts = setup(model, params)
     q, qd, joints, bodies = ts.q, port_symbols("qd", (model.n,)), ts.joints, ts.bodies
     T = kinetic_energy(bodies, moving_frames(joints, qd))
     U = potential_energy(model, bodies, joints)
     n = model.n
-    dT = [se.diff(T, qd[i]) for i in range(n)]
-    M = [[None] * n for _ in range(n)]
-    for i in range(n):
-        for j in range(i, n):
-            M[i][j] = M[j][i] = se.diff(dT[i], qd[j])
+    M = None
+    if mass:
+        dT = [se.diff(T, qd[i]) for i in range(n)]
+        M = [[None] * n for _ in range(n)]
+        for i in range(n):
+            for j in range(i, n):
+                M[i][j] = M[j][i] = se.diff(dT[i], qd[j])
     g = [se.diff(U, qi) for qi in q]
     return LagrangeModel(q, qd, M, g, T, U, ts)
 
@@ -132,7 +136,7 @@ def mass_matrix_lagrange(model: RobotModel, params: str = "numeric", name: str =
 
 def gravity_lagrange(model: RobotModel, params: str = "numeric", name: str = "g_lagrange") -> SymbolicFunction:
     """``g(q) -> g`` as the gradient of the potential energy."""
-    L = lagrange_model(model, params)
+    L = lagrange_model(model, params, mass=False)
     return dynamics_function(name, LAGRANGE + "g = gradient of the potential energy U.", L.ts,
                              (q_port(model),), (L.q,),
                              (Port("g", (model.n,), "gravity torques", "N m"),), (L.g,))

@@ -470,15 +470,21 @@ def regressor(model: RobotModel, kind: str = "Y", name: str | None = None) -> Sy
         metadata={"params": "none", "base_parameters": base.names}, stages=stages.definitions)
 
 
-def base_params_document(model: RobotModel) -> dict | None:
+def base_params_document(model: RobotModel, left_out=()) -> dict | None:
     """Content of ``base_params.json``: per regressor the base parameters in column order,
     their expressions in the barycentric symbols and their values for the robot's
     description (``Y @ values`` is the modelled quantity), rank and column count; for a tree
-    also which link each body is (None for a robot with symbolic lengths)."""
+    also which link each body is (None for a robot with symbolic lengths). A regressor in
+    ``left_out`` (above a run's limits, kindyngen/codegen/budget.py) is not analysed: deciding
+    its base parameters costs as much as deriving it."""
     if not supported(model):
         return None
     out = {}
     for kind in kinds(model):
+        if kind in left_out:
+            out[kind] = {"unavailable": "left out above the run's limits of CPU time and memory "
+                                        "(docs/reference/cli.md, 'Large robots')"}
+            continue
         if unavailable(model, kind):
             out[kind] = {"unavailable": unavailable(model, kind)}
             continue

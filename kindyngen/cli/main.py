@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..algorithms.base_parameters import BaseParameterError
+from ..codegen.budget import GenerationMemoryError, LimitError
 from ..codegen.bundles import BundleError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
@@ -118,7 +119,62 @@ def writable_out(out, replaced: bool = True) -> Path:
 
 def _cmd_generate(args) -> int:
     from ..codegen.float32 import FloatRangeError
-    from ..codegen.catalog import derived_names
+def _large_robot_options(command: argparse.ArgumentParser) -> None:
+    """The limits of a run on a large robot (kindyngen/codegen/budget.py)."""
+    command.add_argument("--allow-large", action="store_true",
+                         help="derive also the functions estimated above the limits of 60 s CPU and 2 GB each, "
+                              "which a large robot leaves out (named) or refuses when asked for (docs/reference/"
+                              "cli.md, 'Large robots')")
+    command.add_argument("--max-memory", type=_gigabytes, metavar="GB",
+                         help="stop with an error naming the function when deriving needs more memory than this "
+                              "(default: the memory available when the run starts)")
+
+
+def _gigabytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of gigabytes, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number of gigabytes, got {text!r}")
+    return value
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now (/proc/meminfo's MemAvailable), or None where unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _planned(model, requested, args, bundles=()) -> tuple:
+    """The functions of ``model`` to derive, of ``requested`` (names the user gave, or None for
+    all), decided before anything is derived (kindyngen/codegen/budget.py): the estimate and
+    what is left out printed as notes, a function asked for (or a member of the description's
+    bundles and ``bundles``) above its limit refused."""
+    from ..codegen.budget import plan
+    from ..codegen.bundles import requested as requested_bundles
+    from ..codegen.catalog import applicable_names
+    names = applicable_names(model, requested)
+    members = tuple(m for bundle in requested_bundles(model, bundles) for m in bundle.members)
+    chosen = plan(model, names, asked=requested is not None, allow_large=args.allow_large,
+                  required=applicable_names(model, set(members)))
+    for note in chosen.notes(model.name):
+        print(f"note: {one_line(note)}", file=sys.stderr)
+    return chosen.names
+
+
+def _memory_limit(args) -> int | None:
+    return int(args.max_memory * 2 ** 30) if args.max_memory else available_memory()
+
+
+def _cmd_generate(args) -> int:
+    from ..codegen.float32 import FloatRangeError
+    from ..codegen.catalog import applicable_names, derived_names, wants_ik_dls
     from ..codegen.pipeline import generate
     writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
@@ -134,11 +190,17 @@ def _cmd_generate(args) -> int:
             raise UsageError(f"{path}: the robot's identifier {model.identifier} is that of {seen[model.identifier]} "
                              f"too: both would be written to {Path(args.out) / model.identifier}; rename one")
         seen[model.identifier] = path
-    for path, model in models:
+    # every robot's plan (estimate, what is left out or refused) before any work
+    bundles = tuple(args.bundle or ())
+    plans = [_planned(model, derived_names(only), args, bundles) for _, model in models]
+    for (path, model), names in zip(models, plans):
+        left_out = set(applicable_names(model, derived_names(only))) - set(names)
+        # the selection without what the plan leaves out (ik_dls where it was wanted)
+        chosen = only if not left_out else set(names) | ({"ik_dls"} if wants_ik_dls(only) else set())
         try:
             out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                           only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
-                           bundles=tuple(args.bundle or ()))
+                           only=chosen, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
+                           bundles=bundles, memory_limit=_memory_limit(args), left_out=tuple(sorted(left_out)))
         except FloatRangeError as exc:      # a derived constant float cannot hold: the description's numbers
             raise UsageError(f"{path}: --scalar float: {exc}; generate it with --scalar double") from None
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
@@ -175,7 +237,7 @@ def _cmd_describe(args) -> int:
 
 def _cmd_count(args) -> int:
     from ..algorithms.regressors import undecided_notes
-    from ..codegen.catalog import NAMES
+    from ..codegen.catalog import NAMES, applicable_names
     from ..codegen.pipeline import build_programs
     from ..codegen.count_report import opcounts_json, opcounts_markdown
     only = None
@@ -189,13 +251,18 @@ def _cmd_count(args) -> int:
         only = set(args.only)
     for path in args.robots:
         model = load(path, args)
-        programs = build_programs(model, args.params, only=only, progress=False)
-        for note in undecided_notes(model, only):
-            print(f"note: {note}", file=sys.stderr)
-        missing = sorted(only - {p.function.name for p in programs}) if only else []
+        missing = sorted(only - set(applicable_names(model, only))) if only else []
         if missing:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
                              f"(does not apply to this arm; see the README's function table)")
+        names = _planned(model, only, args)
+        programs = build_programs(model, args.params, only=set(names), progress=not args.quiet,
+                                  memory_limit=_memory_limit(args))
+        for note in undecided_notes(model, set(names)):    # not of what the plan left out: costly to decide
+            print(f"note: {note}", file=sys.stderr)
+        undecided = sorted(set(names) - {p.function.name for p in programs})
+        if only and undecided:              # asked for, base parameters undecided (the note above)
+            raise UsageError(f"--only: {', '.join(undecided)} not generated for {model.name}")
         if args.format == "json":
             print(strict_json({model.identifier: opcounts_json(programs)}, indent=1))
         else:
@@ -558,6 +625,7 @@ def parser() -> argparse.ArgumentParser:
                    help="C: print the derivatives' single calls as their scalar program instead of a loop over "
                         "lanes (fewer operations; for cores without vector units, e.g. Cortex-M)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
+    _large_robot_options(g)
     g.set_defaults(run=_cmd_generate)
 
     c = sub.add_parser("count", help="print the operation-count table (before and after CSE)",
@@ -570,6 +638,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--only", nargs="*", metavar="FUNCTION",
                    help="restrict to these function names (an unknown or inapplicable name is an error)")
     c.add_argument("--format", choices=("md", "json"), default="md")
+    c.add_argument("--quiet", action="store_true", help="no progress output")
+    _large_robot_options(c)
     c.set_defaults(run=_cmd_count)
 
     w = sub.add_parser("describe", help="write a robot (a URDF's chain, say) as a YAML description",
@@ -760,6 +830,8 @@ def _run(argv) -> int:
     try:
         return args.run(args)
     except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError, BundleError) as exc:
+        message = str(exc)
+    except (LimitError, GenerationMemoryError) as exc:     # a large robot (codegen/budget.py)
         message = str(exc)
     except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)

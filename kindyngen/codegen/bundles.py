@@ -145,12 +145,14 @@ def requested(model: RobotModel, extra=()) -> tuple[Bundle, ...]:
 
 
 def bundle_programs(model: RobotModel, bundles, programs, params: str = "numeric", scalar: str = "double",
-                    step: Callable[[str], None] | None = None) -> list[Program]:
+                    begin: Callable[[str], None] | None = None) -> list[Program]:
     """The program of each bundle, from the members' ``programs`` (those generated anyway) or
-    members derived and optimised here; ``step(name)`` after each (progress)."""
+    members derived and optimised here; ``begin(name)`` before each (progress)."""
     known = {p.function.name: p for p in programs}
     out = []
     for bundle in bundles:
+        if begin is not None:
+            begin(bundle.name)
         missing = [m for m in bundle.members if m not in known]
         if missing:
             for function in derive_all(model, params, set(missing), scalar):
@@ -160,8 +162,6 @@ def bundle_programs(model: RobotModel, bundles, programs, params: str = "numeric
             raise bundle.error(model, f"{', '.join(absent)} does not apply to {model.name} "
                                       "(see the function table: chain-only, flange-only or LWR-type IK functions)")
         out.append(bundle_program(bundle.name, [known[m] for m in bundle.members]))
-        if step is not None:
-            step(bundle.name)
     return out
 
 

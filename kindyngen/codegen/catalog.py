@@ -17,11 +17,12 @@ import symengine as se
 from ..algorithms.derivatives_sweeps import fd_derivatives, tau_derivatives
 from ..algorithms.dualquat.dq_dynamics import coriolis_dq, gravity_dq, inverse_dynamics_dq, mass_matrix_dq, regressor_dq
 from ..algorithms.lagrange import coriolis_christoffel, coriolis_matrix, gravity_lagrange, mass_matrix_lagrange
+from ..ik.lwr_common import lwr_geometry
 from ..ik.lwr_dualquat import ik_dq
 from ..ik.lwr_homogeneous import ik_hom
 from ..algorithms.dualquat.dq_kinematics import fk_dq, jacobian_dq, pose_jacobian_dq
 from ..model.robot_model import RobotModel
-from ..algorithms.regressors import regressor
+from ..algorithms.regressors import regressor, supported
 from ..algorithms.symbolic import Port, SymbolicFunction
 from ..algorithms.articulated_body import forward_dynamics_aba
 from ..algorithms.dynamics import (centre_of_mass_tree, coriolis_tree, forward_dynamics_tree, gravity_tree,
@@ -48,19 +49,34 @@ def chain_only(build: Builder) -> Builder:
     def chain_build(model, params):
         return build(model, params) if model.is_chain else None
     chain_build.chain_only = True
+    chain_build.applies = lambda model: model.is_chain
     return chain_build
 
 
-def flange_only(build: Builder) -> Builder:
+def flange_only(build: Builder, lwr: bool = False) -> Builder:
     """A derivation of a chain's flange (dual-quaternion kinematics, closed-form IK), built on
     :attr:`RobotModel.flange_chain` (a chain read as a tree: its one frame of interest on the
-    last link as the flange); None where there is no such flange."""
+    last link as the flange); None where there is no such flange (``lwr``: or where that arm
+    is not of LWR type, :func:`kindyngen.ik.lwr_common.lwr_geometry`, the closed-form IK's)."""
     def flange_build(model, params, *scalar):
         arm = model.flange_chain
         return build(arm, params, *scalar) if arm is not None else None
     flange_build.chain_only = True
     flange_build.per_scalar = getattr(build, "per_scalar", False)
+    if lwr:
+        flange_build.applies = lambda model: model.flange_chain is not None and \
+            lwr_geometry(model.flange_chain) is not None
+    else:
+        flange_build.applies = lambda model: model.flange_chain is not None
     return flange_build
+
+
+def numeric_lengths(build: Builder) -> Builder:
+    """A regressor: none for a robot with symbolic lengths (its base parameters are found
+    numerically: :func:`kindyngen.algorithms.regressors.supported`)."""
+    structure = getattr(build, "applies", lambda model: True)
+    build.applies = lambda model: supported(model) and structure(model)
+    return build
 
 
 def per_scalar(build: Callable[[RobotModel, str, str], Optional[SymbolicFunction]]) -> Builder:
@@ -115,13 +131,13 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("tau_dq", chain_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
     ("Y_dq", chain_only(lambda model, params: regressor_dq(model, "Y_dq"))),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
-    ("ik_hom", flange_only(per_scalar(lambda model, params, scalar: ik_hom(model, scalar)))),
-    ("ik_dq", flange_only(per_scalar(lambda model, params, scalar: ik_dq(model, scalar)))),
+    ("ik_hom", flange_only(per_scalar(lambda model, params, scalar: ik_hom(model, scalar)), lwr=True)),
+    ("ik_dq", flange_only(per_scalar(lambda model, params, scalar: ik_dq(model, scalar)), lwr=True)),
     # regressors on base parameters (kindyngen/algorithms/regressors.py): the same functions in both
     # params modes; Y_g and Y_m differentiate the Lagrange route, which is written for chains
-    ("Y_g", chain_only(lambda model, params: regressor(model, "Y_g"))),
-    ("Y_m", chain_only(lambda model, params: regressor(model, "Y_m"))),
-    ("Y", lambda model, params: regressor(model, "Y")),
+    ("Y_g", numeric_lengths(chain_only(lambda model, params: regressor(model, "Y_g")))),
+    ("Y_m", numeric_lengths(chain_only(lambda model, params: regressor(model, "Y_m")))),
+    ("Y", numeric_lengths(lambda model, params: regressor(model, "Y"))),
 )
 
 # a model with mimic joints: these functions, in its independent coordinates
@@ -140,7 +156,7 @@ MIMIC_BUILDERS: dict[str, Builder] = {
     "fd_derivatives": reduced.fd_derivatives_reduced,
     "fd_derivatives_no_minv": lambda model, params: reduced.fd_derivatives_reduced(
         model, params, "fd_derivatives_no_minv", with_minv=False),
-    "Y": lambda model, params: regressor(model, "Y"),
+    "Y": numeric_lengths(lambda model, params: regressor(model, "Y")),
 }
 
 # a tree closed by loops with a q-dependent G (kindyngen/algorithms/loop_functions.py): these
@@ -174,40 +190,52 @@ SELECTABLE_NAMES: tuple[str, ...] = NAMES + ITERATIVE_NAMES
 TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
 
 
+def derivations(model: RobotModel) -> dict[str, tuple[RobotModel, Builder]]:
+    """Every function ``model`` gets, in output order: its name -> (the model it is derived on,
+    its builder), decided from the structure alone (chain, flange, LWR geometry, mimic joints,
+    closed loops) without deriving anything: what a run will derive is known (and counted,
+    estimated, refused) before the first derivation starts. A model with mimic joints gets
+    MIMIC_BUILDERS; a tree closed by loops LOOP_BUILDERS (MIMIC_BUILDERS on its coupled model
+    where every loop's G is constant), then the loop functions."""
+    if model.has_loops:
+        system = loop_system(model)
+        linear = system.closed is not None and system.closed.linear
+        derived, builders = (coupled_model(system), MIMIC_BUILDERS) if linear else (model, LOOP_BUILDERS)
+        table = {name: (derived, builders[name]) for name, _ in BUILDERS if name in builders}
+        table.update((name, (model, build)) for name, build in LOOP_FUNCTIONS)
+    elif model.has_mimics:
+        table = {name: (model, MIMIC_BUILDERS[name]) for name, _ in BUILDERS if name in MIMIC_BUILDERS}
+    else:
+        table = {name: (model, build) for name, build in BUILDERS}
+    return {name: (on, build) for name, (on, build) in table.items()
+            if getattr(build, "applies", lambda model: True)(on)}
+
+
+def applicable_names(model: RobotModel, only=None) -> tuple[str, ...]:
+    """The functions ``model`` gets (of ``only``, if given), in output order.
+
+    >>> from kindyngen.readers.yaml_description import load_robot
+    >>> applicable_names(load_robot("robots/panda.yaml"), {"ik_hom", "fk_dq", "tau"})
+    ('fk_dq', 'tau')
+    """
+    return tuple(name for name in derivations(model) if only is None or name in only)
+
+
+def derive(model: RobotModel, name: str, params: str = "numeric", scalar: str = "double") -> SymbolicFunction | None:
+    """The function ``name`` of ``model`` (one of :func:`applicable_names`), for C of the scalar
+    type ``scalar`` (and the other languages written beside it); None for a regressor whose base
+    parameters the samples cannot decide (:func:`kindyngen.algorithms.regressors.unavailable`:
+    numbers, not structure, decide that)."""
+    on, build = derivations(model)[name]
+    function = build(on, params, scalar) if getattr(build, "per_scalar", False) else build(on, params)
+    return None if function is None else with_lengths_port(function, model)
+
+
 def derive_all(model: RobotModel, params: str = "numeric", only=None, scalar: str = "double") -> list[SymbolicFunction]:
     """All applicable functions for ``model`` (optionally only the named ones), for C of the
     scalar type ``scalar`` (and the other languages written beside it)."""
-    if model.has_loops:
-        return _derive_loops(model, params, only)
-    out = []
-    for name, build in BUILDERS:
-        if only is not None and name not in only:
-            continue
-        if model.has_mimics:
-            build = MIMIC_BUILDERS.get(name, lambda model, params: None)
-        function = build(model, params, scalar) if getattr(build, "per_scalar", False) else build(model, params)
-        if function is not None:
-            out.append(with_lengths_port(function, model))
-    return out
-
-
-def _derive_loops(model: RobotModel, params: str, only) -> list[SymbolicFunction]:
-    """The functions of a tree closed by loops (LOOP_BUILDERS, or MIMIC_BUILDERS on its coupled
-    model where G is constant), then the loop functions."""
-    system = loop_system(model)
-    linear = system.closed is not None and system.closed.linear
-    derived, builders = (coupled_model(system), MIMIC_BUILDERS) if linear else (model, LOOP_BUILDERS)
-    out = []
-    for name, _ in BUILDERS + LOOP_FUNCTIONS:
-        if only is not None and name not in only:
-            continue
-        if name in dict(LOOP_FUNCTIONS):
-            function = dict(LOOP_FUNCTIONS)[name](model, params)
-        else:
-            function = builders.get(name, lambda model, params: None)(derived, params)
-        if function is not None:
-            out.append(with_lengths_port(function, model))
-    return out
+    functions = (derive(model, name, params, scalar) for name in applicable_names(model, only))
+    return [f for f in functions if f is not None]
 
 
 def mimic_notes(model: RobotModel, only=None) -> list[str]:
@@ -238,6 +266,8 @@ def loop_notes(model: RobotModel, only=None) -> list[str]:
             notes.append(f"{model.identifier}: closed loops with a configuration-dependent G: {', '.join(missing)} "
                          "not generated")
     return notes
+
+
 def derived_names(only):
     """The derivations a selection ``only`` (None: everything) needs: its own, and those the
     iterative functions it names iterate.

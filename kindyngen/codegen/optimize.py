@@ -109,7 +109,7 @@ class LaneProgram:
                 "critical_path": self.critical.to_json()}
 
 
-def optimize(function: SymbolicFunction) -> Program:
+def optimize(function: SymbolicFunction, report=None) -> Program:
     """CSE over all outputs of ``function`` together, with temporaries named t0, t1, ...
 
     A function with named intermediates (``function.stages``) is reduced as one list of its
@@ -118,12 +118,18 @@ def optimize(function: SymbolicFunction) -> Program:
 
     A function with ``alternatives`` is optimised by every route, and the route with the
     fewest additions and multiplications after CSE (the first one on a tie) is kept; its
-    summary says what the others cost."""
+    summary says what the others cost.
+
+    ``report`` (optional) is called with the name of each phase as it starts ("CSE", "CSE
+    chunk 2/3", "lane program", "critical path", a route's name first): the progress line of a
+    long optimisation."""
+    report = report or _silent
     if function.alternatives:
-        return _cheapest((replace(function, alternatives=()),) + function.alternatives)
+        return _cheapest((replace(function, alternatives=()),) + function.alternatives, report)
     flat = [e for port in function.output_exprs for e in port]
     staged = [e for _, e in function.stages]
-    replacements, reduced = _cse(staged + flat) if function.stages else se.cse(flat)
+    report(f"CSE of {len(staged) + len(flat)} expressions")
+    replacements, reduced = _cse(staged + flat, report) if function.stages else se.cse(flat)
     if function.stages:
         replacements, reduced = _merged(replacements, function.stages, reduced)
     rename = {sym: se.Symbol(f"t{k}") for k, (sym, _) in enumerate(replacements)}
@@ -131,23 +137,31 @@ def optimize(function: SymbolicFunction) -> Program:
     reduced = [_renamed(e, rename) for e in reduced]
     assignments, reduced = _hoist_power_bases(assignments, reduced)
     assignments = _live(assignments, reduced)
+    report("critical path")
     assignments, reduced = _shallower(function, assignments, reduced)
     outputs, start = [], 0
     for port in function.outputs:
         outputs.append(tuple(reduced[start:start + port.size]))
         start += port.size
+    critical = critical_path(function, assignments, reduced)
+    if function.lanes is not None:
+        report("lane program")
     return Program(
         function=function,
         assignments=assignments,
         outputs=tuple(outputs),
         before=tree_count(staged + flat),
         after=program_count(assignments, reduced),
-        critical=critical_path(function, assignments, reduced),
-        lanes=optimize_lanes(function) if function.lanes is not None else None,
+        critical=critical,
+        lanes=optimize_lanes(function, report) if function.lanes is not None else None,
     )
 
 
-def optimize_lanes(function: SymbolicFunction) -> LaneProgram:
+def _silent(phase: str) -> None:
+    """No progress report."""
+
+
+def optimize_lanes(function: SymbolicFunction, report=None) -> LaneProgram:
     """CSE over the lane sweep's stages, the outputs outside the lanes, the seed values and the
     lane expressions together; every temporary that reads a seed (or such a temporary) is a
     lane temporary, the rest are computed once. The critical path is the longest over the used
@@ -169,7 +183,7 @@ def optimize_lanes(function: SymbolicFunction) -> LaneProgram:
     seed_exprs = [se.sympify(v) for row in sweep.values for v in row]
     flat = uniform_exprs + seed_exprs + list(sweep.exprs)
     if sweep.stages:
-        replacements, reduced = _cse([e for _, e in sweep.stages] + flat)
+        replacements, reduced = _cse([e for _, e in sweep.stages] + flat, report or _silent, "lane program ")
         replacements, reduced = _merged(replacements, sweep.stages, reduced)
     else:
         replacements, reduced = se.cse(flat)
@@ -360,13 +374,13 @@ def critical_path(function: SymbolicFunction, assignments, outputs) -> CriticalP
                                  {"kernel": _kernel_wait(extra, assignments)})
 
 
-def _cse(exprs):
+def _cse(exprs, report=_silent, what: str = ""):
     """symengine's cse, on at most CSE_CHUNK expressions at a time (each chunk's temporaries
     renamed apart). Chunked, every sin/cos is first named once for all chunks, so that no call
-    is evaluated twice."""
+    is evaluated twice; ``report`` hears of each chunk as it starts."""
     work = [k for k, expr in enumerate(exprs) if not (expr.is_Symbol or expr.is_Number)]
     if len(work) < len(exprs):          # symbols and numbers (most of M's entries) pass through
-        replacements, reduced = _cse([exprs[k] for k in work])
+        replacements, reduced = _cse([exprs[k] for k in work], report, what)
         out = list(exprs)
         for k, expr in zip(work, reduced):
             out[k] = expr
@@ -380,7 +394,9 @@ def _cse(exprs):
     replacements = [(symbol, call) for call, symbol in calls.items()]
     exprs = [_renamed_calls(expr, calls) for expr in exprs]
     reduced = []
+    chunks = -(-len(exprs) // CSE_CHUNK)
     for chunk, start in enumerate(range(0, len(exprs), CSE_CHUNK)):
+        report(f"{what}CSE chunk {chunk + 1}/{chunks}")
         part, part_reduced = se.cse(exprs[start:start + CSE_CHUNK])
         rename = {sym: se.Symbol(f"_x{chunk}_{k}") for k, (sym, _) in enumerate(part)}
         replacements += [(rename[sym], _renamed(expr, rename)) for sym, expr in part]
@@ -441,10 +457,13 @@ def reads_q_in_place(program: Program) -> bool:
     return not served or bool(half_angles(program.function, served))
 
 
-def _cheapest(routes) -> Program:
+def _cheapest(routes, report=_silent) -> Program:
     """The program of the route with the fewest additions + multiplications after CSE (the first
     on a tie), or of the cheapest route that reads q in place (:data:`IN_PLACE_BOUND`)."""
-    programs = [optimize(route) for route in routes]
+    programs = []
+    for k, route in enumerate(routes):
+        name = route.metadata.get("route", route.name)
+        programs.append(optimize(route, lambda phase: report(f"route {k + 1}/{len(routes)} ({name}): {phase}")))
     ops = [p.after.add + p.after.mul for p in programs]
     best = min(range(len(programs)), key=lambda k: (ops[k], k))
     counted = tuple((p.function.metadata.get("route", p.function.name), p.after) for p in programs)

@@ -11,13 +11,15 @@ import json
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..algorithms.loop_closure import resolved
 from ..algorithms.regressors import base_params_document, undecided_notes
 from ..json_text import strict_json
+from .budget import GenerationMemoryError, memory
 from .bundles import bundle_programs, requested
-from .catalog import derive_all, derived_names, mimic_notes, wants_ik_dls
+from .catalog import applicable_names, derive, derived_names, mimic_notes, wants_ik_dls
 from .interface import listed_files, manifest
 from .optimize import Program, optimize
 from .render import RENDERERS, casadi_builders
@@ -29,46 +31,127 @@ LANGUAGES = ("c", "python", "casadi", "python_c", "jax", "matlab")
 
 
 class Progress:
-    """One line per step on stderr, redrawn in place on a terminal, with elapsed time."""
+    """Where a run is, on stderr: one line per phase of each function as it starts (its number,
+    name and phase: deriving, CSE, ...), with the time since the run began; redrawn in place on
+    a terminal, one line each otherwise.
 
-    def __init__(self, label: str, total: int, stream=None):
+    >>> import io
+    >>> out = io.StringIO()
+    >>> bar = Progress("arm", 2, out, clock=iter(range(10)).__next__)
+    >>> bar.begin("fk_hom"); bar.phase("CSE"); bar.begin("M"); bar.close()
+    >>> print(out.getvalue(), end="")
+    arm [..........] 1/2 fk_hom: deriving (1.0 s)
+    arm [..........] 1/2 fk_hom: CSE (2.0 s)
+    arm [#####.....] 2/2 M: deriving (3.0 s)
+    arm: 2 functions derived and optimised in 4.0 s
+    """
+
+    WIDTH = 10
+
+    def __init__(self, label: str, total: int, stream=None, clock=time.perf_counter):
         # sys.stderr looked up per instance, not bound at import: a redirected or replaced
         # stderr (a caller's capture, a test's) is the one written to
         stream = sys.stderr if stream is None else stream
-        self.label, self.total, self.stream, self.done = label, total, stream, 0
-        self.start = time.perf_counter()
+        self.label, self.total, self.stream, self.clock = label, total, stream, clock
+        self.current, self.name = 0, ""
+        self.start = clock()
         self.tty = stream.isatty()
 
-    def step(self, what: str) -> None:
-        self.done += 1
-        width = 20
-        filled = width * self.done // max(self.total, 1)
-        line = (f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
-                f"{what} ({time.perf_counter() - self.start:.1f} s)")
+    def begin(self, name: str, what: str = "deriving") -> None:
+        """Function ``name`` (the next one) starts, with phase ``what``."""
+        self.current += 1
+        self.name = name
+        self.phase(what)
+
+    def phase(self, what: str) -> None:
+        """The current function enters phase ``what``."""
+        filled = self.WIDTH * (self.current - 1) // max(self.total, 1)
+        line = (f"{self.label} [{'#' * filled}{'.' * (self.WIDTH - filled)}] {self.current}/{self.total} "
+                f"{self.name}: {what} ({self.clock() - self.start:.1f} s)")
+        self._write(line)
+
+    def _write(self, line: str) -> None:
         self.stream.write(("\r" + line.ljust(100)) if self.tty else line + "\n")
         self.stream.flush()
 
     def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
+        line = (f"{self.label}: {self.current} function{'s' if self.current != 1 else ''} derived and optimised in "
+                f"{self.clock() - self.start:.1f} s")
+        self.stream.write(("\r" + line.ljust(100) + "\n") if self.tty else line + "\n")
+        self.stream.flush()
 
 
 def build_programs(model: RobotModel, params: str = "numeric", only=None, progress: bool = True,
-                   scalar: str = "double", bundles=()) -> list[Program]:
-    """Derive and optimise every applicable function of ``model`` (for C of type ``scalar``),
-    then its description's bundles and ``bundles`` (--bundle: kindyngen/codegen/bundles.py)."""
+                   scalar: str = "double", bundles=(), memory_limit: int | None = None) -> list[Program]:
+    """Derive and optimise every applicable function of ``model`` (of ``only``; for C of type
+    ``scalar``), one function after the other, then its description's bundles and ``bundles``
+    (--bundle: kindyngen/codegen/bundles.py), reporting each phase as it starts
+    (:class:`Progress`). ``memory_limit``: bytes the run may grow by (its address space,
+    ``RLIMIT_AS``, while it derives); beyond, :class:`GenerationMemoryError` names the function
+    and phase instead of the system killing the process."""
     bundles = requested(model, bundles)          # checked before anything is derived
-    functions = derive_all(model, params, only, scalar)
-    bar = Progress(f"{model.identifier}", len(functions) + len(bundles)) if progress else None
-    programs = []
-    for f in functions:
-        programs.append(optimize(f))
+    names = applicable_names(model, only)
+    bar = Progress(f"{model.identifier}", len(names) + len(bundles)) if progress else None
+    programs, where = [], ["", "deriving"]        # the function and phase running now
+
+    def begin(name: str, what: str = "deriving") -> None:
+        where[:] = [name, what]
         if bar:
-            bar.step(f.name)
-    programs += bundle_programs(model, bundles, programs, params, scalar, bar.step if bar else None)
+            bar.begin(name, what)
+
+    def phase(what: str) -> None:
+        where[1] = what
+        if bar:
+            bar.phase(what)
+
+    with _address_space_limit(memory_limit) as limit:
+        try:
+            for name in names:
+                begin(name)
+                function = derive(model, name, params, scalar)
+                if function is None:             # a regressor without decided base parameters
+                    phase("not generated (its base parameters are undecided)")
+                    continue
+                programs.append(optimize(function, phase))
+            programs += bundle_programs(model, bundles, programs, params, scalar,
+                                        lambda name: begin(name, "bundling its members"))
+        except MemoryError:
+            failed = tuple(where)
+        else:
+            failed = None
+    if failed is not None:
+        raise GenerationMemoryError(
+            f"{model.name}: {failed[0]} ({failed[1]}) needed more than the memory limit of "
+            f"{memory(limit / 2 ** 20)} (the memory available when the run started, or --max-memory; "
+            f"docs/reference/cli.md, 'Large robots')")
     if bar:
         bar.close()
     return programs
+
+
+@contextmanager
+def _address_space_limit(extra: int | None):
+    """Lower the soft RLIMIT_AS to the current address space plus ``extra`` bytes for the
+    block (yields ``extra``; nothing where ``extra`` is None or the platform has no such
+    limit), and restore it after."""
+    try:
+        import resource
+        pages = int(Path("/proc/self/statm").read_text().split()[0])
+    except (ImportError, OSError, ValueError):
+        yield extra
+        return
+    if extra is None:
+        yield extra
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    limit = pages * resource.getpagesize() + extra
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        yield extra
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
 def _write(path: Path, text: str) -> None:
@@ -122,12 +205,15 @@ def host_compiler_works() -> bool:
 
 def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str = "numeric",
              progress: bool = True, only=None, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, lanes: bool = True, bundles=()) -> Path:
+             batch: bool = True, lanes: bool = True, bundles=(), memory_limit: int | None = None,
+             left_out=()) -> Path:
     """Write all generated files of ``model`` (``only``: just the named functions) under
     ``out_root/<robot>/``; returns that folder. ``trig``: one of c_trig.TRIG_MODES; ``scalar``
     (the C's type, render.SCALARS), ``batch`` (C batch variants) and ``lanes`` (C single calls
     of lane programs as loops over lanes): see render.render_c; ``bundles``: bundles.Bundle
-    requests (--bundle) besides the description's.
+    requests (--bundle) besides the description's; ``memory_limit``: see :func:`build_programs`;
+    ``left_out``: functions the run's plan left out (kindyngen/codegen/budget.py), not in
+    ``only``, whose base parameters (a regressor's) are not analysed either.
 
     Everything is derived first, then written into a staging folder that replaces
     ``out_root/<robot>/`` whole (kindyngen.output_folder.replace_folder): a failed or killed run
@@ -140,9 +226,9 @@ def generate(model: RobotModel, out_root: Path, languages=LANGUAGES, params: str
     # --functions ik_dls: fk_hom and jacobian too (it iterates them); ik_dls only where asked for
     dls = wants_ik_dls(only)
     programs = build_programs(model, params, only=derived_names(only), progress=progress, scalar=scalar,
-                              bundles=bundles)
+                              bundles=bundles, memory_limit=memory_limit)
     document = manifest(model, programs, params, trig, scalar=scalar, batch=batch, lanes=lanes, ik_dls=dls)
-    base_params = base_params_document(model)          # None for robots with symbolic lengths
+    base_params = base_params_document(model, left_out)  # None for robots with symbolic lengths
     for note in undecided_notes(model, only) + mimic_notes(model, only) if progress else ():
         print(f"note: {note}", file=sys.stderr)
     float_error = measure_float_error(model, programs, document, trig, lanes) if scalar == "float" and "c" in languages else None

@@ -53,6 +53,7 @@ Example:
 from __future__ import annotations
 
 from dataclasses import replace
+from fractions import Fraction
 
 import symengine as se
 
@@ -122,15 +123,24 @@ def dadd(*ys) -> list:
     return [se.Add(*(y[k] for y in ys)) for k in range(6)]
 
 
+ROUNDING_RESIDUE = Fraction(1, 10 ** 14)
+
+
 def _rounded(coefficient: se.Basic) -> se.Basic:
-    """A coefficient multiplied out from double constants (angles without a closed form, such
-    as rpy 0.3): within 1e-14 of an exact 0 or +-1 (a rounding residue of c^2 + s^2 = 1,
-    c s - s c) it is that number."""
-    if isinstance(coefficient, se.RealDouble):
-        value = float(coefficient)
-        if abs(value) < 1e-14:
+    """A coefficient multiplied out from constants held as the exact values of doubles (angles
+    without a closed form, such as rpy 0.3: :func:`kindyngen.algorithms.geometry.constant`):
+    within 1e-14 of an exact 0 or +-1 (a rounding residue of c^2 + s^2 = 1, c s - s c) it is
+    that number. The comparison is exact rational arithmetic, the same on every machine.
+
+    >>> _rounded(1 - se.Rational(1, 10 ** 17)), _rounded(se.Rational(3, 10 ** 16)), _rounded(se.Rational(1, 3))
+    (1, 0, 1/3)
+    """
+    if isinstance(coefficient, (se.Rational, se.RealDouble)) and not coefficient.is_Integer:
+        value = Fraction(float(coefficient)) if isinstance(coefficient, se.RealDouble) else \
+            Fraction(int(coefficient.p), int(coefficient.q))
+        if abs(value) < ROUNDING_RESIDUE:
             return ZERO
-        if abs(abs(value) - 1) < 1e-14:
+        if abs(abs(value) - 1) < ROUNDING_RESIDUE:
             return se.Integer(1 if value > 0 else -1)
     return coefficient
 
