@@ -8,6 +8,13 @@ Python turns SIGINT into ``KeyboardInterrupt`` by itself; SIGTERM, which would k
 process on the spot and leave a staging folder behind, is turned into :class:`Terminated`
 here, so that it unwinds the same way (staging folders removed on the way out).
 
+Python runs those handlers between bytecodes only: a main thread inside one long C call (a
+symengine CSE of a large robot's derivatives, minutes) would not see a Ctrl-C until the call
+returns. A watcher thread (:func:`stuck_main_thread_ends`) learns of the signal through
+Python's wakeup file descriptor; when the main thread has not moved on by STUCK_GRACE_S, it
+says the line and ends the process with the same exit code (nothing is unwound then; a
+staging folder of a write under way is removed by the next run, kindyngen.output_folder).
+
 Example:
 
 >>> def long_job():
@@ -29,6 +36,9 @@ EXIT_TERMINATED = 128 + signal.SIGTERM       # 143
 #: a signal swallowed by the garbage collector is sent again this much later (the collector's
 #: callback has returned by then; the program ends within it, not after its work)
 RESEND_DELAY_S = 0.05
+#: how long the main thread may stay in the one C call it was in when a signal came before the
+#: watcher ends the process (a Python-level handler runs within microseconds otherwise)
+STUCK_GRACE_S = 2.0
 
 
 class Terminated(BaseException):
@@ -87,6 +97,65 @@ def signals_not_swallowed():
             resend.cancel()
 
 
+def _position(thread_id: int):
+    """The frame the thread runs and its last instruction, or None (the thread is gone)."""
+    frame = sys._current_frames().get(thread_id)
+    return None if frame is None else (frame, frame.f_lasti)
+
+
+def _forget_wakeup_fd() -> None:
+    """In a forked child (identify's workers): its signals are its own, not the watcher's."""
+    with contextlib.suppress(ValueError):
+        signal.set_wakeup_fd(-1)
+
+
+os.register_at_fork(after_in_child=_forget_wakeup_fd)
+
+
+@contextlib.contextmanager
+def stuck_main_thread_ends():
+    """Inside the block (main thread only), a SIGINT or SIGTERM the main thread does not act on
+    within STUCK_GRACE_S, because it is inside one C call all that time, ends the process:
+    ``interrupted`` or ``terminated`` and exit code 130 or 143 (see the module's text)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    main_id, done = threading.main_thread().ident, threading.Event()
+
+    def watch():
+        while True:
+            try:
+                received = os.read(read_fd, 64)
+            except OSError:
+                return
+            if not received or done.is_set():
+                return
+            for signum in dict.fromkeys(received):
+                if signum not in (signal.SIGINT, signal.SIGTERM):
+                    continue
+                before = _position(main_id)
+                if done.wait(STUCK_GRACE_S):
+                    return
+                now = _position(main_id)
+                if before is not None and now is not None and now[0] is before[0] and now[1] == before[1]:
+                    _say("interrupted" if signum == signal.SIGINT else "terminated")
+                    os._exit(128 + signum)
+
+    watcher = threading.Thread(target=watch, name="kindyngen-signal-watcher", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        signal.set_wakeup_fd(previous_fd)
+        os.close(write_fd)              # the watcher reads the end of the pipe and returns
+        watcher.join(timeout=1.0)
+        os.close(read_fd)
+
+
 def _say(word: str) -> None:
     stream = sys.stderr
     with contextlib.suppress(Exception):          # a closed or broken standard error: the exit code says it
@@ -99,7 +168,7 @@ def ending_on_signals(run: Callable[[], int]) -> int:
     """``run()``'s exit code, or 130 after one ``interrupted`` line (SIGINT) or 143 after one
     ``terminated`` line (SIGTERM) on standard error."""
     try:
-        with sigterm_raises(), signals_not_swallowed():
+        with sigterm_raises(), signals_not_swallowed(), stuck_main_thread_ends():
             code = run()
             if _swallowed:
                 raise _swallowed[-1][0]()

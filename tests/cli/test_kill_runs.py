@@ -351,3 +351,41 @@ def test_a_signal_landing_in_a_finaliser_still_ends_the_command(sig, word, code,
     assert done.returncode == code, done.stderr
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
     assert done.stderr.splitlines()[-1] == word
+
+
+STUCK = """
+import ctypes, sys
+from kindyngen.cli.interrupts import ending_on_signals
+
+def run():
+    print("started", flush=True)
+    ctypes.CDLL({library!r}).spin()          # one C call that never returns to Python
+    return 0
+
+sys.exit(ending_on_signals(run))
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_ends_a_command_stuck_in_one_c_call(signum, tmp_path):
+    """Python's handlers run between bytecodes: a main thread inside one long C call (symengine's
+    CSE of a large robot's derivatives: a SIGTERM went unanswered for minutes) still ends with
+    its line and exit code."""
+    compiler = os.environ.get("CC", "cc")
+    if shutil.which(compiler) is None:
+        pytest.skip(f"no C compiler ({compiler}) to build the C call")
+    (tmp_path / "spin.c").write_text("void spin(void) { volatile unsigned long i = 0; for (;;) { i++; } }\n")
+    subprocess.run([compiler, "-shared", "-fPIC", "-O0", "-o", str(tmp_path / "spin.so"), str(tmp_path / "spin.c")],
+                   check=True)
+    process = subprocess.Popen([sys.executable, "-c", STUCK.format(library=str(tmp_path / "spin.so"))], cwd=ROOT,
+                               env={**os.environ, "PYTHONPATH": str(ROOT)}, text=True, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert process.stdout.readline() == "started\n"
+    time.sleep(0.2)                    # inside spin() by now, or soon: the signal waits for nothing
+    process.send_signal(signum)
+    try:
+        _, err = process.communicate(timeout=HANG)
+    finally:
+        process.kill()
+    code, word = ENDING[signum]
+    assert process.returncode == code and err == word + "\n", (process.returncode, err)
