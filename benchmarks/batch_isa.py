@@ -10,7 +10,9 @@ batch loop (objdump: instructions on zmm, ymm and xmm registers, gathers, scatte
 The library is generated afresh with ``--lang c --functions ...`` (seconds to compile instead
 of a minute per build); every function it holds must be the same text as in ``generated/``
 (checked, the run stops otherwise), so the figures are those of the committed code.
-``--generated DIR`` times another tree (e.g. one rendered by a changed template) instead.
+``--generated DIR`` times another tree instead; ``--baseline DIR`` times a second tree (e.g. the
+code before a template change) in the same rounds, its builds labelled "before: ...", and checks
+its outputs bit for bit against the first build's.
 Single calls and batches (N configurations in structure-of-arrays layout) are timed by
 benchmarks/c_batch.py's two drivers, every build in every round, rounds interleaved; the
 ratio single / batch is taken within the run. Not part of `make bench`.
@@ -130,6 +132,7 @@ def vector_profile(objdump: str, symbol: str) -> dict:
             pending = target.group(1) if target else text
         if mnemonic == "sub" and text.endswith(",%rsp") and not frame:
             frame = int(text.split("$", 1)[1].split(",")[0], 16)
+            frame = frame if frame < 1 << 63 else 0       # sub of a negative: no frame
         if mnemonic.startswith("vmov") and widths & {"y", "z"} and re.search(r"\(%r[sb]p", text):
             counts["stack_vector_moves"] += 1
     if pending is not None:
@@ -153,10 +156,44 @@ def build_library(robot: str, tree: Path, compiler: str, march: str) -> Path:
     """The robot's generated C compiled once into an object for both drivers."""
     source = tree / robot / "c" / f"{robot}.c"
     tag = f"{compiler}_{march}".replace(" ", "_")
-    built = build(f"batch_isa_{robot}_{tag}.o", compiler, [source],
+    # the tree's folder name in the cache name: another tree's build does not replace this one
+    built = build(f"batch_isa_{tree.name}_{robot}_{tag}.o", compiler, [source],
                   ["-c", c_harness.C_STD, *variant_flags(march), f"-I{source.parent}"],
                   extra=(tree / robot / "c" / f"{robot}.h",))
     return built.path
+
+
+_KERNEL = """
+/* the batch functions' first stage alone: sin/cos of each of the robot's joint angles over
+   blocks of 64 configurations by the kernel of the .c included above, stored in place */
+static void kb_kernel_batch(long count, const double *restrict q, double *restrict s, double *restrict c)
+{{
+    long start;
+    int k;
+    for (start = 0; start < count; start += 64) {{
+        const long size = count - start < 64 ? count - start : 64;
+        for (k = 0; k < {angles}; ++k)
+            {kernel}(size, q + k*count + start, s + k*count + start, c + k*count + start);
+    }}
+}}
+"""
+
+
+def kernel_driver(robot: str, tree: Path, angles: int, q: np.ndarray, compiler: str, march: str,
+                  workdir: Path) -> c_harness.Prepared:
+    """A driver timing the sin/cos stage of the batch functions alone (``kb_kernel_batch``),
+    with the generated .c's static kernel functions copied in, on ``q`` ((n, angles))."""
+    source = tree / robot / "c" / f"{robot}.c"
+    n = q.shape[0]
+    kernels = {name: text for name, text in definitions(source.read_text()).items() if name.startswith("kdg_")}
+    prelude = "\n".join(["#include <math.h>", *(text + "\n}\n" for text in kernels.values()),
+                         # the batch variants' kernel (kdg_sincos before it came)
+                         _KERNEL.format(angles=angles, kernel="kdg_sincos_batch" if "kdg_sincos_batch" in kernels
+                                        else "kdg_sincos")])
+    call = c_harness.CFunction("kernel", f"kb_kernel_batch({n}L, {{in0}}, {{out0}}, {{out1}})",
+                               [np.ascontiguousarray(q.T).reshape(1, -1)], [(angles * n, "double")] * 2)
+    return c_harness.prepare(re.sub(r"\W+", "_", f"{robot}_kernel_isa_{tree.name}_{compiler}_{march}"), [call], prelude, [],
+                             variant_flags(march), workdir, compiler)
 
 
 def main(argv=None) -> int:
@@ -171,59 +208,66 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="repetitions per driver run")
     parser.add_argument("--target-ns", type=float, default=1e6, help="length of one repetition")
     parser.add_argument("--generated", type=Path, help="time this generated tree instead")
+    parser.add_argument("--baseline", type=Path, help="also time this generated tree (e.g. one of the "
+                        "code before a template change), as 'before: <build>' in the same rounds")
+    parser.add_argument("--baseline-builds", default="gcc x86-64-v3,gcc native,clang x86-64-v3,clang native",
+                        help="the builds (compiler and -march) of the baseline tree")
     parser.add_argument("--out", type=Path, default=RESULTS / "batch_isa.json")
     args = parser.parse_args(argv)
     robots, names = args.robots.split(","), args.functions.split(",")
-    variants = [(c, m) for c in args.compilers.split(",") for m in args.marches.split(",")]
     work = BUILD / "batch_isa"
     start = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "load": os.getloadavg()}
     tree = args.generated or subset_tree(robots, names, work / "generated")
+    # (label, tree, compiler, -march and flags): every build timed in every round
+    variants = [(f"{c} {m}", tree, c, m) for c in args.compilers.split(",") for m in args.marches.split(",")]
+    if args.baseline:
+        variants += [(f"before: {b}", args.baseline, *b.split(" ", 1)) for b in args.baseline_builds.split(",")]
     results = {"machine": {"cpu": cpu_model(), **cpu_identity(), "cores": os.cpu_count(),
                            "gcc": compiler_version("gcc"), "clang": compiler_version("clang")},
                "date": start["date"], "load_average_start": list(start["load"]),
                "flags": OPT + ["-march=<variant>", c_harness.C_STD], "n": args.n, "rounds": args.rounds,
-               "repeats": args.repeats, "tree": str(tree), "first_build": " ".join(variants[0]), "robots": {}}
+               "repeats": args.repeats, "tree": str(tree), "baseline": str(args.baseline) if args.baseline else None,
+               "first_build": variants[0][0], "robots": {}}
     for robot in robots:
         spec = manifest(tree / robot)
         model = load_robot(ROBOTS / f"{robot}.yaml")
         functions = [f for f in spec["functions"] if f["name"] in names]
         samples = {f["name"]: inputs.sample(f, model, args.n) for f in functions}
         drivers, profiles = {}, {}
-        for compiler, march in variants:
-            key = f"{compiler} {march}"
+        for key, tree, compiler, march in variants:
             log(f"{robot}: building {key}")
             obj = build_library(robot, tree, compiler, march)
             dump = subprocess.run(["objdump", "-dr", "--no-show-raw-insn", str(obj)], capture_output=True,
                                   text=True, check=True).stdout
             profiles[key] = {f["name"]: {"batch": vector_profile(dump, f"{f['c_symbol']}_batch"),
                                          "single": vector_profile(dump, f["c_symbol"])} for f in functions}
-            profiles[key]["kdg_sincos8"] = vector_profile(dump, "kdg_sincos8")
-            _, single, batch = c_batch.prepare(tree / robot, functions, samples, args.n, work / robot / key.replace(" ", "_"),
+            profiles[key]["kernels"] = {k: vector_profile(dump, k) for k in ("kdg_sincos8", "kdg_sincos_batch")}
+            _, single, batch = c_batch.prepare(tree / robot, functions, samples, args.n, work / robot / re.sub(r"\W+", "_", key),
                                                flags=variant_flags(march), compiler=compiler, sources=[obj],
-                                               tag=f"_isa_{compiler}_{march}".replace(" ", "_"))
-            drivers[key] = (single, batch)
+                                               tag=re.sub(r"\W+", "_", f"_isa_{tree.name}_{compiler}_{march}"))
+            kernel = kernel_driver(robot, tree, model.n, inputs.joint_angles(model, args.n), compiler, march,
+                                   work / robot / re.sub(r"\W+", "_", key) / "kernel")
+            drivers[key] = (single, batch, kernel)
         times, outputs = {}, {}
         load_before = os.getloadavg()
         for r in range(args.rounds):
             log(f"{robot}: round {r + 1}/{args.rounds} (load {os.getloadavg()[0]:.1f})")
             order = variants[r % len(variants):] + variants[:r % len(variants)]   # rotate the start
-            for compiler, march in order:
-                key = f"{compiler} {march}"
-                for impl, prepared in zip(("single", "batch"), drivers[key]):
+            for key, *_ in order:
+                for impl, prepared in zip(("single", "batch", "kernel"), drivers[key]):
                     measured, checks = c_harness.measure(prepared, args.repeats, args.target_ns)
                     for name, values in measured.items():
-                        scale = args.n if impl == "batch" else 1
+                        scale = 1 if impl == "single" else args.n
                         times.setdefault(key, {}).setdefault(name, {}).setdefault(impl, []).extend(
                             v / scale for v in values)
                     outputs.setdefault(key, {})[impl] = checks
         load_after = os.getloadavg()
-        first = f"{variants[0][0]} {variants[0][1]}"
+        first = variants[0][0]
         rows = {}
         for f in functions:
             name = f["name"]
             row = {}
-            for compiler, march in variants:
-                key = f"{compiler} {march}"
+            for key, *_ in variants:
                 single, batch = summary(times[key][name]["single"]), summary(times[key][name]["batch"])
                 # configuration 0 of the batch (entry k at [k*n]) and of the single call, and of
                 # the first build: the same bits everywhere with contraction off
@@ -242,10 +286,12 @@ def main(argv=None) -> int:
                                                             zip(got_single + got_batch, ref_single + ref_batch)),
                             "batch_loop": profiles[key][name]["batch"], "single_call": profiles[key][name]["single"]}
             rows[name] = row
-        results["robots"][robot] = {"functions": rows, "load_average_before": list(load_before),
+        kernel = {key: summary(times[key]["kernel"]["kernel"]) for key, *_ in variants}
+        results["robots"][robot] = {"functions": rows, "batch_kernel_stage": kernel, "load_average_before": list(load_before),
                                     "load_average_after": list(load_after),
-                                    "kdg_sincos8": {k: p["kdg_sincos8"] for k, p in profiles.items()}}
+                                    "kernels": {k: p["kernels"] for k, p in profiles.items()}}
         print(table(robot, rows), flush=True)
+        print("  kernel stage    " + "  ".join(f"{k}: {v['median_ns']:.1f}" for k, v in kernel.items()), flush=True)
     results["load_average_end"] = list(os.getloadavg())
 
     def both(folder):
@@ -275,16 +321,16 @@ def plot(results: dict, path: Path) -> None:
     robots = results["robots"]
     fig, axes = plt.subplots(1, len(robots), figsize=(7 * len(robots), 4.5), squeeze=False)
     for ax, (robot, entry) in zip(axes[0], robots.items()):
-        names = list(entry["functions"])
-        keys = list(entry["functions"][names[0]])
+        names = list(entry["functions"]) + ["sin/cos stage"]
+        keys = list(entry["batch_kernel_stage"])
         width = 0.8 / len(keys)
         colors = plt.get_cmap("tab20")
         for k, key in enumerate(keys):
             x = np.arange(len(names)) + (k - (len(keys) - 1) / 2) * width
-            batch = [entry["functions"][n][key]["batch"]["median_ns"] for n in names]
-            single = [entry["functions"][n][key]["single"]["median_ns"] for n in names]
-            ax.bar(x, batch, width, color=colors(k), label=key)
-            ax.scatter(x, single, marker="_", color="black", s=40, zorder=3)
+            batch = [entry["functions"][n][key]["batch"]["median_ns"] for n in names[:-1]]
+            single = [entry["functions"][n][key]["single"]["median_ns"] for n in names[:-1]]
+            ax.bar(x, batch + [entry["batch_kernel_stage"][key]["median_ns"]], width, color=colors(k), label=key)
+            ax.scatter(x[:-1], single, marker="_", color="black", s=40, zorder=3)
         ax.set_xticks(np.arange(len(names)), names)
         ax.set_yscale("log")
         ax.set_ylabel("ns per configuration (bars: batch; ticks: single call)")
