@@ -319,7 +319,7 @@ def plot(results: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     robots = results["robots"]
-    fig, axes = plt.subplots(1, len(robots), figsize=(7 * len(robots), 4.5), squeeze=False)
+    fig, axes = plt.subplots(1, len(robots), figsize=(7 * len(robots), 6), squeeze=False)
     for ax, (robot, entry) in zip(axes[0], robots.items()):
         names = list(entry["functions"]) + ["sin/cos stage"]
         keys = list(entry["batch_kernel_stage"])
@@ -331,12 +331,12 @@ def plot(results: dict, path: Path) -> None:
             single = [entry["functions"][n][key]["single"]["median_ns"] for n in names[:-1]]
             ax.bar(x, batch + [entry["batch_kernel_stage"][key]["median_ns"]], width, color=colors(k), label=key)
             ax.scatter(x[:-1], single, marker="_", color="black", s=40, zorder=3)
-        ax.set_xticks(np.arange(len(names)), names)
+        ax.set_xticks(np.arange(len(names)), names, fontsize=8)
         ax.set_yscale("log")
         ax.set_ylabel("ns per configuration (bars: batch; ticks: single call)")
         load = f"load {entry['load_average_before'][0]:.1f} -> {entry['load_average_after'][0]:.1f}"
         ax.set_title(f"{robot}: -O3 -ffp-contract=off, N = {results['n']} ({load})", fontsize=9)
-        ax.legend(fontsize=6, ncol=2)
+        ax.legend(fontsize=6, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.08))
     fig.suptitle(f"{results['machine']['cpu']} (family {results['machine'].get('cpu_family')}), "
                  f"{results['date']}", fontsize=9)
     fig.tight_layout()
