@@ -37,10 +37,14 @@ def _call(function: dict, batch: bool, n: int) -> str:
     return f"{function['c_symbol']}({ins}, {outs})"
 
 
-def prepare(robot_dir: Path, functions: list[dict], samples: dict, n: int, workdir: Path):
+def prepare(robot_dir: Path, functions: list[dict], samples: dict, n: int, workdir: Path,
+            flags: list[str] = FLAGS, compiler: str = "gcc", sources: list[Path] | None = None,
+            tag: str = ""):
     """Build the single-call and the batch driver for ``functions`` (functions.json entries,
     iterative ones are skipped: they have no batch variant) on ``samples`` ({function name:
-    {port: (>= n, *shape) array}}, e.g. from benchmarks.inputs.sample)."""
+    {port: (>= n, *shape) array}}, e.g. from benchmarks.inputs.sample). ``sources``: the
+    library to link (default: robot_dir/c/<robot>.c; an object file built once serves both
+    drivers); ``tag`` tells builds of other flags or compilers apart in the build cache."""
     robot = robot_dir.name
     chosen = [f for f in functions if f.get("kind") != "iterative" and "c" in f.get("languages", ("c",))]
     single, batch = [], []
@@ -54,10 +58,11 @@ def prepare(robot_dir: Path, functions: list[dict], samples: dict, n: int, workd
                                          [(size * n, dtype) for size, dtype in outputs]))
     c_dir = robot_dir / "c"
     prelude = f'#include "{robot}.h"'
-    sources = [c_dir / f"{robot}.c"]
+    sources = sources or [c_dir / f"{robot}.c"]
+    flags = [*flags, f"-I{c_dir}"]
     return (chosen,
-            c_harness.prepare(f"{robot}_c_single", single, prelude, sources, FLAGS, workdir / "single"),
-            c_harness.prepare(f"{robot}_c_batch", batch, prelude, sources, FLAGS, workdir / "batch"))
+            c_harness.prepare(f"{robot}_c_single{tag}", single, prelude, sources, flags, workdir / "single", compiler),
+            c_harness.prepare(f"{robot}_c_batch{tag}", batch, prelude, sources, flags, workdir / "batch", compiler))
 
 
 def time_batch(robot_dir: Path, model, functions: list[dict], n: int = 1000, repeats: int = 5,

@@ -158,14 +158,14 @@ say otherwise, so the timings include fused multiply-adds on both sides (docs/la
 
 
 def prepare(name: str, functions: list[CFunction], prelude: str, sources: list[Path], flags: list[str],
-            workdir: Path) -> Prepared:
-    """Write and build the driver for ``functions`` with ``sources`` and ``flags``, and
-    write their inputs."""
+            workdir: Path, compiler: str = "gcc") -> Prepared:
+    """Write and build the driver for ``functions`` with ``sources`` and ``flags`` (by
+    ``compiler``), and write their inputs."""
     workdir.mkdir(parents=True, exist_ok=True)
     driver = workdir / f"{name}_driver.c"
     driver.write_text(driver_source(functions, prelude))
     include = sorted({f"-I{Path(s).parent}" for s in sources})
-    built = build(name, "gcc", [driver, *sources], [C_STD, *flags, *include], libs=("-lm",),
+    built = build(name, compiler, [driver, *sources], [C_STD, *flags, *include], libs=("-lm",),
                   extra=tuple(p for s in sources for p in Path(s).parent.glob("*.h")))
     K = functions[0].inputs[0].shape[0] if functions and functions[0].inputs else 1
     data = workdir / f"{name}_inputs"

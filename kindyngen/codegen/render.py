@@ -18,7 +18,7 @@ import symengine as se
 
 from .. import __version__
 from .environment import UserText, blank, environment
-from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, kernel_c, split_slot,
+from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, batch_kernel_c, kernel_c, split_slot,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
 from .optimize import Program, half_angles, kernel_arguments
@@ -506,6 +506,7 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
     env, ctx = _environment(c_comment), _context(model, programs, C_FLOAT if single else C, trig, lanes, ik_dls)
     ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
                sincos="kdg_sincosf" if single else "kdg_sincos", sincos_half=HALF_KERNEL,
+               sincos_batch="kdg_sincosf" if single else "kdg_sincos_batch",
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
                sincos_kernel=_float_kernel(ctx["functions"], batch) if single else _kernels(ctx["functions"], batch),
@@ -527,16 +528,18 @@ def _float_kernel(functions, batch: bool) -> str:
 
 def _kernels(functions, batch: bool) -> str:
     """The double sincos kernels the functions call, and only those (a static function no call
-    uses is a compiler warning): the loop over blocks where a batch variant or a single call of
-    eight or more arguments runs it, the split kernel where a single call of four to seven does
-    (the loop over blocks calls it too), each for the plain and for the half-angle kernel."""
+    uses is a compiler warning): the loop over blocks where a single call of eight or more
+    arguments runs it, the split kernel where a single call of four to seven does (the loop
+    over blocks calls it too), each for the plain and for the half-angle kernel; the batch
+    variants' one loop over a block's arguments (:func:`batch_kernel_c`) where one runs it."""
     text = []
     for name, half in (("kdg_sincos", False), (HALF_KERNEL, True)):
         calls = [f for f in functions if bool(f.half) == half and (f.half or f.angles or f.arguments)]
-        loop = any(not f.split for f in calls) or (not half and batch and any(
-            f.batch.angles or f.batch.arguments for f in functions))
+        loop = any(not f.split for f in calls)
         if loop or calls:
             text.append(kernel_c(name, half=half, blocks=loop))
+    if batch and any(f.batch.angles or f.batch.arguments for f in functions):
+        text.append(batch_kernel_c("kdg_sincos"))
     return "\n".join(text)
 
 

@@ -29,6 +29,10 @@ in blocks of four or eight lanes of plain C99 that compilers vectorise:
   4 <= n < 8 the split kernel: two blocks of four (one AVX2 vector each), x[0..3] and
   x[n-4..n-1], in one loop body (for seven angles one lane is computed twice), two independent
   chains the core overlaps, its results in arrays of eight (:func:`split_slot`);
+* the batch variants, whose n is a block of up to 64 configurations of one angle, run the same
+  steps as one loop over the n arguments instead (:func:`batch_kernel_c`): there the remainder
+  is small against the loop, and a call and a sum of range flags per eight lanes cost more
+  (measured: docs/measurements/speed.md, "Batch throughput by instruction set");
 * |x| > BOUND, infinities and NaN are computed by libm afterwards, in a loop entered only if a
   block's one range test saw one (for the split kernel, by the caller, so that the kernel is a
   leaf function without the calls' register saves).
@@ -365,6 +369,42 @@ def split_slot(k: int, n: int) -> int:
     [0, 1, 2, 3, 5, 6, 7]
     """
     return k if k < 4 else k + 8 - n
+
+
+def batch_kernel_c(name: str = "kdg_sincos") -> str:
+    """The kernel as the batch variants call it, ``name``_batch(n, x, s, c): the same steps in one
+    loop over the n arguments of a block (64 configurations of one angle), which compilers
+    vectorise at the width they prefer and unroll; the range test is an integer OR across the
+    loop, and libm redoes the lanes out of range afterwards. Each lane's arithmetic is that of
+    the blocks of eight, so the results are the same bits. Against the loop over ``name``8
+    (a call per eight lanes and a sum of eight flags each) the sin/cos stage of a batch took 6.2
+    instead of 8.6 ns per configuration of seven angles, lwr4's fk_hom batch 8.5 instead of 10.8
+    and panda's 8.9 instead of 11.4 (gcc 12 -O3 -march=native on Zen 5, one run;
+    docs/measurements/speed.md, "Batch throughput by instruction set")."""
+    bound = repr(BOUND)
+    return f"""\
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n by the kernel's steps (the same bits as a single
+ * call's), in one loop over the n arguments that compilers vectorise at their own width: the batch
+ * variants' form, n configurations of one angle. Arguments beyond +-{BOUND:g}, infinities and NaN take libm
+ * afterwards, in a loop entered only if the kernel's range test saw one. */
+static void {name}_batch(long n, const double *restrict x, double *restrict s, double *restrict c)
+{{
+    long i;
+    int out = 0;
+    for (i = 0; i < n; ++i) {{
+{_body("", "x[i]")}
+{QUADRANT_COMMENT}
+{_quadrant("s[i]", "c[i]")}
+        out |= fabs(xi) <= {bound} ? 0 : 1;
+    }}
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(x[i]) <= {bound})) {{
+                s[i] = sin(x[i]);
+                c[i] = cos(x[i]);
+            }}
+}}
+"""
 
 
 SPLIT = range(4, 8)

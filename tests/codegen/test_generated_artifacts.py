@@ -66,13 +66,16 @@ def test_c_has_no_globals_or_allocation(robot):
     # same of the half-angle variant where single calls read half angles in place (optimize.half_angles)
     plain = [statics_of(trig_kernel.kernel_c(blocks=blocks)) for blocks in (True, False)]
     half = [statics_of(trig_kernel.kernel_c("kdg_sincos_half", half=True, blocks=blocks)) for blocks in (True, False)]
+    # the batch variants' one loop over a block's arguments (trig_kernel.batch_kernel_c)
+    batch = statics_of(trig_kernel.batch_kernel_c())
     # and, inside the derivatives' lane programs, their read-only seed tables (re-entrant)
     statics = [line for line in source.splitlines() if "static " in line and not line.startswith("    static const double kdg_seed[")]
-    assert statics in [a + b for a in plain + [[]] for b in half + [[]]]
+    assert statics in [a + b + c for a in plain + [[]] for b in half + [[]] for c in (batch, [])]
     # each printed where a call uses it
     calls = source[source.index("\nvoid "):]                 # the generated functions
     assert any(s in statics for s in half[1]) is ("kdg_sincos_half" in calls)
     assert any(s in statics for s in plain[1]) is bool(re.search(r"kdg_sincos(_split)?\(", calls))
+    assert (batch[0] in statics) is ("kdg_sincos_batch(" in calls)
     # every statement lives inside a function body: nothing at file scope but includes, the
     # -ffast-math guard and functions (the int one: <robot>_rounds_to_nearest)
     depth, file_scope = 0, []

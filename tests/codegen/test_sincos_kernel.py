@@ -243,13 +243,13 @@ def test_half_angle_kernel_is_the_kernel_on_halves_bit_for_bit(compiler, flags, 
     assert points == 200000 * 45 and differ == 0
 
 
-def differing_bits(compiler, flags, tmp_path, driver):
+def differing_bits(compiler, flags, tmp_path, driver, extra=""):
     """(results whose bits differ, results compared) as ``driver`` prints them, built with the
-    kernel and the half-angle kernel; skips where ``compiler`` is not installed."""
+    kernel, the half-angle kernel and ``extra`` C; skips where ``compiler`` is not installed."""
     if shutil.which(compiler) is None:
         pytest.skip(f"{compiler} not installed")
     (tmp_path / "kernel.h").write_text("#include <math.h>\n" + trig_kernel.kernel_c()
-                                       + trig_kernel.kernel_c("kdg_sincos_half", half=True))
+                                       + trig_kernel.kernel_c("kdg_sincos_half", half=True) + extra)
     (tmp_path / "driver.c").write_text(driver)
     exe = tmp_path / "driver"
     build = subprocess.run([compiler, *STRICT, *flags, '-DKERNEL="kernel.h"', "-I", str(tmp_path),
@@ -331,3 +331,51 @@ def test_split_kernel_is_the_blocks_of_eight_bit_for_bit(compiler, flags, tmp_pa
         [k if k < 4 else k + 8 - n for n in range(4, 8) for k in range(n)]
     differ, points = differing_bits(compiler, flags, tmp_path, SPLIT_DRIVER)
     assert points == 200000 * 2 * (4 + 5 + 6 + 7) and differ == 0
+
+
+BATCH_DRIVER = r"""
+/* kdg_sincos_batch(n, x), the batch variants' one loop over a block's arguments, against the
+ * blocks of eight on the same arguments (kdg_sincos(n, x)), both with their libm fix-up: prints
+ * the number of results whose bits differ, then the points */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include KERNEL
+
+""" + XORSHIFT + r"""
+int main(void)
+{
+    double x[70], s[70], c[70], sb[70], cb[70];
+    const double special[6] = {INFINITY, -INFINITY, NAN, 0.0, -0.0, 4.9406564584124654e-324};
+    long differ = 0, points = 0, r;
+    int n, j;
+    (void)kdg_sincos_half;                 /* included with the kernel, not compared here */
+    for (r = 0; r < 4000; ++r)
+        for (n = 1; n <= 70; ++n) {
+            for (j = 0; j < n; ++j) {
+                const uint64_t bits = next();
+                const double significand = 1.0 + (double)(bits >> 12)/4503599627370496.0;
+                /* exponents 2^-30 .. 2^24: the kernel's range (+-2^20) and beyond it (libm) */
+                x[j] = (bits & 1 ? -1.0 : 1.0)*ldexp(significand, (int)(next() % 55) - 30);
+                if (r % 100 == 0 && j < 6) x[j] = special[(j + n) % 6];
+            }
+            kdg_sincos(n, x, s, c);
+            kdg_sincos_batch(n, x, sb, cb);
+            for (j = 0; j < n; ++j, ++points)
+                if (memcmp(&s[j], &sb[j], sizeof s[j]) || memcmp(&c[j], &cb[j], sizeof c[j])) ++differ;
+        }
+    printf("%ld %ld\n", differ, points);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("compiler,flags", SPLIT_BUILDS, ids=lambda v: v if isinstance(v, str) else " ".join(v))
+def test_batch_kernel_is_the_blocks_of_eight_bit_for_bit(compiler, flags, tmp_path):
+    """The batch variants run the kernel as one loop over a block's 1-64 arguments
+    (trig_kernel.batch_kernel_c), vectorised at the compiler's width: lane for lane the
+    arithmetic of the blocks of eight, so the same bits, out-of-range lanes by libm alike."""
+    differ, points = differing_bits(compiler, flags, tmp_path, BATCH_DRIVER, trig_kernel.batch_kernel_c())
+    assert points == 4000 * 70 * 71 // 2 and differ == 0

@@ -8,44 +8,6 @@
 #error "lwr4_hartl.c needs IEEE arithmetic as C99 specifies it: -ffast-math and -Ofast reorder and drop the roundings the sincos kernel recovers exactly (wrong results); compile it without them"
 #endif
 
-/* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
- * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
- * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
- * _steps explains each step. */
-static int kdg_sincos8(const double *restrict x, double *restrict s, double *restrict c)
-{
-    double out[8];
-    int j;
-    for (j = 0; j < 8; ++j) {
-        const double xi = x[j];
-        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
-        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
-        const double a = xi - k*1.5707963267341256;
-        const double b = a - k*6.077100506303966e-11;
-        const double b_err = (a - b) - k*6.077100506303966e-11;
-        const double d = b - k*2.0222662487111665e-21;
-        const double d_err = (b - d) - k*2.0222662487111665e-21;
-        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
-        const double z = d*d;
-        const double z2 = z*z;
-        const double z4 = z2*z2;
-        const double u = d*z;
-        const double half_z = 0.5*z;
-        const double w = 1.0 - half_z;
-        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
-        const double sin_r = d - nsin;
-        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
-        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
-           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
-        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
-        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
-        s[j] = q >= 2.0 ? -sin_q : sin_q;
-        c[j] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
-        out[j] = fabs(xi) <= 1048576.0 ? 0.0 : 1.0;
-    }
-    return ((out[0] + out[1]) + (out[2] + out[3])) + ((out[4] + out[5]) + (out[6] + out[7])) != 0.0;
-}
-
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) and s[4 + i] = sin(x[n - 4 + i]), c[4 + i] = cos(x[n - 4 + i])
  * for i < 4, 4 <= n <= 8 (s and c hold eight): x[0..3] and x[n-4..n-1] as two blocks of four in
  * one loop body, two independent chains instead of one after the other. Returns nonzero if some
@@ -119,47 +81,6 @@ static void kdg_sincos_split_libm(long n, const double *restrict x, double *rest
         if (!(fabs(x[n - 4 + i]) <= 1048576.0)) {
             s[4 + i] = sin(x[n - 4 + i]);
             c[4 + i] = cos(x[n - 4 + i]);
-        }
-    }
-}
-
-/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n, within 1 ulp of glibc (kindyngen/codegen/trig_kernel.py
- * explains the method and where its constants come from): blocks of eight lanes (n >= 8) or
- * the split kernel's two blocks of four without a branch or a call, which compilers vectorise;
- * arguments beyond +-1.04858e+06, infinities and NaN take libm afterwards, in a loop entered only
- * if a block saw one. Needs IEEE double arithmetic as C99 specifies it: no -ffast-math. */
-static void kdg_sincos(long n, const double *restrict x, double *restrict s, double *restrict c)
-{
-    long i;
-    int out = 0;
-    if (n >= 8) {
-        for (i = 0; i + 8 <= n; i += 8)
-            out |= kdg_sincos8(x + i, s + i, c + i);
-        if (i < n)
-            out |= kdg_sincos8(x + n - 8, s + n - 8, c + n - 8);
-        if (out)
-            for (i = 0; i < n; ++i)
-                if (!(fabs(x[i]) <= 1048576.0)) {
-                    s[i] = sin(x[i]);
-                    c[i] = cos(x[i]);
-                }
-    } else if (n >= 4) {
-        double sb[8], cb[8];
-        if (kdg_sincos_split(n, x, sb, cb))
-            kdg_sincos_split_libm(n, x, sb, cb);
-        for (i = 0; i < n; ++i) {
-            s[i] = sb[i < 4 ? i : i + 8 - n];
-            c[i] = cb[i < 4 ? i : i + 8 - n];
-        }
-    } else if (n > 0) {
-        double xb[4] = {0.0, 0.0, 0.0, 0.0}, sb[8], cb[8];
-        for (i = 0; i < n; ++i)
-            xb[i] = x[i];
-        if (kdg_sincos_split(4, xb, sb, cb))
-            kdg_sincos_split_libm(4, xb, sb, cb);
-        for (i = 0; i < n; ++i) {
-            s[i] = sb[i];
-            c[i] = cb[i];
         }
     }
 }
@@ -239,6 +160,49 @@ static void kdg_sincos_half_split_libm(long n, const double *restrict x, double 
             c[4 + i] = cos(0.5*x[n - 4 + i]);
         }
     }
+}
+
+/* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n by the kernel's steps (the same bits as a single
+ * call's), in one loop over the n arguments that compilers vectorise at their own width: the batch
+ * variants' form, n configurations of one angle. Arguments beyond +-1.04858e+06, infinities and NaN take libm
+ * afterwards, in a loop entered only if the kernel's range test saw one. */
+static void kdg_sincos_batch(long n, const double *restrict x, double *restrict s, double *restrict c)
+{
+    long i;
+    int out = 0;
+    for (i = 0; i < n; ++i) {
+        const double xi = x[i];
+        const double k = (xi*0.6366197723675814 + 6755399441055744.0) - 6755399441055744.0;
+        const double q = k - 4.0*(((0.25*k - 0.375) + 6755399441055744.0) - 6755399441055744.0);
+        const double a = xi - k*1.5707963267341256;
+        const double b = a - k*6.077100506303966e-11;
+        const double b_err = (a - b) - k*6.077100506303966e-11;
+        const double d = b - k*2.0222662487111665e-21;
+        const double d_err = (b - d) - k*2.0222662487111665e-21;
+        const double ntail = k*8.4784276603689e-32 - (b_err + d_err);
+        const double z = d*d;
+        const double z2 = z*z;
+        const double z4 = z2*z2;
+        const double u = d*z;
+        const double half_z = 0.5*z;
+        const double w = 1.0 - half_z;
+        const double nsin = (ntail*w - (u*z4)*(-2.5050758640135855e-08 + 1.5896827148989416e-10*z)) - (u*(-0.16666666666666632 + 0.008333333333322424*z) + (u*z2)*(-0.0001984126982981672 + 2.7557313695144572e-06*z));
+        const double sin_r = d - nsin;
+        const double cos_r = w + (((z2*(0.0416666666666666 + -0.0013888888888874138*z) + z4*(2.4801587289491644e-05 + -2.755731435518579e-07*z)) + (z2*z4)*(2.0875723676428724e-09 + -1.1359669434575456e-11*z)) + (((1.0 - w) - half_z) + d*ntail));
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and
+           cos x = c, -s, -c, s; one compare each, so the masks stay in vector registers */
+        const double sin_q = fabs(q - 2.0) == 1.0 ? cos_r : sin_r;
+        const double cos_q = fabs(q - 2.0) == 1.0 ? sin_r : cos_r;
+        s[i] = q >= 2.0 ? -sin_q : sin_q;
+        c[i] = fabs(q - 1.5) == 0.5 ? -cos_q : cos_q;
+        out |= fabs(xi) <= 1048576.0 ? 0 : 1;
+    }
+    if (out)
+        for (i = 0; i < n; ++i)
+            if (!(fabs(x[i]) <= 1048576.0)) {
+                s[i] = sin(x[i]);
+                c[i] = cos(x[i]);
+            }
 }
 
 void lwr4_hartl_fk_hom(const double *restrict q, double *restrict T)
@@ -322,7 +286,7 @@ void lwr4_hartl_fk_hom_batch(long count, const double *restrict q, double *restr
         double sin_q[7][64], cos_q[7][64];
         double out_T[16][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[6][j];
@@ -491,7 +455,7 @@ void lwr4_hartl_fk_dq_batch(long count, const double *restrict q, double *restri
             arguments[6][j] = 0.5*q[5*count + start + j];
         }
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = cos_q[0][j];
@@ -679,7 +643,7 @@ void lwr4_hartl_jacobian_batch(long count, const double *restrict q, double *res
         double sin_q[7][64], cos_q[7][64];
         double out_J[42][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[0][j];
@@ -1131,7 +1095,7 @@ void lwr4_hartl_pose_jacobian_dq_batch(long count, const double *restrict q, dou
             arguments[6][j] = 0.5*q[3*count + start + j];
         }
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -1733,7 +1697,7 @@ void lwr4_hartl_jacobian_dq_batch(long count, const double *restrict q, double *
             arguments[6][j] = 0.5*q[3*count + start + j];
         }
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -2226,7 +2190,7 @@ void lwr4_hartl_M_batch(long count, const double *restrict q, double *restrict M
         double sin_q[7][64], cos_q[7][64];
         double out_M[49][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[6][j];
@@ -2519,7 +2483,7 @@ void lwr4_hartl_g_batch(long count, const double *restrict q, double *restrict g
         double sin_q[7][64], cos_q[7][64];
         double out_g[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[3][j];
@@ -2862,7 +2826,7 @@ void lwr4_hartl_c_batch(long count, const double *restrict q, const double *rest
         double sin_q[7][64], cos_q[7][64];
         double out_c[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[1][j];
@@ -4039,7 +4003,7 @@ void lwr4_hartl_S_batch(long count, const double *restrict q, const double *rest
         double sin_q[7][64], cos_q[7][64];
         double out_S[49][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -5225,7 +5189,7 @@ void lwr4_hartl_tau_batch(long count, const double *restrict q, const double *re
         double sin_q[7][64], cos_q[7][64];
         double out_tau[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -6124,7 +6088,7 @@ void lwr4_hartl_fd_batch(long count, const double *restrict q, const double *res
         double sin_q[7][64], cos_q[7][64];
         double out_qdd[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[6][j];
@@ -7065,7 +7029,7 @@ void lwr4_hartl_com_batch(long count, const double *restrict q, double *restrict
         double out_J_com[21][32];
         double out_A_g[42][32];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[6][j];
@@ -7725,7 +7689,7 @@ void lwr4_hartl_tau_derivatives_batch(long count, const double *restrict q, cons
         double out_dtau_dq[49][32];
         double out_dtau_dqd[49][32];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[1][j];
@@ -10076,7 +10040,7 @@ void lwr4_hartl_fd_derivatives_batch(long count, const double *restrict q, const
         double out_dqdd_dqd[49][16];
         double out_Minv[49][16];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = cos_q[5][j];
@@ -13663,7 +13627,7 @@ void lwr4_hartl_fd_derivatives_no_minv_batch(long count, const double *restrict 
         double out_dqdd_dq[49][32];
         double out_dqdd_dqd[49][32];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -17498,7 +17462,7 @@ void lwr4_hartl_M_lagrange_batch(long count, const double *restrict q, double *r
         double sin_q[7][64], cos_q[7][64];
         double out_M[49][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[4][j];
@@ -18697,7 +18661,7 @@ void lwr4_hartl_g_lagrange_batch(long count, const double *restrict q, double *r
         double sin_q[7][64], cos_q[7][64];
         double out_g[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -19753,7 +19717,7 @@ void lwr4_hartl_c_christoffel_batch(long count, const double *restrict q, const 
         double sin_q[7][64], cos_q[7][64];
         double out_c[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -20911,7 +20875,7 @@ void lwr4_hartl_M_dq_batch(long count, const double *restrict q, double *restric
             arguments[5][j] = 0.5*q[2*count + start + j];
         }
         for (k = 0; k < 6; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -21263,7 +21227,7 @@ void lwr4_hartl_g_dq_batch(long count, const double *restrict q, double *restric
             arguments[5][j] = 0.5*q[6*count + start + j];
         }
         for (k = 0; k < 6; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -21684,7 +21648,7 @@ void lwr4_hartl_c_dq_batch(long count, const double *restrict q, const double *r
             arguments[5][j] = 0.5*q[4*count + start + j];
         }
         for (k = 0; k < 6; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -22374,7 +22338,7 @@ void lwr4_hartl_tau_dq_batch(long count, const double *restrict q, const double 
             arguments[5][j] = 0.5*q[6*count + start + j];
         }
         for (k = 0; k < 6; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -23811,7 +23775,7 @@ void lwr4_hartl_Y_dq_batch(long count, const double *restrict q, const double *r
             arguments[5][j] = 0.5*q[6*count + start + j];
         }
         for (k = 0; k < 6; ++k) {
-            kdg_sincos(size, arguments[k], sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, arguments[k], sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t1 = sin_q[0][j];
@@ -26156,7 +26120,7 @@ void lwr4_hartl_Y_g_batch(long count, const double *restrict q, double *restrict
         double sin_q[7][32], cos_q[7][32];
         double out_Y[84][32];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = 9.81*cos_q[1][j];
@@ -27785,7 +27749,7 @@ void lwr4_hartl_Y_m_batch(long count, const double *restrict q, double *restrict
         int k;
         double sin_q[7][64], cos_q[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
@@ -30131,7 +30095,7 @@ void lwr4_hartl_Y_batch(long count, const double *restrict q, const double *rest
         int k;
         double sin_q[7][64], cos_q[7][64];
         for (k = 0; k < 7; ++k) {
-            kdg_sincos(size, q + k*count + start, sin_q[k], cos_q[k]);
+            kdg_sincos_batch(size, q + k*count + start, sin_q[k], cos_q[k]);
         }
         for (j = 0; j < size; ++j) {
             const double t0 = sin_q[1][j];
