@@ -54,7 +54,7 @@ ROBOTS = {
     "solo12": ("solo_description/robots/solo12.urdf", None),
     "talos": ("talos_data/robots/talos_reduced.urdf", ["leg_left_6_link", "arm_right_7_link", "torso_2_link"]),
 }
-FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com")
+FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "tau_derivatives", "fd_derivatives")
 OURS = ("c", "c_native")
 PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL)
 TOLERANCE = 1e-9
@@ -73,6 +73,9 @@ PINOCCHIO_NOTES = {
     "tau": "rnea",
     "fd": "aba",
     "com": "jacobianCenterOfMass (com on the way) + computeCentroidalMap",
+    "Minv": "computeMinverse (upper triangle only)",
+    "tau_derivatives": "computeRNEADerivatives (dtau/dq in the tangent, dtau/dqd; M comes along)",
+    "fd_derivatives": "computeABADerivatives (dqdd/dq in the tangent, dqdd/dqd, Minv)",
 }
 # Pinocchio's joint variant needs more Boost.MPL room; the serialized model needs its library.
 CMEEL_LIB = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "lib"
@@ -99,10 +102,12 @@ def states(model, count: int, seed: int = 0) -> dict:
 
 
 def pinocchio_q(pmodel, q: np.ndarray) -> np.ndarray:
-    """Our q -> Pinocchio's: a continuous joint (nq 2) is (cos, sin) of our one angle."""
-    columns = [q[:, :7]]
-    for j, joint in enumerate(pmodel.joints[2:]):   # 0: universe, 1: the free flyer
-        angle = q[:, 7 + j:8 + j]
+    """Our q -> Pinocchio's: a continuous joint (nq 2) is (cos, sin) of our one angle; a free
+    flyer's 7 coordinates are the same in both."""
+    base = 7 if pmodel.joints[1].shortname() == "JointModelFreeFlyer" else 0
+    columns = [q[:, :base]]
+    for j, joint in enumerate(pmodel.joints[1 + (base > 0):]):   # 0: universe
+        angle = q[:, base + j:base + j + 1]
         columns += [np.cos(angle), np.sin(angle)] if joint.nq == 2 else [angle]
     return np.hstack(columns)
 
@@ -211,13 +216,13 @@ def _prelude(functions: dict) -> str:
 
 
 def traced_timer(tracer: Path, model_file: Path, frames: list, samples: dict, workdir: Path, limit_s: float,
-                 stem: str, log, skip) -> compiled.Timer | None:
-    """Trace, code-generate and compile each function (each step of one function limited to
-    limit_s, else ``skip(function, reason)``), then one harness for those that made it."""
+                 stem: str, log, skip, names=FUNCTIONS) -> compiled.Timer | None:
+    """Trace, code-generate and compile each function of ``names`` (each step of one function
+    limited to limit_s, else ``skip(function, reason)``), then one harness for those that made it."""
     outdir = workdir / "traced"
     outdir.mkdir(parents=True, exist_ok=True)
     functions, objects, targets = {}, [], []
-    for name in FUNCTIONS:
+    for name in names:
         started = time.perf_counter()
         try:
             subprocess.run([str(tracer), str(model_file), ",".join(frames), str(outdir), name],
@@ -255,11 +260,12 @@ def urdf_path(key: str) -> Path:
 
 
 def pinocchio_model(path: Path, model, model_file: Path):
-    """Pinocchio's floating-base model of the URDF, saved for the C++ programs; checks that
-    our joints are Pinocchio's, in its order."""
+    """Pinocchio's model of the URDF (with a free flyer where ours has a floating base), saved
+    for the C++ programs; checks that our joints are Pinocchio's, in its order."""
     import pinocchio as pin
-    pmodel = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    if list(pmodel.names)[2:] != [j.name for j in model.joints] or pmodel.nv != model.nv:
+    pmodel = (pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer()) if model.floating_base
+              else pin.buildModelFromUrdf(str(path)))
+    if list(pmodel.names)[1 + model.floating_base:] != [j.name for j in model.joints] or pmodel.nv != model.nv:
         raise WiringError(f"{model.name}: Pinocchio's joints differ from ours")
     pmodel.saveToBinary(str(model_file))
     return pmodel
@@ -327,7 +333,8 @@ def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
     pooled, _ = compiled.interleave(timers, settings["repeats"], settings["rounds"], settings["c_target_ns"], failed)
     for impl, per_function in pooled.items():
         for name, values in per_function.items():
-            stats = entry["functions"][name][impl] = summary(values)
+            # Pinocchio C++ also times Minv, which no generated function has: a row of its own
+            stats = entry["functions"].setdefault(name, {})[impl] = summary(values)
             if impl == "pinocchio_cpp":
                 stats["note"] = PINOCCHIO_NOTES[name]
     entry["ratios"] = ratios(entry["functions"])
