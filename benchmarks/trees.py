@@ -1,5 +1,5 @@
-"""Generated code for kinematic trees with a floating base against Pinocchio C++ and
-CasADi-traced Pinocchio: G1 (29 joints) and Solo12 (12 joints), optionally Talos reduced;
+"""Generated code for kinematic trees with a floating base against Pinocchio C++, CasADi-traced
+Pinocchio and Pinocchio's CppADCodeGen: G1 (29 joints) and Solo12 (12 joints), optionally Talos reduced;
 writes results/trees.json and results/trees.png.
 
     python -m benchmarks.trees [--quick] [--out DIR] [--robots g1,solo12,talos]
@@ -10,7 +10,10 @@ and -O3 -march=native ("c_native"); "pinocchio_cpp" times Pinocchio's algorithms
 (pinocchio_tree_bench.cpp, header-only, -O3 -march=native) on Pinocchio's own
 buildModelFromUrdf(path, JointModelFreeFlyer()) model; "pinocchio_casadi_c" traces the same
 algorithms on ModelTpl<casadi::SX> (pinocchio_tree_trace.cpp), code-generates them with
-CasADi and compiles them -O3 -march=native into the harness that times ours. Every
+CasADi and compiles them -O3 -march=native into the harness that times ours;
+"pinocchio_cppadcg" and "pinocchio_cppadcg_ofast" are Pinocchio's own CppADCodeGen generators
+on the same model (M, Minv, tau, fd and the derivatives; cppadcg_peer.py), their C compiled
+-O3 -march=native and -Ofast, checked against Pinocchio's double algorithms first. Every
 implementation's outputs for the first input must equal the generated numpy code's to 1e-9
 (relative to max(1, |value|)) before anything is timed; a mismatch aborts the run. Times are
 medians of per-call times pooled over interleaved rounds; ratios are peer / ours (above 1:
@@ -36,7 +39,7 @@ from kindyngen.codegen.pipeline import generate
 from kindyngen.json_text import strict_json
 from kindyngen.readers.urdf import load_urdf
 
-from . import c_harness, casadi_codegen, compiled, pinocchio_casadi, pinocchio_cpp, python_timing
+from . import c_harness, casadi_codegen, compiled, cppadcg_peer, pinocchio_casadi, pinocchio_cpp, python_timing
 from .build import BUILD, build, compiler_version, target
 from .common import RESULTS, machine, summary
 from .urdf_vs_yaml import example_robot_data
@@ -56,7 +59,10 @@ ROBOTS = {
 }
 FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "tau_derivatives", "fd_derivatives")
 OURS = ("c", "c_native")
-PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL)
+PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL, *cppadcg_peer.IMPLS)
+# Pinocchio's CppADCodeGen: the functions it has a generator for; Minv (no generated function of
+# ours) too, beside Pinocchio C++'s computeMinverse
+CPPADCG_FUNCTIONS = tuple(f for f in cppadcg_peer.FUNCTIONS if f in FUNCTIONS or f == "Minv")
 TOLERANCE = 1e-9
 # Many short rounds: the machine is shared, and a burst of load from a neighbour should land
 # on every implementation alike rather than on one (see compiled.interleave).
@@ -315,6 +321,9 @@ def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
                               settings["peer_limit_s"], f"{model.identifier}_{pinocchio_casadi.IMPL}", log, skip)
         if traced is not None:
             timers[pinocchio_casadi.IMPL] = traced
+        if "cppadcg_generator" in tools:
+            timers.update(cppadcg_timers(key, model, tools["cppadcg_generator"], model_file, pin_data, entry,
+                                         workdir, log))
 
     # The wiring check, before any timing: one short run of each, input 0 against numpy.
     for impl, timer in timers.items():
@@ -333,15 +342,41 @@ def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
     pooled, _ = compiled.interleave(timers, settings["repeats"], settings["rounds"], settings["c_target_ns"], failed)
     for impl, per_function in pooled.items():
         for name, values in per_function.items():
-            # Pinocchio C++ also times Minv, which no generated function has: a row of its own
+            if name not in entry["functions"] and name not in CPPADCG_FUNCTIONS:
+                continue                 # Pinocchio C++ also times what neither side here has
             stats = entry["functions"].setdefault(name, {})[impl] = summary(values)
             if impl == "pinocchio_cpp":
                 stats["note"] = PINOCCHIO_NOTES[name]
+            elif impl in cppadcg_peer.IMPLS:
+                stats["note"] = cppadcg_peer.NOTES[name]
     entry["ratios"] = ratios(entry["functions"])
     # The fastest repetitions too: on a loaded machine they show what each code costs when
     # it runs alone, which the medians (the headline) blur.
     entry["ratios_min"] = ratios(entry["functions"], "min_ns")
     return entry
+
+
+def cppadcg_timers(key: str, model, generator: Path, model_file: Path, pin_data: dict, entry: dict, workdir: Path,
+                   log) -> dict:
+    """Pinocchio's CppADCodeGen on Pinocchio's model of the robot, both flag sets, each output
+    for input 0 checked against Pinocchio's double algorithms (cppadcg_peer.TOLERANCE) before
+    any timing (the numpy check follows with the others); {impl: Timer}."""
+    log(f"{key}: {cppadcg_peer.IMPL}: generating (CppADCodeGen, cached by content) and compiling")
+    inputs = {name: cppadcg_peer.peer_inputs(name, pin_data) for name in CPPADCG_FUNCTIONS}
+
+    def skip(name, reason):
+        log(f"  {name}: skipped: {reason}")
+        entry["skipped"].setdefault(cppadcg_peer.IMPL, {})[name] = reason
+    peer = cppadcg_peer.build_peer(generator, model_file, model.identifier, CPPADCG_FUNCTIONS, inputs, model.nv,
+                                   workdir / "cppadcg", 3600.0, lambda m: log(f"{key}: {m}"), skip)
+    want = cppadcg_peer.reference(generator, model_file, {k: v[0] for k, v in pin_data.items()}, list(peer.generated),
+                                  workdir / "cppadcg")
+    for impl, timer in peer.timers.items():
+        _, raw = timer.run(1, 1e5)
+        entry["checks"][f"{impl}_vs_pinocchio"] = cppadcg_peer.check(f"{key}: {impl}", timer.outputs(raw), want,
+                                                                     cppadcg_peer.TOLERANCE)
+    entry["cppadcg_build"] = peer.times()
+    return peer.timers
 
 
 def ratios(functions: dict, statistic: str = "median_ns") -> dict:
@@ -363,6 +398,14 @@ def run(settings: dict, log) -> dict:
         tools["tracer"] = tracer.path
         tool_builds = {"pinocchio_tree_bench": {"binary": built.path.name, "seconds": built.seconds},
                        "pinocchio_tree_trace": {"binary": tracer.path.name, "seconds": tracer.seconds}}
+        reason = cppadcg_peer.unavailable()
+        if reason:
+            notes.append(f"{cppadcg_peer.IMPL} skipped: {reason}")
+        else:
+            log("pinocchio_cppadcg: building its generator (header-only Pinocchio with CppAD, minutes unless cached)")
+            generator = cppadcg_peer.build_generator()
+            tools["cppadcg_generator"] = generator.path
+            tool_builds["pinocchio_cppadcg_gen"] = {"binary": generator.path.name, "seconds": generator.seconds}
     else:
         tool_builds = {}
         notes.append("peers skipped (quick mode: their header-only builds take minutes)")
@@ -376,9 +419,11 @@ def run(settings: dict, log) -> dict:
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
         "compile_flags": {**{impl: " ".join(compiled.C_FLAGS[impl]) for impl in (*OURS, pinocchio_casadi.IMPL)},
+                          **{impl: " ".join(flags) for impl, flags in cppadcg_peer.FLAGS.items()},
                           "pinocchio_cpp": "g++ -O3 -march=native (header-only)", "gcc": compiler_version("gcc")},
         "model_source": "pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer()) in Python, passed to the C++ "
-                        "programs with Model.saveToBinary (see pinocchio_tree_bench.cpp)",
+                        "programs (and to Pinocchio's CppADCodeGen generator) with Model.saveToBinary (see "
+                        "pinocchio_tree_bench.cpp)",
         "tool_builds": tool_builds,
         "robots": robots,
         "notes": notes,
@@ -387,8 +432,8 @@ def run(settings: dict, log) -> dict:
 
 def table(result: dict) -> str:
     """The medians (ns) and their ratios (in brackets: the ratios of the minima) as Markdown."""
-    lines = ["| robot | function | ops after CSE | c | c_native | pinocchio_cpp | pinocchio_casadi_c "
-             "| pinocchio_cpp / c_native (min) | pinocchio_casadi_c / c_native (min) |", "|---" * 9 + "|"]
+    lines = ["| robot | function | ops after CSE | " + " | ".join((*OURS, *PEERS)) + " | "
+             + " | ".join(f"{p} / c_native (min)" for p in PEERS) + " |", "|---" * (3 + len(OURS) + 2 * len(PEERS)) + "|"]
     for key, entry in result["robots"].items():
         for name, impls in entry["functions"].items():
             ops = entry["opcounts"].get(name) or {}
