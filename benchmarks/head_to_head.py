@@ -23,7 +23,6 @@ peer's (relative error), so a fast wrong answer shows. Nothing here asserts on a
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from datetime import datetime, timezone

@@ -209,9 +209,12 @@ def main(argv=None) -> int:
            "command": "kindyngen identify --split 0.8 (defaults: 5 Hz zero-phase low-pass, parallel filtering of "
                       "the regressor columns with the torque, decimation 25, OLS)",
            "runs": records}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{args.results}.json").write_text(strict_json(doc, indent=1) + "\n")
-    _plot(doc, RESULTS / f"{args.results}.png")
+    from kindyngen.output_folder import replace_files
+
+    def both(folder):          # the JSON and its figure, both or neither
+        (folder / f"{args.results}.json").write_text(strict_json(doc, indent=1) + "\n")
+        _plot(doc, folder / f"{args.results}.png")
+    replace_files(RESULTS, both)
     return 0
 
 

@@ -21,7 +21,6 @@ header-only builds take minutes), no c_batch and no python_c.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from datetime import datetime, timezone
@@ -409,8 +408,7 @@ def main(argv=None) -> int:
         log(f"wrote {args.out / 'scaling.json'} ({time.perf_counter() - started:.0f} s)")
         # trees: generation time and counts against n, and against Featherstone's formulas
         study = tree_scaling.study(dict(tree_scaling.QUICK if args.quick else tree_scaling.FULL), log=log)
-        (args.out / "tree_scaling.json").write_text(strict_json(study, indent=1) + "\n")
-        tree_scaling.plot(study, args.out / "tree_scaling.png")
+        tree_scaling.write(study, args.out)
         log(f"wrote {args.out / 'tree_scaling.json'} ({time.perf_counter() - started:.0f} s)")
     return 0
 

@@ -44,6 +44,7 @@ import time
 from pathlib import Path
 
 from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
 
 from .common import RESULTS, machine
 
@@ -452,6 +453,15 @@ def robotran(g1: dict | None, tree: dict) -> dict:
 
 # ------------------------------------------------------------------ output
 
+def write(result: dict, out: Path) -> None:
+    """tree_scaling.json and tree_scaling.png in ``out``, both or neither
+    (kindyngen.output_folder.replace_files)."""
+    def both(folder):
+        (folder / "tree_scaling.json").write_text(strict_json(result, indent=1) + "\n")
+        plot(result, folder / "tree_scaling.png")
+    replace_files(out, both)
+
+
 def plot(result: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -640,9 +650,7 @@ def main(argv=None) -> int:
         return _update_g1(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     settings = QUICK if args.quick else FULL
     result = study(settings, log=lambda text: print(text, flush=True))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "tree_scaling.json").write_text(strict_json(result, indent=1) + "\n")
-    plot(result, args.out / "tree_scaling.png")
+    write(result, args.out)
     print(markdown(result))
     if result["g1"]:
         g1 = result["g1"]

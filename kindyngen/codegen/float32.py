@@ -15,6 +15,11 @@ from fractions import Fraction
 import numpy as np
 
 
+class FloatRangeError(ValueError):
+    """A constant that float code cannot hold (beyond FLT_MAX, or nonzero below the normal
+    range): the description needs double code (``generate`` reports it as bad input)."""
+
+
 def nearest_float32(value) -> np.float32:
     """The float nearest to the exact ``value`` (int, Fraction or float), ties to even.
 
@@ -23,7 +28,7 @@ def nearest_float32(value) -> np.float32:
     """
     exact = Fraction(value)
     if abs(exact) > FLT_MAX:
-        raise ValueError(f"constant {float(exact)!r} is outside the float range")
+        raise FloatRangeError(f"constant {float(exact)!r} is outside the float range")
     guess = np.float32(float(exact))       # within one float ulp of the answer (two roundings)
     with np.errstate(over="ignore"):
         candidates = (np.nextafter(guess, np.float32(-np.inf)), guess, np.nextafter(guess, np.float32(np.inf)))
@@ -47,13 +52,13 @@ def c_float(value) -> str:
 
     >>> c_float(1e-30)
     '1e-30f'
-    >>> c_float(1e-150)
+    >>> c_float(1e-150)      # doctest: +IGNORE_EXCEPTION_DETAIL
     Traceback (most recent call last):
     ...
-    ValueError: constant 1e-150 is below float's normal range (1.2e-38): it would round to 0.0
+    FloatRangeError: constant 1e-150 is below float's normal range (1.2e-38): it would round to 0.0
     """
     if value != 0 and abs(Fraction(value)) < FLT_MIN:
-        raise ValueError(f"constant {float(value)!r} is below float's normal range (1.2e-38): "
+        raise FloatRangeError(f"constant {float(value)!r} is below float's normal range (1.2e-38): "
                          f"it would round to {float(nearest_float32(value))!r}")
     text = str(nearest_float32(value))      # numpy: the shortest digits that round-trip
     if "." not in text and "e" not in text:

@@ -38,6 +38,7 @@ import yaml
 
 from ..json_text import strict_json
 from ..readers.yaml_description import load_robot, parse_robot
+from ..model.user_text import markdown
 from .consistent import links_from_barycentric
 from .discovery import (CANDIDATES, CHUNK_ROWS, EXPLAINED_FACTOR, WINDOW_ROWS, Discovery, Recording, discover,
                         in_memory, piece_windows, predict_effects, spring_torque)
@@ -458,11 +459,13 @@ def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     torques = torque_figure(out / "heldout_torques.png", result.heldout_t, result.heldout_tau,
                             {"model.yaml": result.heldout_after, "nominal": result.heldout_nominal},
                             "held-out data: measured torques, nominal model and model.yaml")
-    lines = [f"# Discrepancy between {Path(result.request.robot).name} and the data", "",
-             f"Data: {', '.join(map(str, result.request.data))}; the last {100 * result.request.holdout:g} % of the "
+    # the description's and the logs' names (and the preprocessing notes naming a log's keys) are
+    # the user's: literal Markdown text
+    lines = [f"# Discrepancy between {markdown(Path(result.request.robot).name)} and the data", "",
+             f"Data: {', '.join(markdown(str(path)) for path in result.request.data)}; the last {100 * result.request.holdout:g} % of the "
              f"time span is held out ({result.samples['held_out']} samples); the selection saw "
              f"{result.samples['selection']} samples ({d.folds}-fold time-blocked cross-validation).", "",
-             "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "Preprocessing: " + "; ".join(map(markdown, result.preprocessing_notes)) + ".", "",
              "Parallel filtering: every model column (rigid-body torques, effect columns) is computed from the "
              "filtered motion, then the columns and the *unfiltered* torque pass through the same linear filter "
              "and decimation: " + ("; ".join(d.filtering) if d.filtering else "none (the data as given)") + ".", "",

@@ -48,7 +48,7 @@ from ..algorithms.base_parameters import condition_number_2norm
 from ..json_text import json_number, strict_json
 from ..model.robot_model import RobotModel
 from .effect_columns import coulomb_eps, effect_columns, effect_names
-from .regressor_rows import TorqueRegressor, torque_regressor
+from .regressor_rows import TorqueRegressor, refuse_mimic_joints, torque_regressor
 from . import MeasuredDataError
 
 # the friction columns appended to the rigid-body base regressor (kindyngen.measured.effect_columns)
@@ -241,6 +241,7 @@ def default_limits(model: RobotModel, velocity=DEFAULT_VELOCITY, acceleration=DE
     margin = float(margin)
     if not math.isfinite(margin) or margin < 0:
         raise ExcitationError(f"margin must be a non-negative number of radians, got {margin!r}")
+    refuse_mimic_joints(model)
     return ExcitationLimits(lower=model.lower + margin, upper=model.upper - margin,
                             velocity=velocity, acceleration=acceleration, margin=margin)
 

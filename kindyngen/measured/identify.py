@@ -36,6 +36,7 @@ import yaml
 from ..algorithms.base_parameters import condition_number_2norm
 from ..json_text import json_number, strict_json
 from ..model.inertial_parameters import parameter_vector
+from ..model.user_text import markdown
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
 from .discovery import NOISE_BIAS_FACTOR, REL_STD_MAX, effective_samples, elastic_noise_bias, sensing_columns, spring_of
@@ -401,11 +402,13 @@ def write_outputs(result: Identification, out: str | Path) -> Path:
     if result.model_yaml is not None:
         (out / "model.yaml").write_text(result.model_yaml)
     n = len(result.rms_train)
-    lines = [f"# Identification of {Path(result.request.robot).name}", "",
+    # the description's file name and the preprocessing notes (which may name a log's keys) are
+    # the user's text: literal Markdown
+    lines = [f"# Identification of {markdown(Path(result.request.robot).name)}", "",
              f"Method: {result.method}. Effects: {', '.join(result.request.effects) or 'none'}. "
              f"Training samples: {result.samples_train}; validation samples: {result.samples_validation}. "
              f"Condition number of the stacked regressor: {result.condition_number:.4g}.", "",
-             "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "Preprocessing: " + "; ".join(map(markdown, result.preprocessing_notes)) + ".", "",
              "## RMS torque error per joint (N m)", ""]
     rows = {"identified, training": list(result.rms_train)}
     if result.rms_validation is not None:

@@ -20,7 +20,7 @@ import symengine as se
 from ..model.inertial_parameters import parameter_vector
 from ..algorithms.effect_torques import effect_parameter_values
 from ..algorithms.regressors import base_parameters, regressor
-from ..model.robot_model import RobotModel
+from ..model.robot_model import RobotDescriptionError, RobotModel
 from .effect_columns import coulomb_eps, effect_columns
 
 
@@ -29,6 +29,21 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
     (it is part of the last link's parameters)."""
     joints = tuple(replace(j, friction=None, armature=None) for j in model.joints)
     return replace(model, joints=joints, coulomb_smoothing=None)
+
+
+def refuse_mimic_joints(model: RobotModel) -> None:
+    """Logs, limits and effect columns of the measured side are per joint, and a mimic joint is
+    no coordinate: a robot with mimic joints is refused in one line naming the first, and so is
+    a tree closed by loops (its dependent joints are none either)."""
+    if model.loops:
+        raise RobotDescriptionError(model.source, "loops", "identify, discover and excite take robots without closed "
+                                    "loops (the regressor Y of a parallelogram linkage is generated in its independent "
+                                    "joints: fit it by least squares, docs/tutorials/closed_loops.md)")
+    for joint in model.joints:
+        if joint.mimic is not None:
+            raise RobotDescriptionError(model.source, f"joint '{joint.name}' mimic",
+                                        "identify, discover and excite take robots without mimic joints (the "
+                                        "generated functions of this one take its independent joints)")
 
 
 class BaseRegressor:
@@ -41,6 +56,7 @@ class BaseRegressor:
     the full parameters (as linear as the dynamics itself)."""
 
     def __init__(self, model: RobotModel, kind: str):
+        refuse_mimic_joints(model)
         # rigid bodies only: the effects an identification fits are chosen by the caller
         # (kindyngen.measured.effect_columns), whatever the description declares
         model = rigid_body_model(model)

@@ -38,6 +38,8 @@ Example:
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterator
@@ -344,14 +346,32 @@ def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], No
         return results
     if workers > 1 and len(tasks) > 1:
         import multiprocessing
+        import signal
         from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn")) as pool:
+        # a Ctrl-C in the terminal reaches the workers too: they are started with SIGINT blocked (a
+        # mask survives fork and exec), so they never see it and print no traceback each; this
+        # process gets it when the mask is lifted, and ends them instead of waiting for their files
+        pool = ProcessPoolExecutor(min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn"))
+        try:
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                folded = pool.map(fold_file, tasks)         # the workers are started here
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             results = []
-            for task, result in zip(tasks, pool.map(fold_file, tasks)):
+            for task, result in zip(tasks, folded):
                 results.append(result)
                 progress(f"folded {task.path} ({result.samples} samples, {result.chunks} chunks, "
                          f"{result.seconds:.1f} s)")
-            return results
+        except BaseException:
+            workers_running = list(getattr(pool, "_processes", None) or ())   # their pids (no public API before 3.14)
+            pool.shutdown(wait=False, cancel_futures=True)
+            for pid in workers_running:
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGTERM)
+            raise
+        pool.shutdown()
+        return results
     results = []
     for task in tasks:
         progress(f"reading and folding {task.path}")

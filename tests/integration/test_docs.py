@@ -22,7 +22,8 @@ import pytest
 from tests.harness import HANG_GUARD_S, ROOT
 
 PAGES_RUN = ("README.md", "docs/getting-started.md", "docs/tutorials/identify.md",
-             "docs/tutorials/discover.md", "docs/tutorials/plan.md")
+             "docs/tutorials/discover.md", "docs/tutorials/plan.md", "docs/tutorials/closed_loops.md",
+            "docs/tutorials/mimic_joints.md")
 
 
 def _shell_blocks(path: Path) -> list[str]:
