@@ -1,12 +1,15 @@
 """Ours against Pinocchio's own CppADCodeGen, the traced Pinocchio and Pinocchio C++, in one run:
 tau, fd, M, Minv, tau_derivatives and fd_derivatives of lwr4, panda, ur5 and g1, with the
-generation and compile times of both code generators; writes results/cppadcg.json.
+generation and compile times of both code generators; writes results/cppadcg.json and cppadcg.png
+(the ratios).
 
     python -m benchmarks.cppadcg [--quick] [--robots lwr4,panda,ur5,g1] [--out DIR]
 
-Per robot: ours is generated (``kindyngen`` generate of these functions, C only, no batch
-variants: wall and CPU seconds) and its C compiled as ``c_native`` (gcc -std=gnu99 -O3
--march=native, the compile timed apart); the peer ``pinocchio_cppadcg`` is Pinocchio 4.1's
+Per robot: ours is generated (``kindyngen`` generate of these functions, C only, with their
+batch variants as by default: wall and CPU seconds) and its C compiled as ``c_native`` (gcc
+-std=gnu99 -O3 -march=native, the compile timed apart), timed as single calls (``c_native``)
+and as one ``<name>_batch`` call on all K states (``c_batch``, per state; ``ratios_batch``);
+the peer has no batch form, its figure is a call per state either way; the peer ``pinocchio_cppadcg`` is Pinocchio 4.1's
 CodeGen* classes on Pinocchio's own model of the same robot, CppADCodeGen's C compiled with the
 same flags, and ``pinocchio_cppadcg_ofast`` the same C with CppADCodeGen's flags as Pinocchio's
 compileLib sets them (-Ofast -fPIC) (benchmarks/cppadcg_peer.py); ``pinocchio_casadi_c``
@@ -39,6 +42,7 @@ import numpy as np
 
 from kindyngen.codegen.pipeline import generate
 from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
 from kindyngen.readers.urdf import load_urdf
 from kindyngen.readers.yaml_description import load_robot
 
@@ -49,6 +53,7 @@ from .urdf_vs_yaml import example_robot_data
 
 WORK = BUILD / "cppadcg_study"
 OURS = "c_native"
+BATCH = "c_batch"   # our <name>_batch on all K states in one call, the same object as OURS
 TRACED = pinocchio_casadi.IMPL
 CPP = "pinocchio_cpp"
 PEERS = (*cppadcg_peer.IMPLS, TRACED, CPP)
@@ -103,7 +108,7 @@ def ours(key: str, model, names, data: dict, workdir: Path, log) -> tuple[compil
     """Generate our C of ``names`` (timed), compile it as c_native (timed apart from the driver)
     and wrap it for the harness; (Timer, {generation and compile seconds})."""
     started, cpu = time.perf_counter(), time.process_time()
-    folder = generate(model, WORK / "ours", languages=("c",), progress=False, only=set(names), batch=False)
+    folder = generate(model, WORK / "ours", languages=("c",), progress=False, only=set(names))
     generation = {"wall_s": round(time.perf_counter() - started, 2), "cpu_s": round(time.process_time() - cpu, 2)}
     spec = json.loads((folder / "functions.json").read_text())
     functions = [f for f in spec["functions"] if f["name"] in names]
@@ -122,9 +127,32 @@ def ours(key: str, model, names, data: dict, workdir: Path, log) -> tuple[compil
                                  [obj.path], compiled.C_FLAGS[OURS], workdir)
     timer = compiled.Timer(run=lambda repeats, target_ns: c_harness.measure(prepared, repeats, target_ns),
                            outputs=lambda raw: raw, build_seconds=obj.seconds)
-    return timer, {"generation": generation, "compile": {"wall_s": round(obj.seconds, 2), "cpu_s": obj.cpu_seconds,
+    batch = batch_timer(key, folder, functions, data, obj.path, workdir)
+    return timer, batch, {"generation": generation, "compile": {"wall_s": round(obj.seconds, 2), "cpu_s": obj.cpu_seconds,
                                                          "cached": obj.cached},
                    "flags": " ".join([c_harness.C_STD, *compiled.C_FLAGS[OURS]])}
+
+
+def batch_timer(key: str, folder: Path, functions: list, data: dict, library: Path, workdir: Path) -> compiled.Timer:
+    """Our batch variants (``<name>_batch``: all K states in one call, structure-of-arrays, the
+    same object as the single calls), timed per state; the outputs of state 0 for the check."""
+    n = data["q"].shape[0]
+    targets = []
+    for f in functions:
+        arrays = [data[p["name"]].reshape(n, -1) for p in f["inputs"]]
+        args = [f"{{in{i}}}" for i in range(len(arrays))] + [f"{{out{i}}}" for i in range(len(f["outputs"]))]
+        targets.append(c_harness.CFunction(
+            name=f["name"], call=f"{f['c_symbol']}_batch({n}L, {', '.join(args)})",
+            inputs=[np.ascontiguousarray(a.T).reshape(1, -1) for a in arrays],   # one row: all n states
+            outputs=[(int(np.prod(p["shape"])) * n, p.get("dtype", "double")) for p in f["outputs"]]))
+    prepared = c_harness.prepare(f"{key}_{BATCH}", targets, f'#include "{folder / "c" / folder.name}.h"',
+                                 [library], compiled.C_FLAGS[OURS], workdir / BATCH)
+
+    def run(repeats, target_ns):
+        times, raw = c_harness.measure(prepared, repeats, target_ns)
+        return {name: [t / n for t in values] for name, values in times.items()}, raw   # per state
+    return compiled.Timer(run=run, outputs=lambda raw: {name: [o.reshape(-1, n)[:, 0] for o in outs]
+                                                        for name, outs in raw.items()})
 
 
 # --- the traced Pinocchio and Pinocchio C++ ----------------------------------------------------
@@ -185,7 +213,7 @@ def bench_robot(key: str, settings: dict, paths: dict, log) -> dict:
         entry["skipped"].setdefault(impl, {})[name] = reason
 
     timers = {}
-    timers[OURS], entry["ours_build"] = ours(key, model, [n for n in names if n in OUR_FUNCTIONS], data, workdir, log)
+    timers[OURS], timers[BATCH], entry["ours_build"] = ours(key, model, [n for n in names if n in OUR_FUNCTIONS], data, workdir, log)
     log(f"{key}: {cppadcg_peer.IMPL}: generating (CppADCodeGen) and compiling")
     peer = cppadcg_peer.build_peer(paths["generator"], model_file, model.identifier, names,
                                    {n: cppadcg_peer.peer_inputs(n, pin_data) for n in names}, model.nv, workdir,
@@ -205,7 +233,7 @@ def bench_robot(key: str, settings: dict, paths: dict, log) -> dict:
         outputs = timer.outputs(raw)
         # the arms' traced derivative candidates (CasADi's AD, "_ad") are checked as their function
         expected = {n: want[pinocchio_casadi_base(n)] for n in outputs if pinocchio_casadi_base(n) in want}
-        tolerance = OURS_TOLERANCE if impl == OURS else cppadcg_peer.TOLERANCE
+        tolerance = OURS_TOLERANCE if impl in (OURS, BATCH) else cppadcg_peer.TOLERANCE
         entry["checks"][impl] = cppadcg_peer.check(f"{key}: {impl}", outputs, expected, tolerance)
         log(f"{key}: {impl}: outputs for input 0 equal Pinocchio's (largest scaled error "
             f"{max(entry['checks'][impl].values(), default=0.0):.1e})")
@@ -230,6 +258,7 @@ def bench_robot(key: str, settings: dict, paths: dict, log) -> dict:
                 stats["note"] = note[impl]
     entry["ratios"] = ratios(entry["functions"], "median_ns")
     entry["ratios_min"] = ratios(entry["functions"], "min_ns")
+    entry["ratios_batch"] = ratios(entry["functions"], "median_ns", BATCH)
     entry["aims"] = aims(entry["ratios"])
     return entry
 
@@ -243,15 +272,16 @@ def pinocchio_casadi_base(name: str) -> str:
     return name[:-3] if name.endswith("_ad") else name
 
 
-def ratios(functions: dict, statistic: str) -> dict:
-    """{function: {"peer/c_native": t(peer) / t(ours)}}: above 1, ours is faster.
+def ratios(functions: dict, statistic: str, ours: str = OURS) -> dict:
+    """{function: {"peer/c_native": t(peer) / t(ours)}}: above 1, ours is faster (``ours``: our
+    single calls, or our batch, per state).
 
     >>> ratios({"tau": {"c_native": {"median_ns": 2.0}, "pinocchio_cpp": {"median_ns": 9.0}}}, "median_ns")
     {'tau': {'pinocchio_cpp/c_native': 4.5}}
     """
-    return {name: {f"{peer}/{OURS}": impls[peer][statistic] / impls[OURS][statistic]
+    return {name: {f"{peer}/{ours}": impls[peer][statistic] / impls[ours][statistic]
                    for peer in PEERS if peer in impls}
-            for name, impls in functions.items() if OURS in impls}
+            for name, impls in functions.items() if ours in impls}
 
 
 def aims(robot_ratios: dict) -> dict:
@@ -301,7 +331,7 @@ def run(settings: dict, log) -> dict:
 
 def table(result: dict) -> str:
     """The medians (ns) and the ratios peer / ours as Markdown."""
-    impls = (OURS, *PEERS)
+    impls = (OURS, BATCH, *PEERS)
     lines = ["| robot | function | " + " | ".join(impls) + " | " + " | ".join(f"{p} / ours" for p in PEERS) + " |",
              "|---" * (2 + len(impls) + len(PEERS)) + "|"]
     for key, entry in result["robots"].items():
@@ -313,6 +343,45 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def plot(result: dict, path: Path) -> None:
+    """Per robot, each function's ratio peer / ours by medians (log scale; above 1: ours
+    faster), one bar per peer, the issue's aims against CppADCodeGen at equal flags dashed."""
+    import matplotlib
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+    robots = result["robots"]
+    fig, axes = plt.subplots(len(robots), 1, figsize=(10, 3.4 * len(robots)), squeeze=False)
+    for ax, (key, entry) in zip(axes[:, 0], robots.items()):
+        names = [n for n in entry["functions"] if n in entry["ratios"]]
+        peers = [p for p in PEERS if any(f"{p}/{OURS}" in entry["ratios"][n] for n in names)]
+        width = 0.8 / max(1, len(peers))
+        x = np.arange(len(names))
+        for i, peer in enumerate(peers):
+            values = [entry["ratios"][n].get(f"{peer}/{OURS}", np.nan) for n in names]
+            ax.bar(x + (i - (len(peers) - 1) / 2) * width, values, width, label=f"{peer} / ours")
+        for i, n in enumerate(names):
+            ax.hlines(AIM[n], i - 0.45, i + 0.45, colors="k", linestyles="dashed", linewidth=1)
+        ax.axhline(1.0, color="grey", linewidth=0.8)
+        ax.set_yscale("log")
+        ax.set_xticks(x, names)
+        ax.set_ylabel("t(peer) / t(ours), medians")
+        ax.set_title(f"{key} (nv = {entry['nv']}): above 1, ours is faster; dashed: the aim against "
+                     f"{cppadcg_peer.IMPL}", fontsize="medium")
+        ax.grid(axis="y", which="both", alpha=0.3)
+    axes[0, 0].legend(fontsize="small", ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def write(result: dict, out: Path) -> None:
+    """cppadcg.json and cppadcg.png in ``out``, both or neither (kindyngen.output_folder.replace_files)."""
+    def both(folder):
+        (folder / "cppadcg.json").write_text(strict_json(result, indent=1) + "\n")
+        plot(result, folder / "cppadcg.png")
+    replace_files(out, both)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.cppadcg", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true",
@@ -321,7 +390,7 @@ def main(argv=None) -> int:
                         "(default: lwr4,panda,ur5,g1; --quick: lwr4)")
     parser.add_argument("--functions", help=f"comma-separated functions among {', '.join(FUNCTIONS)} "
                         "(default: all; --quick: tau,M)")
-    parser.add_argument("--out", type=Path, default=RESULTS, help="directory for cppadcg.json")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="directory for cppadcg.json and cppadcg.png")
     args = parser.parse_args(argv)
     settings = dict(QUICK if args.quick else FULL)
     if args.robots:
@@ -346,10 +415,9 @@ def main(argv=None) -> int:
     except cppadcg_peer.WiringError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "cppadcg.json").write_text(strict_json(result, indent=1) + "\n")
+    write(result, args.out)
     log(table(result))
-    log(f"wrote {args.out / 'cppadcg.json'}")
+    log(f"wrote {args.out / 'cppadcg.json'} and {args.out / 'cppadcg.png'}")
     return 0
 
 

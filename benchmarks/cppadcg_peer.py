@@ -45,9 +45,7 @@ import re
 import resource
 import shutil
 import subprocess
-import sys
 import sysconfig
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
