@@ -106,8 +106,8 @@ def unavailable() -> str | None:
     """Why the peer cannot be built here, or None."""
     pins = " ".join(f"{name}=={version}" for name, version in PACKAGES.items())
     if include_dirs() is None:
-        return (f"CppADCodeGen's headers not found (pip install {pins}, or pip install --no-deps "
-                f"--target {SIDE_PREFIX} {pins})")
+        return (f"CppADCodeGen's headers not found (pip install -e '.[bench]', which pins {pins}; or "
+                f"pip install --no-deps --target {SIDE_PREFIX} {pins})")
     if not (pinocchio_cpp.include_dirs()[0] / "pinocchio" / "codegen" / "cppadcg-algo.hpp").exists():
         return "Pinocchio's codegen headers (pinocchio/codegen/cppadcg-algo.hpp) not found"
     return None
