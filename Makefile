@@ -23,7 +23,12 @@ generate: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m pytest -n logical --dist loadfile --durations=20
 
-bench: $(VENV)/.installed
+# the benchmarks' extra peers (pyproject's "bench" extra: CppADCodeGen's headers), not needed by `make test`
+$(VENV)/.bench-installed: $(VENV)/.installed
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	touch $@
+
+bench: $(VENV)/.bench-installed
 	$(PY) -m benchmarks.run
 
 report: $(VENV)/.installed

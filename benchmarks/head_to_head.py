@@ -1,5 +1,6 @@
-"""Head to head: the generated C against the traced Pinocchio peer and Pinocchio C++ on a few
-functions, in one run, interleaved, minima and medians; results/head_to_head.json.
+"""Head to head: the generated C against the traced Pinocchio peer, Pinocchio's CppADCodeGen and
+Pinocchio C++ on a few functions, in one run, interleaved, minima and medians;
+results/head_to_head.json.
 
     python -m benchmarks.head_to_head [--robots lwr4 panda] [--functions jacobian tau ...]
                                       [--candidate NAME=DIR ...] [--rounds 15] [--out FILE]
@@ -7,7 +8,10 @@ functions, in one run, interleaved, minima and medians; results/head_to_head.jso
 The focused form of ``make bench`` for a shared machine: only the C entries (``c_native``,
 gcc -O3 -march=native), ``pinocchio_casadi_c`` (Pinocchio traced with casadi::SX, CasADi's C,
 the same flags; for the derivatives the faster of its two candidates, as in ``make bench``)
-and ``pinocchio_cpp``, the same inputs, many short interleaved rounds (a burst of load from a
+``pinocchio_cppadcg`` / ``pinocchio_cppadcg_ofast`` (Pinocchio's own CppADCodeGen
+generators, their C at the same flags and at -Ofast as Pinocchio's compileLib builds it, for
+tau, fd, M, Minv and the derivatives, checked against Pinocchio's double algorithms first:
+cppadcg_peer.py) and ``pinocchio_cpp``, the same inputs, many short interleaved rounds (a burst of load from a
 neighbour lands on one round of every implementation, not on one implementation). Each
 figure is reported as the minimum and the median ns per single call over the pooled
 repetitions; the ratios t(peer) / t(ours) by both. ``--candidate NAME=DIR`` times another
@@ -29,14 +33,15 @@ import numpy as np
 from kindyngen.json_text import strict_json
 from kindyngen.readers.yaml_description import load_robot
 
-from . import compiled, inputs, pinocchio_casadi, pinocchio_cpp
+from . import compiled, cppadcg_peer, inputs, pinocchio_casadi, pinocchio_cpp
 from .build import BUILD
 from .common import GENERATED, RESULTS, ROBOTS, machine, manifest
 
-DEFAULT_FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "tau_derivatives", "fd_derivatives")
+DEFAULT_FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "Minv", "tau_derivatives", "fd_derivatives")
 OURS = "c_native"
 PEER = pinocchio_casadi.IMPL
 CPP = "pinocchio_cpp"
+PEERS = (PEER, CPP, *cppadcg_peer.IMPLS)   # the ratios' numerators
 
 
 def log(message: str) -> None:
@@ -61,8 +66,33 @@ def relative_error(got, want) -> float | None:
                 for g, w in zip(got, want) if np.size(w)), default=0.0)
 
 
+def cppadcg_timers(robot: str, model, names: list, samples: dict, K: int, workdir: Path) -> dict:
+    """Pinocchio's CppADCodeGen (both flag sets) for those of ``names`` it has, on the generated
+    functions' inputs (Minv on M's, or drawn), checked against Pinocchio's double algorithms."""
+    reason = cppadcg_peer.unavailable()
+    if reason:
+        log(f"{robot}: {cppadcg_peer.IMPL} skipped: {reason}")
+        return {}
+    generator = cppadcg_peer.build_generator().path
+    workdir.mkdir(parents=True, exist_ok=True)
+    model_file = workdir / f"{robot}_pinocchio_model.txt"
+    model_file.write_text(pinocchio_cpp.model_text(model))
+    state = inputs.dynamics_inputs(model, K)
+    peer_names = [n for n in cppadcg_peer.FUNCTIONS if n in names]
+    states = {n: cppadcg_peer.peer_inputs(n, samples.get(n) or (samples.get("M") if n == "Minv" else None) or state)
+              for n in peer_names}
+    peer = cppadcg_peer.build_peer(generator, model_file, robot, peer_names, states, model.n, workdir, 3600.0,
+                                   lambda m: log(f"{robot}: {m}"), lambda n, why: log(f"{robot}: {n} skipped: {why}"))
+    want = cppadcg_peer.reference_for(generator, model_file, {n: states[n] for n in peer.generated}, model.n,
+                                      model.n, workdir)
+    for impl, timer in peer.timers.items():
+        _, raw = timer.run(1, 1e5)
+        cppadcg_peer.check(f"{robot}: {impl}", timer.outputs(raw), want, cppadcg_peer.TOLERANCE)
+    return peer.timers
+
+
 def robot_run(robot: str, names: list, candidates: dict, rounds: int, K: int, target_ns: float,
-              with_peer: bool, with_cpp: bool, workdir: Path) -> dict:
+              with_peer: bool, with_cpp: bool, workdir: Path, with_cppadcg: bool = True) -> dict:
     spec = manifest(GENERATED / robot)
     model = load_robot(ROBOTS / f"{robot}.yaml")
     functions = [f for f in spec["functions"] if f["name"] in names]
@@ -80,6 +110,9 @@ def robot_run(robot: str, names: list, candidates: dict, rounds: int, K: int, ta
     if with_cpp:
         data = inputs.dynamics_inputs(model, K)
         timers[CPP] = compiled.pinocchio(model, functions, data, pinocchio_cpp.build_binary().path, workdir / CPP)
+    if with_cppadcg:
+        log(f"{robot}: {cppadcg_peer.IMPL}: generating (cached by content) and building")
+        timers.update(cppadcg_timers(robot, model, names, samples, K, workdir / "cppadcg"))
     load_before = os.getloadavg()
     log(f"{robot}: timing {', '.join(timers)} in {rounds} interleaved rounds")
     pooled, outputs = compiled.interleave(timers, 3 * rounds, rounds, target_ns,
@@ -97,7 +130,7 @@ def robot_run(robot: str, names: list, candidates: dict, rounds: int, K: int, ta
         for impl in [OURS, *candidates]:
             if impl not in row:
                 continue
-            for peer in (PEER, CPP):
+            for peer in PEERS:
                 if peer in row:
                     row.setdefault("ratios", {})[f"{peer}/{impl}"] = {
                         "by_min": row[peer]["min_ns"] / row[impl]["min_ns"],
@@ -137,8 +170,9 @@ def main(argv=None) -> int:
     parser.add_argument("--target-ns", type=float, default=2e6, help="length of one repetition")
     parser.add_argument("--K", type=int, default=200, help="inputs cycled through per function")
     parser.add_argument("--no-cpp", action="store_true", help="without Pinocchio C++")
+    parser.add_argument("--no-cppadcg", action="store_true", help="without Pinocchio's CppADCodeGen")
     parser.add_argument("--no-peer", action="store_true",
-                        help="without either Pinocchio (ours against the candidates only)")
+                        help="without any Pinocchio (ours against the candidates only)")
     parser.add_argument("--out", type=Path, default=RESULTS / "head_to_head.json")
     args = parser.parse_args(argv)
     for robot in args.robots:
@@ -158,7 +192,8 @@ def main(argv=None) -> int:
               "robots": {}}
     for robot in args.robots:
         result["robots"][robot] = robot_run(robot, args.functions, candidates, args.rounds, args.K, args.target_ns,
-                                            not args.no_peer, not (args.no_cpp or args.no_peer), BUILD / "head_to_head" / robot)
+                                            not args.no_peer, not (args.no_cpp or args.no_peer),
+                                            BUILD / "head_to_head" / robot, not (args.no_cppadcg or args.no_peer))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(strict_json(result, indent=1) + "\n")
     print(table(result))

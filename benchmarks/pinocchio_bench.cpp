@@ -111,6 +111,8 @@ int main(int argc, char ** argv)
   measure("fd", K, repeats, target_ns, [&](long k) {
     return aba(model, data, q[k], qd[k], tau[k])[0];
   });
+  // computeMinverse fills the upper triangle only, as crba.
+  measure("Minv", K, repeats, target_ns, [&](long k) { return computeMinverse(model, data, q[k])(0, 0); });
   measure("tau_derivatives", K, repeats, target_ns, [&](long k) {
     computeRNEADerivatives(model, data, q[k], qd[k], qdd[k], d_dq, d_dv, d_da);
     return d_dq(0, 1);
@@ -150,6 +152,9 @@ int main(int argc, char ** argv)
   print("g", g);
   print("c", nonLinearEffects(model, data, q[0], qd[0]) - g); // Coriolis/centrifugal alone
   print("fd", aba(model, data, q[0], qd[0], tau[0]));
+  Eigen::MatrixXd Minv = computeMinverse(model, data, q[0]);
+  mirror_upper(Minv);
+  print("Minv", Minv);
   // Derivative checks in the generated layout: one line per output, row-major.
   d_dq.setZero();
   d_dv.setZero();

@@ -40,6 +40,7 @@ NOTES = {
     "c": "rnea(q, qd, 0) on a gravity-free copy, traced in SX",
     "tau": "rnea traced in SX",
     "fd": "aba traced in SX",
+    "Minv": "computeMinverse traced in SX, mirrored to the full matrix",
 }
 # Derivative function -> {traced Function: what it is}; the first is Pinocchio's analytical one.
 CANDIDATES = {

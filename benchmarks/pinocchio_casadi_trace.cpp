@@ -18,6 +18,7 @@
 //   c(q, qd) -> c             Coriolis/centrifugal only: rnea(q, qd, 0) on a gravity-free copy
 //   tau(q, qd, qdd) -> tau    rnea
 //   fd(q, qd, tau) -> qdd     aba
+//   Minv(q) -> Minv           computeMinverse, mirrored to the full symmetric matrix
 // and the derivatives in two candidate forms each, both saved so that the faster can be kept:
 //   tau_derivatives(q, qd, qdd) -> (dtau_dq, dtau_dqd)           computeRNEADerivatives
 //   tau_derivatives_ad(...)                                       casadi jacobian of traced rnea
@@ -123,6 +124,10 @@ int main(int argc, char ** argv)
       ADData data(ad);
       aba_sx = to_sx(aba(ad, data, q.eigen, qd.eigen, tau.eigen));
       save(dir, "fd", {{"q", q.sx}, {"qd", qd.sx}, {"tau", tau.sx}}, {{"qdd", aba_sx}});
+    }
+    {
+      ADData data(ad);
+      save(dir, "Minv", {{"q", q.sx}}, {{"Minv", to_sx(mirrored(computeMinverse(ad, data, q.eigen)))}});
     }
     const std::vector<Port> rnea_in{{"q", q.sx}, {"qd", qd.sx}, {"qdd", qdd.sx}};
     const std::vector<Port> aba_in{{"q", q.sx}, {"qd", qd.sx}, {"tau", tau.sx}};

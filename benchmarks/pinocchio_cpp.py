@@ -25,9 +25,9 @@ FLAGS = ["-std=c++17", "-O3", "-march=native", "-DNDEBUG", *BOOST_FLAGS]
 # Generated function name -> the algorithm in pinocchio_bench.cpp that computes the same.
 ALGORITHM = {"fk_hom": "fk", "fk_dq": "fk", "jacobian": "jacobian", "tau": "tau", "M": "M",
              "g": "g", "c": "c", "S": "S", "fd": "fd", "Y": "Y",
-             "tau_derivatives": "tau_derivatives", "fd_derivatives": "fd_derivatives"}
+             "Minv": "Minv", "tau_derivatives": "tau_derivatives", "fd_derivatives": "fd_derivatives"}
 # Timed even when generated/ has no such function (yet): the peers' figures stand on their own.
-ALWAYS = ("tau_derivatives", "fd_derivatives")
+ALWAYS = ("Minv", "tau_derivatives", "fd_derivatives")
 FAMILIES = ("M", "g", "c", "tau")  # M_lagrange, c_christoffel, ...: other routes, same quantity
 
 
@@ -46,6 +46,7 @@ NOTES = {
     "g": "computeGeneralizedGravity",
     "tau": "rnea",
     "fd": "aba",
+    "Minv": "computeMinverse (upper triangle only)",
     "c": "nonLinearEffects (c + g: no Coriolis-only call)",
     "S": "computeCoriolisMatrix",
     "Y": "computeJointTorqueRegressor (all 10n columns)",

@@ -1,9 +1,10 @@
-// Times Pinocchio's C++ algorithms on a kinematic tree with a floating base (the
-// "pinocchio_cpp" column of benchmarks/trees.py), the same way the C harness times the
+// Times Pinocchio's C++ algorithms on a robot read from a URDF, a kinematic tree with a
+// floating base or an arm (the "pinocchio_cpp" column of benchmarks/trees.py and of
+// benchmarks/cppadcg_peer.py's URDF robots), the same way the C harness times the
 // generated code: cycle over K precomputed inputs, CLOCK_MONOTONIC, results summed into a
 // volatile sink.
 //
-// The model is Pinocchio's own buildModelFromUrdf(path, JointModelFreeFlyer()), run by
+// The model is Pinocchio's own buildModelFromUrdf(path[, JointModelFreeFlyer()]), run by
 // benchmarks/trees.py through Pinocchio's Python bindings and handed over with Pinocchio's
 // serialization (Model::saveToBinary / loadFromBinary): parsing the URDF here would mean
 // linking the wheel's precompiled libpinocchio_parsers, whose Eigen objects are laid out for
@@ -11,12 +12,14 @@
 // serialized model is plain numbers and needs only libboost_serialization.
 //
 // usage: pinocchio_tree_bench MODEL.bin FRAMES INPUTS.bin K REPEATS TARGET_NS
-//   MODEL.bin: Model::saveToBinary of the floating-base model.
+//   MODEL.bin: Model::saveToBinary of the model.
 //   FRAMES: comma-separated frame names (the k frames of fk_hom and jacobian).
 //   INPUTS.bin: doubles q[K][nq], qd[K][nv], qdd[K][nv], tau[K][nv] in Pinocchio's layout.
 // output: "time NAME t1 ... tR" (ns per call in each repetition) per function, then
 // "check NAME PORT values..." for input 0, row-major, in the generated functions' layout
-// (fk_hom: k 4x4 poses; jacobian: k 6 x nv; M full; com: com, J_com, A_g).
+// (fk_hom: k 4x4 poses; jacobian: k 6 x nv; M and Minv full; com: com, J_com, A_g;
+// tau_derivatives: dtau_dq, dtau_dqd; fd_derivatives: dqdd_dq, dqdd_dqd, Minv; the derivatives
+// in q by Pinocchio's tangent (nv columns), as the generated ones).
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/serialization.hpp>
 #include <pinocchio/algorithm/aba.hpp>
@@ -27,6 +30,8 @@
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/rnea-derivatives.hpp>
+#include <pinocchio/algorithm/aba-derivatives.hpp>
 
 #include "bench_timing.hpp"
 #include "program_args.hpp"
@@ -50,8 +55,9 @@ static void print(const char * name, int port, const Eigen::MatrixXd & m)
 
 static const char USAGE[] =
   "usage: %s MODEL.bin FRAMES INPUTS.bin K REPEATS TARGET_NS\n"
-  "Times Pinocchio's algorithms (fk_hom, jacobian, M, g, c, tau, fd, com) on the serialized\n"
-  "floating-base model MODEL.bin for the comma-separated FRAMES over the K inputs in INPUTS.bin\n"
+  "Times Pinocchio's algorithms (fk_hom, jacobian, M, g, c, tau, fd, com, Minv, tau_derivatives,\n"
+  "fd_derivatives) on the serialized model MODEL.bin (floating or fixed base) for the\n"
+  "comma-separated FRAMES over the K inputs in INPUTS.bin\n"
   "(both written by benchmarks/trees.py): REPEATS repetitions of about TARGET_NS each; prints\n"
   "\"time NAME ns...\" lines, then \"check NAME PORT values...\" lines for input 0.\n";
 
@@ -139,6 +145,21 @@ int main(int argc, char ** argv)
     return jc + data.com[0][0] + computeCentroidalMap(model, data, q[k])(0, 0);
   });
 
+  // computeMinverse fills the upper triangle only, as crba.
+  measure("Minv", K, repeats, target_ns, [&](long k) { return computeMinverse(model, data, q[k])(0, 0); });
+  // Derivative outputs zeroed once, as computeRNEADerivatives asks: every call assigns the same
+  // entries, so the timed calls need no reset (as in pinocchio_bench.cpp).
+  Eigen::MatrixXd d_dq = Eigen::MatrixXd::Zero(nv, nv), d_dv = Eigen::MatrixXd::Zero(nv, nv),
+                  d_dx = Eigen::MatrixXd::Zero(nv, nv);
+  measure("tau_derivatives", K, repeats, target_ns, [&](long k) {
+    computeRNEADerivatives(model, data, q[k], qd[k], qdd[k], d_dq, d_dv, d_dx);
+    return d_dq(0, 1);
+  });
+  measure("fd_derivatives", K, repeats, target_ns, [&](long k) {
+    computeABADerivatives(model, data, q[k], qd[k], tau[k], d_dq, d_dv, d_dx);
+    return d_dq(0, 1);
+  });
+
   // Results for input 0, compared with the generated code by Python.
   forwardKinematics(model, data, q[0]);
   std::printf("check fk_hom 0");
@@ -166,6 +187,22 @@ int main(int argc, char ** argv)
   print("c", 0, nonLinearEffects(gravity_free, data_free, q[0], qd[0]));
   print("tau", 0, rnea(model, data, q[0], qd[0], qdd[0]));
   print("fd", 0, aba(model, data, q[0], qd[0], tau[0]));
+  Eigen::MatrixXd Minv = computeMinverse(model, data, q[0]);
+  Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
+  print("Minv", 0, Minv);
+  d_dq.setZero();
+  d_dv.setZero();
+  d_dx.setZero();
+  computeRNEADerivatives(model, data, q[0], qd[0], qdd[0], d_dq, d_dv, d_dx);
+  print("tau_derivatives", 0, d_dq);
+  print("tau_derivatives", 1, d_dv);
+  d_dq.setZero();
+  d_dv.setZero();
+  d_dx.setZero();
+  computeABADerivatives(model, data, q[0], qd[0], tau[0], d_dq, d_dv, d_dx); // Minv full
+  print("fd_derivatives", 0, d_dq);
+  print("fd_derivatives", 1, d_dv);
+  print("fd_derivatives", 2, d_dx);
   const Eigen::MatrixXd Jcom = jacobianCenterOfMass(model, data, q[0]);
   print("com", 0, data.com[0]);
   print("com", 1, Jcom);

@@ -1,11 +1,12 @@
-// Traces one of Pinocchio's algorithms on a floating-base tree with casadi::SX as the scalar
-// and saves it as a casadi::Function (<OUTDIR>/<NAME>.casadi): the "pinocchio_casadi_c" column
-// of benchmarks/trees.py, which code-generates it with CasADi and times the C.  One function
+// Traces one of Pinocchio's algorithms on a robot read from a URDF (a floating-base tree or an
+// arm) with casadi::SX as the scalar and saves it as a casadi::Function (<OUTDIR>/<NAME>.casadi):
+// the "pinocchio_casadi_c" column of benchmarks/trees.py (and of cppadcg_peer.py's URDF robots),
+// which code-generates it with CasADi and times the C.  One function
 // per run, so that Python can give each trace its own time limit (the graphs of a 35-dof
 // humanoid are large).
 //
 // usage: pinocchio_tree_trace MODEL.bin FRAMES OUTDIR NAME
-//   MODEL.bin: Model::saveToBinary of the floating-base model (see pinocchio_tree_bench.cpp
+//   MODEL.bin: Model::saveToBinary of the model (see pinocchio_tree_bench.cpp
 //              for why the model is serialized rather than parsed here).
 //   FRAMES: comma-separated frame names (the k frames of fk_hom and jacobian).
 //   NAME: one of
@@ -19,6 +20,10 @@
 //     tau(q, qd, qdd) -> tau    rnea
 //     fd(q, qd, tau) -> qdd     aba
 //     com(q) -> com, J_com, A_g jacobianCenterOfMass (com on the way) + computeCentroidalMap
+//     Minv(q) -> Minv           computeMinverse, mirrored to the full symmetric matrix
+//     tau_derivatives(q, qd, qdd) -> dtau_dq, dtau_dqd        computeRNEADerivatives
+//     fd_derivatives(q, qd, tau) -> dqdd_dq, dqdd_dqd, Minv   computeABADerivatives
+//                               (derivatives in q by Pinocchio's tangent: nv columns)
 // q has Pinocchio's nq entries (a continuous joint is cos, sin), the others nv.  Stacking the
 // k frames' matrices vertically gives, read row-major, the generated (k, 4, 4) / (k, 6, nv).
 #include "sx_trace.hpp" // Pinocchio on casadi::SX: must precede the other Pinocchio headers
@@ -33,6 +38,8 @@
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/rnea-derivatives.hpp>
+#include <pinocchio/algorithm/aba-derivatives.hpp>
 
 #include "frame_list.hpp"
 #include "program_args.hpp"
@@ -96,13 +103,32 @@ static std::vector<Port> trace(const std::string & name, const ADModel & ad, con
     const MatrixXs Ag = computeCentroidalMap(ad, data, q.eigen);
     return {{"com", to_sx(com)}, {"J_com", to_sx(Jcom)}, {"A_g", to_sx(Ag)}};
   }
+  if (name == "Minv")
+  {
+    MatrixXs Minv = computeMinverse(ad, data, q.eigen);
+    Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
+    return {{"Minv", to_sx(Minv)}};
+  }
+  if (name == "tau_derivatives" || name == "fd_derivatives")
+  {
+    MatrixXs dq = MatrixXs::Zero(nv, nv), dv = MatrixXs::Zero(nv, nv), dx = MatrixXs::Zero(nv, nv);
+    if (name == "tau_derivatives")
+    {
+      computeRNEADerivatives(ad, data, q.eigen, qd.eigen, qdd.eigen, dq, dv, dx);
+      return {{"dtau_dq", to_sx(dq)}, {"dtau_dqd", to_sx(dv)}};
+    }
+    // Minv comes out full: computeABADerivatives mirrors it itself to form -Minv dtau/dq.
+    computeABADerivatives(ad, data, q.eigen, qd.eigen, tau.eigen, dq, dv, dx);
+    return {{"dqdd_dq", to_sx(dq)}, {"dqdd_dqd", to_sx(dv)}, {"Minv", to_sx(dx)}};
+  }
   return {};
 }
 
 static const char USAGE[] =
   "usage: %s MODEL.bin FRAMES OUTDIR NAME\n"
-  "Traces Pinocchio's algorithm NAME (fk_hom, jacobian, M, g, c, tau, fd or com) on the serialized\n"
-  "floating-base model MODEL.bin (written by benchmarks/trees.py) with casadi::SX and saves it as\n"
+  "Traces Pinocchio's algorithm NAME (fk_hom, jacobian, M, g, c, tau, fd, com, Minv,\n"
+  "tau_derivatives or fd_derivatives) on the serialized model MODEL.bin (written by\n"
+  "benchmarks/trees.py) with casadi::SX and saves it as\n"
   "OUTDIR/NAME.casadi (casadi.Function.load reads it).\n";
 
 int main(int argc, char ** argv)
@@ -130,11 +156,12 @@ int main(int argc, char ** argv)
       return 2;
     }
     std::vector<Port> inputs{{"q", q.sx}};
-    if (name == "c" || name == "tau" || name == "fd")
+    const bool inverse = name == "tau" || name == "tau_derivatives", forward = name == "fd" || name == "fd_derivatives";
+    if (name == "c" || inverse || forward)
       inputs.push_back({"qd", qd.sx});
-    if (name == "tau")
+    if (inverse)
       inputs.push_back({"qdd", qdd.sx});
-    if (name == "fd")
+    if (forward)
       inputs.push_back({"tau", tau.sx});
     save_function(dir + "/" + name + ".casadi", name, inputs, outputs);
   }

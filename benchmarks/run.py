@@ -7,14 +7,16 @@ Implementations: "c" (-O3), "c_native" (-O3 -march=native), "casadi_codegen" (Ca
 -O3), "python" (numpy, one configuration per call), "python_batch" / "python_batch_<N>"
 (numpy on N configurations, time per configuration), "casadi" (saved Function called from
 Python), "pinocchio_cpp" (Pinocchio's C++ algorithms in double), "pinocchio_casadi_c" (Pinocchio
-traced with casadi::SX, CasADi's C, -O3 -march=native: the strongest Pinocchio-based peer),
+traced with casadi::SX, CasADi's C, -O3 -march=native), "pinocchio_cppadcg" and
+"pinocchio_cppadcg_ofast" (Pinocchio's own CppADCodeGen code generation, its C compiled
+-O3 -march=native like ours and -Ofast as Pinocchio's compileLib does: cppadcg_peer.py),
 "c_batch" (the <name>_batch variants, -O3 -march=native, N configurations per call, time per
 configuration, with the single-call time of the same run), "python_c" (the generated C as a
 Python extension, one configuration per call) against "pinocchio_python" (Pinocchio's Python
 bindings). All
 comparisons are ratios within one run on one machine; nothing here asserts on a time. --quick
-is the smoke-test setting: tiny counts, lwr4 only, neither Pinocchio peer (their header-only
-builds take minutes), no c_batch and no python_c.
+is the smoke-test setting: tiny counts, lwr4 only, none of the Pinocchio peers (their
+header-only builds take minutes), no c_batch and no python_c.
 """
 from __future__ import annotations
 
@@ -29,8 +31,8 @@ import numpy as np
 from kindyngen.json_text import strict_json
 from kindyngen.readers.yaml_description import load_robot
 
-from . import (c_batch, casadi_codegen, compiled, inputs, pinocchio_casadi, pinocchio_cpp, python_c_timing,
-               python_timing, scaling, tree_scaling, trees)
+from . import (c_batch, casadi_codegen, compiled, cppadcg_peer, inputs, pinocchio_casadi, pinocchio_cpp,
+               python_c_timing, python_timing, scaling, tree_scaling, trees)
 from .build import BUILD
 from .common import GENERATED, RESULTS, ROBOTS, machine, manifest, summary
 
@@ -46,8 +48,9 @@ QUICK = dict(K=50, repeats=3, rounds=1, c_target_ns=2e5, py_target_s=0.002, batc
              c_flags=["-O0"])
 PRIMARY = "lwr4"          # the robot of the paper: every implementation
 SECONDARY_IMPLS = ("c", "c_native", "pinocchio_cpp", pinocchio_casadi.IMPL,  # other robots: the ratios only
-                   c_batch.IMPL, "python_c")
-PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL)  # the implementations the ratios divide by
+                   *cppadcg_peer.IMPLS, c_batch.IMPL, "python_c")
+# the implementations the ratios divide by
+PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL, *cppadcg_peer.IMPLS)
 
 
 def log(message: str) -> None:
@@ -89,6 +92,7 @@ class Bench:
         self.robots: dict = {}
         self.pinocchio_build: dict | None = None
         self.pinocchio_casadi_build: dict | None = None
+        self.pinocchio_cppadcg_build: dict | None = None
 
     def note(self, text: str) -> None:
         log("note: " + text)
@@ -154,6 +158,9 @@ class Bench:
         peer = pinocchio_casadi.IMPL
         if wanted(peer):
             timers[peer] = self._guarded(name, peer, self._pinocchio_casadi_timer, name, model, samples, work)
+        if wanted(cppadcg_peer.IMPL):
+            timers.update(self._guarded(name, cppadcg_peer.IMPL, self._cppadcg_timers, name, model, samples, entry,
+                                        work) or {})
         timers = {impl: t for impl, t in timers.items() if t is not None}
         if not timers:
             return
@@ -171,6 +178,8 @@ class Bench:
                     stats["note"] = pinocchio_cpp.note_for(fname)
                 elif impl == peer:
                     stats["note"] = peer_notes.get(fname, "")
+                elif impl in cppadcg_peer.IMPLS:
+                    stats["note"] = cppadcg_peer.NOTES.get(fname, "")
             if timers[impl].build_seconds is not None:
                 entry["build_seconds"][impl] = round(timers[impl].build_seconds, 2)
         # Wiring checks: every output for input 0 against the generated numpy code (Pinocchio:
@@ -181,7 +190,7 @@ class Bench:
                         if f["name"] in got and module is not None and {p["name"] for p in f["inputs"]} <= data.keys()}
                 if "fk_hom" in want:
                     want["fk_hom"] = [want["fk_hom"][0][:12]]  # Pinocchio prints the top 3 rows
-            elif impl == peer:  # where it computes the same function, on the same inputs
+            elif impl in (peer, *cppadcg_peer.IMPLS):  # where it computes the same function, on the same inputs
                 want = {f: w for f, w in refs.items() if f in got}
             else:
                 want = refs
@@ -217,6 +226,45 @@ class Bench:
             log(f"pinocchio_casadi_c: {'cached' if built.cached else 'new'} tracer build, {_seconds(built)} s to compile")
         log(f"{name}: pinocchio_casadi_c: tracing, generating C and building")
         return pinocchio_casadi.timer(model, built.path, samples, self.settings["K"], work)
+
+    def _cppadcg_timers(self, name, model, samples, entry, work):
+        """Pinocchio's CppADCodeGen (both flag sets) on the very inputs of the generated functions
+        (Minv on M's), each output for input 0 checked against Pinocchio's double algorithms
+        (cppadcg_peer.TOLERANCE) before it is timed; {impl: Timer}."""
+        if not self.settings["pinocchio"]:
+            self.note("pinocchio_cppadcg skipped (--quick: its generator's header-only build takes minutes)")
+            return None
+        reason = cppadcg_peer.unavailable()
+        if reason:
+            self.note(f"pinocchio_cppadcg skipped: {reason}")
+            return None
+        if model.length_symbols:
+            self.note(f"{name}: symbolic DH lengths, no Pinocchio model, pinocchio_cppadcg skipped")
+            return None
+        log("pinocchio_cppadcg: building its generator (header-only Pinocchio with CppAD, minutes unless cached)")
+        built = cppadcg_peer.build_generator()
+        if self.pinocchio_cppadcg_build is None:
+            self.pinocchio_cppadcg_build = {"generator": built.path.name, "cached": built.cached,
+                                            "seconds": _seconds(built), "packages": cppadcg_peer.PACKAGES,
+                                            "flags": {i: " ".join(f) for i, f in cppadcg_peer.FLAGS.items()}}
+        work = work / "cppadcg"
+        work.mkdir(parents=True, exist_ok=True)
+        model_file = work / f"{name}_pinocchio_model.txt"
+        model_file.write_text(pinocchio_cpp.model_text(model))
+        names = [f for f in cppadcg_peer.FUNCTIONS if f in samples or f == "Minv" and "M" in samples]
+        states = {f: cppadcg_peer.peer_inputs(f, samples[f] if f in samples else samples["M"]) for f in names}
+        log(f"{name}: pinocchio_cppadcg: generating (CppADCodeGen, cached by content) and compiling")
+        peer = cppadcg_peer.build_peer(built.path, model_file, name, names, states, model.n, work,
+                                       limit_s=3600.0, log=log,
+                                       skip=lambda f, why: self.note(f"{name}: pinocchio_cppadcg {f} skipped: {why}"))
+        want = cppadcg_peer.reference_for(built.path, model_file, {f: states[f] for f in peer.generated}, model.n,
+                                          model.n, work)
+        for impl, timer in peer.timers.items():
+            _, raw = timer.run(1, 1e5)
+            entry["checks"].setdefault(f"{impl}_vs_pinocchio", {}).update(
+                cppadcg_peer.check(f"{name}: {impl}", timer.outputs(raw), want, cppadcg_peer.TOLERANCE))
+        entry["cppadcg_build"] = peer.times()
+        return peer.timers
 
     # -- from Python -------------------------------------------------------------------------
     def _python(self, name, module, model, functions, samples, entry):

@@ -1,5 +1,5 @@
-"""Generated code for kinematic trees with a floating base against Pinocchio C++ and
-CasADi-traced Pinocchio: G1 (29 joints) and Solo12 (12 joints), optionally Talos reduced;
+"""Generated code for kinematic trees with a floating base against Pinocchio C++, CasADi-traced
+Pinocchio and Pinocchio's CppADCodeGen: G1 (29 joints) and Solo12 (12 joints), optionally Talos reduced;
 writes results/trees.json and results/trees.png.
 
     python -m benchmarks.trees [--quick] [--out DIR] [--robots g1,solo12,talos]
@@ -10,7 +10,10 @@ and -O3 -march=native ("c_native"); "pinocchio_cpp" times Pinocchio's algorithms
 (pinocchio_tree_bench.cpp, header-only, -O3 -march=native) on Pinocchio's own
 buildModelFromUrdf(path, JointModelFreeFlyer()) model; "pinocchio_casadi_c" traces the same
 algorithms on ModelTpl<casadi::SX> (pinocchio_tree_trace.cpp), code-generates them with
-CasADi and compiles them -O3 -march=native into the harness that times ours. Every
+CasADi and compiles them -O3 -march=native into the harness that times ours;
+"pinocchio_cppadcg" and "pinocchio_cppadcg_ofast" are Pinocchio's own CppADCodeGen generators
+on the same model (M, Minv, tau, fd and the derivatives; cppadcg_peer.py), their C compiled
+-O3 -march=native and -Ofast, checked against Pinocchio's double algorithms first. Every
 implementation's outputs for the first input must equal the generated numpy code's to 1e-9
 (relative to max(1, |value|)) before anything is timed; a mismatch aborts the run. Times are
 medians of per-call times pooled over interleaved rounds; ratios are peer / ours (above 1:
@@ -37,7 +40,7 @@ from kindyngen.json_text import strict_json
 from kindyngen.output_folder import replace_files
 from kindyngen.readers.urdf import load_urdf
 
-from . import c_harness, casadi_codegen, compiled, pinocchio_casadi, pinocchio_cpp, python_timing
+from . import c_harness, casadi_codegen, compiled, cppadcg_peer, pinocchio_casadi, pinocchio_cpp, python_timing
 from .build import BUILD, build, compiler_version, target
 from .common import RESULTS, machine, summary
 from .urdf_vs_yaml import example_robot_data
@@ -55,9 +58,12 @@ ROBOTS = {
     "solo12": ("solo_description/robots/solo12.urdf", None),
     "talos": ("talos_data/robots/talos_reduced.urdf", ["leg_left_6_link", "arm_right_7_link", "torso_2_link"]),
 }
-FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com")
+FUNCTIONS = ("fk_hom", "jacobian", "M", "g", "c", "tau", "fd", "com", "tau_derivatives", "fd_derivatives")
 OURS = ("c", "c_native")
-PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL)
+PEERS = ("pinocchio_cpp", pinocchio_casadi.IMPL, *cppadcg_peer.IMPLS)
+# Pinocchio's CppADCodeGen: the functions it has a generator for; Minv (no generated function of
+# ours) too, beside Pinocchio C++'s computeMinverse
+CPPADCG_FUNCTIONS = tuple(f for f in cppadcg_peer.FUNCTIONS if f in FUNCTIONS or f == "Minv")
 TOLERANCE = 1e-9
 # Many short rounds: the machine is shared, and a burst of load from a neighbour should land
 # on every implementation alike rather than on one (see compiled.interleave).
@@ -74,6 +80,9 @@ PINOCCHIO_NOTES = {
     "tau": "rnea",
     "fd": "aba",
     "com": "jacobianCenterOfMass (com on the way) + computeCentroidalMap",
+    "Minv": "computeMinverse (upper triangle only)",
+    "tau_derivatives": "computeRNEADerivatives (dtau/dq in the tangent, dtau/dqd; M comes along)",
+    "fd_derivatives": "computeABADerivatives (dqdd/dq in the tangent, dqdd/dqd, Minv)",
 }
 # Pinocchio's joint variant needs more Boost.MPL room; the serialized model needs its library.
 CMEEL_LIB = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "lib"
@@ -100,10 +109,12 @@ def states(model, count: int, seed: int = 0) -> dict:
 
 
 def pinocchio_q(pmodel, q: np.ndarray) -> np.ndarray:
-    """Our q -> Pinocchio's: a continuous joint (nq 2) is (cos, sin) of our one angle."""
-    columns = [q[:, :7]]
-    for j, joint in enumerate(pmodel.joints[2:]):   # 0: universe, 1: the free flyer
-        angle = q[:, 7 + j:8 + j]
+    """Our q -> Pinocchio's: a continuous joint (nq 2) is (cos, sin) of our one angle; a free
+    flyer's 7 coordinates are the same in both."""
+    base = 7 if pmodel.joints[1].shortname() == "JointModelFreeFlyer" else 0
+    columns = [q[:, :base]]
+    for j, joint in enumerate(pmodel.joints[1 + (base > 0):]):   # 0: universe
+        angle = q[:, base + j:base + j + 1]
         columns += [np.cos(angle), np.sin(angle)] if joint.nq == 2 else [angle]
     return np.hstack(columns)
 
@@ -212,13 +223,13 @@ def _prelude(functions: dict) -> str:
 
 
 def traced_timer(tracer: Path, model_file: Path, frames: list, samples: dict, workdir: Path, limit_s: float,
-                 stem: str, log, skip) -> compiled.Timer | None:
-    """Trace, code-generate and compile each function (each step of one function limited to
-    limit_s, else ``skip(function, reason)``), then one harness for those that made it."""
+                 stem: str, log, skip, names=FUNCTIONS) -> compiled.Timer | None:
+    """Trace, code-generate and compile each function of ``names`` (each step of one function
+    limited to limit_s, else ``skip(function, reason)``), then one harness for those that made it."""
     outdir = workdir / "traced"
     outdir.mkdir(parents=True, exist_ok=True)
     functions, objects, targets = {}, [], []
-    for name in FUNCTIONS:
+    for name in names:
         started = time.perf_counter()
         try:
             subprocess.run([str(tracer), str(model_file), ",".join(frames), str(outdir), name],
@@ -256,11 +267,12 @@ def urdf_path(key: str) -> Path:
 
 
 def pinocchio_model(path: Path, model, model_file: Path):
-    """Pinocchio's floating-base model of the URDF, saved for the C++ programs; checks that
-    our joints are Pinocchio's, in its order."""
+    """Pinocchio's model of the URDF (with a free flyer where ours has a floating base), saved
+    for the C++ programs; checks that our joints are Pinocchio's, in its order."""
     import pinocchio as pin
-    pmodel = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    if list(pmodel.names)[2:] != [j.name for j in model.joints] or pmodel.nv != model.nv:
+    pmodel = (pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer()) if model.floating_base
+              else pin.buildModelFromUrdf(str(path)))
+    if list(pmodel.names)[1 + model.floating_base:] != [j.name for j in model.joints] or pmodel.nv != model.nv:
         raise WiringError(f"{model.name}: Pinocchio's joints differ from ours")
     pmodel.saveToBinary(str(model_file))
     return pmodel
@@ -310,6 +322,9 @@ def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
                               settings["peer_limit_s"], f"{model.identifier}_{pinocchio_casadi.IMPL}", log, skip)
         if traced is not None:
             timers[pinocchio_casadi.IMPL] = traced
+        if "cppadcg_generator" in tools:
+            timers.update(cppadcg_timers(key, model, tools["cppadcg_generator"], model_file, pin_data, entry,
+                                         workdir, log))
 
     # The wiring check, before any timing: one short run of each, input 0 against numpy.
     for impl, timer in timers.items():
@@ -328,14 +343,41 @@ def bench_robot(key: str, settings: dict, tools: dict, log) -> dict:
     pooled, _ = compiled.interleave(timers, settings["repeats"], settings["rounds"], settings["c_target_ns"], failed)
     for impl, per_function in pooled.items():
         for name, values in per_function.items():
-            stats = entry["functions"][name][impl] = summary(values)
+            if name not in entry["functions"] and name not in CPPADCG_FUNCTIONS:
+                continue                 # Pinocchio C++ also times what neither side here has
+            stats = entry["functions"].setdefault(name, {})[impl] = summary(values)
             if impl == "pinocchio_cpp":
                 stats["note"] = PINOCCHIO_NOTES[name]
+            elif impl in cppadcg_peer.IMPLS:
+                stats["note"] = cppadcg_peer.NOTES[name]
     entry["ratios"] = ratios(entry["functions"])
     # The fastest repetitions too: on a loaded machine they show what each code costs when
     # it runs alone, which the medians (the headline) blur.
     entry["ratios_min"] = ratios(entry["functions"], "min_ns")
     return entry
+
+
+def cppadcg_timers(key: str, model, generator: Path, model_file: Path, pin_data: dict, entry: dict, workdir: Path,
+                   log) -> dict:
+    """Pinocchio's CppADCodeGen on Pinocchio's model of the robot, both flag sets, each output
+    for input 0 checked against Pinocchio's double algorithms (cppadcg_peer.TOLERANCE) before
+    any timing (the numpy check follows with the others); {impl: Timer}."""
+    log(f"{key}: {cppadcg_peer.IMPL}: generating (CppADCodeGen, cached by content) and compiling")
+    inputs = {name: cppadcg_peer.peer_inputs(name, pin_data) for name in CPPADCG_FUNCTIONS}
+
+    def skip(name, reason):
+        log(f"  {name}: skipped: {reason}")
+        entry["skipped"].setdefault(cppadcg_peer.IMPL, {})[name] = reason
+    peer = cppadcg_peer.build_peer(generator, model_file, model.identifier, CPPADCG_FUNCTIONS, inputs, model.nv,
+                                   workdir / "cppadcg", 3600.0, lambda m: log(f"{key}: {m}"), skip)
+    want = cppadcg_peer.reference(generator, model_file, {k: v[0] for k, v in pin_data.items()}, list(peer.generated),
+                                  workdir / "cppadcg")
+    for impl, timer in peer.timers.items():
+        _, raw = timer.run(1, 1e5)
+        entry["checks"][f"{impl}_vs_pinocchio"] = cppadcg_peer.check(f"{key}: {impl}", timer.outputs(raw), want,
+                                                                     cppadcg_peer.TOLERANCE)
+    entry["cppadcg_build"] = peer.times()
+    return peer.timers
 
 
 def ratios(functions: dict, statistic: str = "median_ns") -> dict:
@@ -357,6 +399,14 @@ def run(settings: dict, log) -> dict:
         tools["tracer"] = tracer.path
         tool_builds = {"pinocchio_tree_bench": {"binary": built.path.name, "seconds": built.seconds},
                        "pinocchio_tree_trace": {"binary": tracer.path.name, "seconds": tracer.seconds}}
+        reason = cppadcg_peer.unavailable()
+        if reason:
+            notes.append(f"{cppadcg_peer.IMPL} skipped: {reason}")
+        else:
+            log("pinocchio_cppadcg: building its generator (header-only Pinocchio with CppAD, minutes unless cached)")
+            generator = cppadcg_peer.build_generator()
+            tools["cppadcg_generator"] = generator.path
+            tool_builds["pinocchio_cppadcg_gen"] = {"binary": generator.path.name, "seconds": generator.seconds}
     else:
         tool_builds = {}
         notes.append("peers skipped (quick mode: their header-only builds take minutes)")
@@ -370,9 +420,11 @@ def run(settings: dict, log) -> dict:
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
         "compile_flags": {**{impl: " ".join(compiled.C_FLAGS[impl]) for impl in (*OURS, pinocchio_casadi.IMPL)},
+                          **{impl: " ".join(flags) for impl, flags in cppadcg_peer.FLAGS.items()},
                           "pinocchio_cpp": "g++ -O3 -march=native (header-only)", "gcc": compiler_version("gcc")},
         "model_source": "pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer()) in Python, passed to the C++ "
-                        "programs with Model.saveToBinary (see pinocchio_tree_bench.cpp)",
+                        "programs (and to Pinocchio's CppADCodeGen generator) with Model.saveToBinary (see "
+                        "pinocchio_tree_bench.cpp)",
         "tool_builds": tool_builds,
         "robots": robots,
         "notes": notes,
@@ -381,8 +433,8 @@ def run(settings: dict, log) -> dict:
 
 def table(result: dict) -> str:
     """The medians (ns) and their ratios (in brackets: the ratios of the minima) as Markdown."""
-    lines = ["| robot | function | ops after CSE | c | c_native | pinocchio_cpp | pinocchio_casadi_c "
-             "| pinocchio_cpp / c_native (min) | pinocchio_casadi_c / c_native (min) |", "|---" * 9 + "|"]
+    lines = ["| robot | function | ops after CSE | " + " | ".join((*OURS, *PEERS)) + " | "
+             + " | ".join(f"{p} / c_native (min)" for p in PEERS) + " |", "|---" * (3 + len(OURS) + 2 * len(PEERS)) + "|"]
     for key, entry in result["robots"].items():
         for name, impls in entry["functions"].items():
             ops = entry["opcounts"].get(name) or {}

@@ -83,6 +83,7 @@ def test_traced_functions_have_the_generated_names_and_ports(traced):
     functions = traced[0]
     ports = {"fk_hom": (["q"], ["T"]), "jacobian": (["q"], ["J"]), "M": (["q"], ["M"]), "g": (["q"], ["g"]),
              "c": (["q", "qd"], ["c"]), "tau": (["q", "qd", "qdd"], ["tau"]), "fd": (["q", "qd", "tau"], ["qdd"]),
+             "Minv": (["q"], ["Minv"]),
              "tau_derivatives": (["q", "qd", "qdd"], ["dtau_dq", "dtau_dqd"]),
              "fd_derivatives": (["q", "qd", "tau"], ["dqdd_dq", "dqdd_dqd", "Minv"])}
     for name, (ins, outs) in ports.items():
@@ -104,6 +105,7 @@ def test_kinematics_and_dynamics_equal_pinocchio(traced):
         _close(_call(functions["c"], q, qd)[0].ravel(), pin.nonLinearEffects(model, data, q, qd) - g)
         _close(_call(functions["tau"], q, qd, x)[0].ravel(), pin.rnea(model, data, q, qd, x))
         _close(_call(functions["fd"], q, qd, x)[0].ravel(), pin.aba(model, data, q, qd, x))
+        _close(_call(functions["Minv"], q)[0], _full(pin.computeMinverse(model, data, q)))
 
 
 @pytest.mark.parametrize("candidate", list(pinocchio_casadi.CANDIDATES["tau_derivatives"]))
@@ -135,7 +137,7 @@ def test_fd_derivatives_equal_pinocchio_and_differences(traced, candidate):
 @pytest.mark.parametrize("name", ["lwr4", "panda"])
 def test_pinocchio_cpp_prints_its_derivatives_in_the_generated_layout(name, tmp_path):
     """pinocchio_bench's check lines (what run.py compares with the generated code) are the
-    derivatives Pinocchio computes from Python, row-major, Minv full."""
+    derivatives and M^-1 Pinocchio computes from Python, row-major, Minv full."""
     if shutil.which("g++") is None:
         pytest.skip("no C++ compiler (g++): pinocchio_bench cannot be built")
     if not pinocchio_cpp.binary_cached() and os.environ.get("KINDYNGEN_BUILD_PEERS") != "1":
@@ -145,7 +147,7 @@ def test_pinocchio_cpp_prints_its_derivatives_in_the_generated_layout(name, tmp_
     data_in = inputs.dynamics_inputs(robot, 2)
     prepared = pinocchio_cpp.prepare(robot, data_in, tmp_path)
     times, checks = pinocchio_cpp.measure(pinocchio_cpp.build_binary().path, prepared, 1, 1e4)
-    assert {"tau_derivatives", "fd_derivatives"} <= times.keys()
+    assert {"Minv", "tau_derivatives", "fd_derivatives"} <= times.keys()
     model, data, _ = pinocchio_model(robot)
     q, qd, qdd, tau = (data_in[k][0] for k in ("q", "qd", "qdd", "tau"))
     dq, dqd, _ = pin.computeRNEADerivatives(model, data, q, qd, qdd)
@@ -156,6 +158,7 @@ def test_pinocchio_cpp_prints_its_derivatives_in_the_generated_layout(name, tmp_
     assert len(checks["fd_derivatives"]) == 3
     for got, want in zip(checks["fd_derivatives"], (dq, dqd, _full(minv))):
         _close(got, want.ravel())
+    _close(checks["Minv"][0], _full(pin.computeMinverse(model, data, q)).ravel())
 
 
 def test_tracer_rejects_bad_arguments_with_a_message(tmp_path):
