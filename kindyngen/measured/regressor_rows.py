@@ -18,10 +18,9 @@ import numpy as np
 import symengine as se
 
 from ..model.inertial_parameters import parameter_vector
-from ..algorithms.effect_torques import effect_parameter_values
 from ..algorithms.regressors import base_parameters, regressor
 from ..model.robot_model import RobotModel
-from .effect_columns import coulomb_eps, effect_columns
+from .effect_columns import law_torques
 
 
 def rigid_body_model(model: RobotModel) -> RobotModel:
@@ -81,12 +80,11 @@ def torque_regressor(model: RobotModel) -> TorqueRegressor:
 
 def description_torques(model: RobotModel, q, qd, qdd, effects: bool = True) -> np.ndarray:
     """What the robot description itself predicts along motion, (N, n) in N m: the rigid bodies
-    with its parameters (payload included) and, with ``effects``, its declared friction, offset
-    and armature (the formulas of :mod:`kindyngen.measured.effect_columns`)."""
+    with its parameters (payload included) and, with ``effects``, its declared joint effects
+    (:func:`kindyngen.measured.effect_columns.law_torques`)."""
     R = torque_regressor(model)
     tau = R(q, qd, qdd) @ (R.base_map @ parameter_vector(model))
     if effects and model.effects:
-        values = np.array([float(v) for v in effect_parameter_values(model)])
-        tau = tau + effect_columns(model.effects, qd, qdd, coulomb_eps(model)) @ values
+        tau = law_torques(model, q, qd, qdd, tau)
     return tau
 

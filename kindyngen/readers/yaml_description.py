@@ -25,7 +25,7 @@ import sympy
 import yaml
 
 from ..model.robot_model import (CONVENTIONS, DHRow, Frame, Friction, Joint, Link, RobotDescriptionError, RobotModel,
-                                 check_inertia)
+                                 Ripple, check_inertia)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
 from .urdf import load_urdf
@@ -122,13 +122,14 @@ TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoo
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
 SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
-JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature", "ripple") + SENSING_KEYS
 # a joint given by origin and axis (dh: none)
-FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature") + SENSING_KEYS
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature", "ripple") + SENSING_KEYS
 ORIGIN_KEYS = ("xyz", "rpy")
 FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
-FRICTION_KEYS = ("viscous", "coulomb", "offset")
+FRICTION_KEYS = ("viscous", "coulomb", "offset", "stribeck", "stribeck_velocity", "load")
+RIPPLE_KEYS = ("sin", "cos", "order")
 
 
 def _check_keys(mapping: dict, allowed: tuple[str, ...], source: str, prefix: str) -> None:
@@ -257,6 +258,7 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
         raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     friction = _parse_friction(row["friction"], source, f"{field}.friction") if "friction" in row else None
     armature = _nonnegative(row["armature"], source, f"{field}.armature") if "armature" in row else None
+    ripple = _parse_ripple(row["ripple"], source, f"{field}.ripple") if "ripple" in row else None
     name = row.get("name", "")
     if not isinstance(name, str):
         raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
@@ -270,7 +272,7 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     if "encoder_offset" in row:
         sensing["encoder_offset"] = _rational(row["encoder_offset"], source, f"{field}.encoder_offset")
     return Joint(before=before, after=after, offset=offset, lower=lower, upper=upper, kind=kind, name=name,
-                 friction=friction, armature=armature, dh=dh, **sensing)
+                 friction=friction, armature=armature, ripple=ripple, dh=dh, **sensing)
 
 
 def _nonnegative(value, source: str, field: str) -> sympy.Rational:
@@ -282,14 +284,48 @@ def _nonnegative(value, source: str, field: str) -> sympy.Rational:
 
 
 def _parse_friction(row, source: str, field: str) -> Friction:
-    """``{viscous: fv, coulomb: fc, offset: f0}``, each optional (0), fv and fc >= 0."""
+    """``{viscous: fv, coulomb: fc, offset: f0, stribeck: fs, stribeck_velocity: vs, load:
+    fl}``, each optional (0; ``stribeck`` needs ``stribeck_velocity``), fv, fc, fs >= 0, vs > 0,
+    0 <= fl < 1 (a load-dependent friction of the whole load or more would let the joint
+    transmit no torque: the forward dynamics has no solution)."""
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(FRICTION_KEYS)}, got {row!r}")
     _check_keys(row, FRICTION_KEYS, source, field + ".")
     zero = sympy.Integer(0)
+    velocity = None
+    if "stribeck_velocity" in row:
+        velocity = _rational(row["stribeck_velocity"], source, f"{field}.stribeck_velocity")
+        if not velocity > 0:
+            raise RobotDescriptionError(source, f"{field}.stribeck_velocity",
+                                        f"must be a positive velocity (rad/s), got {float(velocity):g}")
+    elif "stribeck" in row:
+        raise RobotDescriptionError(source, f"{field}.stribeck_velocity",
+                                    "required with 'stribeck' (the velocity below which the static friction acts)")
+    load = None
+    if "load" in row:
+        load = _nonnegative(row["load"], source, f"{field}.load")
+        if not load < 1:
+            raise RobotDescriptionError(source, f"{field}.load", f"must be below 1 (a fraction of the transmitted "
+                                        f"torque), got {float(load):g}")
     return Friction(viscous=_nonnegative(row.get("viscous", 0), source, f"{field}.viscous"),
                     coulomb=_nonnegative(row.get("coulomb", 0), source, f"{field}.coulomb"),
-                    offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero)
+                    offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero,
+                    stribeck=_nonnegative(row.get("stribeck", 0), source, f"{field}.stribeck"),
+                    stribeck_velocity=velocity, load=load)
+
+
+def _parse_ripple(row, source: str, field: str) -> Ripple:
+    """``{sin: rs, cos: rc, order: k}``: ``rs sin(k q) + rc cos(k q)``, k a positive integer
+    (periods per revolution), the amplitudes optional (0)."""
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(RIPPLE_KEYS)}, got {row!r}")
+    _check_keys(row, RIPPLE_KEYS, source, field + ".")
+    order = _require(row, "order", source, field + ".")
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise RobotDescriptionError(source, f"{field}.order", f"expected a positive whole number of periods per "
+                                    f"revolution, got {order!r}")
+    return Ripple(sin_amplitude=_rational(row.get("sin", 0), source, f"{field}.sin"),
+                  cos_amplitude=_rational(row.get("cos", 0), source, f"{field}.cos"), order=order)
 
 
 def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) -> Link:
