@@ -29,7 +29,8 @@ EXIT_BAD_INPUT = 2
 #: what each command writes into --out (an earlier run's file of these names that a new run
 #: does not write is removed, so two runs never mix: kindyngen.cli.output_dir)
 IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
-DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "residuals.png", "gap.png", "heldout_torques.png")
+DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "report.html", "residuals.png", "steps.png",
+                    "heldout_torques.png")
 EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
 MAX_HOLDOUT = 0.8
 MAX_FOLDS = 50
