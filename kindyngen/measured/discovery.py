@@ -46,9 +46,9 @@ refined between the neighbouring grid points, each joint's ripple order over
   :data:`AMBIGUITY_ANGLE_DEG`, the other members' columns projected out), cannot be told apart
   from it on this data: neither is named; the member chosen stays in the fit and in model.yaml as
   a stand-in.
-* *Not determined*: a coefficient at a finite bound of its range (or at 0 of ``[0, x]``), with a
-  relative standard error above :data:`REL_STD_MAX` (inflated by the effective sample size), a
-  measurement coefficient whose own torque stays below ``MATTER`` floors, or a compliance below
+* *Not determined*: a coefficient at a finite bound of its range (or at 0 of ``[0, x]``), one
+  without which no joint's held-out RMS rises by the margin (:func:`unneeded`), a measurement
+  coefficient whose own torque stays below ``MATTER`` floors, or a compliance below
   :data:`NOISE_BIAS_FACTOR` times what the torque noise alone gives, keeps the description's
   default (0, rigid, ideal) and the others are fitted again without it.
 * *Drift*: a per-joint coefficient refitted on each time block whose values differ by more than
@@ -129,7 +129,8 @@ NOISE_STOP = 1.2
 EXPLAINED_FACTOR = 1.5
 #: residual RMS below this times the torque RMS is rounding, not an effect
 ROUNDING = 1e-9
-#: a coefficient is determined when its relative standard error is at most this
+#: ``identify``'s rule (kindyngen.measured.identify.undetermined_sensing): a coefficient is
+#: determined when its relative standard error is at most this (discover judges by held-out error)
 REL_STD_MAX = 1.0 / 3.0
 #: an elastic joint's compliance must be this many times what the torque noise alone produces
 NOISE_BIAS_FACTOR = 3.0
@@ -324,17 +325,19 @@ def close(a: dict, b: dict, floor) -> bool:
 _WHOLE_BODY = ("payload", "base_tilt", "rigid_bodies")
 
 
-def undetermined(blocks: dict, values: dict, std: dict, bounds: dict, negligible=(), elastic_bias=None) -> dict:
+def undetermined(blocks: dict, values: dict, bounds: dict, negligible=(), elastic_bias=None, weak=None) -> dict:
     """The joint coefficients the data does not determine, name -> why: not to be written.
-    ``blocks``: candidate -> its coefficient names; ``values``/``std``: fitted values and
-    standard deviations; ``bounds``: name -> (low, high) of the physical range; ``negligible``:
-    coefficients whose own torque stays below :data:`MATTER` noise floors; ``elastic_bias``: per
-    joint, the compliance the torque noise alone produces (:func:`elastic_noise_bias`).
+    ``blocks``: candidate -> its coefficient names; ``values``: fitted values; ``bounds``: name
+    -> (low, high) of the physical range; ``negligible``: coefficients whose own torque stays
+    below :data:`MATTER` noise floors; ``elastic_bias``: per joint, the compliance the torque
+    noise alone produces (:func:`elastic_noise_bias`); ``weak``: name -> why the held-out error
+    does not need it (:func:`unneeded`).
 
-    >>> undetermined({"viscous_friction": ("fv1", "fv2")}, {"fv1": 0.5, "fv2": 0.01},
-    ...              {"fv1": 0.01, "fv2": 0.02}, {"fv1": (0, math.inf), "fv2": (0, math.inf)})
-    {'fv2': 'relative standard error 2 > 0.33'}
+    >>> undetermined({"viscous_friction": ("fv1", "fv2")}, {"fv1": 0.5, "fv2": 0.0},
+    ...              {"fv1": (0, math.inf), "fv2": (0, math.inf)})
+    {'fv2': 'at 0, the edge of its physical range: absent, or not resolved'}
     """
+    weak = weak or {}
     out = {}
     for candidate, names in blocks.items():
         if candidate in _WHOLE_BODY:
@@ -342,7 +345,7 @@ def undetermined(blocks: dict, values: dict, std: dict, bounds: dict, negligible
         for nm in names:
             if nm not in values:
                 continue                      # held at the description's default already
-            v, e = values[nm], std.get(nm, 0.0)
+            v = values[nm]
             low, high = bounds[nm]
             width = high - low if math.isfinite(high - low) else max(abs(v), 1.0)
             reasons = []
@@ -351,9 +354,8 @@ def undetermined(blocks: dict, values: dict, std: dict, bounds: dict, negligible
                 reasons.append(f"at the edge of its physical range [{low:.3g}, {high:.3g}]: the data pulls beyond it")
             elif low == 0 and abs(v) <= 1e-9 * width:
                 reasons.append("at 0, the edge of its physical range: absent, or not resolved")
-            elif v == 0 or e / abs(v) > REL_STD_MAX:
-                rel = math.inf if v == 0 else e / abs(v)
-                reasons.append(f"relative standard error {rel:.2g} > {REL_STD_MAX:.2g}")
+            elif nm in weak:
+                reasons.append(weak[nm])
             if candidate in MEASUREMENT and nm in negligible:
                 reasons.append(f"its torque stays below {MATTER:g} noise floors on every joint")
             if candidate == "motor_side_elasticity" and elastic_bias is not None:
@@ -365,6 +367,44 @@ def undetermined(blocks: dict, values: dict, std: dict, bounds: dict, negligible
             if reasons:
                 out[nm] = "; ".join(reasons)
     return out
+
+
+def unneeded(problem: Problem, fit: dict, blocks, at_point: dict, floor) -> dict:
+    """Per-joint and measurement coefficients without which no joint's held-out RMS rises by
+    the margin over the fit with all of them (name -> why): taken out together when each
+    alone rises by at most half the margin, else the one of smallest rise, and the rest tried
+    again without it, until every one left is needed.  The rigid bodies, when fitted, are held
+    at their fit here (no semidefinite program per trial)."""
+    rigid = [c for b in blocks if b.candidate == "rigid_bodies" for c in problem.layout.slices[b.key]
+             if c in fit["idx"]]
+    fixed_cols = np.array(rigid, int)
+    fixed_theta = fit["theta"][np.searchsorted(fit["idx"], fixed_cols)] if len(rigid) else np.zeros(0)
+    coefficients = [(nm, c) for b in blocks if b.candidate not in _WHOLE_BODY
+                    for nm, c in zip(b.names, problem.layout.slices[b.key])
+                    if c in fit["idx"] and problem.scale[c] > 0]
+
+    def without(names):
+        cols = [c for nm, c in coefficients if nm in names]
+        theta = [-at_point.get(nm, 0.0) / problem.scale[c] for nm, c in coefficients if nm in names]
+        return problem.fit(fit["idx"], (np.concatenate([fixed_cols, cols]).astype(int),
+                                        np.concatenate([fixed_theta, theta])))
+    base = without(())
+    margin = _margin(base["heldout"], floor)
+    out = {}
+    while True:
+        rises = {}
+        for nm, _ in coefficients:
+            if nm in out:
+                continue
+            trial = without(set(out) | {nm})
+            rises[nm] = float(np.max((trial["heldout"] - base["heldout"]) / np.maximum(margin, 1e-300)))
+        weak = {nm: r for nm, r in rises.items() if r <= 1.0}
+        if not weak:
+            return out
+        take = [nm for nm, r in weak.items() if r <= 0.5] or [min(weak, key=weak.get)]
+        for nm in take:
+            out[nm] = (f"without it no joint's held-out RMS rises by the margin (at most {max(weak[nm], 0):.2g} "
+                       f"margins)")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -426,12 +466,24 @@ class _Search:
             it = _Item(candidate, (b.key,), idx, named=dict(zip(b.names, idx)))
             return it, self.fit(chosen + [it])
         # a searched parameter: each variant for every joint, then per joint the variant of
-        # lowest held-out RMS on that joint
+        # lowest held-out RMS on that joint; beside chosen rigid bodies, those held at their fit
+        # without the candidate for this choice (a semidefinite program per variant and fold
+        # would dominate the search), the chosen variants then fitted with them
+        fixed = None
+        rigid = [it for it in chosen if it.candidate == "rigid_bodies"]
+        if rigid:
+            base = self.fit(chosen)
+            cols = rigid[0].idx
+            fixed = (cols, base["theta"][np.searchsorted(base["idx"], cols)])
         trials = []
         for b in blocks:
             idx = self.problem.layout.slices[b.key]
             if self.problem.live(idx):
-                trials.append((b, self.fit(chosen + [_Item(candidate, (b.key,), idx)])))
+                columns = np.sort(np.concatenate([_columns_of(chosen), idx]))
+                key = ("fixed", tuple(columns)) if fixed is not None else tuple(columns)
+                if key not in self.cache:
+                    self.cache[key] = self.problem.fit(columns, fixed)
+                trials.append((b, self.cache[key]))
         if not trials:
             return None
         best = []
@@ -502,19 +554,42 @@ def _forward(search: _Search, candidates, floor, scale, progress, notes):
     return chosen, steps, nominal
 
 
+#: the smallest subset is searched among all subsets of up to this many added effects; of more,
+#: by dropping one effect at a time (the one whose removal keeps the fit within the margin of the
+#: best with the fewest coefficients left) until none can go
+EXHAUSTIVE_SUBSETS = 6
+
+
 def _smallest(search: _Search, pool, floor, notes):
     """The smallest subset of ``pool`` (fewest coefficients) within the margin of the best
     subset's fit, and every other subset of that size that is too (the ambiguous ones)."""
     problem = search.problem
-    fits = {}
-    for size in range(len(pool) + 1):
-        for subset in itertools.combinations(range(len(pool)), size):
-            fits[subset] = search.fit([pool[k] for k in subset])
-    best = min(fits.values(), key=lambda f: f["mse"])
 
     def size_of(subset):
         return sum(_size(problem, pool[k]) for k in subset)
-    ok = sorted((s for s in fits if within(fits[s], best, floor)), key=lambda s: (size_of(s), fits[s]["mse"]))
+    fits = {}
+    if len(pool) <= EXHAUSTIVE_SUBSETS:
+        for size in range(len(pool) + 1):
+            for subset in itertools.combinations(range(len(pool)), size):
+                fits[subset] = search.fit([pool[k] for k in subset])
+        best = min(fits.values(), key=lambda f: f["mse"])
+        ok = sorted((s for s in fits if within(fits[s], best, floor)), key=lambda s: (size_of(s), fits[s]["mse"]))
+    else:
+        current = tuple(range(len(pool)))
+        fits[current] = best = search.fit(list(pool))
+        while True:
+            trials = []
+            for k in current:
+                smaller = tuple(i for i in current if i != k)
+                fits[smaller] = search.fit([pool[i] for i in smaller])
+                if within(fits[smaller], best, floor):
+                    trials.append(smaller)
+            if not trials:
+                break
+            current = min(trials, key=lambda s: (size_of(s), fits[s]["mse"]))
+        ok = [current] + sorted((s for s in fits if s != current and len(s) == len(current)
+                                 and within(fits[s], best, floor)), key=lambda s: fits[s]["mse"])
+        notes.append(f"{len(pool)} effects added: the smallest set searched by dropping one at a time")
     chosen = ok[0]
     dropped = [pool[k].candidate for k in range(len(pool)) if k not in chosen]
     if dropped:
@@ -967,7 +1042,8 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
             bias = elastic_noise_bias_pass(lambda q, qd, qdd, p=point: joint_torques(p, rigid, q, qd, qdd),
                                            recordings, raw_floors, chunk_rows)
         blocks_names = {b.candidate: b.names for b in final_blocks}
-        found = undetermined(blocks_names, values, std, named_bounds, negligible, bias)
+        weak = unneeded(fproblem, fit, final_blocks, fitter.last_values, floor)
+        found = undetermined(blocks_names, values, named_bounds, negligible, bias, weak)
         new = {k: v for k, v in found.items() if k not in undetermined_now}
         if not new:
             break

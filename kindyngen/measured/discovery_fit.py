@@ -5,8 +5,9 @@ time-blocked cross-validation.
 Columns are scaled to unit norm (the scaled unknowns ``theta``).  Coefficients with a physical
 range (friction, armature and compliance >= 0, an encoder offset within +-0.05 rad, a torque
 gain error within +-0.5, the load-dependent friction in [0, 0.9]) are fitted by bounded least
-squares (BVLS); a fit with the rigid bodies' columns is a semidefinite program (CLARABEL through
-cvxpy) over the change of every link's ten barycentric parameters, each link's pseudo-inertia
+squares (BVLS); a fit with the rigid bodies' columns is a semidefinite program (a quadratic
+objective under positive semidefinite cones, CLARABEL called directly) over the change of every
+link's ten barycentric parameters, each link's pseudo-inertia
 held >= 1e-6 (the columns are the base regressor's: the change of the base parameters is the
 base map times the change of the links'), as is a fit whose flange payload would otherwise not
 be a body.  Bounds are on the *total* coefficient: a pass at a point that already holds values
@@ -149,80 +150,125 @@ class Problem:
         return bool(np.linalg.eigvalsh(J)[0] >= PSEUDO_INERTIA_EPSILON)
 
     def _program(self, G, b, idx):
-        """The semidefinite program (see the module text); (theta on idx, link change or None)."""
-        import cvxpy as cp
+        """The semidefinite program (see the module text), a quadratic objective under conic
+        constraints solved by CLARABEL directly: (theta on idx, link change or None)."""
+        import clarabel
+        from scipy import sparse
         key = tuple(idx)
         if key not in self._programs:
             self._programs[key] = self._build(idx)
-        problem, root, target, theta_of, links = self._programs[key]
-        w, V = np.linalg.eigh(G)
-        top = max(w.max(), 1e-300)
-        keep = w > RCOND * top
-        sq = np.where(keep, np.sqrt(np.maximum(w, 0)), 0.0)
-        root.value = sq[:, None] * V.T
-        target.value = np.where(keep, (V.T @ b) / np.where(keep, sq, 1.0), 0.0)
-        import warnings
-        with warnings.catch_warnings():
-            # "optimal_inaccurate" (CLARABEL stopped at its iteration limit near the optimum) is
-            # taken: the fit is judged by its held-out error like every other
-            warnings.simplefilter("ignore", UserWarning)
-            try:
-                problem.solve(solver="CLARABEL")
-            except cp.error.SolverError:
-                problem.solve(solver="CLARABEL", max_iter=500, tol_gap_abs=1e-7, tol_gap_rel=1e-7)
-        value = theta_of.value
-        if value is None:
-            raise RuntimeError(f"the physical fit failed ({problem.status})")
-        return np.asarray(value, float), (None if links is None else np.asarray(links.value, float))
+        E, A, rhs, cones, nl = self._programs[key]
+        # objective theta' G theta - 2 b' theta (+ the links' regularisation), theta = E z
+        P = E.T @ G @ E
+        if nl:
+            P[-10 * nl:, -10 * nl:] += LINK_REGULARIZATION * self.m.sum_tau2 * np.eye(10 * nl)
+        P = 0.5 * (P + P.T)
+        top = max(float(np.max(np.abs(P))), 1e-300)
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        settings.max_iter = 400
+        solver = clarabel.DefaultSolver(sparse.triu(sparse.csc_matrix(2 * P / top)).tocsc(), -2 * (E.T @ b) / top,
+                                        A, rhs, cones, settings)
+        solution = solver.solve()
+        z = np.asarray(solution.x, float)
+        if not np.all(np.isfinite(z)) or str(solution.status) not in ("Solved", "AlmostSolved", "MaxIterations",
+                                                                      "InsufficientProgress"):
+            raise RuntimeError(f"the physical fit failed ({solution.status})")
+        return E @ z, (z[-10 * nl:] if nl else None)
 
     def _build(self, idx):
-        import cvxpy as cp
+        """(E: theta = E z, constraint matrix, right-hand side, cones, links) of the program on
+        ``idx``: z holds the scaled unknowns of the non-rigid columns and the links' change."""
+        from scipy import sparse
+        import clarabel
         k = len(idx)
-        root, target = cp.Parameter((k, k)), cp.Parameter(k)
         T = _pseudo_inertia_matrices()
-        x = cp.Variable(k)
-        constraints, extra = [], 0
-        links = None
+        upper = [(r, c) for c in range(4) for r in range(c + 1)]          # CLARABEL's svec order
+
+        def svec_rows(M):                                                  # (10, 4, 4) -> (10, 10)
+            return np.array([[M[i][r, c] * (1.0 if r == c else math.sqrt(2.0)) for (r, c) in upper]
+                             for i in range(len(M))]).T
+
+        svec_T = svec_rows(T)                                              # svec(J(p)) = svec_T @ p
+        svec_eps = np.array([PSEUDO_INERTIA_EPSILON if r == c else 0.0 for (r, c) in upper])
         rigid = np.isin(idx, self.rigid) if self.rigid is not None else np.zeros(k, bool)
+        others = np.flatnonzero(~rigid)
+        nl = 0
+        blocks_A, blocks_b, cones = [], [], []
         if rigid.any():
             base_map, point_links = self.links
             nl = len(point_links) // 10
-            links = cp.Variable(10 * nl)
-            # the rigid columns' scaled unknowns are the base map times the links' change
+        nz = len(others) + 10 * nl
+        E = np.zeros((k, nz))
+        E[others, np.arange(len(others))] = 1.0
+        if nl:
             where = np.flatnonzero(rigid)
             cols = idx[where] - self.rigid[0]
             inv_scale = np.where(self.scale[idx[where]] > 0, 1.0 / np.where(self.scale[idx[where]] > 0,
                                                                             self.scale[idx[where]], 1.0), 0.0)
-            constraints.append(x[where] == cp.multiply(inv_scale, base_map[cols] @ links))
+            E[where, len(others):] = inv_scale[:, None] * base_map[cols]
             for l in range(nl):
-                body = point_links[10 * l:10 * l + 10] + links[10 * l:10 * l + 10]
-                J = sum(body[i] * T[i] for i in range(10))
-                constraints.append(0.5 * (J + J.T) >> PSEUDO_INERTIA_EPSILON * np.eye(4))
-            extra = LINK_REGULARIZATION * self.m.sum_tau2 * cp.sum_squares(links)
+                A = np.zeros((10, nz))
+                A[:, len(others) + 10 * l:len(others) + 10 * l + 10] = -svec_T
+                blocks_A.append(A)
+                blocks_b.append(svec_T @ point_links[10 * l:10 * l + 10] - svec_eps)
+                cones.append(clarabel.PSDTriangleConeT(4))
         if self.payload_columns is not None and np.all(np.isin(self.payload_columns, idx)):
             where = np.array([np.flatnonzero(idx == c)[0] for c in self.payload_columns])
-            body = self.payload + cp.multiply(self.scale[self.payload_columns], x[where])
-            J = sum(body[i] * T[i] for i in range(10))
-            constraints.append(0.5 * (J + J.T) >> PSEUDO_INERTIA_EPSILON * np.eye(4))
-        lower, upper = self.lower[idx], self.upper[idx]
-        for bound, sign in ((lower, 1), (upper, -1)):
-            finite = np.flatnonzero(np.isfinite(bound) & ~rigid)
-            if finite.size:
-                constraints.append(sign * (x[finite] - bound[finite]) >= 0)
-        problem = cp.Problem(cp.Minimize(cp.sum_squares(root @ x - target) + extra), constraints)
-        return problem, root, target, x, links
+            A = np.zeros((10, nz))
+            A[:, where] = -svec_T * self.scale[self.payload_columns][None, :]
+            blocks_A.append(A)
+            blocks_b.append(svec_T @ self.payload - svec_eps)
+            cones.append(clarabel.PSDTriangleConeT(4))
+        lower, upper_b = self.lower[idx], self.upper[idx]
+        rows, rhs = [], []
+        for i in others:
+            if np.isfinite(lower[i]):
+                row = np.zeros(nz)
+                row[np.flatnonzero(others == i)[0]] = -1.0
+                rows.append(row)
+                rhs.append(-lower[i])
+            if np.isfinite(upper_b[i]):
+                row = np.zeros(nz)
+                row[np.flatnonzero(others == i)[0]] = 1.0
+                rows.append(row)
+                rhs.append(upper_b[i])
+        if rows:
+            blocks_A.insert(0, np.array(rows))
+            blocks_b.insert(0, np.array(rhs))
+            cones.insert(0, clarabel.NonnegativeConeT(len(rows)))
+        A = sparse.csc_matrix(np.vstack(blocks_A)) if blocks_A else sparse.csc_matrix((0, nz))
+        rhs = np.concatenate(blocks_b) if blocks_b else np.zeros(0)
+        return E, A, rhs, cones, nl
 
-    def fit(self, idx) -> dict:
-        """Full-data fit and out-of-fold residual sums of the columns ``idx``."""
+    def fit(self, idx, fixed=None) -> dict:
+        """Full-data fit and out-of-fold residual sums of the columns ``idx``; ``fixed``:
+        ``(columns, theta)`` held at those scaled values (not fitted, in every fold)."""
         idx = np.asarray(idx, int)
-        G, b = self.G[np.ix_(idx, idx)], self.b[idx]
+        if fixed is not None:
+            fcols, fth = np.asarray(fixed[0], int), np.asarray(fixed[1], float)
+            idx = idx[~np.isin(idx, fcols)]
+        else:
+            fcols, fth = np.zeros(0, int), np.zeros(0)
+
+        def shifted(G, b):
+            return b[idx] - G[np.ix_(idx, fcols)] @ fth if len(fcols) else b[idx]
+
+        def whole(theta):
+            out = self.raw(idx, theta)
+            out[fcols] = fth * self.scale[fcols]
+            return out
+        G, b = self.G[np.ix_(idx, idx)], shifted(self.G, self.b)
         theta, inv, rank, links = self._solve(G, b, idx)
-        joint_rss = self.joint_rss(self.raw(idx, theta))
+        joint_rss = self.joint_rss(whole(theta))
         oof = np.zeros((self.m.folds, self.n))
         for k in range(self.m.folds):
-            Gk, bk = (self.G - self.Gf[k])[np.ix_(idx, idx)], (self.b - self.bf[k])[idx]
-            th = self._solve(Gk, bk, idx)[0]
-            oof[k] = self.joint_rss(self.raw(idx, th), folds=(k,))
+            Gk, bk = (self.G - self.Gf[k]), (self.b - self.bf[k])
+            th = self._solve(Gk[np.ix_(idx, idx)], shifted(Gk, bk), idx)[0]
+            oof[k] = self.joint_rss(whole(th), folds=(k,))
+        if len(fcols):           # the fit's columns and values include the fixed ones
+            order = np.argsort(np.concatenate([idx, fcols]))
+            idx, theta = np.concatenate([idx, fcols])[order], np.concatenate([theta, fth])[order]
         fold_mse = np.sum(oof, axis=1) / np.maximum(self.m.rows, 1)
         heldout = np.sqrt(np.maximum(np.sum(oof, axis=0), 0) / max(self.N, 1))
         return dict(idx=idx, theta=theta, inv=inv, rank=rank, links=links, joint_rss=joint_rss,
