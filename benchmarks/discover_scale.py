@@ -16,13 +16,14 @@ and after each run is recorded: the machine is shared.  Results:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from kindyngen.json_text import strict_json
 
 from benchmarks.identify_scale import ROBOT, _period, measure, write_csv
 
@@ -64,8 +65,8 @@ def main(argv=None) -> int:
            "candidates": args.candidates or "all",
            "runs": runs}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{args.results}.json").write_text(json.dumps(doc, indent=1) + "\n")
-    print(json.dumps(doc, indent=1))
+    (RESULTS / f"{args.results}.json").write_text(strict_json(doc, indent=1) + "\n")
+    print(strict_json(doc, indent=1))
     return 0 if all(r["exit_code"] == 0 for r in runs) else 1
 
 

@@ -6,13 +6,14 @@ report and figures) and ``discover()`` alone; writes ``results/discovery_timing.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from kindyngen.json_text import strict_json
 
 from .common import RESULTS, machine
 
@@ -68,8 +69,8 @@ def main(argv=None) -> int:
               "command_median_s": float(np.median(command)), "discover_median_s": float(np.median(core)),
               "note": "after one warm-up call that builds the symbolic regressors (about 1-2 s, once per process)"}
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "discovery_timing.json").write_text(json.dumps(result, indent=1) + "\n")
-    print(json.dumps({k: result[k] for k in ("named", "command_median_s", "discover_median_s")}))
+    (args.out / "discovery_timing.json").write_text(strict_json(result, indent=1) + "\n")
+    print(strict_json({k: result[k] for k in ("named", "command_median_s", "discover_median_s")}))
     return 0
 
 

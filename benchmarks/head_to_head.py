@@ -19,7 +19,6 @@ peer's (relative error), so a fast wrong answer shows. Nothing here asserts on a
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from datetime import datetime, timezone
@@ -27,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kindyngen.json_text import strict_json
 from kindyngen.readers.yaml_description import load_robot
 
 from . import compiled, inputs, pinocchio_casadi, pinocchio_cpp
@@ -160,7 +160,7 @@ def main(argv=None) -> int:
         result["robots"][robot] = robot_run(robot, args.functions, candidates, args.rounds, args.K, args.target_ns,
                                             not args.no_peer, not (args.no_cpp or args.no_peer), BUILD / "head_to_head" / robot)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    args.out.write_text(strict_json(result, indent=1) + "\n")
     print(table(result))
     log(f"wrote {args.out}")
     return 0

@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kindyngen.json_text import strict_json
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 ROBOT = ROOT / "robots" / "panda.yaml"
@@ -114,7 +116,7 @@ def in_memory(log: str, out: str) -> int:
     result = identify(IdentificationRequest(ROBOT, (log,), split=0.8),
                       lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     write_outputs(result, out)
-    print(json.dumps({"rms_train": [round(float(v), 4) for v in result.rms_train],
+    print(strict_json({"rms_train": [round(float(v), 4) for v in result.rms_train],
                       "rms_validation": [round(float(v), 4) for v in result.rms_validation],
                       "rms_validation_sum": round(float(np.sum(result.rms_validation)), 4),
                       "physically_consistent": result.physically_consistent}))
@@ -207,9 +209,12 @@ def main(argv=None) -> int:
            "command": "kindyngen identify --split 0.8 (defaults: 5 Hz zero-phase low-pass, parallel filtering of "
                       "the regressor columns with the torque, decimation 25, OLS)",
            "runs": records}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{args.results}.json").write_text(json.dumps(doc, indent=1) + "\n")
-    _plot(doc, RESULTS / f"{args.results}.png")
+    from kindyngen.output_folder import replace_files
+
+    def both(folder):          # the JSON and its figure, both or neither
+        (folder / f"{args.results}.json").write_text(strict_json(doc, indent=1) + "\n")
+        _plot(doc, folder / f"{args.results}.png")
+    replace_files(RESULTS, both)
     return 0
 
 

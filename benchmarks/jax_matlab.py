@@ -20,7 +20,6 @@ Writes benchmarks/results/jax_matlab.json and jax_matlab.png.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import statistics
 import subprocess
@@ -30,6 +29,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
 
 from .common import GENERATED, RESULTS, ROOT, cpu_model
 
@@ -213,9 +215,11 @@ def main(argv=None) -> int:
         results["jax"].append(jax_run(robot_name, batches, progress))
         results["octave"].append(octave_run(robot_name, batches, progress))
     results["machine"]["load_average_end"] = os.getloadavg()
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "jax_matlab.json").write_text(json.dumps(results, indent=1) + "\n")
-    plot(results, RESULTS / "jax_matlab.png")
+
+    def both(folder):          # the JSON and its figure, both or neither
+        (folder / "jax_matlab.json").write_text(strict_json(results, indent=1) + "\n")
+        plot(results, folder / "jax_matlab.png")
+    replace_files(RESULTS, both)
     progress(f"wrote {RESULTS / 'jax_matlab.json'} and jax_matlab.png")
     return 0
 

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from kindyngen.codegen import trig_kernel
+from kindyngen.json_text import strict_json
 from kindyngen.readers.yaml_description import load_robot
 
 from . import c_harness, compiled, inputs
@@ -301,7 +302,7 @@ def main(argv=None) -> int:
             result["robots"][robot] = {"functions": rows, "correlation": correlation(rows)}
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "latency.json"
-    path.write_text(json.dumps(result, indent=1) + "\n")
+    path.write_text(strict_json(result, indent=1) + "\n")
     log(f"wrote {path}")
     return 0
 

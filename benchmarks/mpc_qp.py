@@ -1,32 +1,33 @@
-"""The tracking MPC's QP (examples/mpc_sqp.py) solved two ways on the same linearisations, one
-run: the condensed dense QP in the N n torque steps by DAQP (what `examples/mpc.py --solver
-sqp` uses), cold and warm-started from its own working set, against the sparse structured
-multiple-shooting QP (stage variables (dx_k, du_k), the linearised dynamics as equality rows,
-state and torque limits as simple bounds) by CasADi's `hpipm` conic (Riccati-based interior
-point) in its speed, balance and robust modes.
+"""The tracking MPC's QP (kindyngen/control/mpc.py) solved two ways on the same linearisations,
+one run: the condensed dense QP in the N n torque steps by DAQP (what TrackingMPC uses), cold
+and warm-started from its own working set, against the sparse structured multiple-shooting QP
+(stage variables (dx_k, du_k), the linearised dynamics as equality rows, state and torque limits
+as simple bounds) by CasADi's `hpipm` conic (Riccati-based interior point) in its speed, balance
+and robust modes.
 
-    .venv/bin/python benchmarks/mpc_qp.py --out benchmarks/results/mpc_qp.json [--points 3]
+    .venv/bin/python -m benchmarks.mpc_qp --out benchmarks/results/mpc_qp.json [--points 3]
 
-Both with hard state limits (the loop's soft rows are DAQP-specific), so that they solve the
-same QP; the solutions are compared (largest |du| difference). CPU time (time.process_time)
-of the solver call only, mean of 20 calls; one call of the linearisation and condensing (the
-compiled steps, G, H = G' W G: examples/mpc_sqp.py qp) is timed apart.
-LWR reach reference, N = 20, 2 RK4 steps per interval; the linearisation points are the
-reference with the measured state's speeds perturbed (seeded).
+Both with hard state limits at the nodes (the MPC's exact-penalty slack and inner rows are left
+out), so that they solve the same QP; the solutions are compared (largest |du| difference). CPU
+time (time.process_time) of the solver call only, mean of 20 calls; one call of the
+linearisation and condensing (TrackingMPC.qp) is timed apart. The LWR reach reference of the
+control benchmark (two RK4 steps per interval, margins), N = 20; the linearisation points are
+the reference with the measured state's speeds perturbed (seeded).
 """
 from __future__ import annotations
 
-import json
+import argparse
+import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-ROOT = Path(__file__).resolve().parents[1]
-for _p in (str(ROOT / "examples"), str(ROOT / "tests"), str(ROOT)):
-    if _p not in sys.path:
-        sys.path.insert(0, _p)
+import numpy as np  # noqa: E402
+
+from kindyngen.json_text import strict_json  # noqa: E402
 
 
 def _cpu_ms(f, rep=20):
@@ -37,56 +38,63 @@ def _cpu_ms(f, rep=20):
     return 1e3 * (time.process_time() - c) / rep, out
 
 
-def sparse_qp(ctl, X, U, q):
+def sparse_qp(mpc, x0, X, U, i):
     """The multiple-shooting QP in w = (dx_0, du_0, ..., dx_N) (dx_0 fixed at 0) for hpipm."""
-    N, n, nx = ctl.N, ctl.n, ctl.nx
-    st, nw = nx + n, ctl.N * (nx + n) + nx
+    N, n, nx = mpc.N, mpc.n, mpc.nx
+    st, nw = nx + n, N * (nx + n) + nx
+    Xr, Ur = mpc.reference_window(i)
+    F, Am, Bm, _, _ = mpc.lib.linearise(x0, X, U, mpc.d)
     H, g = np.zeros((nw, nw)), np.zeros(nw)
     A, b = np.zeros((N * nx, nw)), np.zeros(N * nx)
     lbx, ubx = np.zeros(nw), np.zeros(nw)
     for k in range(N):
         iu, ix = k * st + nx, (k + 1) * st
-        wu, wx = ctl.wu[k * n:(k + 1) * n], ctl.wx[k * nx:(k + 1) * nx]
+        wu, wx = mpc.wu[k * n:(k + 1) * n], mpc.wx[k * nx:(k + 1) * nx]
         H[iu:iu + n, iu:iu + n] = np.diag(wu)
-        g[iu:iu + n] = wu * (U[k] - q["Ur"][k])
+        g[iu:iu + n] = wu * (U[k] - Ur[k] + mpc.d)
         H[ix:ix + nx, ix:ix + nx] = np.diag(wx)
-        g[ix:ix + nx] = wx * (X[k] - q["Xr"][k])
+        g[ix:ix + nx] = wx * (X[k] - Xr[k])
         r = slice(k * nx, (k + 1) * nx)
-        A[r, k * st:k * st + nx] = -q["A"][k]
-        A[r, k * st + nx:k * st + st] = -q["B"][k]
+        A[r, k * st:k * st + nx] = -Am[k]
+        A[r, k * st + nx:k * st + st] = -Bm[k]
         A[r, ix:ix + nx] = np.eye(nx)
-        b[r] = q["d"][k]
-        lbx[iu:iu + n], ubx[iu:iu + n] = q["box_lo"][k * n:(k + 1) * n], q["box_hi"][k * n:(k + 1) * n]
-        lbx[ix:ix + nx], ubx[ix:ix + nx] = ctl.xlo - X[k], ctl.xhi - X[k]
+        b[r] = F[k] - X[k]
+        lbx[iu:iu + n], ubx[iu:iu + n] = -mpc.u_max - U[k], mpc.u_max - U[k]
+        lbx[ix:ix + nx], ubx[ix:ix + nx] = mpc.xlo - X[k], mpc.xhi - X[k]
     return H, g, A, b, lbx, ubx
 
 
 def main(argv=None) -> int:
     import casadi as ca
     import daqp
-    import mpc
-    import mpc_sqp
-    ap = mpc._Parser(description=__doc__.split("\n\n")[0])
+    from benchmarks import control_bench as cb, control_robots as cr
+    from kindyngen.control.integrators import Integrator
+    from kindyngen.control.mpc import MPCOptions, TrackingMPC
+    from kindyngen.control.reach import ReachNLP
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, help="JSON file to write")
     ap.add_argument("--points", type=int, default=3, help="linearisation points (default 3)")
     args = ap.parse_args(argv)
     if args.points < 1:
         ap.error(f"--points {args.points}: must be at least 1")
-    funcs = mpc_sqp.load("lwr4")
-    ref = mpc_sqp.reference("lwr4", 20, 2, funcs)
-    ctl = mpc_sqp.TrackingMPC(funcs, ref["limits"], ref["X"], ref["U"], ref["h"], 20, substeps=2)
-    N, n, nx = ctl.N, ctl.n, ctl.nx
+    model, robot, limits, task = cr.load("lwr4")
+    rt = replace(task, integrator=Integrator("rk4", 2), inner=True, margin_speed=0.3, margin_position=0.05,
+                 margin_torque=0.1)
+    ref = ReachNLP(robot, rt).solve()
+    mpc = TrackingMPC(robot, limits, np.hstack([ref.q, ref.qd]), ref.tau, MPCOptions())
+    N, n, nx = mpc.N, mpc.n, mpc.nx
     st = nx + n
     rows = []
     for seed in range(args.points):
         rng = np.random.default_rng(seed)
-        X, U = ctl.initial_guess(0)
-        x0 = ref["x0"] + np.concatenate([np.zeros(n), 0.05 * rng.standard_normal(n)])
+        X, U = mpc.initial_guess(0)
+        x0 = mpc.Xref[0] + np.concatenate([np.zeros(n), 0.05 * rng.standard_normal(n)])
         c0 = time.process_time()
-        q = ctl.qp(x0, X, U, 0)
+        q = mpc.qp(x0, X, U, 0)
         condense_ms = 1e3 * (time.process_time() - c0)
-        bu = np.concatenate([q["box_hi"], q["row_hi"]])
-        bl = np.concatenate([q["box_lo"], q["row_lo"]])
+        rows_n = N * nx                   # the node rows (the inner ones left out)
+        bu = np.concatenate([q["box_hi"], q["row_hi"][:rows_n]])
+        bl = np.concatenate([q["box_lo"], q["row_lo"][:rows_n]])
         Gc = np.ascontiguousarray(q["G"])
         cold_ms, (du_d, _, flag, info) = _cpu_ms(lambda: daqp.solve(q["H"], q["g"], Gc, bu, bl))
         du_d = np.asarray(du_d)
@@ -99,7 +107,7 @@ def main(argv=None) -> int:
                "daqp_condensed_warm": {"cpu_ms": warm_ms, "exitflag": int(flag_w),
                                        "iterations": int(info_w["iterations"]),
                                        "max_du_difference_to_cold": float(np.abs(np.asarray(du_w) - du_d).max())}}
-        H, g, A, b, lbx, ubx = sparse_qp(ctl, X, U, q)
+        H, g, A, b, lbx, ubx = sparse_qp(mpc, x0, X, U, 0)
         Hs, As = ca.sparsify(ca.DM(H)), ca.sparsify(ca.DM(A))
         for mode in ("speed", "balance", "robust"):
             S = ca.conic("S", "hpipm", {"h": Hs.sparsity(), "a": As.sparsity()},
@@ -114,13 +122,13 @@ def main(argv=None) -> int:
                                            "iterations": int(stats.get("iter_count", -1)),
                                            "max_du_difference_to_daqp": float(np.abs(du - du_d).max())}
         rows.append(row)
-        print(json.dumps(row), flush=True)
+        print(strict_json(row), flush=True)
     doc = {"problem": "the tracking MPC's QP, LWR reach reference, N = 20, hard state limits", "points": rows,
            "versions": {"daqp": getattr(daqp, "__version__", "0.11.0 (pip)"), "casadi": ca.__version__},
-           "machine": mpc.machine(), "max_du_scale": "torque steps up to a few N m"}
+           "machine": cb.machine(), "uptime": cb.uptime(), "max_du_scale": "torque steps up to a few N m"}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(doc, indent=1) + "\n")
+    out.write_text(strict_json(doc, indent=1) + "\n")
     print(f"  wrote {out}")
     return 0
 

@@ -1,7 +1,8 @@
-"""Time-optimal point-to-point motions (examples/ocp.py): today's formulation (mx_map: one SX
-RK4-step Function mapped over the intervals, IPOPT's exact derivatives through CasADi's
-virtual machine) against the same NLP with its Jacobian and Hessian assembled from compiled
-per-interval functions (examples/ocp_time_stages.py, `--solver stages`), in one run.
+"""Time-optimal point-to-point motions (examples/ocp.py's problems): the mx_map formulation (one SX
+RK4-step Function mapped over the intervals, IPOPT's exact derivatives through CasADi's virtual
+machine) against the same NLP on kindyngen.control.time_optimal's native library (constraints,
+Jacobian and exact Hessian in C over the generated fd and fd_derivatives; `examples/ocp.py
+--solver native`), in one run.
 
     .venv/bin/python benchmarks/ocp_time_optimal.py            # Panda N = 40 and LWR N = 20
     .venv/bin/python benchmarks/ocp_time_optimal.py --problems panda --repeats 2
@@ -10,18 +11,17 @@ Per problem and formulation: IPOPT's status, iterations, CPU and wall time of th
 (process time: the machine is shared), T, and Pinocchio's checks (examples/ocp.py's resimulate:
 20 RK4 steps per interval of ABA; the tolerance of tests/integration/test_ocp.py: node error
 below 10x the planner's RK4 error estimate + 1e-6 and below 2e-2, limits passed by no more
-than that error). The compiled library is built into a fresh cache first, so its C size and
-the compiler's CPU time are measured, not a cached load (--cache DIR reuses a cache instead;
---cc and --cflags choose the compiler, default gcc -O1). Writes
-benchmarks/results/ocp_time_optimal.json.
+than that error). The native row's build time (the robot's derivation if not cached, the
+library's compile) is recorded; --fresh-cache builds everything into an empty cache, so that
+the whole build is measured. Writes benchmarks/results/ocp_time_optimal.json.
+(The compiled per-interval stages of examples/ocp_time_stages.py this replaced are in the
+runs' JSON before and in docs/optimal_control.md.)
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
-import resource
 import subprocess
 import sys
 import tempfile
@@ -31,11 +31,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from kindyngen.json_text import strict_json
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
 import ocp  # noqa: E402
-import ocp_stages  # noqa: E402
-import ocp_time_stages  # noqa: E402
 
 DEFAULT_N = {"panda": 40, "lwr4": 20}
 SUBSTEPS = 4                        # examples/ocp.py's default for the 7-joint arms
@@ -44,10 +44,13 @@ SUBSTEPS = 4                        # examples/ocp.py's default for the 7-joint 
 def machine() -> dict:
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                 if line.startswith("model name")), platform.processor())
-    gcc = subprocess.run(["gcc", "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    from kindyngen.control.native import compiler
+    cc = compiler()
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
     import pinocchio
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "casadi": ca.__version__,
-            "numpy": np.__version__, "pinocchio": pinocchio.__version__, "gcc": gcc}
+            "numpy": np.__version__, "pinocchio": pinocchio.__version__, "native_compiler": version,
+            "uptime": subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()}
 
 
 def checks(setup: dict, res: dict, fd: ca.Function) -> dict:
@@ -60,24 +63,13 @@ def checks(setup: dict, res: dict, fd: ca.Function) -> dict:
     return {"resim_error": err, "rk4_error_estimate": est, "limit_excess": lim, "within_tolerance": bool(ok)}
 
 
-def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, cc: str = "gcc",
-            cflags: tuple[str, ...] | None = None, ipopt: dict | None = None) -> dict:
+def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, ipopt: dict | None = None) -> dict:
     c0 = time.process_time()
-    children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     if solver == "mx_map":
         res = ocp.solve(setup, funcs["fd"], N, "mx_map", SUBSTEPS, ipopt=ipopt)
-        extra = {}
     else:
-        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, SUBSTEPS, cc=cc, cflags=cflags)
-        children1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        res = nlp.solve(ipopt)
-        src = sorted(ocp_stages.CACHE.glob(f"topt_{problem}_M{SUBSTEPS}_*.c"))
-        extra = {"compile_wall_s": nlp.compile_s,
-                 "compile_gcc_cpu_s": (children1.ru_utime + children1.ru_stime)
-                 - (children0.ru_utime + children0.ru_stime),
-                 "c_source_bytes": src[-1].stat().st_size if src else None,
-                 "cc": cc, "cflags": " ".join(ocp_stages.CFLAGS if cflags is None else cflags)}
+        res = ocp.solve_native(setup, N, SUBSTEPS, ipopt=ipopt)
     total_wall, total_cpu = time.perf_counter() - t0, time.process_time() - c0
     chk = checks(setup, res, funcs["fd"])
     row = {"problem": problem, "N": N, "substeps": SUBSTEPS, "formulation": solver, "status": res["status"],
@@ -85,9 +77,10 @@ def run_one(problem: str, N: int, solver: str, funcs: dict, setup: dict, cc: str
            "solve_wall_s": res["solve_s"], "cpu_per_iteration_s": res["solve_cpu_s"] / max(res["iterations"], 1),
            "build_wall_s": res["build_s"], "total_cpu_s": total_cpu, "total_wall_s": total_wall, "T": res["T"],
            "objective": res["objective"], "max_defect": res["max_defect"], "pinocchio": chk,
-           "ipopt_options": dict(ipopt or {}), **extra}
+           "ipopt_options": dict(ipopt or {})}
     print(f"  {problem} N={N} {solver:7s}: {res['status']}, {res['iterations']} it, solve {res['solve_cpu_s']:.2f} s CPU "
-          f"({res['solve_s']:.2f} s wall), T = {res['T']:.9f}, Pinocchio ok: {chk['within_tolerance']}", flush=True)
+          f"({res['solve_s']:.2f} s wall), build {res['build_s']:.1f} s, T = {res['T']:.9f}, Pinocchio ok: "
+          f"{chk['within_tolerance']}", flush=True)
     return row
 
 
@@ -113,13 +106,11 @@ def main(argv=None) -> int:
     ap.add_argument("--problems", nargs="+", choices=sorted(DEFAULT_N), default=["panda", "lwr4"])
     ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats of each pair (default 1)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ocp_time_optimal.json"))
-    ap.add_argument("--cc", default="gcc", help="C compiler of the stages library (default gcc)")
-    ap.add_argument("--cflags", default=None,
-                    help=f"its flags, one string (default '{' '.join(ocp_stages.CFLAGS)}'), e.g. '-O2 -shared -fPIC'")
-    ap.add_argument("--cache", default=None,
-                    help="library cache to reuse (default: a fresh one, so that the compile is measured)")
+    ap.add_argument("--fresh-cache", action="store_true",
+                    help="derive the robots and build the native libraries into an empty cache (the whole build "
+                         "measured; default: the user's cache, a cached library loads in milliseconds)")
     ap.add_argument("--ipopt", action="append", default=[], metavar="KEY=VALUE",
-                    help="an IPOPT option for the stages solve (repeatable), e.g. mu_linear_decrease_factor=0.1; "
+                    help="an IPOPT option for the native solve (repeatable), e.g. mu_linear_decrease_factor=0.1; "
                          "the baseline is then also solved with the same options (row mx_map_same_options), "
                          "the headline speed-up staying against the plain baseline")
     args = ap.parse_args(argv)
@@ -131,45 +122,41 @@ def main(argv=None) -> int:
     if args.repeats < 1:
         print(f"error: --repeats {args.repeats}: must be at least 1", file=sys.stderr)
         return 2
-    # a fresh cache: the first stages build compiles (C size and gcc time measured), the
-    # repeats load it
-    ocp_stages.CACHE = Path(args.cache) if args.cache else Path(tempfile.mkdtemp(prefix="kindyngen_topt_bench_"))
-    cflags = tuple(args.cflags.split()) if args.cflags else None
+    if args.fresh_cache:
+        os.environ["KINDYNGEN_CACHE"] = tempfile.mkdtemp(prefix="kindyngen_topt_bench_")
     doc = {"machine": machine(), "load_before": os.getloadavg(), "started_utc": time.strftime("%Y-%m-%d %H:%M:%S",
                                                                                                  time.gmtime()),
            "note": "CPU time (process_time) of the solve; the machine is shared, so wall times are not speeds. "
-                   "speed-up = CPU time of mx_map's solve / CPU time of stages' solve, within this run.",
-           "stages_library": {"cc": args.cc, "cflags": args.cflags, "cache_reused": bool(args.cache)},
-           "stages_ipopt_options": ipopt,
-           "rows": [], "summary": {}}
+                   "speed-up = CPU time of mx_map's solve / CPU time of the native solve, within this run.",
+           "fresh_cache": args.fresh_cache, "native_ipopt_options": ipopt, "rows": [], "summary": {}}
     for problem in args.problems:
         funcs = ocp.load_functions(problem)
         setup = ocp.problem_setup(problem, funcs)
         N = DEFAULT_N[problem]
         pairs = []
         for _ in range(args.repeats):
-            pair = {"stages": run_one(problem, N, "stages", funcs, setup, args.cc, cflags, ipopt),
+            pair = {"native": run_one(problem, N, "native", funcs, setup, ipopt),
                     "mx_map": run_one(problem, N, "mx_map", funcs, setup)}
             if ipopt:
                 pair["mx_map_same_options"] = run_one(problem, N, "mx_map", funcs, setup, ipopt=ipopt)
                 pair["mx_map_same_options"]["formulation"] = "mx_map_same_options"
             doc["rows"].extend(pair.values())
             pairs.append(pair)
-        sp = [p["mx_map"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]
-        spi = [p["mx_map"]["cpu_per_iteration_s"] / p["stages"]["cpu_per_iteration_s"] for p in pairs]
+        sp = [p["mx_map"]["solve_cpu_s"] / p["native"]["solve_cpu_s"] for p in pairs]
+        spi = [p["mx_map"]["cpu_per_iteration_s"] / p["native"]["cpu_per_iteration_s"] for p in pairs]
         doc["summary"][problem] = {
             "N": N, "speedup_solve_cpu": sp, "speedup_cpu_per_iteration": spi,
-            "T_difference": [abs(p["mx_map"]["T"] - p["stages"]["T"]) for p in pairs],
-            "iterations": [[p["mx_map"]["iterations"], p["stages"]["iterations"]] for p in pairs]}
+            "T_difference": [abs(p["mx_map"]["T"] - p["native"]["T"]) for p in pairs],
+            "iterations": [[p["mx_map"]["iterations"], p["native"]["iterations"]] for p in pairs]}
         if ipopt:
             doc["summary"][problem]["speedup_like_for_like"] = [
-                p["mx_map_same_options"]["solve_cpu_s"] / p["stages"]["solve_cpu_s"] for p in pairs]
+                p["mx_map_same_options"]["solve_cpu_s"] / p["native"]["solve_cpu_s"] for p in pairs]
             doc["summary"][problem]["iterations_same_options"] = [p["mx_map_same_options"]["iterations"] for p in pairs]
         print(f"  {problem}: speed-up (solve CPU) {', '.join(f'{v:.1f}x' for v in sp)}; per iteration "
               f"{', '.join(f'{v:.1f}x' for v in spi)}", flush=True)
     doc["load_after"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+    Path(args.out).write_text(strict_json(doc, indent=1) + "\n")
     print(f"wrote {args.out} (load {doc['load_before'][0]:.1f} -> {doc['load_after'][0]:.1f})")
     return 0
 

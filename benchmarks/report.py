@@ -20,8 +20,11 @@ import matplotlib
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
 
+from kindyngen.json_text import strict_json  # noqa: E402
+
 from . import paper, scaling  # noqa: E402
 from .common import GENERATED, RESULTS, manifest  # noqa: E402
+from kindyngen.output_folder import replace_files  # noqa: E402
 
 IMPL_ORDER = ("c", "c_native", "casadi_codegen", "pinocchio_cpp", "pinocchio_casadi_c", "python", "python_batch",
               "python_batch_1000", "casadi")
@@ -196,9 +199,15 @@ def scaling_markdown(study: dict) -> list[str]:
 
 # --- the report ----------------------------------------------------------------------------
 def build_report(timings: dict, study: dict, out: Path, counts: dict | None = None) -> dict:
-    """``counts``: {function: opcount} from generated/lwr4/functions.json; default: the
-    copy taken by the benchmark run."""
-    out.mkdir(parents=True, exist_ok=True)
+    """report.md, report.json and the figures in ``out``, all or none
+    (kindyngen.output_folder.replace_files). ``counts``: {function: opcount} from
+    generated/lwr4/functions.json; default: the copy taken by the benchmark run."""
+    summary = {}
+    replace_files(out, lambda folder: summary.update(_write_report(timings, study, folder, counts)))
+    return summary
+
+
+def _write_report(timings: dict, study: dict, out: Path, counts: dict | None) -> dict:
     functions, ratios = timings.get("functions", {}), timings.get("ratios", {})
     rows = opcount_rows(counts if counts is not None else timings.get("opcounts", {}))
     figure = fig1(functions, out / "fig1_times.png")
@@ -256,7 +265,7 @@ def build_report(timings: dict, study: dict, out: Path, counts: dict | None = No
     (out / "report.md").write_text("\n".join(md))
     summary = {"date": timings.get("date"), "machine": m, "opcounts": rows, "speed": functions, "ratios": ratios,
                "fig1": figure, "peers": peers, "scaling": study, "checks": checks}
-    (out / "report.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (out / "report.json").write_text(strict_json(summary, indent=1) + "\n")
     return summary
 
 

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import symengine as se
 
+from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
+
 from .common import GENERATED, RESULTS
 
 # (quantity, homogeneous-route function, dual-quaternion-route function)
@@ -119,9 +122,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS, help="results folder")
     args = parser.parse_args(argv)
     doc = table()
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "representations.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (args.out / "representations.md").write_text(markdown(doc))
+
+    def both(folder):          # the JSON and its table, both or neither
+        (folder / "representations.json").write_text(strict_json(doc, indent=1) + "\n")
+        (folder / "representations.md").write_text(markdown(doc))
+    replace_files(args.out, both)
     print(markdown(doc))
     return 0
 

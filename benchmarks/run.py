@@ -19,7 +19,6 @@ builds take minutes), no c_batch and no python_c.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from datetime import datetime, timezone
@@ -27,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kindyngen.json_text import strict_json
 from kindyngen.readers.yaml_description import load_robot
 
 from . import (c_batch, casadi_codegen, compiled, inputs, pinocchio_casadi, pinocchio_cpp, python_c_timing,
@@ -345,7 +345,7 @@ def main(argv=None) -> int:
         "notes": bench.notes,
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "timings.json").write_text(json.dumps(result, indent=1) + "\n")
+    (args.out / "timings.json").write_text(strict_json(result, indent=1) + "\n")
     log(f"wrote {args.out / 'timings.json'} ({time.perf_counter() - started:.0f} s)")
 
     # kinematic trees with a floating base against both Pinocchio peers (results/trees.json);
@@ -356,12 +356,11 @@ def main(argv=None) -> int:
 
     if not args.no_scaling:
         study = scaling.study(range(2, settings["scaling_max_n"] + 1), settings["scaling_budget_s"], log=log)
-        (args.out / "scaling.json").write_text(json.dumps(study, indent=1) + "\n")
+        (args.out / "scaling.json").write_text(strict_json(study, indent=1) + "\n")
         log(f"wrote {args.out / 'scaling.json'} ({time.perf_counter() - started:.0f} s)")
         # trees: generation time and counts against n, and against Featherstone's formulas
         study = tree_scaling.study(dict(tree_scaling.QUICK if args.quick else tree_scaling.FULL), log=log)
-        (args.out / "tree_scaling.json").write_text(json.dumps(study, indent=1) + "\n")
-        tree_scaling.plot(study, args.out / "tree_scaling.png")
+        tree_scaling.write(study, args.out)
         log(f"wrote {args.out / 'tree_scaling.json'} ({time.perf_counter() - started:.0f} s)")
     return 0
 

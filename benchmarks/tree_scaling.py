@@ -43,6 +43,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
+
 from .common import RESULTS, machine
 
 FULL = dict(tree_limbs=4, tree_per_limb=tuple(range(2, 16)), chain_sizes=tuple(range(4, 61, 4)) + (80, 100),
@@ -450,6 +453,15 @@ def robotran(g1: dict | None, tree: dict) -> dict:
 
 # ------------------------------------------------------------------ output
 
+def write(result: dict, out: Path) -> None:
+    """tree_scaling.json and tree_scaling.png in ``out``, both or neither
+    (kindyngen.output_folder.replace_files)."""
+    def both(folder):
+        (folder / "tree_scaling.json").write_text(strict_json(result, indent=1) + "\n")
+        plot(result, folder / "tree_scaling.png")
+    replace_files(out, both)
+
+
 def plot(result: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -604,7 +616,7 @@ def _update_cse(path: Path, log) -> int:
     """The CSE-chunk part of the study again, written into ``path``."""
     result = json.loads(path.read_text())
     result["cse"] = cse_study(log)
-    path.write_text(json.dumps(result, indent=1) + "\n")
+    path.write_text(strict_json(result, indent=1) + "\n")
     log(f"wrote {path}")
     return 0
 
@@ -615,7 +627,7 @@ def _update_g1(path: Path, log) -> int:
     g1 = g1_generate(5, log)
     g1["measured"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     result["g1"], result["robotran"] = g1, robotran(g1, result["tree"])
-    path.write_text(json.dumps(result, indent=1) + "\n")
+    path.write_text(strict_json(result, indent=1) + "\n")
     log(f"G1: median {g1['median_s']:.2f} s wall over {len(g1['seconds'])} runs; derive + CSE, CPU s: "
         + ", ".join(f"{k} {v['cpu_s']:.2f}" for k, v in g1["functions"].items()) + f"; wrote {path}")
     return 0
@@ -638,9 +650,7 @@ def main(argv=None) -> int:
         return _update_g1(args.out / "tree_scaling.json", log=lambda text: print(text, flush=True))
     settings = QUICK if args.quick else FULL
     result = study(settings, log=lambda text: print(text, flush=True))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "tree_scaling.json").write_text(json.dumps(result, indent=1) + "\n")
-    plot(result, args.out / "tree_scaling.png")
+    write(result, args.out)
     print(markdown(result))
     if result["g1"]:
         g1 = result["g1"]
@@ -648,7 +658,7 @@ def main(argv=None) -> int:
               f"median {g1['median_s']:.2f} s wall, {g1['median_cpu_s']:.2f} s CPU over {len(g1['seconds'])} runs "
               f"(load averages before: {', '.join(f'{v:.1f}' for v in g1['load_average_before'])}); derive + CSE, "
               "CPU s: " + ", ".join(f"{k} {v['cpu_s']:.2f}" for k, v in g1["functions"].items()))
-    print(json.dumps(result["robotran"], indent=1))
+    print(strict_json(result["robotran"], indent=1))
     print(f"wrote {args.out / 'tree_scaling.json'} and tree_scaling.png ({result['seconds']:.0f} s)")
     return 0
 

@@ -33,6 +33,8 @@ import casadi
 import numpy as np
 
 from kindyngen.codegen.pipeline import generate
+from kindyngen.json_text import strict_json
+from kindyngen.output_folder import replace_files
 from kindyngen.readers.urdf import load_urdf
 
 from . import c_harness, casadi_codegen, compiled, pinocchio_casadi, pinocchio_cpp, python_timing
@@ -419,10 +421,11 @@ def plot(result: dict, path: Path) -> None:
 
 
 def write(result: dict, out: Path, log=print) -> None:
-    """trees.json and trees.png in ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "trees.json").write_text(json.dumps(result, indent=1) + "\n")
-    plot(result, out / "trees.png")
+    """trees.json and trees.png in ``out``, both or neither (kindyngen.output_folder.replace_files)."""
+    def both(folder):
+        (folder / "trees.json").write_text(strict_json(result, indent=1) + "\n")
+        plot(result, folder / "trees.png")
+    replace_files(out, both)
     log(f"wrote {out / 'trees.json'} and {out / 'trees.png'}")
 
 

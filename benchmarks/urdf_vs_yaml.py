@@ -8,12 +8,13 @@ with the URDF's flange offset as its ``tool``; ``tests/readers/test_urdf_panda.p
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from kindyngen.json_text import strict_json
 
 from .common import RESULTS, machine
 
@@ -62,7 +63,7 @@ def main(argv=None) -> int:
               "opcounts_after_cse": {name: {"urdf": urdf_counts[name], "yaml": yaml_counts[name]}
                                      for name in yaml_counts}}
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "urdf_vs_yaml.json").write_text(json.dumps(result, indent=1) + "\n")
+    (args.out / "urdf_vs_yaml.json").write_text(strict_json(result, indent=1) + "\n")
     print(f"generation (all functions, median of {args.repeats}): URDF {urdf_time:.2f} s, YAML {yaml_time:.2f} s")
     return 0
 

@@ -22,14 +22,12 @@ Problems:
             poses with the shortest joint-space distance).
   panda     Franka Panda (robots/panda.yaml, generated/panda/casadi/*.casadi), two given
             configurations.
-  lwr4_reach  the LWR reach of examples/ocp_reach.py (fixed T = 1 s, flange position goal,
-            min integral |tau|^2), with --formulation (baseline, fd_rk4, id_rk4) and
-            --solver (ipopt, fatrop, sqp, stages, fatrop_stages, fd_stages, fd_stages_adaptive); its RK4
-            steps per interval are --substeps
-            (default 1).
 
---solver stages (lwr4, panda): the same NLP, IPOPT given its constraint Jacobian and Lagrangian
-Hessian assembled from per-interval functions compiled to C once (examples/ocp_time_stages.py).
+--solver native (lwr4, panda): the same NLP solved by kindyngen.control.time_optimal on its
+native library (constraints, Jacobian and exact Hessian in C over the generated fd and
+fd_derivatives, compiled per robot, N and integrator in a few seconds; formerly --solver stages
+with examples/ocp_time_stages.py). The LWR reach (minimum torque, fixed T) that was --problem
+lwr4_reach is examples/ocp_reach.py.
 
 Output in --out: ocp.json (status, iterations, solve_s, T, t, q, qd, tau, max_defect,
 resim_error, limit checks), joints.png, torques.png.
@@ -54,7 +52,7 @@ for _p in (str(ROOT), str(EXAMPLES)):
 
 from kindyngen.readers.yaml_description import load_robot  # noqa: E402
 
-PROBLEMS = ("two_link", "lwr4", "panda", "lwr4_reach")
+PROBLEMS = ("two_link", "lwr4", "panda")
 MODES = ("sx", "mx", "mx_expand", "mx_map")
 # Fastest way of using the generated Functions in this NLP (examples/ocp_speed.py,
 # examples/results/ocp_speed.json): one SX RK4-step Function with fd inlined, mapped over the
@@ -328,6 +326,26 @@ def solve(setup: dict, fd: ca.Function, N: int, mode: str = DEFAULT_MODE, subste
             "objective": float(sol["f"]), "max_defect": float(np.abs(np.array(sol["g"])[:N * nx]).max())}
 
 
+def solve_native(setup: dict, N: int, substeps: int, verbose: bool = False, ipopt: dict | None = None) -> dict:
+    """The p2p NLP by kindyngen.control.time_optimal (the robot derived into its cache, the
+    native library compiled once per N and integrator), in solve()'s result form."""
+    from kindyngen.control.integrators import Integrator
+    from kindyngen.control.robot import Limits, prepare
+    from kindyngen.control.time_optimal import TimeOptimalNLP
+    t0 = time.perf_counter()
+    limits = Limits(tuple(setup["q_lo"]), tuple(setup["q_hi"]), tuple(setup["qd_max"]), tuple(setup["tau_max"]))
+    nlp = TimeOptimalNLP(prepare(setup["robot"]), limits, setup["q0"], setup["qf"], N=N,
+                         integrator=Integrator("rk4", substeps), weight=setup["weight"], speed_margin=VELOCITY_BACKOFF,
+                         T_guess=setup["T_guess"], T_bounds=setup["T_bounds"],
+                         ipopt=dict(ipopt or {}, **({"ipopt.print_level": 5} if verbose else {})))
+    build_s = time.perf_counter() - t0
+    r = nlp.solve()
+    return {"status": r["status"], "success": r["success"], "iterations": r["iterations"], "solve_s": r["solve_s"],
+            "solve_cpu_s": r["solve_cpu_s"], "build_s": build_s, "T": r["T"], "N": N, "mode": "native",
+            "substeps": substeps, "t": r["t"], "q": r["q"], "qd": r["qd"], "tau": r["tau"],
+            "objective": r["objective"], "max_defect": r["max_defect"]}
+
+
 def resimulate(setup: dict, res: dict, substeps: int = 20) -> dict:
     """Apply the optimal torques piecewise constant from the initial state and integrate with
     Pinocchio's ABA (tests/reference.py's independent model) and fixed-step RK4, `substeps`
@@ -453,15 +471,13 @@ def plot(setup: dict, res: dict, sim: dict, out: Path) -> list[str]:
 
 def run(problem: str, N: int, mode: str = DEFAULT_MODE, substeps: int = 1, resim_substeps: int = 20,
         verbose: bool = False, workdir: str | None = None, solver: str = "ipopt") -> tuple[dict, dict, dict]:
-    """Solve and check. solver 'ipopt': the NLP of build_nlp in `mode`; 'stages': the same NLP
-    with its derivatives assembled from compiled per-interval functions
-    (examples/ocp_time_stages.py; p2p problems only; `mode` does not apply)."""
+    """Solve and check. solver 'ipopt': the NLP of build_nlp in `mode`; 'native': the same NLP
+    by kindyngen.control.time_optimal on its native library (p2p problems only; `mode` does not
+    apply)."""
     funcs = load_functions(problem, workdir)
     setup = problem_setup(problem, funcs)
-    if solver == "stages":
-        import ocp_time_stages
-        nlp = ocp_time_stages.TimeOptimalStages(setup, funcs, N, substeps)
-        res = nlp.solve({"ipopt.print_level": 5} if verbose else None)
+    if solver == "native":
+        res = solve_native(setup, N, substeps, verbose)
     else:
         res = solve(setup, funcs["fd"], N, mode, substeps, verbose=verbose, fk_hom=funcs["fk_hom"])
     sim = resimulate(setup, res, resim_substeps)
@@ -500,68 +516,6 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def run_reach(args, out: Path) -> int:
-    import ocp_reach
-    funcs = ocp_reach.load()
-    M = args.substeps or 1
-    if args.formulation == "baseline":
-        if args.solver != "ipopt":
-            print("error: --formulation baseline is Opti + IPOPT; --solver must be ipopt", file=sys.stderr)
-            return 2
-        res = ocp_reach.solve_baseline(args.N or 20, funcs, args.verbose, M)
-        setup = ocp_reach.setup_dict(funcs, args.N or 20)
-    elif args.solver in ("fd_stages", "fd_stages_adaptive"):
-        if args.formulation != "fd_rk4" or M != 1:
-            print(f"error: --solver {args.solver} compiles the fd_rk4 interval with one RK4 step; --formulation must be "
-                  "fd_rk4 and --substeps 1", file=sys.stderr)
-            return 2
-        import ocp_fd_stages
-        nlp = ocp_fd_stages.FdStageReach(args.N or 20, funcs)
-        opts = {"ipopt.print_level": 5} if args.verbose else {}
-        if args.solver == "fd_stages_adaptive":
-            import ocp_fd_options
-            opts.update(ocp_fd_options.FAST)
-        res, setup = nlp.solve_ipopt(nlp.ipopt(opts)), nlp.setup
-        res["solver"] = "ipopt (compiled fd_rk4 stages" + (", adaptive barrier)" if args.solver == "fd_stages_adaptive"
-                                                          else ")")
-    elif args.solver in ("stages", "fatrop_stages"):
-        if args.formulation != "id_rk4" or M != 1:
-            print(f"error: --solver {args.solver} compiles the id_rk4 interval with one RK4 step; --formulation must be "
-                  "id_rk4 and --substeps 1", file=sys.stderr)
-            return 2
-        if args.solver == "stages":
-            import ocp_stages
-            nlp = ocp_stages.StageReach(args.N or 20, funcs)
-            res, setup = nlp.solve_ipopt(nlp.ipopt({"ipopt.print_level": 5} if args.verbose else None)), nlp.setup
-        else:
-            import ocp_fatrop
-            nlp = ocp_fatrop.FatropReach(args.N or 20, funcs, {"print_level": 10} if args.verbose else None)
-            res, setup = nlp.solve(), nlp.s.setup
-    else:
-        nlp = ocp_reach.reach_problem(args.formulation, args.solver, args.N or 20, funcs, verbose=args.verbose,
-                                      substeps=M)
-        res, setup = nlp.solve(), nlp.setup
-    sim = ocp_reach.check(setup, res, funcs, args.resim_substeps)
-    doc = {k: res[k] for k in ("status", "success", "iterations", "solve_s", "solve_cpu_s", "build_s", "formulation",
-                               "solver", "substeps", "N", "T", "objective")}
-    doc.update({k: sim[k] for k in ("plan_step_error", "resim_error", "resim_final_error", "resim_substeps",
-                                    "resim_goal_error_m", "resim_final_speed", "limit_excess")})
-    doc.update({"problem": "lwr4_reach", "q_start": setup["q0"].tolist(), "goal": setup["goal"].tolist(),
-                "limits": {"q_lower": setup["q_lo"].tolist(), "q_upper": setup["q_hi"].tolist(),
-                           "tau_max": setup["tau_max"].tolist()},
-                "t": res["t"].tolist(), "q": res["q"].tolist(), "qd": res["qd"].tolist(), "tau": res["tau"].tolist()})
-    setup_plot = dict(setup, problem="lwr4_reach")
-    doc["plots"] = plot(setup_plot, res, sim, out)
-    (out / "ocp.json").write_text(json.dumps(doc, indent=1) + "\n")
-    print(f"lwr4_reach ({args.formulation}, {args.solver}, {M} RK4 step(s)/interval): {res['status']}, "
-          f"{res['iterations']} iterations, solve {res['solve_s']:.3f} s, build {res['build_s']:.2f} s, "
-          f"objective {res['objective']:.4f}")
-    print(f"  Pinocchio: plan step error {sim['plan_step_error']:.1e}, re-simulation ({args.resim_substeps} steps/"
-          f"interval) error {sim['resim_error']:.2e}, flange {1e3 * sim['resim_goal_error_m']:.2f} mm from the goal")
-    print(f"  wrote {out / 'ocp.json'}")
-    return 0 if res["success"] else 1
-
-
 def main(argv=None) -> int:
     ap = _Parser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -576,33 +530,18 @@ def main(argv=None) -> int:
                          "(default 1 for two_link, 4 otherwise)")
     ap.add_argument("--resim-substeps", type=int, default=20, help="RK4 steps per interval of the re-simulation")
     ap.add_argument("--verbose", action="store_true", help="IPOPT's iteration log")
-    ap.add_argument("--formulation", choices=("baseline", "fd_rk4", "id_rk4"), default="id_rk4",
-                    help="lwr4_reach only: how the dynamics enter (default id_rk4)")
-    ap.add_argument("--solver", choices=("ipopt", "fatrop", "sqp", "stages", "fatrop_stages", "fd_stages",
-                                         "fd_stages_adaptive"),
-                    default="ipopt",
-                    help="default ipopt. lwr4_reach: stages: IPOPT with the id_rk4 interval compiled to C "
-                         "(examples/ocp_stages.py; the first run compiles, later runs load the cache); "
-                         "fatrop_stages: fatrop on the same compiled functions (examples/ocp_fatrop.py); "
-                         "fd_stages: IPOPT with the fd_rk4 interval and its exact Hessian compiled to C "
-                         "(examples/ocp_fd_stages.py; --formulation fd_rk4); fd_stages_adaptive: the same with "
-                         "IPOPT's adaptive barrier (examples/ocp_fd_options.FAST: 23 iterations instead of 45, "
-                         "same optimum). lwr4, "
-                         "panda (ipopt or stages): stages solves the same time-optimal NLP with IPOPT given its "
-                         "Jacobian and Hessian assembled from per-interval functions compiled to C "
-                         "(examples/ocp_time_stages.py; --mode does not apply; the first run compiles ~1-2 min)")
+    ap.add_argument("--solver", choices=("ipopt", "native"), default="ipopt",
+                    help="ipopt: the NLP of --mode with CasADi's derivatives (default); native (lwr4, panda): the "
+                         "same NLP by kindyngen.control.time_optimal, its Jacobian and exact Hessian from a C "
+                         "library over the generated fd and fd_derivatives (compiled once per robot, N and "
+                         "integrator; --mode does not apply)")
     args = ap.parse_args(argv)
     if args.N is not None and args.N < 1:
         ap.error(f"--N {args.N}: must be at least 1")
     if args.substeps is not None and args.substeps < 1:
         ap.error(f"--substeps {args.substeps}: must be at least 1")
-    if args.problem == "lwr4_reach":
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        return run_reach(args, out)
-    if args.solver not in ("ipopt", "stages") or (args.solver == "stages" and args.problem == "two_link"):
-        ap.error(f"--solver {args.solver}: --problem {args.problem} takes ipopt"
-                 + ("" if args.problem == "two_link" else " or stages"))
+    if args.solver == "native" and args.problem == "two_link":
+        ap.error("--solver native: --problem two_link (the path problem) takes ipopt")
     N = args.N or (100 if args.problem == "two_link" else 20)
     args.substeps = args.substeps or (1 if args.problem == "two_link" else 4)
     out = Path(args.out)

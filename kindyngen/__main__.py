@@ -1,3 +1,3 @@
-from .cli.main import main
+from .cli import command_line
 
-raise SystemExit(main())
+raise SystemExit(command_line())

@@ -21,6 +21,11 @@ from kindyngen.readers.yaml_description import load_robot
 ROOT = Path(__file__).resolve().parents[1]
 GENERATED = ROOT / "generated"
 LANGS = ("python", "c", "casadi")
+HANG_GUARD_S = 30 * 60
+"""The timeout of every subprocess a test starts: a guard against a hang, never a time limit
+(tests assert no speed; timings belong in benchmarks/). The slowest, generating every robot
+twice at once (tests/integration/test_reproducibility.py), takes about 3 min on an idle
+2-core machine and many times that on a loaded one."""
 
 
 @lru_cache(maxsize=None)

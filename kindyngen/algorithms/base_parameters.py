@@ -69,9 +69,15 @@ class BaseParameterError(RuntimeError):
 
 
 def rationalize(value: float, denominator: int | None = None, tol: float = RATIONAL_TOL,
-                max_denominator: int = MAX_DENOMINATOR):
-    """A rational that reproduces ``value`` to ``tol`` (relative, absolute near zero), as a
-    sympy Rational, or ``None``.
+                max_denominator: int = MAX_DENOMINATOR, scale: float = 1.0):
+    """A rational that reproduces ``value`` to ``tol`` (relative, absolute near zero, at
+    least ``tol * scale``), as a sympy Rational, or ``None``.
+
+    ``scale``: the size below which the value's last bits are noise. A grouping coefficient
+    t relating a dependent column a to a base column b (a = t b + ...) is computed to about
+    eps |a| / |b| (column norms): with 100 m links the mass columns are 1e4 times the inertia
+    columns, and a coefficient that is exactly zero comes out near 1e-10 (the norm ratio,
+    not 1, is its scale).
 
     With ``denominator`` (a known common denominator of the exact value, e.g. the squared
     lcm of the DH lengths' denominators) the candidate is ``round(value * D) / D``; without
@@ -82,9 +88,11 @@ def rationalize(value: float, denominator: int | None = None, tol: float = RATIO
 
     >>> rationalize(0.15600000000000003), rationalize(-0.00680625, 4 * 10 ** 6), rationalize(np.pi)
     (39/250, -1089/160000, None)
+    >>> rationalize(2.4e-10), rationalize(2.4e-10, scale=1e4)
+    (None, 0)
     """
     value = float(value)
-    bound = tol * max(1.0, abs(value))
+    bound = tol * max(1.0, abs(value), scale)
     if abs(value) <= bound:
         return sympy.Integer(0)
     if denominator is not None:
@@ -286,17 +294,23 @@ def find_base_parameters(evaluate: Callable[[int], np.ndarray], full_names, seed
         raise BaseParameterError(f"pivoted QR gives rank {rank} but {len(base)} columns are independent in order")
     dependent = tuple(k for k in range(len(full_names)) if k not in base)
     B = A[:, list(base)]
+    # the relations solved on unit-norm columns (lengths of metres or hundreds of metres put
+    # the mass columns orders of magnitude above the inertia columns); ratio[i, j] = |a_j| / |b_i|
+    # is the scale of coefficient t_ij's rounding noise (rationalize's scale)
+    base_norms = np.maximum(np.linalg.norm(B, axis=0), 1e-300)
+    dependent_norms = np.maximum(np.linalg.norm(A[:, list(dependent)], axis=0), 1e-300)
+    ratio = dependent_norms[None, :] / base_norms[:, None]
     if dependent:
-        T_float = np.linalg.lstsq(B, A[:, list(dependent)], rcond=None)[0]
+        T_float = np.linalg.lstsq(B / base_norms, A[:, list(dependent)] / dependent_norms, rcond=None)[0] * ratio
     else:
         T_float = np.zeros((len(base), 0))
     T, T_check, exact = [], [], True
-    for row in T_float:
+    for row, scales in zip(T_float, ratio):
         out = []
-        for v in row:
-            r = rationalize(v, denominator) if denominator else None
+        for v, scale in zip(row, scales):
+            r = rationalize(v, denominator, scale=scale) if denominator else None
             if r is None:
-                r = rationalize(v)
+                r = rationalize(v, scale=scale)
             if r is None:
                 # not rational: kept as a float rounded to NUMERIC_DIGITS, so that the
                 # processor's last bits do not reach base_params.json (base_params.json

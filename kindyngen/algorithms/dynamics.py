@@ -192,7 +192,11 @@ def setup(model: RobotModel, params: str = "numeric") -> TreeSetup:
     the last link; "symbolic": the input ``p`` of 10 barycentric parameters per body, a
     floating base's root body first, grouped expressions collected); cached: every function
     starts from it (its exact constant transforms cost a tenth of a second on a humanoid) and
-    nothing changes it."""
+    nothing changes it. A model with mimic joints is derived as the same tree without them and
+    then reduced (:mod:`kindyngen.algorithms.reduced_coordinates`)."""
+    if model.has_mimics or model.has_loops:
+        raise ValueError(f"{model.name}: mimic joints or loops: derive on model.without_mimics() and reduce "
+                         f"(kindyngen.algorithms.reduced_coordinates, loop_closure)")
     q = port_symbols("q", (model.nq,))
     joint_q = q[7:] if model.floating_base else q
     joints = joint_frames(model, joint_q)

@@ -38,6 +38,9 @@ def _root_pose(model: RobotModel, q):
 def link_poses(model: RobotModel, q, stages: Stages | None = None):
     """(root pose, [(R, p) of each joint's link frame], [(axis, origin) of each joint]) in
     the world (root) frame; with ``stages``, each link pose is named there."""
+    if model.has_mimics or model.has_loops:
+        raise ValueError(f"{model.name}: mimic joints or loops: derive on model.without_mimics() and reduce "
+                         f"(kindyngen.algorithms.reduced_coordinates, loop_closure)")
     joint_q = q[7:] if model.floating_base else q
     root = _root_pose(model, q)
     links, axes = [], []

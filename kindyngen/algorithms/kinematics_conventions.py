@@ -28,20 +28,21 @@ def frame_convention(model: RobotModel) -> str:
 
 
 def joint_units(model: RobotModel, revolute: str, prismatic: str) -> str:
-    """A port's unit: the revolute one, the prismatic one, or both with the joints named."""
-    kinds = {j.kind for j in model.joints}
+    """A port's unit: the revolute one, the prismatic one, or both with the joints named (by
+    their index among the coordinates: a mimic joint is no entry of a port)."""
+    kinds = {j.kind for j in model.coordinate_joints}
     if kinds == {"revolute"}:
         return revolute
     if kinds == {"prismatic"}:
         return prismatic
-    moving = ", ".join(str(i) for i, j in enumerate(model.joints) if j.prismatic)
+    moving = ", ".join(str(i) for i, j in enumerate(model.coordinate_joints) if j.prismatic)
     return f"{revolute} ({prismatic} for prismatic joints {moving}, 0-based)"
 
 
 def q_port(model: RobotModel) -> Port:
     """The joint positions (after a floating base's position and unit quaternion)."""
-    what = "joint angles" if all(not j.prismatic for j in model.joints) else "joint positions"
+    what = "joint angles" if all(not j.prismatic for j in model.coordinate_joints) else "joint positions"
     if model.floating_base:
         return Port("q", (model.nq,), "base position in the world, base orientation as a unit quaternion "
                     f"(x, y, z, w), then {what}, {model.order_text}", "m, 1, " + joint_units(model, "rad", "m"))
-    return Port("q", (model.n,), f"{what}, {model.order_text}", joint_units(model, "rad", "m"))
+    return Port("q", (model.nq,), f"{what}, {model.order_text}", joint_units(model, "rad", "m"))

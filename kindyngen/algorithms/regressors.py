@@ -40,7 +40,7 @@ Example:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache, reduce
 
 import numpy as np
@@ -53,6 +53,8 @@ from .effect_torques import effect_columns, effect_parameter_names, effect_param
 from .joint_frame_steps import mat3
 from .kinematics_conventions import q_port
 from .lagrange import gravity_lagrange, mass_matrix_lagrange
+from .loop_closure import coupled_model, loop_system
+from .reduced_coordinates import coordinate_map, reduced_input
 from .rigid_bodies import ZERO, cross, qd_port, qdd_port, vadd, vscale
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
 from ..model.inertial_parameters import NAMES, barycentric, exact_parameter_vector
@@ -79,9 +81,21 @@ SUMMARIES = {
 
 
 def kinds(model: RobotModel) -> tuple[str, ...]:
-    """The regressors ``model`` has: Y always, Y_g and Y_m for a chain, however it was read
-    (their sources, :data:`SOURCES`, are written for chains)."""
-    return KINDS if model.is_chain else ("Y",)
+    """The regressors ``model`` has: Y always, Y_g and Y_m for a chain without mimic joints,
+    however it was read (their sources, :data:`SOURCES`, are written for chains of independent
+    joints)."""
+    return KINDS if model.is_chain and not model.has_mimics and not model.has_loops else ("Y",)
+
+
+def reduced_model(model: RobotModel) -> RobotModel | None:
+    """The model the regressor is derived on: ``model``, or for a tree closed by loops that
+    are all parallelograms its coupled model (constant G:
+    :func:`kindyngen.algorithms.loop_closure.coupled_model`, itself: its mimic joints are
+    the loops' linear relations); None for other loops."""
+    if not model.has_loops or model.has_mimics:
+        return model
+    system = loop_system(model)
+    return coupled_model(system) if system.closed is not None and system.closed.linear else None
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -145,7 +159,19 @@ class FullRegressor:
 
     def columns(self, indices, stages: Stages | None = None) -> tuple[se.Basic, ...]:
         """Row-major entries of the regressor restricted to columns ``indices``; with
-        ``stages``, Y's carried motion states and wrenches are named there."""
+        ``stages``, Y's carried motion states and wrenches are named there. A model with mimic
+        joints: the full tree's rows contracted with G (``G^T Y_x``) and rewritten in the
+        independent coordinates (:mod:`kindyngen.algorithms.reduced_coordinates`), its
+        intermediates too."""
+        if self.model.has_mimics:
+            cmap = coordinate_map(self.model)
+            start = len(stages.definitions) if stages is not None else 0
+            entries = full_regressor(cmap.free, self.kind).columns(indices, stages)
+            entries = cmap.contract(entries, (cmap.nv_full, len(indices)), (0,))
+            sub = cmap.substitution()
+            if stages is not None:
+                stages.substitute(sub, start)
+            return tuple(e.xreplace(sub) for e in entries)
         wanted = sorted(k for k in indices if k < self.links)
         if self.rigid_rows is None:
             column = dict(zip(wanted, link_parameter_columns(self.model, frozenset(wanted), stages)))
@@ -161,6 +187,12 @@ def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
     if kind not in kinds(model):
         raise ValueError(f"kind must be one of {kinds(model)} for {model.identifier}, got {kind!r}")
     n, zero = model.n, se.Integer(0)
+    if model.has_mimics:        # the full tree's, contracted and rewritten by columns()
+        free = full_regressor(model.without_mimics(), kind)
+        inputs = tuple(reduced_input(model, port, free.model) for port in free.inputs)
+        symbols = (port_symbols("q", (model.nq,)), port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,)))
+        return replace(free, model=model, inputs=inputs, input_symbols=symbols,
+                       row_names=tuple(f"tau{i}" for i in range(model.nv)))
     if kind == "Y":
         inputs = (q_port(model), qd_port(model), qdd_port(model))
         input_symbols = (setup(model).q, port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,)))
@@ -250,9 +282,9 @@ def random_states(model: RobotModel, count: int, seed: int) -> dict:
     (clipped to +-pi) and a floating base anywhere within 1 m with a random unit quaternion;
     qd and qdd standard normal."""
     rng = np.random.default_rng(seed)
-    lower = np.array([max(j.lower, -np.pi) for j in model.joints])
-    upper = np.array([min(j.upper, np.pi) for j in model.joints])
-    q = rng.uniform(lower, upper, size=(count, model.n))
+    lower = np.array([max(j.lower, -np.pi) for j in model.coordinate_joints])
+    upper = np.array([min(j.upper, np.pi) for j in model.coordinate_joints])
+    q = rng.uniform(lower, upper, size=(count, lower.size))
     if model.floating_base:
         quat = rng.standard_normal((count, 4))
         q = np.hstack([rng.uniform(-1, 1, (count, 3)), quat / np.linalg.norm(quat, axis=1, keepdims=True), q])
@@ -266,7 +298,8 @@ def _select(*args):
     return np.select(values[1::2], values[0::2])
 
 
-_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "exp1": lambda: np.e, "abs": np.abs, "piecewise": _select,
+_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "exp1": lambda: np.e, "abs": np.abs, "atan2": np.arctan2,
+              "piecewise": _select,
               "strictlessthan": np.less, "booleantrue": lambda: True}
 
 
@@ -336,16 +369,19 @@ def evaluate_full(model: RobotModel, kind: str, inputs: dict, chunk: int = 512) 
 
 def common_denominator(model: RobotModel) -> int | None:
     """A common denominator of every grouping coefficient: the squared lcm of the joint
-    placements' lengths' denominators when all lengths are rational and every constant
-    rotation is a signed permutation (DH: cos and sin of each alpha and offset in {0, 1,
-    -1}); else None."""
+    placements' lengths' denominators (and of mimic multipliers) when all lengths are rational
+    and every constant rotation is a signed permutation (DH: cos and sin of each alpha and
+    offset in {0, 1, -1}, a revolute mimic's offset 0); else None."""
     dens = []
     for joint in model.joints:
+        offsets = [joint.offset] + ([joint.mimic.offset] if joint.mimic is not None else [])
         if not joint.prismatic:
-            for v in (sympy.cos(joint.offset), sympy.sin(joint.offset)):
+            for v in [f(o) for o in offsets for f in (sympy.cos, sympy.sin)]:
                 if v not in (0, 1, -1):
                     return None
-        lengths = [joint.offset] if joint.prismatic else []
+        if joint.mimic is not None:
+            dens += [int(sympy.Rational(multiplier).q) for _, multiplier in joint.mimic.sources]
+        lengths = offsets if joint.prismatic else []
         for placement in (joint.before, joint.after):
             R, p = placement.matrix()
             if any(v not in (0, 1, -1) for v in R):
@@ -385,6 +421,10 @@ def unavailable(model: RobotModel, kind: str = "Y") -> str | None:
     functions are generated all the same."""
     if not supported(model):
         return "symbolic lengths"
+    if reduced_model(model) is None:
+        return ("closed loops with a configuration-dependent G (the base parameters are decided on samples, and "
+                "only parallelogram loops are reduced with a constant G)")
+    model = reduced_model(model)
     try:
         base_parameters(model, kind)
     except BaseParameterError as exc:
@@ -407,6 +447,7 @@ def regressor(model: RobotModel, kind: str = "Y", name: str | None = None) -> Sy
     None where :func:`unavailable` says why not."""
     if unavailable(model, kind):
         return None
+    model = reduced_model(model)
     full = full_regressor(model, kind)
     base = base_parameters(model, kind)
     rows, cols = len(full.row_names), len(base.base)
@@ -430,7 +471,7 @@ def regressor(model: RobotModel, kind: str = "Y", name: str | None = None) -> Sy
         f"named after the barycentric parameter each is led by (m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, "
         f"Izz {bodies}, inertia about the link frame origin in link-frame axes; suffix R: other "
         f"parameters grouped into it); their expressions and the robot's values are in "
-        f"base_params.json. Y times those values equals the modelled quantity.")
+        f"base_params.json. Y times those values equals the modelled quantity. {model.mimic_text}").strip()
     return SymbolicFunction(
         name=name or kind, summary=SUMMARIES[kind],
         inputs=full.inputs, outputs=(port,), input_symbols=full.input_symbols, output_exprs=(exprs,),
@@ -450,6 +491,7 @@ def base_params_document(model: RobotModel) -> dict | None:
         if unavailable(model, kind):
             out[kind] = {"unavailable": unavailable(model, kind)}
             continue
+        model = reduced_model(model)
         b = base_parameters(model, kind)
         out[kind] = {
             "names": list(b.names),

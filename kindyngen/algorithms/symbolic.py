@@ -155,8 +155,9 @@ class Stages:
     ((_s0, 1 + a*b),)
     """
 
-    def __init__(self):
+    def __init__(self, prefix: str = "_s"):
         self._definitions: list = []
+        self._prefix = prefix         # another prefix: intermediates joined to another function's
 
     def cut(self, expr):
         expr = se.sympify(expr)
@@ -165,7 +166,7 @@ class Stages:
         if isinstance(expr, se.Mul) and len(expr.args) == 2 and expr.args[0].is_Number \
                 and expr.args[1].is_Symbol:
             return expr          # c * s: one multiplication wherever it is used
-        symbol = se.Symbol(f"_s{len(self._definitions)}")
+        symbol = se.Symbol(f"{self._prefix}{len(self._definitions)}")
         self._definitions.append((symbol, expr))
         return symbol
 
@@ -175,6 +176,19 @@ class Stages:
     @property
     def definitions(self) -> tuple:
         return tuple(self._definitions)
+
+    def substitute(self, mapping: dict, start: int = 0) -> None:
+        """Rewrite the definitions from ``start`` on by one simultaneous ``xreplace`` with
+        ``mapping`` (a derivation in other coordinates:
+        :mod:`kindyngen.algorithms.reduced_coordinates`).
+
+        >>> stages = Stages()
+        >>> a, b = se.symbols("a b")
+        >>> _ = stages.cut(a * b + 1)
+        >>> stages.substitute({a: b, b: a}); stages.definitions
+        ((_s0, 1 + a*b),)
+        """
+        self._definitions[start:] = [(s, e.xreplace(mapping)) for s, e in self._definitions[start:]]
 
 
 def naming(stages: Stages | None):

@@ -14,12 +14,16 @@ from pathlib import Path
 import numpy as np
 
 from ..algorithms.base_parameters import BaseParameterError
+from ..codegen.bundles import BundleError
 from ..codegen.trig_kernel import TRIG_MODES
 from ..codegen.render import SCALARS
+from ..json_text import strict_json
 from ..runtime.evaluate import EvaluationError
 from ..measured import MeasuredDataError
 from ..model.robot_model import RobotDescriptionError
+from ..model.user_text import one_line
 from ..readers.yaml_description import load_robot
+from .interrupts import ending_on_signals
 
 
 LANGS = ("c", "python", "casadi", "jax", "matlab")
@@ -27,11 +31,13 @@ LANGS = ("c", "python", "casadi", "jax", "matlab")
 GENERATE_LANGS = ("c", "python", "casadi", "python_c", "jax", "matlab")
 EXIT_BAD_INPUT = 2
 #: what each command writes into --out (an earlier run's file of these names that a new run
-#: does not write is removed, so two runs never mix: kindyngen.cli.output_dir)
+#: does not write is dropped, so two runs never mix: kindyngen.output_folder.replace_outputs)
 IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
 DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "report.html", "residuals.png", "steps.png",
                     "heldout_torques.png")
 EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
+REPRODUCE_OUTPUTS = ("reproduction.json", "report.md", "fig4_torque_validation.png", "fig6_elements.png",
+                     "g2_published.png")
 MAX_HOLDOUT = 0.8
 MAX_FOLDS = 50
 #: excite refuses a design whose regressor condition number exceeds this (identify's default limit)
@@ -91,26 +97,56 @@ def load(path, args):
                            floating_base=args.floating_base)
     else:
         model = load_robot(path, snap_angles=not args.keep_angles, base=args.base, tip=args.tip)
-    for note in model.notes:
-        print(f"note: {note}", file=sys.stderr)
+    for note in model.notes:      # a note may quote an attribute no name check saw (a URDF <mimic joint>)
+        print(f"note: {one_line(note)}", file=sys.stderr)
     return model
 
 
+def writable_out(out, replaced: bool = True) -> Path:
+    """``--out`` checked before any work is done: a folder that can be created or replaced there
+    (``replaced``: ``out`` is swapped whole, in its parent), or one to write folders into
+    (``generate``'s ``OUT``, holding ``OUT/<robot>/``); else a UsageError naming it."""
+    from ..output_folder import check_writable
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a folder")
+    try:
+        check_writable(out.parent if replaced else out)
+    except OSError as exc:
+        raise UsageError(f"--out {out}: {exc.strerror}") from None
+    return out
+
+
 def _cmd_generate(args) -> int:
+    from ..codegen.float32 import FloatRangeError
+    from ..codegen.catalog import derived_names
     from ..codegen.pipeline import generate
+    writable_out(args.out, replaced=False)
     only = set(args.functions) if args.functions else None
     if args.scalar == "float" and "python_c" in args.lang:
         if args.lang is not GENERATE_LANGS:      # asked for explicitly
             raise UsageError("--lang python_c: the CPython extension wraps double C; "
                              "drop python_c from --lang or use --scalar double")
         args.lang = tuple(lang for lang in args.lang if lang != "python_c")
-    for path in args.robots:
-        model = load(path, args)
-        out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
-                       only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes)
+    models = [(path, load(path, args)) for path in args.robots]      # every file read before any work
+    seen = {}
+    for path, model in models:
+        if model.identifier in seen:
+            raise UsageError(f"{path}: the robot's identifier {model.identifier} is that of {seen[model.identifier]} "
+                             f"too: both would be written to {Path(args.out) / model.identifier}; rename one")
+        seen[model.identifier] = path
+    for path, model in models:
+        try:
+            out = generate(model, Path(args.out), args.lang, args.params, progress=not args.quiet, trig=args.trig,
+                           only=only, scalar=args.scalar, batch=not args.no_batch, lanes=not args.no_lanes,
+                           bundles=tuple(args.bundle or ()))
+        except FloatRangeError as exc:      # a derived constant float cannot hold: the description's numbers
+            raise UsageError(f"{path}: --scalar float: {exc}; generate it with --scalar double") from None
         written = {f["name"] for f in json.loads((out / "functions.json").read_text())["functions"]}
         for name in sorted((only or set()) - written):
             print(f"note: --functions: {name} does not apply to {model.name}; not generated", file=sys.stderr)
+        for name in sorted((derived_names(only) or set()) - (only or set())):
+            print(f"note: --functions: {name} generated too (ik_dls iterates it)", file=sys.stderr)
         if not args.quiet:
             print(f"wrote {out}", file=sys.stderr)
     return 0
@@ -124,12 +160,13 @@ def _cmd_describe(args) -> int:
         data = describe(model)
     except ValueError as exc:       # a standard DH table: its link frames are off the joint axes
         raise UsageError(f"{args.robot}: {exc}") from None
-    header = (f"# {model.name}: written by kindyngen describe from {Path(args.robot).name}"
-              + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "") + "\n")
+    header = "# " + one_line(f"{model.name}: written by kindyngen describe from {Path(args.robot).name}"
+                             + (f" (base {model.base_name}, tip {args.tip})" if args.tip or args.base else "")) + "\n"
     text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     if args.out:
+        from ..output_folder import replace_file
         try:
-            Path(args.out).write_text(text)
+            replace_file(args.out, text)
         except OSError as exc:
             raise UsageError(f"--out {args.out}: cannot write: {exc.strerror}") from None
     else:
@@ -161,7 +198,7 @@ def _cmd_count(args) -> int:
             raise UsageError(f"--only: {', '.join(missing)} not generated for {model.name} "
                              f"(does not apply to this arm; see the README's function table)")
         if args.format == "json":
-            print(json.dumps({model.identifier: opcounts_json(programs)}, indent=1))
+            print(strict_json({model.identifier: opcounts_json(programs)}, indent=1))
         else:
             print(opcounts_markdown(model.name, programs, model.identifier.startswith("lwr4")))
     return 0
@@ -180,21 +217,6 @@ def _strict_numbers(value, where: str):
         raise EvaluationError(f"input {where} must be finite, got {value}")
 
 
-def json_number(value):
-    """A float as JSON: finite numbers as they are, NaN and the infinities as the strings
-    ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (protobuf's JSON mapping of doubles), since
-    JSON itself has no spelling for them.
-
-    >>> [json_number(v) for v in (1.5, float("nan"), float("-inf"))]
-    [1.5, 'NaN', '-Infinity']
-    """
-    if isinstance(value, list):
-        return [json_number(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    return value
-
-
 def _cmd_eval(args) -> int:
     from ..runtime.evaluate import load_generated
     text = sys.stdin.read()
@@ -206,9 +228,9 @@ def _cmd_eval(args) -> int:
         raise EvaluationError("standard input must be a JSON object of named inputs, e.g. {\"q\": [...]}")
     for name, value in inputs.items():
         _strict_numbers(value, name)
-    with np.errstate(all="ignore"):   # overflow is reported in the output itself (see json_number)
+    with np.errstate(all="ignore"):   # overflow is reported in the output itself (see kindyngen.json_text)
         outputs = load_generated(args.generated_dir, args.lang).call(args.function, inputs)
-    print(json.dumps({k: json_number(np.asarray(v).tolist()) for k, v in outputs.items()}, allow_nan=False))
+    print(strict_json({k: np.asarray(v).tolist() for k, v in outputs.items()}))
     return 0
 
 
@@ -223,8 +245,8 @@ def _cmd_build_python(args) -> int:
 
 
 def _all_function_names() -> tuple[str, ...]:
-    from ..codegen.catalog import NAMES
-    return NAMES
+    from ..codegen.catalog import SELECTABLE_NAMES
+    return SELECTABLE_NAMES
 
 
 def _names_argument(what: str, known, allow_empty: bool = False):
@@ -253,6 +275,15 @@ def _candidate_names():
 
 _languages = _names_argument("language", lambda: GENERATE_LANGS)
 _function_names = _names_argument("function", _all_function_names)
+
+
+def _bundle(text: str):
+    """An argparse type: ``NAME=FUNCTION,FUNCTION,...`` (kindyngen.codegen.bundles.parse_option)."""
+    from ..codegen.bundles import parse_option
+    try:
+        return parse_option(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 _effects = _names_argument("effect", _effect_names, allow_empty=True)
 _candidates = _names_argument("candidate", _candidate_names)
 
@@ -300,11 +331,12 @@ def _cmd_identify(args) -> int:
     from ..measured.effect_columns import SENSING_EFFECTS
     from ..measured.identify import IdentificationRequest, identify, write_outputs
     from ..measured.log_preparing import Preprocessing
-    from ..measured.streaming import FitLimits, check_fit, check_joint_limits, identify_streamed
-    from .output_dir import replace_outputs
+    from ..measured.streaming import FitLimits, check_fit, identify_streamed
+    from ..output_folder import replace_outputs
     if not args.validate and args.split is None:
         raise UsageError("give validation data (--validate FILE) or --split FRACTION: a model judged only on "
                          "the data it was fitted to says little")
+    writable_out(args.out)
     settings = Preprocessing(cutoff_hz=args.cutoff, rate_hz=args.rate)
     request = IdentificationRequest(robot=args.robot, data=tuple(args.data), validate=tuple(args.validate or ()),
                                     effects=args.effects, consistent=args.consistent, weighted=args.weighted,
@@ -331,7 +363,6 @@ def _cmd_identify(args) -> int:
             progress(f"{', '.join(e for e in args.effects if e in SENSING_EFFECTS)}: identified in memory "
                      f"(re-linearised fits; not streamed, --workers and --scheduler unused)")
             result = identify(request, progress,
-                              check_segment=lambda model, segment: check_joint_limits(segment.source, model, segment),
                               check_fit=lambda samples, columns, condition: check_fit(samples, columns, condition,
                                                                                       limits))
         else:
@@ -346,7 +377,7 @@ def _cmd_identify(args) -> int:
         summary["rms_validation"] = [round(float(v), 4) for v in result.rms_validation]
         summary["rms_validation_sum"] = round(float(np.sum(result.rms_validation)), 4)
     summary["physically_consistent"] = result.physically_consistent
-    print(json.dumps(summary))
+    print(strict_json(summary))
     progress(f"wrote {out}/identification.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
 
@@ -364,7 +395,8 @@ def _cmd_discover(args) -> int:
         if not args.quiet:
             print(f"discover: {text}", file=sys.stderr, flush=True)
 
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
     if args.holdout > MAX_HOLDOUT:
         raise UsageError(f"--holdout {args.holdout:g} leaves {100 * (1 - args.holdout):.3g} % of the log to find "
                          f"effects in; at most {MAX_HOLDOUT:g} may be held out")
@@ -375,10 +407,10 @@ def _cmd_discover(args) -> int:
     replace_outputs(args.out, lambda folder: write_outputs(result, folder), DISCOVER_OUTPUTS)
     out = Path(args.out)
     d = result.discovery
-    print(json.dumps({"effects": list(d.effects),
-                      "indistinguishable": [list(group) for group, _ in d.indistinguishable],
-                      "rms_before": [round(float(v), 4) for v in result.rms_before],
-                      "rms_after": [round(float(v), 4) for v in result.rms_after]}))
+    print(strict_json({"effects": list(d.effects),
+                       "indistinguishable": [list(group) for group, _ in d.indistinguishable],
+                       "rms_before": [round(float(v), 4) for v in result.rms_before],
+                       "rms_after": [round(float(v), 4) for v in result.rms_after]}))
     progress(f"wrote {out}/discovery.json, report.md" + (", model.yaml" if result.model_yaml else ""))
     return 0
 
@@ -386,6 +418,8 @@ def _cmd_discover(args) -> int:
 def _cmd_reproduce(args) -> int:
     from ..measured.fri_source import FriSource, MissingPinocchioError
     from ..measured.paper_reproduction import PAPER_TABLE_II, reproduce, write_report
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
     model = load_robot(args.robot)
 
     def progress(text):
@@ -404,8 +438,10 @@ def _cmd_reproduce(args) -> int:
         raise UsageError(str(exc).splitlines()[0]) from None
     result = reproduce(source, model, n_train=args.train, n_val=args.validate, seed=args.seed,
                        tip_mass=args.tip_mass, progress=progress)
-    summary = write_report(result, args.out)
-    print(json.dumps({"tip_mass": summary.get("tip_mass")}))
+    summary = {}
+    replace_outputs(args.out, lambda folder: summary.update(write_report(result, folder)),
+                    REPRODUCE_OUTPUTS)
+    print(strict_json({"tip_mass": summary.get("tip_mass")}))
     progress(f"wrote {args.out}/reproduction.json, report.md")
     return 0
 
@@ -413,6 +449,7 @@ def _cmd_reproduce(args) -> int:
 def _cmd_excite(args) -> int:
     from ..measured.excitation import (default_limits, optimise_excitation, write_trajectory_csv,
                                        write_trajectory_json)
+    writable_out(args.out)
     model = load(args.robot, args)
     limits = default_limits(model, velocity=args.velocity, acceleration=args.acceleration, margin=args.margin)
 
@@ -421,7 +458,7 @@ def _cmd_excite(args) -> int:
             print(f"excite: {text}", file=sys.stderr, flush=True)
 
     from ..measured.log_reading import MIN_SAMPLES
-    from .output_dir import replace_outputs
+    from ..output_folder import replace_outputs
     rows = int(math.floor(args.periods / args.frequency * args.rate + 1e-9)) + 1
     if rows < MIN_SAMPLES:
         raise UsageError(f"--rate {args.rate:g} Hz over {args.periods} period(s) of {1 / args.frequency:g} s gives "
@@ -444,10 +481,31 @@ def _cmd_excite(args) -> int:
         write_trajectory_csv(folder / "excitation.csv", result.trajectory, args.rate, periods=args.periods)
         write_trajectory_json(folder / "excitation.json", result)
     replace_outputs(out, write, EXCITE_OUTPUTS)
-    print(json.dumps({"condition_number": round(result.condition_number, 3),
-                      "initial_condition_number": round(result.initial_condition_number, 3),
-                      "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
+    print(strict_json({"condition_number": round(result.condition_number, 3),
+                       "initial_condition_number": round(result.initial_condition_number, 3),
+                       "iterations": result.iterations, "feasible": result.feasible, "rows": rows}))
     progress(f"wrote {out}/excitation.csv ({rows} rows at {args.rate:g} Hz) and excitation.json")
+    return 0
+
+
+def _cmd_plan(args) -> int:
+    """A reach (and with --track the MPC tracking it in a simulated loop): kindyngen/control."""
+    from ..control import plan_command
+    from ..control.robot import ControlError
+    from ..output_folder import replace_outputs
+    writable_out(args.out)
+
+    def progress(text):
+        if not args.quiet:
+            print(f"plan: {text}", file=sys.stderr, flush=True)
+    model = load(args.robot, args)
+    try:
+        plan, robot, limits, task = plan_command.plan_reach(model, Path(args.robot), args, progress)
+        tracked = plan_command.track(robot, limits, task, args, progress) if args.track else None
+    except (ControlError, ValueError) as exc:
+        raise UsageError(str(exc).splitlines()[0]) from None
+    replace_outputs(Path(args.out), lambda folder: plan_command.write(folder, plan, tracked), plan_command.OUTPUTS)
+    progress(f"wrote {args.out}/plan.json" + (", track.json" if tracked else ""))
     return 0
 
 
@@ -489,7 +547,12 @@ def parser() -> argparse.ArgumentParser:
                         "Cortex-M4F (float literals, sinf/cosf/sqrtf, a float sincos kernel; no ik_dls; "
                         "python_c is left out)")
     g.add_argument("--functions", type=_function_names, metavar="NAME,NAME,...",
-                   help="generate only these functions, e.g. fk_hom,jacobian,tau (default: all that apply)")
+                   help="generate only these functions, e.g. fk_hom,jacobian,tau; ik_dls brings the fk_hom and "
+                        "jacobian it iterates (default: all that apply)")
+    g.add_argument("--bundle", type=_bundle, action="append", metavar="NAME=FUNCTION,FUNCTION,...",
+                   help="also generate NAME, one function computing all these functions' outputs with one CSE "
+                        "over them (the sin/cos of q once), e.g. step=fk_hom,jacobian,M,g,tau (repeatable; a "
+                        "description's bundles: section adds its own)")
     g.add_argument("--no-batch", action="store_true",
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--no-lanes", action="store_true",
@@ -650,18 +713,60 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("--folds", type=_folds, default=5, help="cross-validation blocks, 2 to 50 (default 5)")
     _log_arguments(d)
     d.set_defaults(run=_cmd_discover)
+
+    pl = sub.add_parser("plan", help="plan a reach with joint limits (optimal control), optionally track it by MPC",
+                        description=("Plan a reach on a fixed-base arm: from rest at --q0, the flange to --goal (m, base "
+                                     "frame) and at rest after --T s, minimising the integral of |tau|^2 under the joint "
+                                     "position, speed and torque limits (the URDF's <limit>, or --limits FILE). The "
+                                     "robot's dynamics are generated and compiled once (cached). With --track the plan "
+                                     "is tracked by the MPC in a simulated 1 kHz loop. Writes plan.json (and "
+                                     "track.json) into --out."))
+    pl.add_argument("robot", metavar="ROBOT", help="robot description, YAML or URDF")
+    _robot_options(pl)
+    where = pl.add_mutually_exclusive_group(required=True)
+    where.add_argument("--goal", type=float, nargs=3, metavar=("X", "Y", "Z"), help="flange goal position in m")
+    where.add_argument("--offset", type=float, nargs=3, metavar=("DX", "DY", "DZ"),
+                       help="flange goal relative to its position at --q0, in m")
+    pl.add_argument("--q0", type=float, nargs="+", metavar="Q", help="start configuration (default: 0 clipped to the limits)")
+    pl.add_argument("--limits", metavar="FILE", help="YAML with velocity: [...] and effort: [...] (default: the URDF's)")
+    pl.add_argument("--T", type=_positive, default=1.0, help="duration in s (default 1)")
+    pl.add_argument("--N", type=_count, default=20, help="shooting intervals (default 20)")
+    pl.add_argument("--integrator", choices=("rk4", "midpoint", "euler"), default="rk4", help="default rk4")
+    pl.add_argument("--substeps", type=_count, default=1, help="integrator steps per interval (default 1)")
+    pl.add_argument("--speed-margin", type=_fraction, default=0.0, metavar="FRACTION",
+                    help="fraction of every speed limit the plan keeps free (default 0)")
+    pl.add_argument("--position-margin", type=float, default=0.0, metavar="RAD",
+                    help="rad the plan keeps from every position limit (default 0); plan.json's between_nodes "
+                         "says what the limits at the nodes leave between them")
+    pl.add_argument("--track", action="store_true", help="also track the plan by MPC in a simulated 1 kHz loop")
+    pl.add_argument("--settle", type=float, default=1.0, help="--track: seconds simulated after --T (default 1)")
+    pl.add_argument("--budget-ms", type=_positive, default=10.0, help="--track: CPU budget per re-solve (default 10)")
+    pl.add_argument("--noise", type=float, nargs=2, default=(0.0, 0.0), metavar=("RAD", "RAD_S"),
+                    help="--track: measurement noise (standard deviations)")
+    pl.add_argument("--torque-step", type=float, nargs=4, metavar=("JOINT", "NM", "START", "DURATION"),
+                    help="--track: a torque step on a joint (1-based) of NM newton metres from START for DURATION s")
+    pl.add_argument("--out", required=True, metavar="DIR")
+    pl.add_argument("--quiet", action="store_true", help="no progress output")
+    pl.set_defaults(run=_cmd_plan)
     return p
 
 
 def main(argv=None) -> int:
+    """Run one command; its exit code (2: bad input, 130 / 143: interrupted, kindyngen.cli.interrupts)."""
+    return ending_on_signals(lambda: _run(argv))
+
+
+def _run(argv) -> int:
     args = parser().parse_args(argv)
     try:
         return args.run(args)
-    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError) as exc:
+    except (RobotDescriptionError, EvaluationError, UsageError, BaseParameterError, BundleError) as exc:
         message = str(exc)
     except MeasuredDataError as exc:   # logs, estimation, the solver, excitation
         message = str(exc)
     except OSError as exc:  # an unwritable --out, a vanished file: still one line, no traceback
         message = f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
-    print(f"error: {message}", file=sys.stderr)
+    # no control character a file or its names hold reaches the terminal (an escape sequence, a
+    # carriage return); newlines stay where a message has them on purpose (a compiler's output)
+    print("error: " + "\n".join(one_line(line) for line in message.split("\n")), file=sys.stderr)
     return EXIT_BAD_INPUT

@@ -3,7 +3,9 @@
 Each builder takes the robot model and the inertial-parameter mode ("numeric": the
 description's values baked in; "symbolic": an extra input ``p`` of 10 barycentric parameters
 per body, a floating base's root body first) and returns a SymbolicFunction, or None where
-the derivation does not apply to that robot.
+the derivation does not apply to that robot. Builders marked :func:`per_scalar` also take the
+C scalar type the code is for (the closed-form IK's tolerances differ between double and
+float).
 """
 from __future__ import annotations
 
@@ -26,6 +28,9 @@ from ..algorithms.dynamics import (centre_of_mass_tree, coriolis_tree, forward_d
                                    inverse_dynamics_tree, mass_matrix_tree)
 from ..algorithms.kinematics import fk_hom_tree, jacobian_tree
 from ..algorithms.derivatives_world_frame import fd_derivatives_tree, tau_derivatives_tree
+from ..algorithms import reduced_functions as reduced
+from ..algorithms import loop_functions as loops
+from ..algorithms.loop_closure import coupled_model, loop_system
 
 Builder = Callable[[RobotModel, str], Optional[SymbolicFunction]]
 
@@ -50,11 +55,21 @@ def flange_only(build: Builder) -> Builder:
     """A derivation of a chain's flange (dual-quaternion kinematics, closed-form IK), built on
     :attr:`RobotModel.flange_chain` (a chain read as a tree: its one frame of interest on the
     last link as the flange); None where there is no such flange."""
-    def flange_build(model, params):
+    def flange_build(model, params, *scalar):
         arm = model.flange_chain
-        return build(arm, params) if arm is not None else None
+        return build(arm, params, *scalar) if arm is not None else None
     flange_build.chain_only = True
+    flange_build.per_scalar = getattr(build, "per_scalar", False)
     return flange_build
+
+
+def per_scalar(build: Callable[[RobotModel, str, str], Optional[SymbolicFunction]]) -> Builder:
+    """A derivation whose expressions depend on the C scalar type (render.SCALARS) it is
+    printed in: called as ``build(model, params, scalar)``. Only the closed-form IK: its
+    singular sets are decided by tolerances, which must lie above what the type resolves
+    (kindyngen/ik/lwr_common.py, TOLERANCES); everything else is the same in both."""
+    build.per_scalar = True
+    return build
 
 
 # every robot's functions, in output order; one builder per function, each written over the
@@ -100,8 +115,8 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("tau_dq", chain_only(lambda model, params: inverse_dynamics_dq(model, params, "tau_dq"))),
     ("Y_dq", chain_only(lambda model, params: regressor_dq(model, "Y_dq"))),
     # closed-form IK of LWR-like arms (None for other arms): kindyngen/ik/lwr_*.py
-    ("ik_hom", flange_only(lambda model, params: ik_hom(model))),
-    ("ik_dq", flange_only(lambda model, params: ik_dq(model))),
+    ("ik_hom", flange_only(per_scalar(lambda model, params, scalar: ik_hom(model, scalar)))),
+    ("ik_dq", flange_only(per_scalar(lambda model, params, scalar: ik_dq(model, scalar)))),
     # regressors on base parameters (kindyngen/algorithms/regressors.py): the same functions in both
     # params modes; Y_g and Y_m differentiate the Lagrange route, which is written for chains
     ("Y_g", chain_only(lambda model, params: regressor(model, "Y_g"))),
@@ -109,21 +124,140 @@ BUILDERS: tuple[tuple[str, Builder], ...] = (
     ("Y", lambda model, params: regressor(model, "Y")),
 )
 
-NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS)
+# a model with mimic joints: these functions, in its independent coordinates
+# (kindyngen/algorithms/reduced_functions.py); the others (routes written for independent
+# chains, closed-form IK) are not generated for it, with a note (MIMIC_NOTE)
+MIMIC_BUILDERS: dict[str, Builder] = {
+    "fk_hom": lambda model, params: reduced.fk_hom_reduced(model),
+    "jacobian": lambda model, params: reduced.jacobian_reduced(model),
+    "M": reduced.mass_matrix_reduced,
+    "g": reduced.gravity_reduced,
+    "c": reduced.coriolis_reduced,
+    "tau": reduced.inverse_dynamics_reduced,
+    "fd": reduced.forward_dynamics_reduced,
+    "com": reduced.centre_of_mass_reduced,
+    "tau_derivatives": reduced.tau_derivatives_reduced,
+    "fd_derivatives": reduced.fd_derivatives_reduced,
+    "fd_derivatives_no_minv": lambda model, params: reduced.fd_derivatives_reduced(
+        model, params, "fd_derivatives_no_minv", with_minv=False),
+    "Y": lambda model, params: regressor(model, "Y"),
+}
+
+# a tree closed by loops with a q-dependent G (kindyngen/algorithms/loop_functions.py): these
+# functions in its independent coordinates; where every loop is a parallelogram (G constant) it
+# is derived as a model with mimic joints instead (MIMIC_BUILDERS)
+LOOP_BUILDERS: dict[str, Builder] = {
+    "fk_hom": lambda model, params: loops.fk_hom_loop(model),
+    "jacobian": lambda model, params: loops.jacobian_loop(model),
+    "M": loops.mass_matrix_loop,
+    "g": loops.gravity_loop,
+    "c": loops.coriolis_loop,
+    "tau": loops.inverse_dynamics_loop,
+    "fd": loops.forward_dynamics_loop,
+    "com": loops.centre_of_mass_loop,
+}
+# every tree closed by loops also gets the constraint, and the closed form where there is one
+LOOP_FUNCTIONS: tuple[tuple[str, Builder], ...] = (
+    ("loop_residual", lambda model, params: loops.loop_residual(model)),
+    ("loop_jacobian", lambda model, params: loops.loop_jacobian(model)),
+    ("loop_solve", lambda model, params: loops.loop_solve(model)),
+)
+
+NAMES: tuple[str, ...] = tuple(name for name, _ in BUILDERS) + tuple(name for name, _ in LOOP_FUNCTIONS)
+# the iterative IK (kindyngen/ik/damped_least_squares.py): no derivation of its own, it iterates the
+# generated fk_hom and jacobian, and is written wherever those are (an arm's one flange pose)
+ITERATIVE_NAMES: tuple[str, ...] = ("ik_dls",)
+ITERATED = {"ik_dls": ("fk_hom", "jacobian")}
+# every name ``generate --functions`` takes
+SELECTABLE_NAMES: tuple[str, ...] = NAMES + ITERATIVE_NAMES
 # the functions a branched tree (or a floating base) read as a tree gets
 TREE_NAMES: tuple[str, ...] = tuple(name for name, build in BUILDERS if not getattr(build, "chain_only", False))
 
 
-def derive_all(model: RobotModel, params: str = "numeric", only=None) -> list[SymbolicFunction]:
-    """All applicable functions for ``model`` (optionally only the named ones)."""
+def derive_all(model: RobotModel, params: str = "numeric", only=None, scalar: str = "double") -> list[SymbolicFunction]:
+    """All applicable functions for ``model`` (optionally only the named ones), for C of the
+    scalar type ``scalar`` (and the other languages written beside it)."""
+    if model.has_loops:
+        return _derive_loops(model, params, only)
     out = []
     for name, build in BUILDERS:
         if only is not None and name not in only:
             continue
-        function = build(model, params)
+        if model.has_mimics:
+            build = MIMIC_BUILDERS.get(name, lambda model, params: None)
+        function = build(model, params, scalar) if getattr(build, "per_scalar", False) else build(model, params)
         if function is not None:
             out.append(with_lengths_port(function, model))
     return out
+
+
+def _derive_loops(model: RobotModel, params: str, only) -> list[SymbolicFunction]:
+    """The functions of a tree closed by loops (LOOP_BUILDERS, or MIMIC_BUILDERS on its coupled
+    model where G is constant), then the loop functions."""
+    system = loop_system(model)
+    linear = system.closed is not None and system.closed.linear
+    derived, builders = (coupled_model(system), MIMIC_BUILDERS) if linear else (model, LOOP_BUILDERS)
+    out = []
+    for name, _ in BUILDERS + LOOP_FUNCTIONS:
+        if only is not None and name not in only:
+            continue
+        if name in dict(LOOP_FUNCTIONS):
+            function = dict(LOOP_FUNCTIONS)[name](model, params)
+        else:
+            function = builders.get(name, lambda model, params: None)(derived, params)
+        if function is not None:
+            out.append(with_lengths_port(function, model))
+    return out
+
+
+def mimic_notes(model: RobotModel, only=None) -> list[str]:
+    """For a model with mimic joints whose tree without mimics is a chain: the functions a
+    chain gets that it does not (written for independent joints), as one note; else none. A
+    tree closed by loops: :func:`loop_notes`."""
+    if model.has_loops:
+        return loop_notes(model, only)
+    if not model.has_mimics or not model.without_mimics().is_chain:
+        return []
+    missing = [name for name, build in BUILDERS if name not in MIMIC_BUILDERS and (only is None or name in only)]
+    return [f"{model.identifier}: mimic joints: {', '.join(missing)} not generated (routes written for independent "
+            f"joints); every other function takes the independent joints"] if missing else []
+
+
+def loop_notes(model: RobotModel, only=None) -> list[str]:
+    """What a tree closed by loops does not get, and why, as notes."""
+    system = loop_system(model)
+    wanted = (lambda name: only is None or name in only)
+    notes = []
+    if system.closed is None:
+        notes.append(f"{model.identifier}: closed loops: no closed form recognised for the dependent joints "
+                     f"({', '.join(system.dependent_names)}): loop_solve runs {loops.NEWTON_STEPS} Newton steps from "
+                     "q_guess; every function takes the positions of all joints")
+    if system.closed is None or not system.closed.linear:
+        missing = [name for name in loops.NOT_GENERATED if wanted(name)]
+        if missing:
+            notes.append(f"{model.identifier}: closed loops with a configuration-dependent G: {', '.join(missing)} "
+                         "not generated")
+    return notes
+def derived_names(only):
+    """The derivations a selection ``only`` (None: everything) needs: its own, and those the
+    iterative functions it names iterate.
+
+    >>> sorted(derived_names({"ik_dls", "M"})), derived_names(None)
+    (['M', 'fk_hom', 'ik_dls', 'jacobian'], None)
+    """
+    if only is None:
+        return None
+    return set(only).union(*(ITERATED.get(name, ()) for name in only))
+
+
+def wants_ik_dls(only) -> bool:
+    """Whether a selection ``only`` (None: everything) asks for ik_dls, which is then written
+    where it applies (an arm's flange: kindyngen.ik.damped_least_squares.applies).
+
+    >>> wants_ik_dls(None), wants_ik_dls({"fk_hom", "jacobian"}), wants_ik_dls({"ik_dls"})
+    (True, False, True)
+    """
+    return only is None or "ik_dls" in only
 
 
 def with_lengths_port(function: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

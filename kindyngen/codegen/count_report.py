@@ -6,6 +6,7 @@ paper's Table II (Hartl-Nesic and Meiringer: Maple 2018, with and without optimi
 from __future__ import annotations
 
 from .optimize import IN_PLACE_BOUND, Program
+from ..model.user_text import markdown
 
 # Kinematics paper, Table II: (add, mult, calls); "derived" = without code optimisation.
 PAPER_TABLE_II = {
@@ -23,14 +24,24 @@ def opcounts_json(programs: list[Program], float_error: dict | None = None) -> d
     dependent operations (:func:`kindyngen.codegen.opcount.program_critical_path`); a function
     whose C single call is a lane program has ``"c_lanes"`` (:meth:`kindyngen.codegen.optimize.LaneProgram.to_json`:
     lanes, the counts once and per lane, those executed, its critical path); with ``--scalar float``
-    each measured function has ``"float_error"`` (kindyngen/runtime/float_accuracy.py)."""
+    each measured function has ``"float_error"`` (kindyngen/runtime/float_accuracy.py); a bundle
+    ``"members"`` and ``"members_after"`` (their count called one by one)."""
     float_error = float_error or {}
     return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(),
                               "critical_path": p.critical.to_json(), **_routes_json(p),
                               **({"c_lanes": p.lanes.to_json()} if p.lanes is not None else {}),
+                              **_bundle_json(p),
                               **({"float_error": float_error[p.function.name].to_json()}
                                  if p.function.name in float_error else {})}
             for p in programs}
+
+
+def _bundle_json(p: Program) -> dict:
+    """A bundle's members and their count after CSE called one by one (kindyngen/codegen/bundles.py)."""
+    if "members" not in p.function.metadata:
+        return {}
+    return {"members": list(p.function.metadata["members"]),
+            "members_after": p.function.metadata["members_after"].to_json()}
 
 
 def _routes_json(p: Program) -> dict:
@@ -61,7 +72,7 @@ def _critical_markdown(programs) -> list[str]:
 
 def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_paper: bool,
                       float_error: dict | None = None) -> str:
-    lines = [f"# Operation counts: {robot_name}", "",
+    lines = [f"# Operation counts: {markdown(robot_name)}", "",
              "add = additions/subtractions, mul = multiplications/divisions, call = sin, cos, sqrt, "
              "atan2, ... (counting rule in the README). Before = the expression tree as derived; "
              "after = the generated straight-line code after CSE."
@@ -90,6 +101,20 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
             lines.append(f"| {p.function.name} | {lp.uniform.add} / {lp.uniform.mul} / {lp.uniform.call} | "
                          f"{lp.lane.add} / {lp.lane.mul} | {lp.count} ({lp.used}) | "
                          f"{lp.executed.add} / {lp.executed.mul} | {lp.critical.cycles} |")
+    bundled = [p for p in programs if "members" in p.function.metadata]
+    if bundled:
+        lines += ["", "## Bundles", "",
+                  "A bundle computes its members' outputs in one call with one CSE over all of them (the sin/cos "
+                  "of q once, equal intermediates once; kindyngen/codegen/bundles.py), against its members "
+                  "called one by one:", "",
+                  "| bundle | members | add / mul / call after | members one by one | add + mul ratio |",
+                  "|---|---|---|---|---|"]
+        for p in bundled:
+            parts = p.function.metadata["members_after"]
+            ratio = (p.after.add + p.after.mul) / max(parts.add + parts.mul, 1)
+            lines.append(f"| {p.function.name} | {', '.join(p.function.metadata['members'])} | "
+                         f"{p.after.add} / {p.after.mul} / {p.after.call} | {parts.add} / {parts.mul} / {parts.call} | "
+                         f"{ratio:.2f} |")
     chosen = [p for p in programs if p.routes]
     if chosen:
         lines += ["", "## Routes", "", "Functions derived by several routes keep the one with the fewest "

@@ -15,6 +15,11 @@ from fractions import Fraction
 import numpy as np
 
 
+class FloatRangeError(ValueError):
+    """A constant that float code cannot hold (beyond FLT_MAX, or nonzero below the normal
+    range): the description needs double code (``generate`` reports it as bad input)."""
+
+
 def nearest_float32(value) -> np.float32:
     """The float nearest to the exact ``value`` (int, Fraction or float), ties to even.
 
@@ -23,7 +28,7 @@ def nearest_float32(value) -> np.float32:
     """
     exact = Fraction(value)
     if abs(exact) > FLT_MAX:
-        raise ValueError(f"constant {float(exact)!r} is outside the float range")
+        raise FloatRangeError(f"constant {float(exact)!r} is outside the float range")
     guess = np.float32(float(exact))       # within one float ulp of the answer (two roundings)
     with np.errstate(over="ignore"):
         candidates = (np.nextafter(guess, np.float32(-np.inf)), guess, np.nextafter(guess, np.float32(np.inf)))
@@ -35,19 +40,26 @@ def nearest_float32(value) -> np.float32:
 
 
 FLT_MAX = Fraction(float(np.finfo(np.float32).max))
+FLT_MIN = Fraction(float(np.finfo(np.float32).tiny))     # the smallest normal float, 1.2e-38
 
 
-def c_float(value, saturate: bool = True) -> str:
-    """The C literal (``f`` suffix) of the float nearest to ``value``. Beyond float's range
-    (the closed-form IK's input bounds, 1e149 and 1e300: sums of squares that must not
-    overflow) ``saturate`` gives the largest float, the same test in float arithmetic (a sum
-    that overflowed is inf, which no comparison with it passes).
+def c_float(value) -> str:
+    """The C literal (``f`` suffix) of the float nearest to ``value``. A nonzero constant
+    below float's normal range is refused, as one beyond its largest value is: it would be
+    printed as 0 (or a denormal), and a guard such as 1 / max(x, 1e-150) would become 1/0
+    (the closed-form IK's tolerances are per scalar type for that reason:
+    kindyngen/ik/lwr_common.py, TOLERANCES).
 
-    >>> c_float(1e300)
-    '3.4028235e+38f'
+    >>> c_float(1e-30)
+    '1e-30f'
+    >>> c_float(1e-150)      # doctest: +IGNORE_EXCEPTION_DETAIL
+    Traceback (most recent call last):
+    ...
+    FloatRangeError: constant 1e-150 is below float's normal range (1.2e-38): it would round to 0.0
     """
-    if saturate and abs(Fraction(value)) > FLT_MAX:
-        value = FLT_MAX if value > 0 else -FLT_MAX
+    if value != 0 and abs(Fraction(value)) < FLT_MIN:
+        raise FloatRangeError(f"constant {float(value)!r} is below float's normal range (1.2e-38): "
+                         f"it would round to {float(nearest_float32(value))!r}")
     text = str(nearest_float32(value))      # numpy: the shortest digits that round-trip
     if "." not in text and "e" not in text:
         text += ".0"

@@ -3,7 +3,10 @@
 
 One renderer per target language, all fed the same plain context built here: names of
 inputs, temporaries and outputs are decided once per language, the printer supplies the
-expressions.
+expressions. Text from the user (the robot's name, the description's file name, summaries,
+conventions and port descriptions, which name joints, links and frames) enters the context as
+:class:`kindyngen.codegen.environment.UserText` and is escaped by the environment of the file
+it is printed in: C comments, Python docstrings, MATLAB comments, the CMake comment.
 """
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ import jinja2
 import symengine as se
 
 from .. import __version__
+from .environment import UserText, blank, environment
 from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, kernel_c, split_slot,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
@@ -22,8 +26,7 @@ from .schedule import pressure_order
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
 from .render_python_c import render_python_c
 from ..model.robot_model import RobotModel
-
-TEMPLATES = Path(__file__).resolve().parent / "templates"
+from ..model.user_text import c_comment, cmake_comment, matlab_comment, python_string
 
 BATCH_BLOCK = 64
 """Most configurations per block of a C batch function. A block's sin/cos of the joint angles
@@ -203,9 +206,9 @@ def _matlab_index(k: int, shape) -> str:
     return ", ".join(str(int(i) + 1) for i in _index(k, shape).split(", "))
 
 
-def _environment() -> jinja2.Environment:
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), keep_trailing_newline=True,
-                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+def _environment(escape) -> jinja2.Environment:
+    """The templates' environment for files whose user text ``escape`` makes data."""
+    env = environment(escape)
     env.filters["shape"] = lambda shape: " x ".join(str(s) for s in shape)
     env.filters["index"] = _index
     env.filters["mindex"] = _matlab_index
@@ -324,11 +327,11 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
             assignments.append((str(sym), dialect.expr(expr, names)))
             printed[sym] = assignments[-1]
     inputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
-                            p.unit, p.description,
+                            UserText(p.unit), UserText(p.description),
                             used=any(s in used_symbols for s in syms))
                    for p, syms in zip(f.inputs, f.input_symbols))
     outputs = tuple(PortView(p.name, p.shape, p.size, "float" if dialect.single and p.dtype == "double" else p.dtype,
-                             p.unit, p.description,
+                             UserText(p.unit), UserText(p.description),
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
     lane = None
@@ -347,7 +350,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
                            for k in (pressure_order if pressure else demand_order)(kept, program.outputs))
     text = " ".join(t for _, t in assignments) + " ".join(t for o in outputs for _, t in o.entries)
     return FunctionView(
-        name=f.name, c_symbol=f"{prefix}_{f.name}", summary=f.summary, conventions=f.conventions,
+        name=f.name, c_symbol=f"{prefix}_{f.name}", summary=UserText(f.summary), conventions=UserText(f.conventions),
         inputs=inputs, outputs=outputs, assignments=tuple(assignments),
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
@@ -466,11 +469,12 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     return view, first, angles, arguments
 
 
-def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", lanes: bool = True) -> dict:
+def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", lanes: bool = True,
+             ik_dls: bool = True) -> dict:
     return {
         "robot": model.identifier,
-        "robot_name": model.name,
-        "source": Path(model.source).name,
+        "robot_name": UserText(model.name),
+        "source": UserText(Path(model.source).name),
         "n": model.nv,                           # velocity coordinates (a floating base: 6 + joints)
         "nq": model.nq,
         "convention": model.convention,
@@ -484,30 +488,41 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", 
         "kernel_latency": kernel_latency(),
         "batch_block": BATCH_BLOCK,
         "batch_stack": BATCH_STACK,
-        "ik_dls": dls_view(model, programs),  # iterative IK (templates/*/ik_dls.*.j2), or None
+        # iterative IK (templates/*/ik_dls.*.j2) where asked for (--functions) and applicable, else None
+        "ik_dls": dls_view(model, programs) if ik_dls else None,
     }
 
 
 def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "double",
-             batch: bool = True, float_error: dict | None = None, lanes: bool = True) -> dict[str, str]:
+             batch: bool = True, float_error: dict | None = None, lanes: bool = True,
+             ik_dls: bool = True) -> dict[str, str]:
     """Header, source and CMakeLists.txt of the C99 library; ``trig``: see kindyngen/codegen/trig_kernel.py;
     ``scalar``: one of SCALARS (float: no ik_dls, whose tolerances are double's); ``batch``:
     whether the <name>_batch variants are written; ``lanes``: single calls of functions with a
     lane program print it (a loop over lanes that compilers vectorise), else their scalar
-    program (fewer operations, for targets without vector units)."""
+    program (fewer operations, for targets without vector units); ``ik_dls``: whether the
+    iterative IK is written (where it applies)."""
     single = scalar == "float"
-    env, ctx = _environment(), _context(model, programs, C_FLOAT if single else C, trig, lanes)
+    env, ctx = _environment(c_comment), _context(model, programs, C_FLOAT if single else C, trig, lanes, ik_dls)
     ctx.update(scalar=scalar, batch=batch, zero="0.0f" if single else "0.0",
                sincos="kdg_sincosf" if single else "kdg_sincos", sincos_half=HALF_KERNEL,
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
-               sincos_kernel=kernel_c_float() if single else _kernels(ctx["functions"], batch),
+               sincos_kernel=_float_kernel(ctx["functions"], batch) if single else _kernels(ctx["functions"], batch),
                float_error={name: e.text() for name, e in (float_error or {}).items()})
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),
             f"{model.identifier}.c": env.get_template("c/source.c.j2").render(ctx),
-            "CMakeLists.txt": env.get_template("c/CMakeLists.txt.j2").render(ctx)}
+            "CMakeLists.txt": _environment(cmake_comment).get_template("c/CMakeLists.txt.j2").render(ctx)}
+
+
+def _float_kernel(functions, batch: bool) -> str:
+    """The float sincos kernel where a single call or a batch variant calls it, else nothing (a
+    static function no call uses is a compiler warning: a float library of ik_hom alone)."""
+    used = any(f.half or f.angles or f.arguments for f in functions) or (
+        batch and any(f.batch.angles or f.batch.arguments for f in functions))
+    return kernel_c_float() if used else ""
 
 
 def _kernels(functions, batch: bool) -> str:
@@ -525,31 +540,43 @@ def _kernels(functions, batch: bool) -> str:
     return "\n".join(text)
 
 
-def render_python(model: RobotModel, programs) -> dict[str, str]:
-    env, ctx = _environment(), _context(model, programs, NUMPY)
+def render_python(model: RobotModel, programs, ik_dls: bool = True) -> dict[str, str]:
+    env, ctx = _environment(python_string), _context(model, programs, NUMPY, ik_dls=ik_dls)
     return {f"{model.identifier}.py": env.get_template("python/module.py.j2").render(ctx)}
 
 
-def render_casadi(model: RobotModel, programs) -> dict[str, str]:
-    env, ctx = _environment(), _context(model, programs, CASADI)
+def render_casadi(model: RobotModel, programs, escape=python_string, ik_dls: bool = True) -> dict[str, str]:
+    """The module of CasADi Function builders; ``escape``: how it prints user text (see
+    :func:`casadi_builders`); ``ik_dls``: whether the iterative IK is written (where it applies)."""
+    env, ctx = _environment(escape), _context(model, programs, CASADI, ik_dls=ik_dls)
     return {f"{model.identifier}_casadi.py": env.get_template("casadi/module.py.j2").render(ctx)}
 
 
-def render_jax(model: RobotModel, programs) -> dict[str, str]:
+def casadi_builders(model: RobotModel, programs, ik_dls: bool = True) -> str:
+    """The CasADi module without any user text (every UserText printed as nothing): the code the
+    pipeline runs to save the .casadi files, which therefore never runs a character of the
+    description. Its Functions are those of the written module (names, inputs, outputs and
+    expressions are not user text)."""
+    return next(iter(render_casadi(model, programs, escape=blank, ik_dls=ik_dls).values()))
+
+
+def render_jax(model: RobotModel, programs, ik_dls: bool = False) -> dict[str, str]:
     """A module of pure jax.numpy functions (jit, vmap, grad apply); the iterative ik_dls is
-    left out (its loop and restarts are host code in the numpy module)."""
-    env, ctx = _environment(), _context(model, programs, JAX)
+    left out whatever ``ik_dls`` says (its loop and restarts are host code in the numpy module)."""
+    env, ctx = _environment(python_string), _context(model, programs, JAX)
     return {f"{model.identifier}_jax.py": env.get_template("jax/module.py.j2").render(ctx)}
 
 
-def render_matlab(model: RobotModel, programs) -> dict[str, str]:
+def render_matlab(model: RobotModel, programs, ik_dls: bool = False) -> dict[str, str]:
     """One .m function per generated function, ``<robot>_<name>.m`` (vectorised over a trailing
     batch dimension), a MEX gateway around the generated C and the .m that builds it; the
-    iterative ik_dls is left out."""
-    env, ctx = _environment(), _context(model, programs, MATLAB)
+    iterative ik_dls is left out whatever ``ik_dls`` says."""
+    env, ctx = _environment(matlab_comment), _context(model, programs, MATLAB)
     ctx["mex"] = f"{model.identifier}_mex"
+    # the gateway's matrix reader, only where an input is a matrix (an unused static function is a warning)
+    ctx["matrix_inputs"] = any(len(p.shape) == 2 for f in ctx["functions"] for p in f.inputs)
     files = {f"{f.c_symbol}.m": env.get_template("matlab/function.m.j2").render(ctx, f=f) for f in ctx["functions"]}
-    files[f"{ctx['mex']}.c"] = env.get_template("matlab/mex.c.j2").render(ctx)
+    files[f"{ctx['mex']}.c"] = _environment(c_comment).get_template("matlab/mex.c.j2").render(ctx)
     files[f"{model.identifier}_build_mex.m"] = env.get_template("matlab/build_mex.m.j2").render(ctx)
     return files
 

@@ -7,19 +7,18 @@ argument order, for one configuration per call at a per-call overhead well under
 ``kindyngen.runtime.python_c.load`` compiles and imports it.
 
 The renderer reads only the interface document, so the extension of an already generated
-robot can be rendered from its ``functions.json`` alone (``render_extension``).
+robot can be rendered from its ``functions.json`` alone (``render_extension``). Its texts (the
+robot's name, summaries, conventions, port descriptions) are user text: C string literals of the
+docstrings (:func:`kindyngen.model.user_text.c_string`), a C comment in the file's header.
 """
 from __future__ import annotations
 
 import textwrap
-from pathlib import Path
-
-import jinja2
 
 from .. import __version__
+from .environment import UserText, environment
 from .interface import manifest
-
-TEMPLATES = Path(__file__).resolve().parent / "templates"
+from ..model.user_text import c_comment, c_string, one_line
 
 # The longest string literal a C99 compiler must accept (5.2.4.1); -pedantic warns beyond it.
 C99_STRING_LIMIT = 4095
@@ -31,14 +30,22 @@ class PythonCRenderError(ValueError):
 
 
 def _c_literal_lines(text: str) -> list[str]:
-    """``text`` as the lines of one C string literal (escaped, one source line per text line)."""
-    if len(text.encode()) > C99_STRING_LIMIT:
-        raise PythonCRenderError(f"docstring of {len(text.encode())} bytes exceeds the C99 string limit "
+    r"""``text`` as the lines of one C string literal (escaped, one source line per text line).
+
+    >>> print("\n".join(_c_literal_lines('f(q)\n--\nthe "tip"\\ */ ??/')))
+    "f(q)\n"
+    "--\n"
+    "the \"tip\"\\ */ ?\?/"
+    """
+    # the compiled bytes: the newlines, the rest as c_string writes it (controls visibly)
+    size = len("\n".join(one_line(line) for line in text.split("\n")).encode())
+    if size > C99_STRING_LIMIT:
+        raise PythonCRenderError(f"docstring of {size} bytes exceeds the C99 string limit "
                                  f"{C99_STRING_LIMIT}: {text[:60]!r}...")
     lines = text.split("\n")
     out = []
     for k, line in enumerate(lines):
-        body = line.replace("\\", "\\\\").replace('"', '\\"')
+        body = c_string(line)
         out.append(f'"{body}\\n"' if k < len(lines) - 1 else f'"{body}"')
     return out
 
@@ -60,7 +67,8 @@ def _cost_text(opcount: dict) -> str:
 
 
 def _wrap(text: str, indent: str = "") -> str:
-    return textwrap.fill(text, DOC_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
+    """``text`` filled to DOC_WIDTH, its controls first written visibly (as the C string will)."""
+    return textwrap.fill(one_line(text), DOC_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
 
 
 def _docstring(spec: dict, signature: str, robot: str) -> str:
@@ -137,18 +145,17 @@ def render_extension(interface: dict) -> dict[str, str]:
     robot = interface["robot"]
     functions = [_function_view(f, robot) for f in interface["functions"]
                  if "c" in f.get("languages", ("c",))]        # only what exists in the generated C
-    ctx = {"robot": robot, "module": f"{robot}_ext", "robot_name": interface["name"], "n": interface["n"],
+    ctx = {"robot": robot, "module": f"{robot}_ext", "robot_name": UserText(interface["name"]), "n": interface["n"],
            "convention": interface["convention"], "gravity": [repr(float(g)) for g in interface["gravity"]],
            "structure": interface.get("structure"), "gravity_frame": _gravity_frame(interface),
            "version": __version__, "functions": functions, "module_doc": _c_literal_lines(_module_doc(interface))}
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), keep_trailing_newline=True,
-                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
-    return {f"{robot}_ext.c": env.get_template("python_c/extension.c.j2").render(ctx)}
+    return {f"{robot}_ext.c": environment(c_comment).get_template("python_c/extension.c.j2").render(ctx)}
 
 
-def render_python_c(model, programs) -> dict[str, str]:
-    """The extension source of ``model``'s optimised ``programs`` (render.RENDERERS entry)."""
+def render_python_c(model, programs, ik_dls: bool = True) -> dict[str, str]:
+    """The extension source of ``model``'s optimised ``programs`` (render.RENDERERS entry);
+    ``ik_dls``: whether the iterative IK is wrapped (where it applies)."""
     # the renderer reads no top-level entry but robot, name, n, convention, gravity, functions and
     # a tree's structure, nq and nv:
     # "params" (and how the C computes sin/cos) are in the ports and the C already
-    return render_extension(manifest(model, programs, params="numeric"))
+    return render_extension(manifest(model, programs, params="numeric", ik_dls=ik_dls))

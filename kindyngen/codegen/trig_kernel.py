@@ -445,26 +445,65 @@ static void {name}(long n, const double *restrict x, double *restrict s, double 
 # -- single precision (``generate --scalar float``) -------------------------------------------
 # The same method in float arithmetic: the float kernel is the double one with its constants
 # rounded once to float from their exact values (pi/2 split for float, minimax polynomials of
-# degree 3 fitted for float's precision), a range of +-FLOAT_BOUND and libm's sinf/cosf beyond.
+# degree 3 fitted for float's precision) for |x| <= FLOAT_BOUND, and beyond it a Payne-Hanek
+# reduction in integer arithmetic (the bits of 2/pi as a table), so that every finite float
+# stays in the kernel: no libm sinf/cosf is called or linked, and an angle's cost is bounded.
 
 FLOAT_BOUND = 1024.0
-"""Largest |x| the float kernel reduces itself (2^10 rad): |k| < 2^10, so k times each of the
-first three parts of pi/2 (14 significant bits) is exact in float."""
+"""Largest |x| the float kernel reduces by Cody-Waite (2^10 rad): |k| < 2^10, so k times each of
+the first three parts of pi/2 (14 significant bits) is exact in float. Beyond it (and for
+infinities and NaN) the Payne-Hanek reduction of :func:`kernel_c_float`."""
 
 FLOAT_MAX_ULP = 1
 """Largest difference of the float kernel from the correctly rounded sin and cos, in ulp of the
-float result (tests/runtime/test_float_code.py checks it)."""
+float result, for every finite float, in round-to-nearest (tests/runtime/test_float_code.py and
+tests/runtime/test_firmware.py check it)."""
 
 FLOAT_TWO_OVER_PI = "0.63661975f"
 FLOAT_PIO2_PARTS = ("1.5706787f", "0.000117614865f", "9.920313e-10f", "6.223372e-14f")
 FLOAT_SIN_COEFFS = ("-0.16666667f", "0.008333329f", "-0.00019839335f", "2.7183114e-06f")
 FLOAT_COS_COEFFS = ("0.041666668f", "-0.0013888883f", "2.479952e-05f", "-2.7210237e-07f")
 
-FLOAT_SHIFTER = "12582912.0f"
-"""1.5 * 2^23: y + SHIFTER - SHIFTER rounds y (|y| < 2^22) to an integer in IEEE float."""
-
 FLOAT_TINY = "0.00024414062f"
 """2^-12: below it sinf x = x and cosf x = 1 after rounding."""
+
+TWO_OVER_PI_WORDS = ("0xA2F9836Eu", "0x4E441529u", "0xFC2757D1u", "0xF534DDC0u", "0xDB629599u", "0x3C439041u",
+                     "0xFE5163ABu")
+"""The first 224 bits of 2/pi's binary fraction, 32 per word (:func:`two_over_pi_words`): the
+Payne-Hanek reduction of a float of exponent e (x = m 2^(e-23), m < 2^24, e <= 127) reads
+its bits e - 24 to e + 71; the bits before weigh multiples of 4 quarter turns."""
+
+PIO2_Q31 = "0xC90FDAA2u"
+"""pi/2 in units of 2^-31, rounded down (3373259426.13...): the reduced fraction of a quarter turn
+times this is the reduced argument, in integer arithmetic."""
+
+
+def two_over_pi_words() -> tuple[str, ...]:
+    """2/pi's binary fraction as seven 32-bit words (C literals), recomputed from mpmath.
+
+    >>> two_over_pi_words()[0]
+    '0xA2F9836Eu'
+    """
+    import mpmath as mp
+    with mp.workprec(400):
+        value, words = 2 / mp.pi, []
+        for _ in range(len(TWO_OVER_PI_WORDS)):
+            value *= 2 ** 32
+            word = int(mp.floor(value))
+            words.append(f"0x{word:08X}u")
+            value -= word
+        return tuple(words)
+
+
+def pio2_q31() -> str:
+    """floor(pi/2 2^31) as a C literal, recomputed from mpmath.
+
+    >>> pio2_q31()
+    '0xC90FDAA2u'
+    """
+    import mpmath as mp
+    with mp.workprec(100):
+        return f"0x{int(mp.floor(mp.pi / 2 * 2 ** 31)):08X}u"
 
 
 def split_pio2_float():
@@ -508,50 +547,132 @@ def _horner_text(coeffs, z: str) -> str:
     return text
 
 
-def kernel_c_float(name: str = "kdg_sincosf") -> str:
-    """The float kernel as a static C99 function ``name(n, x, s, c)``: s[i] = sinf x[i],
-    c[i] = cosf x[i] for i < n; the double kernel's steps in float (see kernel_c)."""
-    p1, p2, p3, p4 = FLOAT_PIO2_PARTS
-    sh = FLOAT_SHIFTER
+def _reduce_large_float(name: str) -> str:
+    """The C of ``name``_reduce, the Payne-Hanek reduction of one float beyond FLOAT_BOUND."""
+    words = ", ".join(TWO_OVER_PI_WORDS)
     return f"""\
+/* x = (k + f) pi/2 for |x| > {FLOAT_BOUND:g}, an infinity or NaN (Payne-Hanek, integer arithmetic):
+ * returns k mod 4 and *r + *rlo = f pi/2 (|f| <= 1/2) to about 2^-29 of its size; for an infinity or
+ * NaN, 0 and NaN. x = m 2^(e-23) with m < 2^24, 10 <= e <= 127; x 2/pi mod 4 needs only 2/pi's bits
+ * e - 24 to e + 71 (earlier ones weigh multiples of 4, later ones under 2^-71), which the table
+ * holds after 32 zero bits. Its cost does not depend on x beyond the exponent's table position. */
+static unsigned {name}_reduce(float x, float *r, float *rlo)
+{{
+    static const uint32_t bits[8] = {{0x00000000u, {words}}};
+    union {{ float f; uint32_t u; }} v, scale;
+    uint32_t m, w2, w1, w0, top, hi, lo;
+    uint64_t p, a, prod;
+    unsigned k, e, word, shift, sh;
+    v.f = x;
+    e = (v.u >> 23) & 0xFFu;
+    if (e == 0xFFu) {{
+        *r = x - x;          /* an infinity or NaN: sin and cos are NaN */
+        *rlo = 0.0f;
+        return 0u;
+    }}
+    m = (v.u & 0x7FFFFFu) | 0x800000u;
+    /* bit e - 24 of 2/pi (e the unbiased exponent, e = biased - 127) is bit e + 7 of the table */
+    word = (e - 127u + 7u) >> 5;
+    shift = (e - 127u + 7u) & 31u;
+    w2 = (uint32_t)(((uint64_t)bits[word] << 32 | bits[word + 1]) >> (32u - shift));
+    w1 = (uint32_t)(((uint64_t)bits[word + 1] << 32 | bits[word + 2]) >> (32u - shift));
+    w0 = (uint32_t)(((uint64_t)bits[word + 2] << 32 | bits[word + 3]) >> (32u - shift));
+    /* p = x 2/pi mod 4 in units of 2^-62: the product's bits 32..95 (mod 2^96) */
+    p = ((uint64_t)(m * w2) << 32) + (uint64_t)m * w1 + (((uint64_t)m * w0) >> 32);
+    k = (unsigned)((p + ((uint64_t)1 << 61)) >> 62);     /* the nearest quarter turn, 0..4 */
+    p -= (uint64_t)k << 62;                              /* f 2^62, two's complement */
+    a = (p >> 63) ? (uint64_t)0 - p : p;                 /* |f| 2^62 <= 2^61 */
+    /* normalised to [2^60, 2^61) by sh bits: six steps whatever a is */
+    sh = a < ((uint64_t)1 << 29) ? 32u : 0u;
+    a <<= sh;
+    sh += a < ((uint64_t)1 << 45) ? 16u : 0u;
+    a <<= sh & 16u;
+    sh += a < ((uint64_t)1 << 53) ? 8u : 0u;
+    a <<= sh & 8u;
+    sh += a < ((uint64_t)1 << 57) ? 4u : 0u;
+    a <<= sh & 4u;
+    sh += a < ((uint64_t)1 << 59) ? 2u : 0u;
+    a <<= sh & 2u;
+    sh += a < ((uint64_t)1 << 60) ? 1u : 0u;
+    a <<= sh & 1u;
+    /* |f| pi/2 = top 2^-(31 + sh) * pi/2 2^31 2^-31: the product's 48 leading bits as two floats */
+    top = (uint32_t)(a >> 29);
+    prod = (uint64_t)top * {PIO2_Q31};
+    sh += (prod >> 63) ? 0u : 1u;
+    prod <<= (prod >> 63) ? 0u : 1u;
+    hi = (uint32_t)(prod >> 40);
+    lo = (uint32_t)(prod >> 16) & 0xFFFFFFu;
+    scale.u = (127u - 24u - sh) << 23;                   /* 2^(-24 - sh), a normal float */
+    *r = (float)hi * scale.f;
+    *rlo = (float)lo * scale.f * 5.9604645e-08f;          /* times 2^-24 */
+    if ((p >> 63) != (v.u >> 31)) {{                      /* f < 0 xor x < 0 */
+        *r = -*r;
+        *rlo = -*rlo;
+    }}
+    return (v.u >> 31) ? (0u - k) & 3u : k & 3u;          /* sin(-x) = -sin x, cos(-x) = cos x */
+}}
+"""
+
+
+def kernel_c_float(name: str = "kdg_sincosf") -> str:
+    """The float kernel as static C99 functions: ``name(n, x, s, c)``: s[i] = sinf x[i],
+    c[i] = cosf x[i] for i < n; the double kernel's steps in float (see kernel_c) for
+    |x| <= FLOAT_BOUND, ``name``_reduce beyond, so every finite float stays in the kernel.
+
+    Independent of the rounding mode where that is cheap: the quadrant k is x 2/pi rounded to
+    the nearest integer by a conversion (which truncates in every mode) and an exact
+    correction, so that in a directed rounding mode the reduced argument stays within the
+    polynomials' interval and the quadrant's selects see an exact integer; only the roundings
+    of the arithmetic (and Fast2Sum's recovery of them) change, by a few ulp. The double
+    kernel's float shifter (k = (y + 1.5 2^23) - 1.5 2^23) picked a wrong quadrant there."""
+    p1, p2, p3, p4 = FLOAT_PIO2_PARTS
+    return f"""\
+{_reduce_large_float(name)}
 /* s[i] = sin(x[i]), c[i] = cos(x[i]) for i < n in float, within {FLOAT_MAX_ULP} ulp of the correctly
- * rounded values (kindyngen/codegen/trig_kernel.py: the double kernel's method, its constants rounded to
- * float). The first loop has no branch and no call; arguments beyond +-{FLOAT_BOUND:g}, infinities and
- * NaN take libm's sinf/cosf in the second. Needs IEEE float arithmetic: no -ffast-math. */
+ * rounded values for every float (kindyngen/codegen/trig_kernel.py: the double kernel's method, its
+ * constants rounded to float, for |x| <= {FLOAT_BOUND:g}; Payne-Hanek beyond); no libm call. Needs IEEE
+ * float arithmetic: no -ffast-math (the .c refuses it); rounding to nearest for the stated ulp bound,
+ * a few ulp more in the other rounding modes. */
 static void {name}(long n, const float *restrict x, float *restrict s, float *restrict c)
 {{
     long i;
     for (i = 0; i < n; ++i) {{
         const float xi = x[i];
-        /* k = xi*2/pi rounded to an integer by the shifter 1.5*2^23; m = k mod 4 in -2..2 */
-        const float k = (xi*{FLOAT_TWO_OVER_PI} + {sh}) - {sh};
-        const float m = k - 4.0f*((0.25f*k + {sh}) - {sh});
-        /* r + rlo = xi - k*pi/2 (Cody-Waite, the roundings recovered by Fast2Sum) */
-        const float a = xi - k*{p1};
-        const float b = a - k*{p2};
-        const float b_err = (a - b) - k*{p2};
-        const float d = b - k*{p3};
-        const float d_err = (b - d) - k*{p3};
-        const float tail = (b_err + d_err) - k*{p4};
-        const float r = d + tail;
-        const float rlo = (d - r) + tail;
-        const float z = r*r;
-        const float sin_r = r + (r*z*({_horner_text(FLOAT_SIN_COEFFS, "z")}) + rlo*(1.0f - 0.5f*z));
-        const float half_z = 0.5f*z;
-        const float w = 1.0f - half_z;
-        const float cos_r = w + (((1.0f - w) - half_z)
-                                 + (z*z*({_horner_text(FLOAT_COS_COEFFS, "z")}) - r*rlo));
-        const float sin_q = fabsf(m) == 1.0f ? cos_r : sin_r;
-        const float cos_q = fabsf(m) == 1.0f ? sin_r : cos_r;
-        const int tiny = fabsf(xi) < {FLOAT_TINY};
-        s[i] = tiny ? xi : ((m == 2.0f || m == -2.0f || m == -1.0f) ? -sin_q : sin_q);
-        c[i] = tiny ? 1.0f : ((m == 2.0f || m == -2.0f || m == 1.0f) ? -cos_q : cos_q);
-    }}
-    for (i = 0; i < n; ++i) {{
-        if (!(fabsf(x[i]) <= {FLOAT_BOUND!r}f)) {{
-            s[i] = sinf(x[i]);
-            c[i] = cosf(x[i]);
+        float r, rlo, sin_r, cos_r, sin_q, cos_q;
+        unsigned q;
+        if (fabsf(xi) <= {FLOAT_BOUND!r}f) {{
+            /* k = xi*2/pi rounded to the nearest integer (ties away from 0): the conversion truncates
+               in any rounding mode, the fraction y - trunc(y) is exact */
+            const float y = xi*{FLOAT_TWO_OVER_PI};
+            const int kt = (int)y;
+            const float frac = y - (float)kt;
+            const int ki = kt + (frac >= 0.5f) - (frac <= -0.5f);
+            const float k = (float)ki;
+            /* r + rlo = xi - k*pi/2 (Cody-Waite, the roundings recovered by Fast2Sum) */
+            const float a = xi - k*{p1};
+            const float b = a - k*{p2};
+            const float b_err = (a - b) - k*{p2};
+            const float d = b - k*{p3};
+            const float d_err = (b - d) - k*{p3};
+            const float tail = (b_err + d_err) - k*{p4};
+            r = d + tail;
+            rlo = (d - r) + tail;
+            q = (unsigned)ki & 3u;
+        }} else {{
+            q = {name}_reduce(xi, &r, &rlo);
         }}
+        {{
+            const float z = r*r;
+            const float half_z = 0.5f*z;
+            const float w = 1.0f - half_z;
+            sin_r = r + (r*z*({_horner_text(FLOAT_SIN_COEFFS, "z")}) + rlo*(1.0f - 0.5f*z));
+            cos_r = w + (((1.0f - w) - half_z) + (z*z*({_horner_text(FLOAT_COS_COEFFS, "z")}) - r*rlo));
+        }}
+        /* x = r + k pi/2: quadrants q = 0, 1, 2, 3 give sin x = s, c, -s, -c and cos x = c, -s, -c, s */
+        sin_q = (q & 1u) ? cos_r : sin_r;
+        cos_q = (q & 1u) ? sin_r : cos_r;
+        s[i] = fabsf(xi) < {FLOAT_TINY} ? xi : ((q & 2u) ? -sin_q : sin_q);
+        c[i] = fabsf(xi) < {FLOAT_TINY} ? 1.0f : (((q + 1u) & 2u) ? -cos_q : cos_q);
     }}
 }}
 """

@@ -191,7 +191,7 @@ def per_iteration_counts(model: RobotModel, programs) -> dict:
     iteration: one fk_hom, at most one jacobian (after an accepted step), one 6x6 solve (a
     second one only when a joint at a limit is released) and the pose error."""
     fk, jac = _program(programs, "fk_hom"), _program(programs, "jacobian")
-    parts = {"fk_hom": fk.after, "jacobian": jac.after, **_solve_counts(model.n)}
+    parts = {"fk_hom": fk.after, "jacobian": jac.after, **_solve_counts(model.nv)}
     total = OpCount()
     for count in parts.values():
         total = total + count
@@ -212,7 +212,7 @@ def dls_view(model: RobotModel, programs) -> DlsView | None:
     return DlsView(
         name=NAME, c_symbol=f"{prefix}_{NAME}",
         fk_name="fk_hom", fk_symbol=f"{prefix}_fk_hom", jacobian_name="jacobian",
-        jacobian_symbol=f"{prefix}_jacobian", n=model.n,
+        jacobian_symbol=f"{prefix}_jacobian", n=model.nv,
         lower=tuple(literal(float(v)) for v in model.lower),
         upper=tuple(literal(float(v)) for v in model.upper),
         restarts=tuple(tuple(literal(v) for v in row) for row in restart_table(model)),
@@ -225,13 +225,13 @@ def dls_view(model: RobotModel, programs) -> DlsView | None:
 
 
 def _q_what(model: RobotModel) -> str:
-    return "joint positions" if any(j.prismatic for j in model.joints) else "joint angles"
+    return "joint positions" if any(j.prismatic for j in model.coordinate_joints) else "joint angles"
 
 
 def ports(model: RobotModel, programs) -> tuple[list, list]:
     """functions.json inputs and outputs of ik_dls."""
     extra = _extra_inputs(programs) or ()
-    n = model.n
+    n = model.nv
     inputs = [
         {"name": "T", "shape": [4, 4], "description": "target flange pose in the base frame (row-major; last row unused)",
          "unit": "m (translation), 1 (rotation)", "dtype": "double"},

@@ -48,7 +48,8 @@ angles q themselves for the canonical table):
     joint 1, in the canonical base frame) has the sign of +th4 / -th4, i.e. for e = 0 rows,
     s = 0 has r >= 0.
 
-Status codes (one per row, first match wins):
+Status codes (one per row, first match wins; the tolerances are the double build's, the
+float build's are larger, above what float resolves: :data:`TOLERANCES`):
 
     2  unreachable: the target is outside the workspace (||p|| beyond |d3| + |d5| or below
        ||d3| - |d5||), or not reachable with this theta3 (horizontal distance of the wrist
@@ -69,9 +70,9 @@ Status codes (one per row, first match wins):
 
 Statuses 0, 1, 3, 4, 5 all satisfy FK(q) = target (to rounding); 0, 3, 4, 5 are
 admissible (within limits). Every output is finite for every finite input: inputs whose
-sum of squares reaches 1e300 (ik_hom) or 1e149 (ik_dq), divided by (1 + |p_B| + |p_F|)^2
-for a map with translations, too large for the squares and products inside, are replaced by
-the (canonical) zero pose (status 2).
+sum of squares reaches 1e300 (ik_hom) or 1e149 (ik_dq) (float: 1e36, 1e17), divided by
+(1 + |p_B| + |p_F|)^2 for a map with translations, too large for the squares and products
+inside, are replaced by the (canonical) zero pose (status 2).
 """
 from __future__ import annotations
 
@@ -96,13 +97,80 @@ ADMISSIBLE = (VALID, WRIST_SINGULAR, ELBOW_SINGULAR, SHOULDER_SINGULAR)
 N_BRANCHES = 8
 
 # --- tolerances (lengths in m) -----------------------------------------------------------
-REACH_C4 = 1e-12        # |cos q4| may exceed 1 by this (about 2e-13 m in ||p||) and still reach
-ELBOW_C4 = 5e-13        # 1 - |cos q4| below this: elbow singular, q4 snapped (|sin q4| < 1e-6)
-SHOULDER_REACH = 1e-10  # m: |v| may exceed the horizontal distance by this and still reach
-SHOULDER_R2 = 1e-12     # m^2: r^2 below this (r < 1e-6 m): shoulder singular
-SHOULDER_AXIS = 1e-12   # m: a wrist centre this close to the z0 axis is put on it (th1 = 0)
-WRIST_S6 = 1e-12        # |sin q6| below this (and cos q6 > 0): wrist singular
-TINY = 1e-150           # guards 0/0 (q1 = 0 on the z0 axis); above any underflowed product
+@dataclass(frozen=True)
+class Tolerances:
+    """Where the closed form decides near its singular sets, and its overflow guards: one set
+    per C scalar type, because a decision by an exact zero (or a tolerance below what the type
+    resolves) is moved by rounding: in float a stretched elbow came out unreachable, and
+    ``tiny`` = 1e-150 printed as 0.0f turned the guard 1 / max(x, tiny) into 1/0 and the
+    wrist centre on the z0 axis (T = identity, the pose at q = 0) into NaN.
+
+    ``reach_c4``: |cos th4| may exceed 1 by this and still reach; ``elbow_c4``: 1 - |cos th4|
+    below this is elbow singular, th4 snapped (|sin th4| below ``elbow_sine``, the text of
+    sqrt(2 elbow_c4)); ``shoulder_reach`` (m): |v| may exceed the wrist centre's distance
+    from the z0 axis by this and still reach; ``shoulder_r2`` (m^2): r^2 below this is
+    shoulder singular; ``shoulder_axis`` (m): a wrist centre this close to the z0 axis is
+    put on it (th1 = 0); ``wrist_s6``: |sin th6| below this (cos th6 > 0) is wrist singular,
+    th6 = 0; ``tiny``: guards 0/0 (1 / max(x, tiny), atan2(0, 0 + tiny)), a normal number
+    of the type above every guarded product that is not exactly 0; ``bound_hom``,
+    ``bound_dq``: inputs whose sum of squares reaches this are replaced by the zero pose
+    (status 2), so that no square or product inside overflows (ik_hom's intermediates stay
+    below 6 bound_hom, ik_dq's below 13 bound_dq^2 for the LWR's lengths)."""
+
+    reach_c4: float
+    elbow_c4: float
+    elbow_sine: str
+    shoulder_reach: float
+    shoulder_r2: float
+    shoulder_axis: float
+    wrist_s6: float
+    tiny: float
+    bound_hom: float
+    bound_dq: float
+    stated: bool = False     # the header lists them all (float; double's header predates it)
+
+    def conventions(self, limits: str, bound: float) -> str:
+        """The generated documentation's conventions with these tolerances."""
+        text = CONVENTIONS.format(limits=limits, bound=f"{bound:g}", elbow_sine=self.elbow_sine,
+                                  wrist_s6=_short(self.wrist_s6))
+        if self.stated:
+            text += (f" Tolerances of this scalar type (above the rounding errors measured at exactly "
+                     f"singular targets): reachable while |cos q4| <= 1 + {_short(self.reach_c4)} and "
+                     f"|v| = |d5 sin q3 sin q4| <= rho + {_short(self.shoulder_reach)} m (rho: the wrist "
+                     f"centre's distance from the z0 axis); elbow singular where 1 - |cos q4| < "
+                     f"{_short(self.elbow_c4)}; shoulder singular where r^2 = rho^2 - v^2 < "
+                     f"{_short(self.shoulder_r2)} m^2 (r < {math.sqrt(self.shoulder_r2) * 1e3:g} mm); a wrist "
+                     f"centre within {_short(self.shoulder_axis)} m of the z0 axis is put on it; wrist "
+                     f"singular where |sin q6| < {_short(self.wrist_s6)} (q6 set to 0).")
+        return text
+
+
+def _short(x: float) -> str:
+    """A tolerance as text.
+
+    >>> _short(1e-12), _short(1e-05), _short(4e-06)
+    ('1e-12', '1e-5', '4e-6')
+    """
+    return f"{x:g}".replace("e-0", "e-")
+
+
+TOLERANCES = {
+    # double (unit roundoff 1.1e-16): |cos q4| beyond 1 by 1e-12 is about 2e-13 m in ||p||
+    "double": Tolerances(reach_c4=1e-12, elbow_c4=5e-13, elbow_sine="1e-6", shoulder_reach=1e-10,
+                         shoulder_r2=1e-12, shoulder_axis=1e-12, wrist_s6=1e-12, tiny=1e-150,
+                         bound_hom=1e300, bound_dq=1e149),
+    # float (unit roundoff 6e-8), above the rounding errors measured at exactly singular float
+    # targets (tests/ik/test_ik_float.py, docs/reference/ik.md): cos q4 from ||p||^2 errs by
+    # ~1e-6 (2e-5 beyond 1 is 4e-6 m in ||p|| for the LWR), r^2 by < 4e-7 m^2 where
+    # |sin q4| >= 0.1, a float FK's wrist centre on the z0 axis lies ~1e-7 m off it: ten times
+    # those; q6 errs by up to 5e-5 (the arm's angles carry the target's rounding, amplified
+    # near the elbow and shoulder singularities): 3e-5 flags all but 0.3 %, and a wider band
+    # would turn the pose by as much; tiny 1e-30 (float's normal range ends at 1.2e-38); the
+    # bounds keep every intermediate below FLT_MAX (3.4e38)
+    "float": Tolerances(reach_c4=2e-5, elbow_c4=1e-5, elbow_sine="4.5e-3", shoulder_reach=1e-5,
+                        shoulder_r2=4e-6, shoulder_axis=1e-6, wrist_s6=3e-5, tiny=1e-30,
+                        bound_hom=1e36, bound_dq=1e17, stated=True),
+}
 
 CONVENTIONS = (
     "Returns all eight closed-form branches of the LWR IK for the given theta3 (= q3). "
@@ -112,7 +180,7 @@ CONVENTIONS = (
     "(-pi, pi] (q3 = theta3 as given). status (first match wins): 2 unreachable (outside "
     "the workspace or not reachable with this theta3; q finite but not a solution), "
     "1 outside joint limits, 5 shoulder singular (r ~ 0; q1 = 0 on the z0 axis), "
-    "4 elbow singular (|sin q4| < 1e-6, q4 snapped), 3 wrist singular (|q6| < 1e-12, "
+    "4 elbow singular (|sin q4| < {elbow_sine}, q4 snapped), 3 wrist singular (|q6| < {wrist_s6}, "
     "q6 = 0, q5 = q7: the rotation about the common axis split equally), 0 valid. "
     "Statuses 0, 1, 3, 4, 5 reproduce the target; 0, 3, 4, 5 are within the joint limits "
     "{limits}. Branch-free; no NaN/Inf for any finite input (inputs with a sum of squares "
@@ -580,28 +648,31 @@ class Shoulder:
     s2: se.Basic
 
 
-def elbow_cosine(p, d3, d5):
+def elbow_cosine(p, d3, d5, tol: Tolerances):
     """cos th4 from ||p|| by the law of cosines, clamped and snapped to +-1 near the elbow
-    singularity. Returns (c4, unreachable, singular), the flags as single comparisons."""
+    singularity (``tol.elbow_c4``, ``tol.reach_c4``). Returns (c4, unreachable, singular),
+    the flags as single comparisons."""
     px, py, pz = p
     k = se.Integer(1) / (2 * d3 * d5)
     c4raw = (px ** 2 + py ** 2 + pz ** 2) * k - (d3 ** 2 + d5 ** 2) * k
-    c4 = select((1, 1 - ELBOW_C4 < c4raw), (-1, c4raw < -1 + ELBOW_C4), c4raw)
+    c4 = select((1, 1 - tol.elbow_c4 < c4raw), (-1, c4raw < -1 + tol.elbow_c4), c4raw)
     size = se.Abs(c4raw)
-    return c4, 1 + REACH_C4 < size, 1 - ELBOW_C4 < size
+    return c4, 1 + tol.reach_c4 < size, 1 - tol.elbow_c4 < size
 
 
-def solve_position(p, c3, s3, c4, s4, d3, d5, scale=1) -> tuple[tuple[Shoulder, Shoulder], se.Basic, se.Basic]:
-    """Shoulder angles for wrist centre ``p`` given th3 (c3, s3) and th4 (c4, s4 >= 0).
+def solve_position(p, c3, s3, c4, s4, d3, d5, tol: Tolerances,
+                   scale=1) -> tuple[tuple[Shoulder, Shoulder], se.Basic, se.Basic]:
+    """Shoulder angles for wrist centre ``p`` given th3 (c3, s3) and th4 (c4, s4 >= 0), with
+    the tolerances ``tol`` (``shoulder_axis``, ``shoulder_reach``, ``shoulder_r2``, ``tiny``).
 
     ``scale`` multiplies every length (the DQ form works with p/2 and d/2).
     Returns the two shoulder solutions (r >= 0 first), the shoulder-reach failure flag and
     the shoulder-singular flag."""
     px, py, pz = p
-    # on the z0 axis (within SHOULDER_AXIS) the wrist centre is put exactly on it, so that
+    # on the z0 axis (within tol.shoulder_axis) the wrist centre is put exactly on it, so that
     # both shoulder solutions coincide with th1 = 0 instead of following rounding noise
     rho2 = px ** 2 + py ** 2
-    keep = select((0, rho2 < (SHOULDER_AXIS * scale) ** 2), 1)
+    keep = select((0, rho2 < (tol.shoulder_axis * scale) ** 2), 1)
     px, py, rho2 = keep * px, keep * py, keep * rho2
     rho = se.sqrt(rho2)
     d5s4 = d5 * s4
@@ -610,20 +681,21 @@ def solve_position(p, c3, s3, c4, s4, d3, d5, scale=1) -> tuple[tuple[Shoulder, 
     r2 = rho2 - v2
     rr = se.Max(r2, 0)
     r = se.sqrt(rr)
-    tol = SHOULDER_REACH * scale
-    unreachable = (rho + tol) ** 2 < v2                 # |v| > rho + tol
-    singular = r2 < SHOULDER_R2 * scale ** 2
+    reach = tol.shoulder_reach * scale
+    unreachable = (rho + reach) ** 2 < v2               # |v| > rho + reach
+    singular = r2 < tol.shoulder_r2 * scale ** 2
     # (px, py) = Rz(th1) (r, v):  cos th1 ~ r px + v py, sin th1 ~ r py - v px
     rpx, vpy, rpy, vpx = r * px, v * py, r * py, v * px
     # (r, pz) = Rot(th2) (u, w):  cos th2 ~ u r + w pz, sin th2 ~ u pz - w r
     ur, wpz, upz, wr = u * r, w * pz, u * pz, w * r
     # norms: |(A1, B1)| = sqrt((r^2 + v^2) rho2), |(A2, B2)| = sqrt((u^2 + w^2)(r^2 + pz^2))
-    inv1 = 1 / se.Max(se.sqrt(se.Max(rho2, v2)) * rho, TINY)
-    inv2 = 1 / se.Max(se.sqrt((u ** 2 + w ** 2) * (rr + pz ** 2)), TINY)
+    tiny = tol.tiny
+    inv1 = 1 / se.Max(se.sqrt(se.Max(rho2, v2)) * rho, tiny)
+    inv2 = 1 / se.Max(se.sqrt((u ** 2 + w ** 2) * (rr + pz ** 2)), tiny)
     shoulders = []
     for sign in (1, -1):
-        a1, b1 = sign * rpx + vpy + TINY, sign * rpy - vpx
-        a2, b2 = sign * ur + wpz + TINY, upz - sign * wr
+        a1, b1 = sign * rpx + vpy + tiny, sign * rpy - vpx
+        a2, b2 = sign * ur + wpz + tiny, upz - sign * wr
         shoulders.append(Shoulder(th1=se.atan2(b1, a1), c1=a1 * inv1, s1=b1 * inv1,
                                   th2=se.atan2(b2, a2), c2=a2 * inv2, s2=b2 * inv2))
     return tuple(shoulders), unreachable, singular

@@ -35,15 +35,11 @@ import sympy
 import symengine as se
 
 from ..algorithms.geometry import constant, joint_cos_sin
-from .lwr_common import (CONVENTIONS, TINY, WRIST_S6, LwrGeometry, Wrist, assemble, elbow_cosine,
-                         half_angle, indicator, input_bound, lwr_geometry, quaternion, sanitize, solve_position)
+from .lwr_common import (TOLERANCES, LwrGeometry, Wrist, assemble, elbow_cosine, half_angle, indicator,
+                         input_bound, lwr_geometry, quaternion, sanitize, solve_position)
 from ..algorithms.dualquat.dq_kinematics import quat_add, quat_mul
 from ..model.robot_model import RobotModel
 from ..algorithms.symbolic import Port, SymbolicFunction, port_symbols
-
-# sum of squares of x: entries below ~3e74, so t/2 = vec(d r*) stays below 1e150 and its
-# squares below 1e300
-INPUT_BOUND = 1e149
 
 
 def conj(quat):
@@ -72,34 +68,39 @@ def canonical_dq(geometry: LwrGeometry, xs) -> tuple:
     return r + d
 
 
-def _wrist(r, h1, h2, h3, h4) -> Wrist:
-    """Wrist angles (th6 >= 0) from w = (Qz(th1) Qy(-th2) Qz(th3) Qy(th4))* (x) r."""
+def _wrist(r, h1, h2, h3, h4, wrist_s6: float, tiny: float) -> Wrist:
+    """Wrist angles (th6 >= 0) from w = (Qz(th1) Qy(-th2) Qz(th3) Qy(th4))* (x) r; singular
+    where |sin th6| < ``wrist_s6``."""
     w = quat_mul(conj((h1[0], 0, 0, h1[1])), r)
     w = quat_mul(conj((h2[0], 0, -h2[1], 0)), w)
     w = quat_mul(conj((h3[0], 0, 0, h3[1])), w)
     W, X, Y, Z = quat_mul(conj((h4[0], 0, h4[1], 0)), w)
     sb2, cb2 = X ** 2 + Y ** 2, W ** 2 + Z ** 2
-    singular = indicator(sb2 < (WRIST_S6 / 2) ** 2 * (sb2 + cb2))     # th6 = 0
+    singular = indicator(sb2 < (wrist_s6 / 2) ** 2 * (sb2 + cb2))     # th6 = 0
     regular = 1 - singular
     th6 = se.atan2(2 * regular * se.sqrt(sb2 * cb2), cb2 - sb2)        # exactly 0 there
-    # (cos S, sin S) ~ (W, Z), (cos D, sin D) ~ (-Y, X); W + TINY keeps th6 = pi (W = Z = 0)
+    # (cos S, sin S) ~ (W, Z), (cos D, sin D) ~ (-Y, X); W + tiny keeps th6 = pi (W = Z = 0)
     # valid. At the singularity D := 0, split equally: q5 = q7 = S taken in [-pi/2, pi/2]
-    # (from (W, 0) instead of (1, 0); + TINY for W = 0, S = pi/2)
-    Wt = W + TINY
+    # (from (W, 0) instead of (1, 0); + tiny for W = 0, S = pi/2)
+    Wt = W + tiny
     dc, ds = singular * Wt - regular * Y, regular * X
     th5 = se.atan2(Wt * ds + Z * dc, Wt * dc - Z * ds)
     th7 = se.atan2(Z * dc - Wt * ds, Wt * dc + Z * ds)
     return Wrist(th5=th5, th6=th6, th7=th7, singular=singular)
 
 
-def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
-    """All eight IK branches of an arm of LWR type from a unit dual quaternion (None otherwise)."""
+def ik_dq(model: RobotModel, scalar: str = "double") -> Optional[SymbolicFunction]:
+    """All eight IK branches of an arm of LWR type from a unit dual quaternion (None
+    otherwise), with the tolerances of the C scalar type ``scalar``
+    (:data:`lwr_common.TOLERANCES`; the sum of squares of x below ``bound_dq``: in double its
+    entries below ~3e74, so t/2 = vec(d r*) stays below 1e150 and its squares below 1e300)."""
     geometry = lwr_geometry(model)
     if geometry is None:
         return None
+    tol = TOLERANCES[scalar]
     x = port_symbols("x", (8,))
     theta3 = port_symbols("theta3", (1,))
-    bound = input_bound(geometry, INPUT_BOUND)
+    bound = input_bound(geometry, tol.bound_dq)
     xs = sanitize(x, bound)
     if geometry.base is not None or geometry.flange is not None:
         xs = canonical_dq(geometry, xs)                # B^-1 x F^-1
@@ -110,13 +111,13 @@ def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
 
     ch3, sh3 = joint_cos_sin(geometry.signs[2] * theta3[0] / 2, sympy.sympify(geometry.offsets[2]) / 2)
     c3, s3 = ch3 ** 2 - sh3 ** 2, 2 * ch3 * sh3
-    c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5)
+    c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5, tol)
     ch4, sh4 = se.sqrt((1 + c4) / 2), se.sqrt((1 - c4) / 2)
     s4 = 2 * ch4 * sh4
     th4 = se.atan2(s4, c4)
-    shoulders, shoulder_unreachable, shoulder_singular = solve_position(p, c3, s3, c4, s4, d3, d5, scale=half)
-    wrists = [_wrist(r, half_angle(sh.c1, sh.s1), half_angle(sh.c2, sh.s2), (ch3, sh3), (ch4, sh4))
-              for sh in shoulders]
+    shoulders, shoulder_unreachable, shoulder_singular = solve_position(p, c3, s3, c4, s4, d3, d5, tol, scale=half)
+    wrists = [_wrist(r, half_angle(sh.c1, sh.s1), half_angle(sh.c2, sh.s2), (ch3, sh3), (ch4, sh4),
+                     tol.wrist_s6, tol.tiny) for sh in shoulders]
     q, status = assemble(geometry, theta3[0], th4, shoulders, wrists,
                          (elbow_unreachable, shoulder_unreachable), shoulder_singular, elbow_singular)
     return SymbolicFunction(
@@ -131,6 +132,6 @@ def ik_dq(model: RobotModel) -> Optional[SymbolicFunction]:
                       "3 wrist singular, 4 elbow singular, 5 shoulder singular", "", "int")),
         input_symbols=(x, theta3),
         output_exprs=(q, status),
-        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{bound:g}")
+        conventions=tol.conventions(geometry.limits_text(), bound)
         + " Input x in fk_dq's layout; x and -x give the same result." + geometry.map_text(),
     )

@@ -32,16 +32,15 @@ from typing import Optional
 import symengine as se
 
 from ..algorithms.geometry import joint_cos_sin
-from .lwr_common import (CONVENTIONS, WRIST_S6, Wrist, assemble, canonical_pose, elbow_cosine, half_angle,
-                         indicator, input_bound, lwr_geometry, sanitize, solve_position)
+from .lwr_common import (TOLERANCES, Wrist, assemble, canonical_pose, elbow_cosine, half_angle, indicator,
+                         input_bound, lwr_geometry, sanitize, solve_position)
 from ..model.robot_model import RobotModel
 from ..algorithms.symbolic import Port, SymbolicFunction, port_symbols
 
-INPUT_BOUND = 1e300   # sum of squares of the 12 used entries of T: every entry below 1e150
 
-
-def _wrist(R, c1, s1, c2, s2, c3, s3, c4, s4) -> Wrist:
-    """Wrist angles (th6 >= 0) from M = R_04^T R*, R_04 = Rz(th1) Ry(-th2) Rz(th3) Ry(th4)."""
+def _wrist(R, c1, s1, c2, s2, c3, s3, c4, s4, wrist_s6: float) -> Wrist:
+    """Wrist angles (th6 >= 0) from M = R_04^T R*, R_04 = Rz(th1) Ry(-th2) Rz(th3) Ry(th4);
+    aligned where |sin th6| < ``wrist_s6``."""
     R0, R1, R2 = R
     a = [c1 * x + s1 * y for x, y in zip(R0, R1)]
     b = [c1 * y - s1 * x for x, y in zip(R0, R1)]                 # Rz(-th1) R*
@@ -54,7 +53,7 @@ def _wrist(R, c1, s1, c2, s2, c3, s3, c4, s4) -> Wrist:
     m0 = [c4 * x - s4 * z for x, z in zip(p[:2], n2[:2])]
     m20, m21, m22 = m2
     s6 = se.sqrt(m20 ** 2 + m21 ** 2)
-    aligned = indicator(s6 < WRIST_S6)          # th6 = 0 or pi: any th7 will do
+    aligned = indicator(s6 < wrist_s6)          # th6 = 0 or pi: any th7 will do
     regular = 1 - aligned
     # (c7, s7) up to the positive factor s6. When aligned, M = Rz(phi) Ry(-th6) with
     # (cos phi, sin phi) = (m11, -m01): th7 = phi/2 (half-angle vector), and th5 from K
@@ -69,25 +68,29 @@ def _wrist(R, c1, s1, c2, s2, c3, s3, c4, s4) -> Wrist:
     return Wrist(th5=th5, th6=th6, th7=se.atan2(s7, c7), singular=singular)
 
 
-def ik_hom(model: RobotModel) -> Optional[SymbolicFunction]:
-    """All eight IK branches of an arm of LWR type from a homogeneous pose (None otherwise)."""
+def ik_hom(model: RobotModel, scalar: str = "double") -> Optional[SymbolicFunction]:
+    """All eight IK branches of an arm of LWR type from a homogeneous pose (None otherwise),
+    with the tolerances of the C scalar type ``scalar`` (:data:`lwr_common.TOLERANCES`; the
+    sum of squares of the 12 used entries of T below ``bound_hom``: in double every entry
+    below 1e150)."""
     geometry = lwr_geometry(model)
     if geometry is None:
         return None
+    tol = TOLERANCES[scalar]
     T = port_symbols("T", (4, 4))
     theta3 = port_symbols("theta3", (1,))
-    bound = input_bound(geometry, INPUT_BOUND)
+    bound = input_bound(geometry, tol.bound_hom)
     entries, drop = sanitize(T[0:3] + T[4:7] + T[8:11] + (T[3], T[7], T[11]), bound, flag=True)
     R, p = (entries[0:3], entries[3:6], entries[6:9]), entries[9:12]
     R, p = canonical_pose(geometry, R, p, drop)    # B^-1 T F^-1 (unchanged for the LWR's own table)
     d3, d5 = geometry.d3, geometry.d5
 
     c3, s3 = joint_cos_sin(geometry.signs[2] * theta3[0], geometry.offsets[2])
-    c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5)
+    c4, elbow_unreachable, elbow_singular = elbow_cosine(p, d3, d5, tol)
     s4 = se.sqrt((1 - c4) * (1 + c4))
     th4 = se.atan2(s4, c4)
-    shoulders, shoulder_unreachable, shoulder_singular = solve_position(p, c3, s3, c4, s4, d3, d5)
-    wrists = [_wrist(R, sh.c1, sh.s1, sh.c2, sh.s2, c3, s3, c4, s4) for sh in shoulders]
+    shoulders, shoulder_unreachable, shoulder_singular = solve_position(p, c3, s3, c4, s4, d3, d5, tol)
+    wrists = [_wrist(R, sh.c1, sh.s1, sh.c2, sh.s2, c3, s3, c4, s4, tol.wrist_s6) for sh in shoulders]
     q, status = assemble(geometry, theta3[0], th4, shoulders, wrists,
                          (elbow_unreachable, shoulder_unreachable), shoulder_singular, elbow_singular)
     return SymbolicFunction(
@@ -101,5 +104,5 @@ def ik_hom(model: RobotModel) -> Optional[SymbolicFunction]:
                       "3 wrist singular, 4 elbow singular, 5 shoulder singular", "", "int")),
         input_symbols=(T, theta3),
         output_exprs=(q, status),
-        conventions=CONVENTIONS.format(limits=geometry.limits_text(), bound=f"{bound:g}") + geometry.map_text(),
+        conventions=tol.conventions(geometry.limits_text(), bound) + geometry.map_text(),
     )

@@ -20,6 +20,9 @@ adds what meeting real data needs, one module per job:
 * :mod:`kindyngen.measured.identify`: the ``identify`` command's run (in memory);
 * :mod:`kindyngen.measured.log_formats`: logs read in chunks (CSV, npz, Parquet, ROS 2 and
   ROS 1 bags of JointState);
+* :mod:`kindyngen.measured.log_checks`: a log checked against the robot it claims to record
+  (joint limits, angles in degrees, torques, velocities and accelerations beyond physical
+  bounds, time stamps not in seconds), for every command that reads logs;
 * :mod:`kindyngen.measured.ls_factor`: least squares from the triangular factor, folded chunk
   by chunk and combined across logs;
 * :mod:`kindyngen.measured.streaming`: the ``identify`` command's run folded into a QR factor (bounded memory), and

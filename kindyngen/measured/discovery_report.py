@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.user_text import markdown as markdown_text
 from .discovery import EXPLAINED_FACTOR
 from .identification_report import rms_table, torque_figure
 
@@ -121,11 +122,13 @@ def _coefficient_lines(doc) -> list[str]:
 def markdown(result, doc, figures) -> str:
     d = result.discovery
     n = len(result.rms_before)
-    lines = [f"# Discrepancy between {Path(result.request.robot).name} and the data", "",
-             f"Data: {', '.join(map(str, result.request.data))}; the last {100 * result.request.holdout:g} % of each "
+    # the description's and the logs' names (and the preprocessing notes naming a log's keys) are
+    # the user's: literal Markdown text
+    lines = [f"# Discrepancy between {markdown_text(Path(result.request.robot).name)} and the data", "",
+             f"Data: {', '.join(markdown_text(str(path)) for path in result.request.data)}; the last {100 * result.request.holdout:g} % of each "
              f"file's time span is held out ({result.samples['held_out']} samples after filtering); the selection saw "
              f"{result.samples['selection']} samples ({d.folds}-fold time-blocked cross-validation).", "",
-             "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "Preprocessing: " + "; ".join(map(markdown_text, result.preprocessing_notes)) + ".", "",
              "Parallel filtering: every model column is computed from the filtered motion, then the columns and the "
              "*unfiltered* torque pass through the same linear filter and decimation: "
              + ("; ".join(d.filtering) if d.filtering else "none (the data as given)") + ".", "",

@@ -31,11 +31,13 @@ from typing import Callable
 
 import numpy as np
 
+from ..json_text import strict_json
 from ..readers.yaml_description import load_robot
 from .discovery import CANDIDATES, EXPLAINED_FACTOR, Discovery, discover
 from .discovery_data import (CHUNK_ROWS, WINDOW_ROWS, Recording, _smoothing, _spring, edge_rows, in_memory,
                              piece_windows)
 from .effect_columns import coulomb_eps
+from .log_checks import log_bounds
 from .log_formats import joint_names_of, read_any
 from .log_preparing import Preprocessing, Segment, preprocess, split_time
 from .log_streaming import ChunkedParallelFilter, NotStreamable, overlap_rows, segment_pieces
@@ -176,10 +178,13 @@ def _rows(seg: Segment, a: int, b: int) -> Segment:
 
 
 def _part(path, model, settings, k0: int, k1: int, chunk_rows: int):
-    """Rows ``[k0, k1)`` of the (single) segment of a streamed log, piece by piece."""
+    """Rows ``[k0, k1)`` of the (single) segment of a streamed log, piece by piece (each pass
+    checks the samples against the robot again: the file may have changed since the first)."""
+    bounds = log_bounds(model)
+
     def pieces():
         row = 0
-        for _, piece in segment_pieces(path, model.n, settings, joint_names_of(model), chunk_rows):
+        for _, piece in segment_pieces(path, model.n, settings, joint_names_of(model), chunk_rows, bounds=bounds):
             m = len(piece.t)
             a, b = max(k0 - row, 0), min(k1 - row, m)
             if a < b:
@@ -195,19 +200,21 @@ def _file_parts(path, model, request, progress):
     ``holdout`` fraction of its own time span held out (as
     :func:`kindyngen.measured.log_preparing.split_time` cuts).  A log whose chunks preprocess
     like the whole is streamed (a first pass reads its time stamps); any other log (gaps,
-    repeated rows, ``--rate`` resampling, or short) is preprocessed whole in memory."""
+    repeated rows, ``--rate`` resampling, or short) is preprocessed whole in memory.  Every
+    sample is checked against the robot as it is read (:mod:`kindyngen.measured.log_checks`)."""
     settings = request.preprocessing
+    bounds = log_bounds(model)
     notes, spans, times = [], [], []
     try:
         for index, piece in segment_pieces(path, model.n, settings, joint_names_of(model), request.chunk_rows,
-                                           notes=notes, spans=spans):
+                                           notes=notes, spans=spans, bounds=bounds):
             if spans:                          # preprocessed whole anyway (short, or resampled)
                 break
             times.append(piece.t)
     except NotStreamable as exc:
         notes, spans = [f"preprocessed whole in memory ({exc})"], [None]
     if spans:
-        segments = preprocess(read_any(path, model.n, joint_names_of(model)), settings)
+        segments = preprocess(read_any(path, model.n, joint_names_of(model), bounds), settings)
         notes = [note for note in notes if note.startswith("preprocessed whole")] + \
             [note for s in segments for note in s.notes]
         a, b = split_time(segments, 1.0 - request.holdout)
@@ -362,13 +369,12 @@ def result_document(result: DiscrepancyResult) -> dict:
 
 def write_outputs(result: DiscrepancyResult, out: str | Path) -> Path:
     """discovery.json, model.yaml, report.md, report.html and the figures into ``out``."""
-    import json
-
     from .discovery_report import write_reports
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = result_document(result)
-    (out / "discovery.json").write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
-    (out / "model.yaml").write_text(result.model_yaml)
+    (out / "discovery.json").write_text(strict_json(doc, indent=1) + "\n")
+    if result.model_yaml is not None:
+        (out / "model.yaml").write_text(result.model_yaml)
     write_reports(result, doc, out)
     return out

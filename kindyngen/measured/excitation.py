@@ -45,9 +45,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..algorithms.base_parameters import condition_number_2norm
+from ..json_text import json_number, strict_json
 from ..model.robot_model import RobotModel
 from .effect_columns import coulomb_eps, effect_columns, effect_names
-from .regressor_rows import TorqueRegressor, torque_regressor
+from .regressor_rows import TorqueRegressor, refuse_mimic_joints, torque_regressor
 from . import MeasuredDataError
 
 # the friction columns appended to the rigid-body base regressor (kindyngen.measured.effect_columns)
@@ -240,6 +241,7 @@ def default_limits(model: RobotModel, velocity=DEFAULT_VELOCITY, acceleration=DE
     margin = float(margin)
     if not math.isfinite(margin) or margin < 0:
         raise ExcitationError(f"margin must be a non-negative number of radians, got {margin!r}")
+    refuse_mimic_joints(model)
     return ExcitationLimits(lower=model.lower + margin, upper=model.upper - margin,
                             velocity=velocity, acceleration=acceleration, margin=margin)
 
@@ -592,12 +594,9 @@ def write_trajectory_csv(path, trajectory: FourierTrajectory, rate_hz: float, pe
     return count
 
 
-def _finite_or_none(value: float):
-    return float(value) if math.isfinite(value) else None  # JSON has no inf
-
-
 def trajectory_document(result: ExcitationResult) -> dict:
-    """The JSON document of :func:`write_trajectory_json` (plain Python values)."""
+    """The JSON document of :func:`write_trajectory_json` (plain Python values; an infinite
+    condition number, of a rank-deficient design, as the string "Infinity": :mod:`kindyngen.json_text`)."""
     traj = result.trajectory
     return {
         "format": "kindyngen-excitation",
@@ -613,8 +612,8 @@ def trajectory_document(result: ExcitationResult) -> dict:
         "limits": result.limits.as_dict(),
         "units": {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "a": "rad/s", "b": "rad/s",
                   "q0": "rad", "base_frequency_hz": "Hz"},
-        "condition_number": _finite_or_none(result.condition_number),
-        "initial_condition_number": _finite_or_none(result.initial_condition_number),
+        "condition_number": json_number(float(result.condition_number)),
+        "initial_condition_number": json_number(float(result.initial_condition_number)),
         "columns": list(result.columns),
         "friction": result.friction,
         "samples_per_period": result.samples_per_period,
@@ -629,8 +628,8 @@ def trajectory_document(result: ExcitationResult) -> dict:
 
 
 def write_trajectory_json(path, result: ExcitationResult) -> None:
-    """Write :func:`trajectory_document` as strict JSON (no NaN or infinity)."""
-    text = json.dumps(trajectory_document(result), indent=2, allow_nan=False)
+    """Write :func:`trajectory_document` as strict JSON (:func:`kindyngen.json_text.strict_json`)."""
+    text = strict_json(trajectory_document(result), indent=2)
     Path(path).write_text(text + "\n")
 
 

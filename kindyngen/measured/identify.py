@@ -25,7 +25,6 @@ Example:
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,13 +34,17 @@ import numpy as np
 import yaml
 
 from ..algorithms.base_parameters import condition_number_2norm
+from ..json_text import json_number, strict_json
 from ..model.inertial_parameters import parameter_vector
+from ..model.user_text import markdown
 from ..readers.yaml_description import load_robot, parse_robot
 from .consistent import identify_consistent, links_from_barycentric, min_pseudo_inertia_eigenvalues
 from .discovery import NOISE_BIAS_FACTOR, REL_STD_MAX, effective_samples, elastic_noise_bias, sensing_columns, spring_of
 from .effect_columns import EFFECTS, NONNEGATIVE, SENSING_EFFECTS, coulomb_eps, effect_columns, effect_names, effect_of
 from .estimation import least_squares, rms_per_joint
-from .log_preparing import Preprocessing, filtered_rows, load_segments, split_time
+from .log_checks import log_bounds
+from .log_formats import joint_names_of, read_any
+from .log_preparing import Preprocessing, filtered_rows, preprocess, split_time
 from .identified_model import ModelWriteError, model_yaml
 from .regressor_rows import description_torques, torque_regressor
 from .identification_report import rms_table, torque_figure
@@ -154,16 +157,15 @@ def _std_percent(Y, residual, values) -> np.ndarray:
         return np.where(np.abs(values) > 0, 100 * std / np.abs(values), np.inf)
 
 
-def _segments(paths, n, settings, progress, what, split=None, check_segment=None):
-    """The segments of every file; with ``split``, (training, validation) cut file by file:
-    each file is its own experiment, with its own time span. ``check_segment(segment)`` may
-    refuse one (raising)."""
+def _segments(paths, model, settings, progress, what, split=None):
+    """The segments of every file, each checked against the robot as it is read
+    (:mod:`kindyngen.measured.log_checks`); with ``split``, (training, validation) cut file by
+    file: each file is its own experiment, with its own time span."""
     train, held = [], []
+    bounds = log_bounds(model)
     for path in paths:
         progress(f"reading {what} log {path}")
-        segments = load_segments(path, n, settings)
-        for segment in segments if check_segment is not None else ():
-            check_segment(segment)
+        segments = preprocess(read_any(path, model.n, joint_names_of(model), bounds), settings)
         if split is None:
             train.extend(segments)
         else:
@@ -188,22 +190,20 @@ def check_consistency(full: np.ndarray, n: int, names, values) -> tuple[bool, tu
 
 
 def identify(request: IdentificationRequest, progress: Callable[[str], None] = lambda text: None,
-             check_segment: Callable | None = None, check_fit: Callable | None = None) -> Identification:
-    """Run the identification of ``request`` (see the module text). The optional checks may
-    refuse the data (raising): ``check_segment(model, segment)`` each segment read,
-    ``check_fit(samples, columns, condition)`` the first fit (``condition()`` its stacked
-    regressor's condition number), returning notes for the report (the command line passes
-    the streamed identification's limits, :mod:`kindyngen.measured.streaming`)."""
+             check_fit: Callable | None = None) -> Identification:
+    """Run the identification of ``request`` (see the module text); every log is checked
+    against the robot as it is read (:mod:`kindyngen.measured.log_checks`). ``check_fit(samples,
+    columns, condition)`` may refuse the first fit (raising; ``condition()`` is its stacked
+    regressor's condition number) or return notes for the report (the command line passes the
+    streamed identification's limits, :mod:`kindyngen.measured.streaming`)."""
     model = load_robot(request.robot, request.snap_angles, request.base, request.tip)
     n = model.n
     settings = request.preprocessing
-    check = None if check_segment is None else (lambda segment: check_segment(model, segment))
     if request.split is not None:
-        train, held_out = _segments(request.data, n, settings, progress, "training", request.split, check)
+        train, held_out = _segments(request.data, model, settings, progress, "training", request.split)
     else:
-        train, held_out = _segments(request.data, n, settings, progress, "training", check_segment=check), ()
-    validation = tuple(held_out) + _segments(request.validate, n, settings, progress, "validation",
-                                             check_segment=check)
+        train, held_out = _segments(request.data, model, settings, progress, "training"), ()
+    validation = tuple(held_out) + _segments(request.validate, model, settings, progress, "validation")
     notes = tuple(dict.fromkeys(note for s in train + validation for note in s.notes))
     filters = tuple(dict.fromkeys(s.low_pass.describe() for s in train + validation if s.low_pass is not None))
     if filters:
@@ -363,11 +363,9 @@ def identify(request: IdentificationRequest, progress: Callable[[str], None] = l
 
 
 def _numbers(values) -> list:
-    """Floats for JSON; a non-finite one (std of a zero value) as a string, JSON-valid."""
-    out = []
-    for v in np.asarray(values, float):
-        out.append(float(v) if math.isfinite(v) else ("Infinity" if v > 0 else "-Infinity" if v < 0 else "NaN"))
-    return out
+    """Floats for JSON; a non-finite one (the relative std of a zero value or of a coefficient
+    the data does not determine) as the string of :mod:`kindyngen.json_text`'s rule."""
+    return json_number(np.asarray(values, float).tolist())
 
 
 def result_document(result: Identification) -> dict:
@@ -382,7 +380,7 @@ def result_document(result: Identification) -> dict:
                         "std_percent": None if result.base_std_percent is None else _numbers(result.base_std_percent)},
         "effects": {"names": list(result.effect_names), "values": _numbers(result.effect_values),
                     "std_percent": None if result.effect_std_percent is None else _numbers(result.effect_std_percent)},
-        "condition_number": result.condition_number,
+        "condition_number": json_number(float(result.condition_number)),
         "rms_train": _numbers(result.rms_train),
         "rms_validation": None if result.rms_validation is None else _numbers(result.rms_validation),
         "rms_validation_description": None if result.rms_validation_nominal is None
@@ -400,15 +398,17 @@ def write_outputs(result: Identification, out: str | Path) -> Path:
     ``validation_torques.png`` under ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "identification.json").write_text(json.dumps(result_document(result), indent=1, allow_nan=False) + "\n")
+    (out / "identification.json").write_text(strict_json(result_document(result), indent=1) + "\n")
     if result.model_yaml is not None:
         (out / "model.yaml").write_text(result.model_yaml)
     n = len(result.rms_train)
-    lines = [f"# Identification of {Path(result.request.robot).name}", "",
+    # the description's file name and the preprocessing notes (which may name a log's keys) are
+    # the user's text: literal Markdown
+    lines = [f"# Identification of {markdown(Path(result.request.robot).name)}", "",
              f"Method: {result.method}. Effects: {', '.join(result.request.effects) or 'none'}. "
              f"Training samples: {result.samples_train}; validation samples: {result.samples_validation}. "
              f"Condition number of the stacked regressor: {result.condition_number:.4g}.", "",
-             "Preprocessing: " + "; ".join(result.preprocessing_notes) + ".", "",
+             "Preprocessing: " + "; ".join(map(markdown, result.preprocessing_notes)) + ".", "",
              "## RMS torque error per joint (N m)", ""]
     rows = {"identified, training": list(result.rms_train)}
     if result.rms_validation is not None:

@@ -34,6 +34,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from .log_checks import LogBounds, check_raw_log, check_samples
 from .log_reading import CHANNELS, LogError, RawLog, read_log
 from .log_reading import csv_layout   # the CSV's column rules, shared by Parquet (one spelling of them)
 
@@ -83,11 +84,12 @@ def log_kind(path) -> str:
 
 
 def iter_chunks(path, n: int, joint_names: Sequence[str] | None = None,
-                chunk_rows: int = CHUNK_ROWS) -> Iterator[RawChunk]:
+                chunk_rows: int = CHUNK_ROWS, bounds: LogBounds | None = None) -> Iterator[RawChunk]:
     """The samples of the log at ``path`` (any format of the module text) in chunks of at most
     ``chunk_rows``, checked as they come: finite values, time never going backwards (rows
-    named from 1 over the whole log).  ``joint_names``: the description's joints, in order
-    (needed for bags)."""
+    named from 1 over the whole log), and with the robot's ``bounds`` its limits and physical
+    bounds (:func:`kindyngen.measured.log_checks.check_samples`).  ``joint_names``: the
+    description's joints, in order (needed for bags)."""
     kind = log_kind(path)
     readers = {"csv": _csv_chunks, "npz": _npz_chunks, "parquet": _parquet_chunks,
                "rosbag2": _bag_chunks, "rosbag1": _bag_chunks}
@@ -95,6 +97,9 @@ def iter_chunks(path, n: int, joint_names: Sequence[str] | None = None,
     last_t, rows = None, 0
     for chunk in readers[kind](Path(path), n, chunk_rows, joint_names):
         _check_chunk(source, chunk, last_t, kind)
+        if bounds is not None:
+            check_samples(source, bounds, chunk.t, chunk.q, chunk.tau, chunk.qd, chunk.qdd, chunk.first_row,
+                          _row_word(kind))
         last_t = float(chunk.t[-1])
         rows += len(chunk.t)
         yield chunk
@@ -102,12 +107,16 @@ def iter_chunks(path, n: int, joint_names: Sequence[str] | None = None,
         raise LogError(source, "t", "no samples")
 
 
-def read_any(path, n: int, joint_names: Sequence[str] | None = None) -> RawLog:
-    """The whole log at ``path`` as a RawLog (CSV and npz by :func:`kindyngen.measured.log_reading.read_log`)."""
-    if log_kind(path) in ("csv", "npz") and (Path(path).suffix.lower() == ".npz"
-                                             or Path(path).stat().st_size <= SMALL_CSV_BYTES):
-        return read_log(path, n)
-    chunks = list(iter_chunks(path, n, joint_names, chunk_rows=1 << 62))
+def read_any(path, n: int, joint_names: Sequence[str] | None = None, bounds: LogBounds | None = None) -> RawLog:
+    """The whole log at ``path`` as a RawLog (CSV and npz by :func:`kindyngen.measured.log_reading.read_log`),
+    checked against the robot's ``bounds`` when given (:func:`kindyngen.measured.log_checks.check_samples`)."""
+    kind = log_kind(path)
+    if kind in ("csv", "npz") and (kind == "npz" or Path(path).stat().st_size <= SMALL_CSV_BYTES):
+        raw = read_log(path, n)
+        if bounds is not None:
+            check_raw_log(raw, bounds, _row_word(kind))
+        return raw
+    chunks = list(iter_chunks(path, n, joint_names, chunk_rows=1 << 62, bounds=bounds))
     parts = {ch: [getattr(c, ch) for c in chunks] for ch in ("t",) + CHANNELS}
     whole = {ch: (None if any(p is None for p in v) else np.concatenate(v)) for ch, v in parts.items()}
     return RawLog(str(path), whole["t"], whole["q"], whole["tau"], whole["qd"], whole["qdd"])
@@ -143,8 +152,13 @@ def time_span_of_file(path) -> tuple[float, float] | None:
         return None
 
 
+def _row_word(kind: str) -> str:
+    """What a row of a log of this kind is called in messages."""
+    return "sample" if kind.startswith("rosbag") else "data row"
+
+
 def _check_chunk(source: str, chunk: RawChunk, last_t, kind: str) -> None:
-    row = "sample" if kind.startswith("rosbag") else "data row"
+    row = _row_word(kind)
     for name, a in (("t", chunk.t),) + tuple((ch, getattr(chunk, ch)) for ch in CHANNELS):
         if a is None:
             continue

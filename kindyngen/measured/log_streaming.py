@@ -13,6 +13,7 @@ from typing import Iterator
 
 import numpy as np
 
+from .log_checks import LogBounds
 from .log_formats import CHUNK_ROWS, SMALL_CSV_BYTES, RawChunk, iter_chunks, log_kind, read_any, time_span_of_file
 from .log_preparing import Preprocessing, Segment, preprocess, zero_phase_low_pass
 from .log_reading import MIN_SAMPLES, LogError, RawLog
@@ -44,34 +45,36 @@ def _window_log(source: str, buf: dict, a: int, b: int) -> RawLog:
 
 
 def stream_segments(path, n: int, settings: Preprocessing = Preprocessing(), joint_names=None,
-                    chunk_rows: int = CHUNK_ROWS, notes: list | None = None) -> Iterator[Segment]:
+                    chunk_rows: int = CHUNK_ROWS, notes: list | None = None,
+                    bounds: LogBounds | None = None) -> Iterator[Segment]:
     """Preprocessed consecutive pieces of the log at ``path`` whose concatenation equals (to
     ~1e-15 relative) the segments of ``preprocess(read_any(path))``; at most about ``2 chunk_rows``
     samples each, each carrying its unfiltered torque and low-pass when filtered (as the whole
-    log's segments do).  ``notes`` (a list) receives what was done."""
-    for _, piece in segment_pieces(path, n, settings, joint_names, chunk_rows, notes):
+    log's segments do).  ``notes`` (a list) receives what was done; ``bounds``: the robot's, each
+    chunk checked against them as it is read (:mod:`kindyngen.measured.log_checks`)."""
+    for _, piece in segment_pieces(path, n, settings, joint_names, chunk_rows, notes, bounds=bounds):
         yield piece
 
 
 def segment_pieces(path, n: int, settings: Preprocessing = Preprocessing(), joint_names=None,
                    chunk_rows: int = CHUNK_ROWS, notes: list | None = None,
-                   spans: list | None = None) -> Iterator[tuple[int, Segment]]:
+                   spans: list | None = None, bounds: LogBounds | None = None) -> Iterator[tuple[int, Segment]]:
     """``(segment index, piece)`` of :func:`stream_segments`; raises :class:`NotStreamable` at
     the first window that would not preprocess like the whole log (then read it whole).
     ``notes`` (a list) receives what was done; when the log is preprocessed whole anyway
     (short, or resampled), ``spans`` (a list) receives the exact (first, last) time of its
     segments before the first piece, as :func:`kindyngen.measured.log_preparing.split_time`
-    takes them."""
+    takes them.  ``bounds``: the robot's, every sample checked against them as it is read."""
     source = str(path)
     notes = notes if notes is not None else []
     spans = spans if spans is not None else []
     if settings.rate_hz is not None:
         notes.append("preprocessed whole in memory (resampling to --rate needs the whole log)")
-        whole = preprocess(read_any(path, n, joint_names), settings)
+        whole = preprocess(read_any(path, n, joint_names, bounds), settings)
         spans.append((float(whole[0].t[0]), float(whole[-1].t[-1])))
         yield from segment_chunks(whole, chunk_rows)
         return
-    chunks = iter_chunks(path, n, joint_names, chunk_rows)
+    chunks = iter_chunks(path, n, joint_names, chunk_rows, bounds)
     buf = None           # arrays of global rows [b0, b1)
     b0 = 0
     exhausted = False

@@ -44,7 +44,6 @@ Example:
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -55,6 +54,7 @@ import numpy as np
 import sympy
 
 from ..algorithms.paper_parameters import base_expressions_in_paper, paper_symbols
+from ..json_text import strict_json
 from ..algorithms.regressors import base_parameters
 from ..model.robot_model import RobotModel
 from .estimation import Fit, least_squares
@@ -522,7 +522,7 @@ def write_report(result: Reproduction, out_dir) -> dict:
     summary = result.summary()
     files = _plots(result, out)
     summary["plots"] = files
-    (out / "reproduction.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (out / "reproduction.json").write_text(strict_json(summary, indent=1) + "\n")
 
     em = result.entry_map
     ours = result.pi_g_paper_order()

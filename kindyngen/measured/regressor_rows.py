@@ -23,7 +23,7 @@ import symengine as se
 
 from ..model.inertial_parameters import parameter_vector
 from ..algorithms.regressors import base_parameters, regressor
-from ..model.robot_model import Link, RobotModel
+from ..model.robot_model import Link, RobotDescriptionError, RobotModel
 from .effect_columns import law_torques
 
 
@@ -35,17 +35,33 @@ def rigid_body_model(model: RobotModel) -> RobotModel:
     return replace(model, joints=joints, coulomb_smoothing=None)
 
 
+def refuse_mimic_joints(model: RobotModel) -> None:
+    """Logs, limits and effect columns of the measured side are per joint, and a mimic joint is
+    no coordinate: a robot with mimic joints is refused in one line naming the first, and so is
+    a tree closed by loops (its dependent joints are none either)."""
+    if model.loops:
+        raise RobotDescriptionError(model.source, "loops", "identify, discover and excite take robots without closed "
+                                    "loops (the regressor Y of a parallelogram linkage is generated in its independent "
+                                    "joints: fit it by least squares, docs/tutorials/closed_loops.md)")
+    for joint in model.joints:
+        if joint.mimic is not None:
+            raise RobotDescriptionError(model.source, f"joint '{joint.name}' mimic",
+                                        "identify, discover and excite take robots without mimic joints (the "
+                                        "generated functions of this one take its independent joints)")
+
+
 _UNIT_LINK = Link(mass=1, com=(0, 0, 0), inertia=(1, 1, 1, 0, 0, 0))
 
 
 def geometry_of(model: RobotModel) -> RobotModel:
     """What a regressor depends on: the rigid-body model with its inertial values, payload,
-    name, source and notes replaced by fixed ones (the regressor is linear in the inertial
+    name, source, notes and bundles replaced by fixed ones (the regressor is linear in the inertial
     parameters and its base parameters are decided without their values,
     :mod:`kindyngen.algorithms.regressors`).  Two models with the same geometry, joints and
     gravity share one regressor."""
     rigid = rigid_body_model(model)
     return replace(rigid, name="robot", source="<memory>", links=(_UNIT_LINK,) * model.n, payload=None, notes=(),
+                   bundles=(),
                    root=_UNIT_LINK if model.floating_base else rigid.root)
 
 
@@ -110,6 +126,7 @@ class BaseRegressor:
     the full parameters (as linear as the dynamics itself)."""
 
     def __init__(self, model: RobotModel, kind: str):
+        refuse_mimic_joints(model)
         # rigid bodies only: the effects an identification fits are chosen by the caller
         # (kindyngen.measured.effect_columns), whatever the description declares
         model = rigid_body_model(model)

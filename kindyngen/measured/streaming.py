@@ -38,7 +38,8 @@ Example:
 """
 from __future__ import annotations
 
-import math
+import contextlib
+import os
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterator
@@ -53,6 +54,7 @@ from .consistent import identify_consistent_factor, links_from_barycentric
 from .effect_columns import coulomb_eps, effect_columns, effect_names
 from .estimation import IdentificationDataError
 from .identify import Identification, IdentificationRequest, check_consistency
+from .log_checks import log_bounds
 from .log_formats import CHUNK_ROWS, joint_names_of, read_any
 from .log_reading import LogError
 from .log_streaming import (ChunkedParallelFilter, NotStreamable, overlap_rows, segment_chunks, segment_pieces,
@@ -64,11 +66,6 @@ from .regressor_rows import torque_regressor
 
 #: Validation samples the figure keeps per run (every k-th sample, k a power of two).
 FIGURE_SAMPLES = 4000
-#: A position further than this outside a revolute joint's limits (rad, or this fraction of
-#: the joint's range if larger) is not a measurement of this robot: refused, with a hint when
-#: the numbers look like degrees.
-LIMIT_MARGIN_RAD = 0.35
-LIMIT_MARGIN_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -83,26 +80,6 @@ class FitLimits:
     min_samples_per_column: float = 10.0
     max_condition: float = 1e6
     override: bool = False
-
-
-def check_joint_limits(source: str, model, seg: Segment) -> None:
-    """Refuse positions far outside the description's joint limits (LogError naming the column)."""
-    for j, joint in enumerate(model.joints):
-        lo, hi = float(joint.lower), float(joint.upper)
-        if joint.kind != "revolute" or not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
-            continue
-        margin = max(LIMIT_MARGIN_RAD, LIMIT_MARGIN_FRACTION * (hi - lo))
-        q = seg.q[:, j]
-        bad = np.flatnonzero((q < lo - margin) | (q > hi + margin))
-        if bad.size:
-            i = int(bad[np.argmax(np.abs(q[bad]))])
-            hint = ""
-            if np.abs(q).max() > 2 * math.pi:
-                hint = (f"; values up to {np.abs(q).max():.4g} look like degrees: the log must give "
-                        f"angles in radians (multiply by pi/180 = 0.01745)")
-            raise LogError(source, f"q{j + 1}", f"{q[i]:.4g} rad at t = {seg.t[i]:.6g} s is far outside the joint "
-                                                f"limits [{lo:.4g}, {hi:.4g}] rad of the description (more than "
-                                                f"{margin:.3g} rad beyond){hint}")
 
 
 # --------------------------------------------------------------------------- one file's fold
@@ -191,17 +168,18 @@ def fold_file(task: FoldTask, progress: Callable[[str], None] = lambda text: Non
     model = load_robot(task.robot, task.snap_angles, task.base, task.tip)
     n = model.n
     names = joint_names_of(model)
+    bounds = log_bounds(model)
     folder = _Folder(task, model, started, progress)
     with threadpool_limits(1):      # the same arithmetic whatever the worker's thread count
         notes: list[str] = []
         spans: list = []
         raw_span = time_span(task.path, n, names, task.chunk_rows) if task.role == "split" else None
         try:
-            parts = folder.run(segment_pieces(task.path, n, task.settings, names, task.chunk_rows, notes, spans),
-                               spans, raw_span)
+            parts = folder.run(segment_pieces(task.path, n, task.settings, names, task.chunk_rows, notes, spans,
+                                              bounds), spans, raw_span)
         except NotStreamable as exc:
             notes = [f"preprocessed whole in memory ({exc})"]
-            whole = preprocess(read_any(task.path, n, names), task.settings)
+            whole = preprocess(read_any(task.path, n, names, bounds), task.settings)
             notes += [note for s in whole for note in s.notes]
             folder = _Folder(task, model, started, progress)
             parts = folder.run(segment_chunks(whole, task.chunk_rows), [(float(whole[0].t[0]), float(whole[-1].t[-1]))],
@@ -264,7 +242,6 @@ class _Folder:
         part = None                # (segment index, is validation, filter or None, step after filtering)
         cut_time = None
         for index, piece in _sub_pieces(pieces):
-            check_joint_limits(task.path, self.model, piece)
             if task.role == "split" and cut_time is None:
                 if spans:
                     start, end = spans[0]
@@ -369,14 +346,32 @@ def run_folds(tasks, workers: int = 1, client=None, progress: Callable[[str], No
         return results
     if workers > 1 and len(tasks) > 1:
         import multiprocessing
+        import signal
         from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn")) as pool:
+        # a Ctrl-C in the terminal reaches the workers too: they are started with SIGINT blocked (a
+        # mask survives fork and exec), so they never see it and print no traceback each; this
+        # process gets it when the mask is lifted, and ends them instead of waiting for their files
+        pool = ProcessPoolExecutor(min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn"))
+        try:
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                folded = pool.map(fold_file, tasks)         # the workers are started here
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             results = []
-            for task, result in zip(tasks, pool.map(fold_file, tasks)):
+            for task, result in zip(tasks, folded):
                 results.append(result)
                 progress(f"folded {task.path} ({result.samples} samples, {result.chunks} chunks, "
                          f"{result.seconds:.1f} s)")
-            return results
+        except BaseException:
+            workers_running = list(getattr(pool, "_processes", None) or ())   # their pids (no public API before 3.14)
+            pool.shutdown(wait=False, cancel_futures=True)
+            for pid in workers_running:
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGTERM)
+            raise
+        pool.shutdown()
+        return results
     results = []
     for task in tasks:
         progress(f"reading and folding {task.path}")

@@ -12,6 +12,20 @@ build it from a YAML description (:mod:`kindyngen.readers.yaml_description`) or 
 derivations read it and never change it. ``frames`` are the frames of interest of a tree
 (FK and Jacobians); an arm's is its flange moved by the tool.
 
+A joint may *mimic* another (:class:`Mimic`, URDF ``<mimic>``): its position is ``multiplier *
+q_k + offset`` of joint k, a linear holonomic constraint. The model's coordinates (``q``,
+``qd``, ``qdd``, ``tau`` of every generated function: :attr:`RobotModel.coordinates`, sizes
+:attr:`RobotModel.nq`, :attr:`RobotModel.nv`) are then the joints that mimic none; the
+derivations run on :meth:`RobotModel.without_mimics` (every joint a coordinate) and
+:mod:`kindyngen.algorithms.reduced_coordinates` folds the mimics in.
+
+A tree may be closed into kinematic loops (:class:`LoopClosure`: four-bar and parallelogram
+linkages, parallel robots): a loop joint holds a frame on one body to a frame on another in
+the directions it constrains. The model keeps the tree and its loops as described, with the
+independent joints the user named (``independent``) and the configuration the loops are
+assembled near (``reference``); :mod:`kindyngen.algorithms.loop_closure` chooses the
+coordinates and reduces the dynamics to them.
+
 Example:
 
 >>> from kindyngen.readers.yaml_description import load_robot
@@ -27,16 +41,18 @@ import numpy as np
 import sympy
 
 from .placement import Placement
+from .user_text import identifier, name_problem, one_line
 
 CONVENTIONS = ("standard", "modified")
 
 
 class RobotDescriptionError(ValueError):
-    """A robot description that cannot be used, with the file, field and reason."""
+    """A robot description that cannot be used, with the file, field and reason; its message is
+    one line whatever the file's names hold (:func:`kindyngen.model.user_text.one_line`)."""
 
     def __init__(self, source: str, field: str, reason: str):
         self.source, self.field, self.reason = source, field, reason
-        super().__init__(f"{source}: field '{field}': {reason}")
+        super().__init__(one_line(f"{source}: field '{field}': {reason}"))
 
 
 @dataclass(frozen=True)
@@ -49,6 +65,55 @@ class DHRow:
     alpha: sympy.Expr
     d: sympy.Expr
     theta: sympy.Expr = sympy.Integer(0)     # constant angle of a prismatic row
+
+
+@dataclass(frozen=True)
+class Mimic:
+    """The joint follows joint ``joint`` (an index into ``RobotModel.joints``; that joint mimics
+    none): ``q = multiplier * q_joint + offset``, exact. The multiplier's unit is the ratio of
+    the two joints' units (m/rad for a prismatic joint following a revolute one); readers
+    resolve a mimic of a mimic into this form. ``terms``: further ``(joint, multiplier)``
+    pairs added to the sum (a linear coupling of several joints; readers never write them:
+    the closed form of a parallelogram loop does,
+    :func:`kindyngen.algorithms.loop_closure.coupled_model`)."""
+
+    joint: int
+    multiplier: sympy.Rational = sympy.Integer(1)
+    offset: sympy.Rational = sympy.Integer(0)   # rad (m for a prismatic joint)
+    terms: tuple = ()                           # ((joint, multiplier), ...) beyond the first
+
+    @property
+    def sources(self) -> tuple:
+        """Every ``(joint, multiplier)`` of the sum, the first one first."""
+        return ((self.joint, self.multiplier),) + tuple(self.terms)
+
+
+LOOP_TYPES = ("spherical", "revolute", "fixed")
+DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
+# what each loop joint constrains by default: a spherical joint the origin (3 translations),
+# a revolute one also the two rotations about frame A's x and y (its axis is z), a fixed one all
+LOOP_DIRECTIONS = {"spherical": DIRECTIONS[:3], "revolute": DIRECTIONS[:5], "fixed": DIRECTIONS}
+
+
+@dataclass(frozen=True)
+class LoopClosure:
+    """A loop joint closing the tree: frame A (``placement_a`` on the link frame of body
+    ``body_a``, a joint index, -1 the root body) and frame B (``placement_b`` on body
+    ``body_b``) are held together in ``directions``, each a row of the constraint, in frame A's
+    axes: ``x``, ``y``, ``z`` the components of B's origin relative to A's
+    (``R_A^T (p_B - p_A)``), ``rx``, ``ry``, ``rz`` the entries ``(R_A^T R_B)[2][1], [0][2],
+    [1][0]`` (zero for B's axes aligned with A's; a small rotation of B about A's x, y or z
+    axis). A spherical loop joint constrains x, y, z; a revolute one (axis: z of both frames)
+    also rx, ry; a fixed one all six; ``directions`` may name a subset (a planar linkage:
+    the two translations in its plane)."""
+
+    name: str
+    kind: str                      # one of LOOP_TYPES
+    body_a: int
+    placement_a: Placement
+    body_b: int
+    placement_b: Placement
+    directions: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -76,6 +141,7 @@ class Joint:
     stiffness: sympy.Rational | None = None       # N m/rad (N/m): elasticity seen by a motor-side encoder
     encoder_offset: sympy.Rational | None = None  # rad (m): constant offset of the position reading
     torque_gain: sympy.Rational | None = None     # gain of the torque sensor (1: exact)
+    mimic: Mimic | None = None                    # None: the joint is a coordinate of the model
 
     @property
     def prismatic(self) -> bool:
@@ -184,13 +250,31 @@ class RobotModel:
     base_name: str = ""                             # the base frame's name (URDF root link)
     flange_name: str = ""                           # the last link's name
     notes: tuple[str, ...] = ()                     # what reading the description changed, for the user
+    loops: tuple[LoopClosure, ...] = ()             # loop joints closing the tree
+    independent: tuple[int, ...] | None = None      # the joints the user chose as coordinates (loops)
+    reference: tuple | None = None                  # exact joint values the loops close near (None: 0)
+    # the description's bundles: (name, member function names), each generated as one function
+    # (kindyngen/codegen/bundles.py checks the names against the function catalog)
+    bundles: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def __post_init__(self):
         if self.parents is None:
             object.__setattr__(self, "parents", tuple(range(-1, len(self.joints) - 1)))
         assert len(self.parents) == len(self.joints) == len(self.links)
         assert all(-1 <= p < j for j, p in enumerate(self.parents)), "parents must come first"
-
+        for j, joint in enumerate(self.joints):
+            if joint.mimic is not None:
+                k = joint.mimic.joint
+                assert 0 <= k < len(self.joints) and k != j, f"joint {j} mimics joint {k}"
+                assert self.joints[k].mimic is None, f"joint {j} mimics joint {k}, itself a mimic (resolve chains)"
+                assert joint.mimic.multiplier != 0, f"joint {j}: mimic multiplier 0"
+                for k, _ in joint.mimic.terms:
+                    assert 0 <= k < len(self.joints) and self.joints[k].mimic is None, f"joint {j} couples joint {k}"
+        for loop in self.loops:
+            assert loop.kind in LOOP_TYPES and set(loop.directions) <= set(LOOP_DIRECTIONS[loop.kind]), loop
+            assert -1 <= loop.body_a < len(self.joints) and -1 <= loop.body_b < len(self.joints), loop
+            assert loop.body_a != loop.body_b, f"loop {loop.name} closes a body on itself"
+        assert self.reference is None or len(self.reference) == len(self.joints)
     @property
     def is_tree(self) -> bool:
         """Read as a tree (its functions: those of a tree, every frame of interest); else an
@@ -297,34 +381,99 @@ class RobotModel:
 
     @property
     def n(self) -> int:
+        """The joints (bodies) of the tree, mimic joints included."""
         return len(self.joints)
 
     @property
+    def coordinates(self) -> tuple[int, ...]:
+        """The joints whose positions are inputs: those that mimic none (all of them without
+        mimic joints), in joint order; a tree closed by loops: its ``independent`` joints once
+        known (:func:`kindyngen.algorithms.loop_closure.resolved`)."""
+        if self.loops and self.independent is not None:
+            return self.independent
+        return tuple(j for j, joint in enumerate(self.joints) if joint.mimic is None)
+
+    @property
+    def coordinate_joints(self) -> tuple[Joint, ...]:
+        return tuple(self.joints[j] for j in self.coordinates)
+
+    @property
+    def has_mimics(self) -> bool:
+        return any(joint.mimic is not None for joint in self.joints)
+
+    def without_mimics(self) -> "RobotModel":
+        """The same tree with every joint a coordinate and no loop closed: what the derivations
+        run on before :mod:`kindyngen.algorithms.reduced_coordinates` folds the mimics in (and
+        :mod:`kindyngen.algorithms.loop_closure` the loops)."""
+        if not self.has_mimics and not self.loops:
+            return self
+        return replace(self, joints=tuple(replace(joint, mimic=None) for joint in self.joints), loops=(),
+                       independent=None, reference=None)
+
+    @property
+    def has_loops(self) -> bool:
+        return bool(self.loops)
+
+    @property
+    def reference_values(self) -> tuple:
+        """The reference configuration of the loops (exact joint values; 0 where not given)."""
+        return self.reference if self.reference is not None else (sympy.Integer(0),) * self.n
+
+    @property
+    def mimic_text(self) -> str:
+        """Which joints mimic which, and what the inputs are (headers, functions.json); empty
+        without mimic joints."""
+        if not self.has_mimics:
+            return ""
+        rules = "; ".join(f"{joint.name} = {_affine_text(joint.mimic, self.joints)}"
+                          for joint in self.joints if joint.mimic is not None)
+        names = ", ".join(joint.name for joint in self.coordinate_joints)
+        if self.loops:
+            loops = ", ".join(loop.name for loop in self.loops)
+            return (f"Closed loops {loops} (parallelograms: the dependent joints are linear in the independent "
+                    f"ones): {rules}. Inputs are the {len(self.coordinates)} independent joints ({names}); the "
+                    f"dependent joints' motion, torques and inertia are folded in (tau = G^T tau_tree).")
+        return (f"Mimic joints: {rules}. Inputs are the {len(self.coordinates)} independent joints ({names}); the "
+                f"mimic joints' motion (q, qd, qdd through the multiplier), torques and inertia are folded in: "
+                f"tau of a joint includes multiplier * tau of each joint mimicking it.")
+
+    @property
     def nq(self) -> int:
-        """Configuration coordinates: the joint positions (after the base pose's 7)."""
-        return self.n + (FREE_FLYER_NQ if self.floating_base else 0)
+        """Configuration coordinates: the independent joint positions (after the base pose's 7)."""
+        return len(self.coordinates) + (FREE_FLYER_NQ if self.floating_base else 0)
 
     @property
     def nv(self) -> int:
-        """Velocity coordinates: the joint velocities (after the base twist's 6)."""
-        return self.n + (FREE_FLYER_NV if self.floating_base else 0)
+        """Velocity coordinates: the independent joint velocities (after the base twist's 6)."""
+        return len(self.coordinates) + (FREE_FLYER_NV if self.floating_base else 0)
 
     @property
     def structure_text(self) -> str | None:
-        """What a tree's generated files say it is (an arm's state n and its convention)."""
-        if not self.is_tree:
+        """What a tree's (or a model with mimic joints') generated files say it is (an arm's:
+        its state n and its convention)."""
+        if not self.is_tree and not self.has_mimics:
             return None
         kinds = sorted({j.kind for j in self.joints})
         base = (f"floating base (nq {self.nq}, nv {self.nv})" if self.floating_base else "fixed base")
-        return f"{self.n} {' and '.join(kinds)} joints in a tree of depth {self.depth}, {base}"
+        shape = f"a tree of depth {self.depth}" if self.is_tree else "a chain"
+        mimics = self.n - len(self.coordinates)
+        coupled = (f"; {mimics} of them mimic{'s' if mimics == 1 else ''} another, inputs the "
+                   f"{len(self.coordinates)} independent joints" if mimics and not self.loops else "")
+        if self.loops:
+            closed = ", ".join(f"{loop.name} ({loop.kind}, {' '.join(loop.directions)})" for loop in self.loops)
+            inputs = (f", inputs the {len(self.coordinates)} independent joints"
+                      if self.independent is not None or self.has_mimics else "")
+            coupled = f"; closed by the loop joints {closed}{inputs}"
+        return f"{self.n} {' and '.join(kinds)} joints in {shape}, {base}{coupled}"
 
     @property
     def lower(self) -> np.ndarray:
-        return np.array([j.lower for j in self.joints])
+        """The lower limits of the coordinates (the independent joints)."""
+        return np.array([j.lower for j in self.coordinate_joints])
 
     @property
     def upper(self) -> np.ndarray:
-        return np.array([j.upper for j in self.joints])
+        return np.array([j.upper for j in self.coordinate_joints])
 
     @property
     def length_symbols(self) -> tuple:
@@ -350,14 +499,49 @@ class RobotModel:
 
     @property
     def identifier(self) -> str:
-        """The name as a C identifier (used as the prefix of generated functions)."""
-        ident = "".join(ch if ch.isalnum() else "_" for ch in self.name.lower())
-        return ident if not ident[0].isdigit() else "r_" + ident
+        """The name as the identifier of the generated files and symbols (the output folder,
+        ``<identifier>.h``, the prefix of every C function): :func:`kindyngen.model.user_text.identifier`."""
+        return identifier(self.name)
+
+
+def _affine_text(mimic: Mimic, joints) -> str:
+    """``multiplier * source + offset`` as text (each term of a coupling), exact numbers as
+    decimals.
+
+    >>> a = [Joint(Placement(), Placement(), 0, -1, 1, name=n) for n in "ab"]
+    >>> _affine_text(Mimic(0, sympy.Integer(-1), sympy.Rational(1, 10)), a), _affine_text(Mimic(0), a)
+    ('-1 * a + 0.1', '1 * a')
+    >>> _affine_text(Mimic(0, sympy.Integer(1), terms=((1, sympy.Integer(-1)),)), a)
+    '1 * a - 1 * b'
+    """
+    text = ""
+    for joint, multiplier in mimic.sources:
+        term = f"{abs(float(multiplier)):g} * {joints[joint].name}"
+        text = (f"{'-' if multiplier < 0 else ''}{term}" if not text
+                else f"{text} {'-' if multiplier < 0 else '+'} {term}")
+    return text if mimic.offset == 0 else f"{text} {'+' if mimic.offset > 0 else '-'} {abs(float(mimic.offset)):g}"
 
 
 def _translations(placement: Placement) -> tuple:
     """The entries of a placement's translations, in order."""
     return tuple(v for kind, *rest in placement.factors if kind == "trans" for v in rest[0])
+
+
+def check_name(name: str, source: str, field: str) -> str:
+    """``name`` itself when it may name a robot, joint, link or frame (no control character:
+    :func:`kindyngen.model.user_text.name_problem`), else a RobotDescriptionError saying why.
+
+    >>> check_name('arm "7" */', "f.yaml", "name")
+    'arm "7" */'
+    >>> check_name("a\\x00b", "f.yaml", "joints[1].name")
+    Traceback (most recent call last):
+    ...
+    kindyngen.model.robot_model.RobotDescriptionError: f.yaml: field 'joints[1].name': holds the control character U+0000 (NULL) at position 2: a name is one line of printable text
+    """
+    problem = name_problem(name)
+    if problem:
+        raise RobotDescriptionError(source, field, problem)
+    return name
 
 
 def check_inertia(inertia: np.ndarray, source: str, field: str, point_mass_allowed: bool = False) -> None:

@@ -23,6 +23,7 @@ import sympy
 
 from ..model.robot_model import Friction, Link, RobotModel
 from ..model.placement import ANGLE_STEP, Z, Placement, rotation, translation
+from .input_bounds import beyond_turn
 
 
 def _angle(value) -> float | str:
@@ -59,6 +60,25 @@ def origin(placement: Placement) -> dict:
     return {"xyz": [_number(v) for v in p], "rpy": [_angle(sympy.simplify(a)) for a in (roll, pitch, yaw)]}
 
 
+def _mimic(joint, joints) -> dict:
+    """A mimic joint's ``mimic`` entry (the joint it follows by name), none for the others."""
+    if joint.mimic is None:
+        return {}
+    return {"mimic": {"joint": joints[joint.mimic.joint].name, "multiplier": _exact(joint.mimic.multiplier),
+                      "offset": _exact(joint.mimic.offset)}}
+
+
+def _exact(value) -> float | str:
+    """A rational as the shortest decimal when that is it exactly, else as a fraction
+    (``'1/3'``, which the reader takes exactly).
+
+    >>> _exact(sympy.Rational(1, 4)), _exact(sympy.Rational(-2, 3))
+    (0.25, '-2/3')
+    """
+    value = sympy.Rational(value)
+    return float(value) if sympy.Rational(repr(float(value))) == value else str(value)
+
+
 def _joint(joint, effects: dict) -> dict:
     R_after, p_after = joint.after.matrix()
     if any(v != 0 for v in p_after):
@@ -72,8 +92,23 @@ def _joint(joint, effects: dict) -> dict:
         row["name"] = joint.name
     row["origin"] = origin(joint.before * (_offset(joint) * joint.after))
     row["axis"] = [_number(v) for v in axis]
-    row.update(lower=float(joint.lower), upper=float(joint.upper), **effects)
+    row.update(lower=_limit(joint, joint.lower), upper=_limit(joint, joint.upper), **effects)
     return row
+
+
+def _limit(joint, value: float) -> float | str:
+    """A joint limit; a revolute one beyond a full turn (a multi-turn URDF joint) as an
+    expression, the form the YAML reader takes such a range in (a plain number beyond a full
+    turn is read as degrees written by mistake and refused).
+
+    >>> from kindyngen.model.robot_model import Joint
+    >>> joint = Joint(Placement(), Placement(), 0, -10.0, 2.5)
+    >>> _limit(joint, joint.lower), _limit(joint, joint.upper)
+    ('-10.0', 2.5)
+    """
+    if not joint.prismatic and beyond_turn(value):
+        return repr(float(value))
+    return float(value)
 
 
 def _offset(joint) -> Placement:
@@ -111,9 +146,13 @@ def _link(link: Link) -> dict:
 
 def describe(model: RobotModel) -> dict:
     """The YAML data (``dh: none``) of ``model``: joints by origin and axis, links, payload,
-    tool, effects. Frames and joint order are the model's."""
+    tool, effects, bundles. Frames and joint order are the model's. A tree closed by loops is refused
+    (ValueError): its loops would be lost."""
+    if model.has_loops:
+        raise ValueError("closed loops (loop joints) are not written by describe: keep the description as it is")
     data = {"name": model.name, "dh": "none", "gravity": [_number(v) for v in model.gravity],
-            "joints": [_joint(j, _effects(j.friction, j.armature, j)) for j in model.joints],
+            "joints": [_joint(j, {**_effects(j.friction, j.armature, j), **_mimic(j, model.joints)})
+                       for j in model.joints],
             "links": [_link(link) for link in model.links]}
     if model.payload is not None:
         data["payload"] = _link(model.payload)
@@ -121,4 +160,6 @@ def describe(model: RobotModel) -> dict:
         data["coulomb_smoothing"] = _number(model.coulomb_smoothing)
     if not model.tool.is_identity:
         data["tool"] = origin(model.tool)
+    if model.bundles:
+        data["bundles"] = {name: list(members) for name, members in model.bundles}
     return data

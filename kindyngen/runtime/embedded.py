@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..json_text import strict_json
+
 HERE = Path(__file__).resolve().parents[1] / "codegen" / "templates" / "embedded"
 REPS = 20
 TICK_INSTRUCTIONS = 40      # 25 MHz SysTick over the 1 GHz virtual clock of -icount shift=0
@@ -81,6 +83,17 @@ def fixed_inputs(manifest: dict, host_lib, lower, upper, seed: int = 7) -> dict:
     return out
 
 
+def _main(scalar: str, body: list) -> list:
+    """A harness's main(): SysTick started, ``body`` (the calls and their timed loops), then
+    the empty function's loop ("ticks - ...") and "done"."""
+    return (["", "int main(void)", "{", "    uint32_t start;", "    int r;", f"    static {scalar} a[1], b[1];",
+             "    SYST_RVR = 0xFFFFFFu;", "    SYST_CVR = 0u;", "    SYST_CSR = 5u;   /* enable, processor clock */"]
+            + body
+            + ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", "        kdg_empty(a, b);", "    }",
+               '    printf("ticks - %lu\\n", (unsigned long)elapsed(start));', '    printf("done\\n");',
+               "    return 0;", "}", ""])
+
+
 def _literal(value, real) -> str:
     if real is np.float32:
         return f"{float(value).hex()}f"
@@ -127,13 +140,7 @@ def harness_source(manifest: dict, inputs: dict) -> str:
                  for p in spec["outputs"]]
         body += ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", f"        {call};", "    }",
                  f'    printf("ticks {name} %lu\\n", (unsigned long)elapsed(start));']
-    lines += ["", "int main(void)", "{", "    uint32_t start;", "    int r;", f"    static {scalar} a[1], b[1];",
-              "    SYST_RVR = 0xFFFFFFu;", "    SYST_CVR = 0u;", "    SYST_CSR = 5u;   /* enable, processor clock */"]
-    lines += body
-    lines += ["    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{", "        kdg_empty(a, b);", "    }",
-              '    printf("ticks - %lu\\n", (unsigned long)elapsed(start));', '    printf("done\\n");',
-              "    return 0;", "}", ""]
-    return "\n".join(lines)
+    return "\n".join(lines + _main(scalar, body))
 
 
 def empty_source(scalar: str) -> str:
@@ -184,7 +191,8 @@ def undefined_symbols(obj: Path) -> list[str]:
 def build_and_run(generated_dir: Path, target: Target, work: Path, inputs: dict) -> dict:
     """Cross-build the library and the harness for ``target``, run it on QEMU; returns
     ``{"outputs": {fn: {port: array}}, "instructions": {fn: n}, "flash": {fn: bytes},
-    "stack": {fn: bytes}, "undefined": [symbols]}``."""
+    "stack": {fn: bytes}, "undefined": [symbols the library's object needs], "linked": [symbols
+    the harness image defines]}``."""
     generated_dir = Path(generated_dir)
     manifest = json.loads((generated_dir / "functions.json").read_text())
     robot = manifest["robot"]
@@ -229,7 +237,99 @@ def build_and_run(generated_dir: Path, target: Target, work: Path, inputs: dict)
         stack[fn] = frames.get(symbol, 0) + (kernel if any(k.startswith("kdg_sincos") for k in sizes) else 0)
     batch_stack = {k[len(robot) + 1:]: v for k, v in frames.items() if k.endswith("_batch")}
     return {"outputs": outputs, "instructions": instructions, "flash": flash, "stack": stack,
-            "batch_stack": batch_stack, "undefined": undefined_symbols(obj)}
+            "batch_stack": batch_stack, "undefined": undefined_symbols(obj), "linked": defined_symbols(elf)}
+
+
+def _float_literal(value) -> str:
+    """A float's C99 spelling, infinities and NaN by <math.h>'s macros.
+
+    >>> _float_literal(0.1), _float_literal(float("-inf")), _float_literal(float("nan"))
+    ('0x1.99999a0000000p-4f', '-INFINITY', 'NAN')
+    """
+    value = float(np.float32(value))
+    if np.isnan(value):
+        return "NAN"
+    if np.isinf(value):
+        return "-INFINITY" if value < 0 else "INFINITY"
+    return f"{value.hex()}f"
+
+
+def kernel_source(arguments: dict) -> str:
+    """A harness of the float sincos kernel alone (``kindyngen.codegen.trig_kernel.kernel_c_float``):
+    per named argument list, its sin and cos as hex words ("out <name> sin|cos <word> ..."),
+    then "ticks <name> <ticks of REPS calls>"; an empty function's loop last ("ticks - ...").
+    The kernel is called through a function of the harness's own file, as a generated
+    function calls it."""
+    from ..codegen.trig_kernel import kernel_c_float
+    lines = ["/* KinDynGen float kernel harness (kindyngen/runtime/embedded.py): generated, do not edit. */",
+             "#include <math.h>", "#include <stdint.h>", "#include <stdio.h>", "",
+             "#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)",
+             "#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)",
+             "#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)", "",
+             kernel_c_float(),
+             "void kdg_kernel_call(long n, const float *x, float *s, float *c);",
+             "void kdg_kernel_call(long n, const float *x, float *s, float *c)", "{",
+             "    kdg_sincosf(n, x, s, c);", "}", "",
+             "void kdg_empty(const float *a, float *b);", "",
+             "static void print_words(const char *name, const char *what, const float *data, long n)", "{",
+             "    long i;", '    printf("out %s %s", name, what);', "    for (i = 0; i < n; ++i) {",
+             "        union { float f; uint32_t u; } v;", "        v.f = data[i];",
+             '        printf(" %08lx", (unsigned long)v.u);', "    }", '    printf("\\n");', "}", "",
+             "static uint32_t elapsed(uint32_t start)", "{", "    return (start - SYST_CVR) & 0xFFFFFFu;", "}", ""]
+    body = []
+    for k, (name, values) in enumerate(arguments.items()):
+        n = len(values)
+        words = ", ".join(_float_literal(v) for v in values)
+        lines.append(f"static const float x{k}[{n}] = {{{words}}};")
+        lines.append(f"static float s{k}[{n}], c{k}[{n}];")
+        body += [f"    kdg_kernel_call({n}, x{k}, s{k}, c{k});",
+                 f'    print_words("{name}", "sin", s{k}, {n});', f'    print_words("{name}", "cos", c{k}, {n});',
+                 "    start = SYST_CVR;", f"    for (r = 0; r < {REPS}; ++r) {{",
+                 f"        kdg_kernel_call({n}, x{k}, s{k}, c{k});", "    }",
+                 f'    printf("ticks {name} %lu\\n", (unsigned long)elapsed(start));']
+    return "\n".join(lines + _main("float", body))
+
+
+def kernel_figures(arguments: dict, work: Path) -> dict:
+    """The float sincos kernel on the Cortex-M4F board (QEMU) for each named argument list:
+    ``{"sin": {name: float32 array}, "cos": {...}, "instructions": {name: per call},
+    "symbols": [every symbol the linked image defines]}`` (the last says whether newlib's
+    sinf/cosf were linked)."""
+    target = TARGETS["m4f"]
+    bad = [name for name in arguments if not re.fullmatch(r"[A-Za-z0-9_.+-]+", name)]
+    if bad:
+        raise ValueError(f"argument list names must be single words (they are printed and parsed): {bad}")
+    work = Path(work)
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "kernel_harness.c").write_text(kernel_source(arguments))
+    (work / "empty.c").write_text(empty_source("float"))
+    elf = work / "kernel.elf"
+    _run([CC, *target.cpu_flags, *C_FLAGS, "-Werror", "-Wl,--gc-sections", "--specs=rdimon.specs", "-nostartfiles",
+          "-T", HERE / "mps2.ld", HERE / "startup.c", work / "kernel_harness.c", work / "empty.c", "-lm", "-o", elf],
+         "linking the M4F kernel harness")
+    done = _run([QEMU, "-M", target.board, "-nographic", "-monitor", "none", "-serial", "none",
+                 "-semihosting-config", "enable=on,target=native", "-icount", "shift=0", "-kernel", elf],
+                f"running the kernel harness on {target.board}", timeout=300)
+    lines = done.stdout.splitlines()
+    if "done" not in lines:
+        raise EmbeddedError(f"the {target.board} kernel harness stopped early:\n{done.stdout[-2000:]}")
+    out, ticks = {"sin": {}, "cos": {}}, {}
+    for line in lines:
+        parts = line.split()
+        if parts[0] == "out":
+            out[parts[2]][parts[1]] = np.array([int(w, 16) for w in parts[3:]], dtype=np.uint32).view(np.float32)
+        elif parts[0] == "ticks":
+            ticks[parts[1]] = int(parts[2])
+    base = ticks.pop("-")
+    out["instructions"] = {name: round((t - base) * TICK_INSTRUCTIONS / REPS) for name, t in ticks.items()}
+    out["symbols"] = defined_symbols(elf)
+    return out
+
+
+def defined_symbols(elf: Path) -> list[str]:
+    """Every symbol a linked image defines (``nm --defined-only``): what was linked in."""
+    out = _run(["arm-none-eabi-nm", "--defined-only", elf], "nm").stdout
+    return sorted({line.split()[-1] for line in out.splitlines() if line.strip()})
 
 
 def host_outputs(generated_dir: Path, inputs: dict) -> dict:
@@ -263,7 +363,9 @@ def figures(generated_dir: Path, target_name: str, work: Path, lower=None, upper
     from .evaluate import load_generated
     generated_dir = Path(generated_dir)
     manifest = json.loads((generated_dir / "functions.json").read_text())
-    n = manifest["n"]
+    # the coordinates the functions take: a tree with mimic joints or closed by loops has fewer
+    # than its joints ("nq"); loop_solve closes a tree's other joints from them
+    n = manifest.get("nq", manifest["n"])
     lower = np.full(n, -1.0) if lower is None else np.asarray(lower, float)
     upper = np.full(n, 1.0) if upper is None else np.asarray(upper, float)
     inputs = fixed_inputs(manifest, load_generated(generated_dir, "c"), lower, upper)
@@ -328,7 +430,7 @@ def main(argv=None) -> int:
         return 2
     document = {k: r[k] for k in ("flash", "stack", "instructions", "batch_stack", "undefined")}
     document["vs_host"] = agreement(r)
-    text = json.dumps(document, indent=1) + "\n"
+    text = strict_json(document, indent=1) + "\n"
     print(text, end="")
     if args.write:
         folder = Path(args.generated_dir)

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.user_text import is_identifier, octave_string
 from .python_c import cache_root
 
 
@@ -48,6 +49,12 @@ class GeneratedLibrary:
             self.functions = {f["name"]: f for f in self.manifest["functions"]}
         except (json.JSONDecodeError, KeyError, TypeError) as exc:
             raise EvaluationError(f"{manifest_path}: not a KinDynGen interface file ({exc})") from None
+        # the robot's identifier and the function names become paths, module names and Octave
+        # function handles: only identifiers (kindyngen.model.user_text) are taken
+        for what in [self.manifest.get("robot")] + list(self.functions):
+            if not isinstance(what, str) or not is_identifier(what):
+                raise EvaluationError(f"{manifest_path}: {what!r} is not an identifier (not a KinDynGen "
+                                      f"interface file, or one edited by hand)")
         self._impl = {"python": _PythonBackend, "c": _CBackend, "casadi": _CasadiBackend,
                       "jax": _JaxBackend, "matlab": _MatlabBackend}[lang](self)
 
@@ -229,21 +236,22 @@ def run_octave(matlab_dir, calls, timeout: float = 600.0) -> list[list[np.ndarra
                               "(Debian: apt-get install octave)")
     with tempfile.TemporaryDirectory(prefix="kindyngen-octave-") as tmp:
         tmp = Path(tmp)
-        lines = [f"addpath('{Path(matlab_dir).resolve()}');"]
+        lines = [f'addpath("{octave_string(str(Path(matlab_dir).resolve()))}");']
+        where = octave_string(str(tmp))
         for c, (name, inputs, shapes) in enumerate(calls):
             args = []
             for k, a in enumerate(inputs):
                 _octave_layout(a).tofile(tmp / f"in{c}_{k}.bin")
                 dims = ", ".join(str(s) for s in (tuple(a.shape[1:]) + (a.shape[0],)))
-                lines.append(f"fid = fopen('{tmp}/in{c}_{k}.bin'); a{k} = reshape(fread(fid, Inf, 'double'), [{dims}]); "
+                lines.append(f"fid = fopen(\"{where}/in{c}_{k}.bin\"); a{k} = reshape(fread(fid, Inf, 'double'), [{dims}]); "
                              "fclose(fid);")
                 args.append(f"a{k}")
             outs = ", ".join(f"o{k}" for k in range(len(shapes)))
-            writes = " ".join(f"fid = fopen('{tmp}/out{c}_{k}.bin', 'w'); fwrite(fid, double(o{k}), 'double'); fclose(fid);"
+            writes = " ".join(f"fid = fopen(\"{where}/out{c}_{k}.bin\", 'w'); fwrite(fid, double(o{k}), 'double'); fclose(fid);"
                               for k in range(len(shapes)))
             handle = name if name.startswith("@") else "@" + name
             lines.append(f"try\n  fn = {handle};\n  [{outs}] = fn({', '.join(args)});\n  {writes}\ncatch err\n"
-                         f"  fid = fopen('{tmp}/err{c}.txt', 'w'); fputs(fid, err.message); fclose(fid);\nend")
+                         f"  fid = fopen(\"{where}/err{c}.txt\", 'w'); fputs(fid, err.message); fclose(fid);\nend")
         (tmp / "run.m").write_text("\n".join(lines) + "\n")
         done = subprocess.run([octave, "--no-init-file", "--quiet", "--no-window-system", str(tmp / "run.m")],
                               capture_output=True, text=True, timeout=timeout)

@@ -40,6 +40,8 @@ import sysconfig
 import tempfile
 from pathlib import Path
 
+from ..model.user_text import is_identifier
+
 # Modules imported in this process, by built file: a second load returns the same module.
 _LOADED: dict = {}
 
@@ -64,6 +66,9 @@ def _sources(robot_dir: Path) -> tuple[str, list[Path]]:
         robot = json.loads(manifest.read_text())["robot"]
     except (json.JSONDecodeError, KeyError, TypeError) as exc:
         raise BuildError(f"{manifest}: not a KinDynGen interface file ({exc})") from None
+    if not isinstance(robot, str) or not is_identifier(robot):     # it names files and the module
+        raise BuildError(f"{manifest}: robot {robot!r} is not an identifier (not a KinDynGen interface file, "
+                         f"or one edited by hand)")
     files = [robot_dir / "python_c" / f"{robot}_ext.c", robot_dir / "c" / f"{robot}.c", robot_dir / "c" / f"{robot}.h"]
     for path, lang in zip(files, ("python_c", "c", "c")):
         if not path.is_file():

@@ -69,3 +69,30 @@ def test_irrational_grouping_is_rounded_to_twelve_digits():
     b = find_base_parameters(evaluate, ("x", "y", "z"), seeds=(0, 1))
     assert not b.exact
     assert b.T[0][0] == 1.41421356237 and b.T[1][0] == 0
+
+
+def test_columns_of_very_different_sizes_group_exactly():
+    """z = 100 x - y / 4 + 0 w with x, y, w of norms 1e2, 1 and 1e-2 (masses beside inertias
+    of long links): the relations are solved on unit-norm columns and each coefficient's
+    rounding judged at its column ratio (|z| / |w| = 1e6), so the zero stays an exact zero (judged
+    against 1 the coefficient of the small column is rounding noise of about 1e-10, and the
+    grouping was 'not exact')."""
+    def evaluate(seed):
+        a = np.random.default_rng(seed).normal(size=(40, 3)) * np.array([1e2, 1.0, 1e-2])
+        return np.column_stack([a, 100 * a[:, 0] - a[:, 1] / 4])[:, None, :]
+
+    b = find_base_parameters(evaluate, ("x", "y", "w", "z"), seeds=(0, 1))
+    assert b.exact and b.T == ((sympy.Integer(100),), (sympy.Rational(-1, 4),), (sympy.Integer(0),))
+
+
+def test_hundred_metre_links_group_exactly(tmp_path):
+    """lwr4 with d3 = d5 = 100 m: every grouping coefficient is the exact rational the geometry
+    gives (squares of the lengths), as for the shipped 0.4 m links."""
+    from kindyngen.readers.yaml_description import load_robot
+    from tests.harness import ROOT
+    text = (ROOT / "robots" / "lwr4.yaml").read_text().replace("d: 0.40,", "d: 100,").replace("d: 0.39,", "d: 100,")
+    (tmp_path / "long.yaml").write_text(text)
+    document = regressors.base_params_document(load_robot(tmp_path / "long.yaml"))
+    for kind, entry in document.items():
+        assert entry["exact"], (kind, [e for e in entry["expressions"] if "e-" in e][:3])
+    assert any("10000*m3" in e for e in document["Y_m"]["expressions"])

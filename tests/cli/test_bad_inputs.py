@@ -164,3 +164,32 @@ def test_reused_out_never_mixes_runs(log, capsys, tmp_path):
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before       # a failed run leaves them whole
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".partial")]
     assert math.isfinite(doc["condition_number"])
+
+
+PLANAR = """name: planar
+dh: standard
+gravity: [0, 0, -9.81]
+joints:
+  - {a: 0.5, alpha: 0, d: 0, offset: 0, lower: -3, upper: 3}
+  - {a: 0.4, alpha: 0, d: 0, offset: 0, lower: -3, upper: 3}
+links:
+  - {mass: 2.0, com: [0.2, 0, 0], inertia: [0.02, 0.02, 0.02, 0, 0, 0]}
+  - {mass: MASS, com: [0.2, 0, 0], inertia: [INERTIA, INERTIA, INERTIA, 0, 0, 0]}
+"""
+
+
+def test_float_build_of_a_planar_arm_and_a_constant_float_cannot_hold(capsys, tmp_path):
+    """A planar arm (gravity along its joint axes: g is zero, Y_g has no column) builds in float; a
+    description whose derived constants fall below float's normal range is refused with the
+    reason, not a traceback (both were tracebacks: an empty port in the float-error measurement,
+    and float32.c_float's ValueError)."""
+    ok = tmp_path / "planar.yaml"
+    ok.write_text(PLANAR.replace("MASS", "1.0").replace("INERTIA", "0.01"))
+    code, _, err = _run(["generate", str(ok), "--scalar", "float", "--functions", "g,Y_g,M", "--out",
+                         str(tmp_path / "o"), "--quiet"], capsys)
+    assert code == 0, err
+    tiny = tmp_path / "tiny.yaml"
+    tiny.write_text(PLANAR.replace("MASS", "1e-41").replace("INERTIA", "1e-43"))
+    _refused(["generate", str(tiny), "--scalar", "float", "--functions", "M", "--out", str(tmp_path / "t"),
+              "--quiet"], capsys, "tiny.yaml", "--scalar float", "below float's normal range", "--scalar double")
+    assert not (tmp_path / "t" / "planar").exists()

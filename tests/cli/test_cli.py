@@ -133,7 +133,7 @@ def test_unwritable_output_folder(capsys, monkeypatch, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("")
     _refused(["generate", str(ROOT / "robots" / "lwr4.yaml"), "--out", str(blocker / "sub"), "--quiet",
-              "--lang", "python"], capsys, monkeypatch, "Not a directory")
+              "--lang", "python"], capsys, monkeypatch, f"--out {blocker / 'sub'}: {blocker} is not a folder")
 
 
 def test_eval_on_a_broken_or_partial_generated_folder(capsys, monkeypatch, tmp_path):

@@ -94,7 +94,7 @@ def test_yaml_tree_needs_joints_by_origin_and_axis(tmp_path, capsys, monkeypatch
 
 @pytest.mark.parametrize("change, message", [
     (lambda d: d["joints"][1].update(parent="nope"), "field 'joints[1].parent': 'nope' is not an earlier joint"),
-    (lambda d: d["joints"][1].update(name="hip"), "a tree's joints need unique names"),
+    (lambda d: d["joints"][1].update(name="hip"), "field 'joints[1].name': 'hip' is also the name of joints[0]"),
     (lambda d: d["joints"][0].update(friction={"viscous": 1}), "field 'joints[0].friction': unknown key"),
     (lambda d: d.update(payload={}), "field 'payload': unknown key"),
 ])
@@ -271,3 +271,15 @@ def test_readme_tree_example_loads():
     block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
     model = parse_robot(yaml.safe_load(block), "trees.md", floating_base=True)
     assert model.parents == (-1, 0) and model.nv == 8 and float(model.root.mass) == 4.0
+
+
+@pytest.mark.parametrize("drop_base", [False, True])
+def test_a_tree_description_read_as_an_arm_is_told_to_use_tree(tmp_path, capsys, monkeypatch, drop_base):
+    """Without --tree a tree's keys (base, a joint's parent) are the reading's fault, not typos."""
+    text = "\n".join(line for line in YAML_TREE.splitlines() if not (drop_base and line.startswith("base:")))
+    path = tmp_path / "tree.yaml"
+    path.write_text(text)
+    code, out, err = _run(["generate", str(path), "--out", str(tmp_path / "out"), "--functions", "M"], capsys,
+                          monkeypatch)
+    field = "joints[1].parent" if drop_base else "base"
+    assert code == 2 and err == f"error: {path}: field '{field}': a key of a tree description: read it as a tree (--tree)\n"

@@ -29,6 +29,21 @@ def test_c_compiles_strictly(robot, compiler, tmp_path):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("compiler", ["gcc", "clang"])
+def test_mex_gateway_compiles_strictly(robot, compiler):
+    """The MEX gateway against Octave's mex.h (a system header: its own warnings are not the
+    gateway's); the gateway itself as strict as the C."""
+    mkoctfile = shutil.which("mkoctfile")
+    if shutil.which(compiler) is None or mkoctfile is None:
+        pytest.skip(f"{compiler} or mkoctfile (GNU Octave's headers) not installed")
+    flags = subprocess.run([mkoctfile, "-p", "INCFLAGS"], capture_output=True, text=True, check=True).stdout.split()
+    done = subprocess.run([compiler, *STRICT, "-fsyntax-only", *(f"-isystem{f[2:]}" for f in flags),
+                           "-I", str(GENERATED / robot / "c"), str(GENERATED / robot / "matlab" / f"{robot}_mex.c")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
 def test_c_builds_with_cmake(robot, tmp_path):
     if shutil.which("cmake") is None:
         pytest.skip("cmake not installed")
@@ -58,10 +73,12 @@ def test_c_has_no_globals_or_allocation(robot):
     calls = source[source.index("\nvoid "):]                 # the generated functions
     assert any(s in statics for s in half[1]) is ("kdg_sincos_half" in calls)
     assert any(s in statics for s in plain[1]) is bool(re.search(r"kdg_sincos(_split)?\(", calls))
-    # every statement lives inside a function body: nothing at file scope but includes and functions
+    # every statement lives inside a function body: nothing at file scope but includes, the
+    # -ffast-math guard and functions (the int one: <robot>_rounds_to_nearest)
     depth, file_scope = 0, []
     for line in source.splitlines():
-        if depth == 0 and line.strip() and not line.startswith(("#", "/*", " *", "void ", "static void ", "static int ", "{", "}")):
+        if depth == 0 and line.strip() and not line.startswith(("#", "/*", " *", "void ", "int ", "static void ", "static int ",
+                                                                 "{", "}")):
             file_scope.append(line)
         depth += line.count("{") - line.count("}")
     assert file_scope == []

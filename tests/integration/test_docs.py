@@ -19,10 +19,11 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import ROOT
+from tests.harness import HANG_GUARD_S, ROOT
 
 PAGES_RUN = ("README.md", "docs/getting-started.md", "docs/tutorials/identify.md",
-             "docs/tutorials/discover.md", "docs/tutorials/plan.md")
+             "docs/tutorials/discover.md", "docs/tutorials/plan.md", "docs/tutorials/closed_loops.md",
+            "docs/tutorials/mimic_joints.md")
 
 
 def _shell_blocks(path: Path) -> list[str]:
@@ -73,5 +74,5 @@ def test_page_commands_run_as_written(page, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT), "KINDYNGEN_CACHE": str(tmp_path / "cache"),
            "PYTHONDONTWRITEBYTECODE": "1"}
     done = subprocess.run(["bash", "-c", "set -euo pipefail\n" + "\n".join(blocks)], cwd=work, env=env,
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert done.returncode == 0, f"{page}:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"

@@ -18,13 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.harness import GENERATED, ROOT
+from tests.harness import GENERATED, HANG_GUARD_S, ROOT
 
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "kindyngen")
 
 
 def _run(cmd, cwd, stdin=None):
-    done = subprocess.run(cmd, cwd=cwd, input=stdin, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(cmd, cwd=cwd, input=stdin, capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert done.returncode == 0, f"{' '.join(map(str, cmd))} failed:\n{done.stdout}\n{done.stderr}"
     return done.stdout
 

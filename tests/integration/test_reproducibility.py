@@ -14,7 +14,7 @@ import subprocess
 import sys
 
 
-from tests.harness import GENERATED, ROOT
+from tests.harness import GENERATED, HANG_GUARD_S, ROOT
 
 KERNELS = ("Haswell", "SkylakeX", "Sandybridge", "Prescott")
 MIN_KERNELS = 3
@@ -45,7 +45,8 @@ def _environments() -> dict[str, dict]:
 
 
 def _probe(env: dict) -> list[str] | None:
-    done = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=120)
+    done = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True,
+                          timeout=HANG_GUARD_S)
     return json.loads(done.stdout) if done.returncode == 0 else None
 
 
@@ -93,7 +94,7 @@ def test_generation_is_identical_under_every_blas_kernel(tmp_path):
                                      "--quiet"], env=env, cwd=ROOT, stderr=subprocess.PIPE, text=True)
             active.append((label, out, proc))
         label, out, proc = active.pop(0)
-        _, err = proc.communicate(timeout=600)
+        _, err = proc.communicate(timeout=HANG_GUARD_S)
         assert proc.returncode == 0, f"{label}: generation failed: {err}"
         committed = _tree(GENERATED)
         fresh = _tree(out)

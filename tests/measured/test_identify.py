@@ -4,7 +4,9 @@ recovery from noise-free data, an identified robot description that reloads and 
 the identified model predicts, and one-line refusals of bad requests."""
 from __future__ import annotations
 
+import html
 import json
+import re
 
 import numpy as np
 import pinocchio as pin
@@ -107,6 +109,24 @@ def test_noise_free_recovery_and_reloadable_model(logs, capsys):
     pm, pd, _ = pinocchio_model(model)
     predicted = np.array([pin.rnea(pm, pd, a, b, c) for a, b, c in zip(q, qd, qdd)]) + fv * qd + fc * np.sign(qd) + f0
     np.testing.assert_allclose(predicted, _torques(lwr, q, qd, qdd), atol=1e-7)
+
+
+def test_report_shows_the_descriptions_file_name_as_text(logs, capsys, tmp_path):
+    """Issue 42: the description's file name is the user's text; report.md, rendered as MkDocs
+    renders it, has no element but its own and its heading reads as the name."""
+    markdown = pytest.importorskip("markdown")
+    root, (train, validate) = logs
+    robot_file = tmp_path / "lwr4 <script> *b* [l](u) _i_ `c` | #.yaml"       # no "/" in a file name
+    robot_file.write_text((ROOT / "robots" / "lwr4.yaml").read_text())
+    out = tmp_path / "out"
+    code, _, err = _run(["identify", "--robot", str(robot_file), "--data", str(train), "--validate", str(validate),
+                         "--cutoff", "none", "--out", str(out), "--quiet"], capsys)
+    assert code == 0, err
+    page = markdown.markdown((out / "report.md").read_text(), extensions=["tables"])
+    assert set(re.findall(r"<(\w+)", page)) <= {"h1", "h2", "p", "table", "thead", "tbody", "tr", "th", "td", "img",
+                                                "ul", "li"}
+    assert re.search(r"<h1>(.*)</h1>", page).group(1) == html.escape(f"Identification of {robot_file.name}",
+                                                                      quote=False)
 
 
 def test_consistent_identification_on_noise_free_data(logs, capsys):

@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from tests.harness import ROOT
+from tests.harness import HANG_GUARD_S, ROOT
 from kindyngen.measured.estimation import least_squares
 from kindyngen.measured.identify import IdentificationRequest, identify
 from kindyngen.measured.log_formats import joint_names_of, read_any, write_parquet, write_rosbag1, write_rosbag2
@@ -189,6 +189,7 @@ def test_ten_files_split_each_on_its_own_as_in_memory(ten_files, settings):
 
 def test_one_file_and_ten_files_and_dask_workers_agree(ten_files):
     distributed = pytest.importorskip("distributed")
+    import dask
     arm, one, parts, held_out = ten_files
     settings = Preprocessing(cutoff_hz=None)
     single = identify_streamed(IdentificationRequest(arm, (str(one),), validate=(str(held_out),),
@@ -201,13 +202,17 @@ def test_one_file_and_ten_files_and_dask_workers_agree(ten_files):
     request = IdentificationRequest(arm, tuple(map(str, parts)), validate=(str(held_out),), split=0.75)
     split = identify_streamed(request)
     bits = []
-    with distributed.LocalCluster(n_workers=4, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    # Dask's 30 s connect and silent-connection timeouts as hang guards only: four worker
+    # processes starting (or computing) on a loaded 2-core machine may take longer
+    guard = f"{HANG_GUARD_S}s"
+    with dask.config.set({"distributed.comm.timeouts.connect": guard, "distributed.comm.timeouts.tcp": guard}), \
+            distributed.LocalCluster(n_workers=4, threads_per_worker=1, processes=True,
+                                     dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         for workers in (4, 2, 1):            # one cluster, workers retired between runs (start-up is the cost)
             alive = sorted(client.scheduler_info()["workers"])
             if len(alive) > workers:
                 client.retire_workers(alive[workers:], close_workers=True)
-            client.wait_for_workers(workers)
+            client.wait_for_workers(workers, timeout=HANG_GUARD_S)
             assert len(client.scheduler_info()["workers"]) == workers
             bits.append(_values(identify_streamed(request, client=client)))
     for other in bits:

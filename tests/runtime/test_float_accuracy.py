@@ -53,3 +53,30 @@ def test_random_inputs_stay_within_the_limits_and_near_zero_puts_each_joint_near
     assert np.abs(x["qd"]).max() <= 2 and np.abs(x["qdd"]).max() <= 5
     near = random_inputs(model, None, spec, rng, 70, near_zero=True)["q"]
     assert np.all(np.abs(near[np.arange(70), np.arange(70) % 7]) <= NEAR_ZERO)
+
+
+def _two_link_programs():
+    from kindyngen.codegen.pipeline import build_programs
+    from kindyngen.codegen.interface import manifest
+    model = load_robot(ROOT / "examples" / "two_link.yaml")
+    programs = build_programs(model, only={"fk_hom"}, progress=False)
+    return model, programs, manifest(model, programs, "numeric", "libm", scalar="float")
+
+
+def test_the_float_measurement_is_a_note_only_without_a_host_compiler(monkeypatch, capsys):
+    """No compiler: a note and no figure. A compiler that builds a one-line library but not the
+    generated C: the failure is raised, never passed off as a missing compiler."""
+    from kindyngen.codegen import pipeline
+    from kindyngen.runtime import float_accuracy
+    from kindyngen.runtime.evaluate import EvaluationError
+    model, programs, document = _two_link_programs()
+
+    def failing(*args, **kwargs):
+        raise EvaluationError("compiling two_link.c failed:\nerror: expected ';'")
+
+    monkeypatch.setattr(float_accuracy, "measure", failing)
+    with pytest.raises(EvaluationError, match="expected ';'"):
+        pipeline.measure_float_error(model, programs, document, "libm")
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    assert pipeline.measure_float_error(model, programs, document, "libm") == {}
+    assert "note: float error not measured (no working host C compiler)" in capsys.readouterr().err

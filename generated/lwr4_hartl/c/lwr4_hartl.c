@@ -4,6 +4,10 @@
 
 #include "lwr4_hartl.h"
 
+#if defined(__FAST_MATH__)
+#error "lwr4_hartl.c needs IEEE arithmetic as C99 specifies it: -ffast-math and -Ofast reorder and drop the roundings the sincos kernel recovers exactly (wrong results); compile it without them"
+#endif
+
 /* The blocks of kdg_sincos (below): s[i] = sin(x[i]), c[i] = cos(x[i]) for eight lanes; they return
  * nonzero if some |x[i]| exceeds 1.04858e+06 or is not a number: those lanes are garbage here (no
  * undefined behaviour: all in double) and kdg_sincos replaces them by libm. codegen/trig_kernel.py's
@@ -30988,6 +30992,17 @@ Y[299*count + start + j] = t732;
 Y[300*count + start + j] = t129;
         }
     }
+}
+
+int lwr4_hartl_rounds_to_nearest(void)
+{
+    /* 1 + 1/4 ulp, 1 + 3/4 ulp and their negatives: to nearest they round to 1, 1 + ulp, -1 and
+       -1 - ulp; upward, downward and toward zero each change one of them. volatile: added by the
+       FPU at run time, in its current mode, not folded by the compiler; stored, so that a wider
+       evaluation (FLT_EVAL_METHOD 2) is rounded to the type as well */
+    volatile double one = 1.0, quarter = 0x1p-54, three_quarters = 0x3p-54;
+    volatile double a = one + quarter, b = one + three_quarters, c = -one - quarter, d = -one - three_quarters;
+    return a == 1.0 && b == 0x1.0000000000001p0 && c == -1.0 && d == -0x1.0000000000001p0;
 }
 
 void lwr4_hartl_ik_dls(const double *T, const double *q0, double *q, int *status)

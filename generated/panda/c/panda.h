@@ -16,12 +16,21 @@
  * on dense grids, at the doubles nearest every multiple of pi/2 up to 1048576, at random
  * doubles of random exponent and at +-0, subnormals, inf and NaN); |q| > 1048576 rad,
  * infinities and NaN are passed to libm sin/cos. Other sin/cos (and the half angles of the
- * batch variants) are libm calls. The kernel needs IEEE double arithmetic as C99 specifies it: do not compile with
- * -ffast-math (-ffp-contract=fast is fine).
+ * batch variants) are libm calls.
  *
- * Fused multiply-adds: strict C99 (gcc -std=c99) keeps every product rounded; on FMA targets
- * -ffp-contract=fast lets the compiler fuse them, with results that differ by roundings only.
- * Measured (python -m benchmarks.latency; lwr4, gcc 12.2 -O3 -march=native, AMD EPYC Zen 4):
+ * Floating-point environment: IEEE arithmetic as C99 specifies it. The .c refuses -ffast-math
+ * (and -Ofast) with an #error: they let the compiler reorder and drop the roundings the sincos
+ * kernel recovers exactly. The accuracy stated here is for rounding to nearest, the FPU's
+ * default; panda_rounds_to_nearest() checks the current mode at run time (after code that may
+ * change it: fesetround, FPSCR on Cortex-M).
+ * The double kernel needs rounding to nearest: in another mode it can pick the wrong quadrant,
+ * and sin/cos are then wrong, not merely rounded differently.
+ *
+ * Fused multiply-adds: strict C99 keeps every product rounded (gcc -std=c99; clang also needs
+ * -ffp-contract=off; CMakeLists.txt sets both), so that two such builds give the same bits on
+ * any IEEE machine. Where the target has FMA, gcc's GNU modes (its default -std=gnu*) and clang's
+ * default fuse products into multiply-adds, with results that differ by roundings only; that
+ * measured (python -m benchmarks.latency; lwr4, gcc 12.2 -O3 -march=native, AMD EPYC Zen 4)
  * fk_hom 1.14x and jacobian 1.05x faster per single call, tau 1.13x, fd and fd_derivatives
  * 1.24x and 1.21x; other machines differ.
  *
@@ -595,6 +604,13 @@ void panda_Y_m_batch(long count, const double *q, double *Y);
  */
 void panda_Y(const double *q, const double *qd, const double *qdd, double *Y);
 void panda_Y_batch(long count, const double *q, const double *qd, const double *qdd, double *Y);
+
+/*
+ * panda_rounds_to_nearest: 1 if the floating-point unit currently rounds to nearest (ties to
+ * even), the mode every accuracy figure in this header is for; 0 in any other rounding mode.
+ * Four double additions of volatile operands, evaluated in the current mode.
+ */
+int panda_rounds_to_nearest(void);
 
 /*
  * ik_dls: Inverse kinematics by damped least squares (Levenberg-Marquardt): q with fk_hom(q) = T

@@ -18,15 +18,6 @@
 #include "mex.h"
 #include "panda.h"
 
-/* entry k of a row-major (rows x cols) matrix is element (k % cols, k / cols) of MATLAB's
-   column-major one, at (k % cols)*rows + k / cols */
-static void from_matlab(const double *src, double *dst, long rows, long cols)
-{
-    long k;
-    for (k = 0; k < rows*cols; ++k)
-        dst[k] = src[(k % cols)*rows + k / cols];
-}
-
 static long configurations(const mxArray *a, long size, const char *name, const char *port)
 {
     long count;

@@ -16,11 +16,13 @@ if(KDG_CPU STREQUAL "m7")
 else()
   set(KDG_CPU_FLAGS "-mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16")
 endif()
-# -ffp-contract=off: the library's CMakeLists asks for C99 with GNU extensions (gnu99), whose
-# default contraction into fused multiply-adds would change results from those of strict C99
+# -ffp-contract=off: no fused multiply-adds (the M4F and M7 FPUs have them), the results of strict
+# C99 on the host, bit for bit; the library's CMakeLists.txt sets it too (and -std=c99), this is
+# for the firmware's own files
 set(CMAKE_C_FLAGS_INIT "${KDG_CPU_FLAGS} -O2 -ffp-contract=off -ffunction-sections -fdata-sections -fno-schedule-insns")
-# no -fPIC on bare metal (the library's CMakeLists turns position-independent code on for
-# hosts): emptied after CMake's compiler rules, which set it, by this file read as rules override
+# no -fPIC on bare metal (the library's CMakeLists.txt turns position-independent code on only
+# for hosts; older ones did for every system): emptied after CMake's compiler rules, which set
+# it, by this file read as rules override
 set(CMAKE_USER_MAKE_RULES_OVERRIDE ${CMAKE_CURRENT_LIST_FILE})
 set(CMAKE_C_COMPILE_OPTIONS_PIC "")
 set(CMAKE_C_COMPILE_OPTIONS_PIE "")
