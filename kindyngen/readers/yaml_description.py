@@ -419,6 +419,7 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     else:
         joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
     joints = _with_mimics(rows, joints, reading)
+    _refuse_load_friction_with_mimics(joints, source)
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
@@ -515,6 +516,20 @@ def _mimic_entry(row: dict, kind: str, source: str, field: str) -> tuple:
     if kind != "prismatic":
         check_angle(float(offset), source, f"{field}.offset")
     return name, multiplier, offset
+
+
+def _refuse_load_friction_with_mimics(joints: tuple, source: str) -> None:
+    """Load-dependent friction acts on a joint's own transmitted torque, which a robot with
+    mimic joints does not have per joint (its functions are reduced to the independent joints
+    through G^T): refused, naming the first joint that declares it."""
+    if not any(joint.mimic is not None for joint in joints):
+        return
+    for k, joint in enumerate(joints):
+        if joint.friction is not None and joint.friction.load not in (None, 0):
+            raise RobotDescriptionError(source, f"joints[{k}].friction.load",
+                                        "load-dependent friction is not supported on a robot with mimic joints (it "
+                                        "acts on each joint's own transmitted torque; the functions of this robot are "
+                                        "reduced to its independent joints)")
 
 
 def _with_mimics(rows: list, joints: tuple, reading: Reading) -> tuple:
