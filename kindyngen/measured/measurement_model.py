@@ -52,6 +52,7 @@ import yaml
 
 from ..model.inertial_parameters import NAMES as BARYCENTRIC_NAMES
 from ..model.robot_model import RobotModel
+from ..readers.input_bounds import QUANTITIES
 from .effect_columns import JointLaws, coulomb_shape, joint_laws
 from .regressor_rows import full_values, torque_regressor
 
@@ -333,7 +334,9 @@ def description_data(nominal: RobotModel, source, values: dict, header: str = ""
         if prefix in ("fv", "fc", "f0", "Ia", "fs", "vs", "fl", "rs", "rc", "rk", "dq", "gt") and key[2:].isdigit():
             effects[key] = v
         elif prefix == "ce" and key[2:].isdigit():
-            if v > 0:
+            # a compliance whose stiffness is beyond what a description may hold (1e12 N m/rad,
+            # kindyngen.readers.input_bounds) deflects no encoder: the joint is written rigid
+            if v > 1.0 / QUANTITIES["coefficient"][0]:
                 effects[key] = v
     # a ripple or Stribeck term is written with its order or velocity, nothing without its amplitude
     for i in range(1, n + 1):
