@@ -600,7 +600,6 @@ def data_pass(point: Point, rigid: RigidBodies, recordings, blocks: Sequence[Blo
     floors, low_pass_text = [], []
     started, last, read = time.perf_counter(), time.perf_counter(), 0
     sum_qd2 = np.zeros(n)
-    extra = len(SIGNALS) if signals else 0
     for rec in recordings:
         state_ = dict(emitted=0, m_total=None, filt=None, bins=np.zeros((n, MEDIAN_BINS), np.int64))
 
