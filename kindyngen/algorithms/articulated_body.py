@@ -42,7 +42,7 @@ from .kinematics_conventions import q_port
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
 from .rigid_bodies import ZERO, cross, dot, matTvec, matvec, qd_port, qdd_port, vadd, vscale
 from .symbolic import Stages, SymbolicFunction, port_symbols
-from .dynamics import ROUTE, TreeSetup, carry, force_port, joint_effects, dynamics_function, setup
+from .dynamics import ROUTE, TreeSetup, carry, force_port, transmitted, dynamics_function, setup
 
 
 def _skew(v):
@@ -219,7 +219,7 @@ def forward_dynamics_aba(model: RobotModel, params: str = "numeric", name: str =
     ts = setup(model, params)
     qd, tau = port_symbols("qd", (model.nv,)), port_symbols("tau", (model.nv,))
     stages = Stages()
-    applied = [t - e for t, e in zip(tau, joint_effects(model, qd, None))]
+    applied = transmitted(model, ts.q, qd, tau)
     armature = [se.sympify(model.armature(j)) for j in range(model.n)] if "armature" in model.effects else None
     qdd = aba(ts, qd, applied, stages, armature)
     return dynamics_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g) by the articulated-body algorithm "

@@ -81,7 +81,8 @@ import symengine as se
 
 from .joint_frame_steps import mat3, u_matrix
 from .ldlt import ldlt_factor, ldlt_substitute
-from .effect_torques import coulomb_shape, effect_torques, with_armature
+from .effect_torques import (additive_derivatives, has_load_friction, joint_torque_derivatives,
+                             transmitted_derivatives, transmitted_torques, with_armature)
 from .kinematics_conventions import q_port
 from .rigid_bodies import (ZERO, cross, dot, flat, matvec, qd_port, qdd_port,
                            tau_port, vadd, vscale)
@@ -110,20 +111,6 @@ def coriolis_velocity_jacobian(dM, qd):
     Mdot = [[se.Add(*(dM[k][i][j] * qd[k] for k in range(n))) for j in range(n)] for i in range(n)]
     G = [[se.Add(*(dM[j][i][k] * qd[k] for k in range(n))) for j in range(n)] for i in range(n)]
     return [[Mdot[i][j] + G[i][j] - G[j][i] for j in range(n)] for i in range(n)]
-
-
-def effect_velocity_derivatives(model: RobotModel, qd) -> list:
-    """Per joint, the derivative of its friction torque with respect to its own velocity (the
-    only effect term that depends on q or qd): ``fv + fc d(shape)/dqd``, where the sign shape
-    contributes 0 (its derivative wherever it has one) and ``tanh(qd / eps)`` its derivative."""
-    out = []
-    for i in range(model.n):
-        f = model.friction(i)
-        terms = [se.sympify(f.viscous)] if f.viscous != 0 else []
-        if f.coulomb != 0 and model.coulomb_smoothing is not None:
-            terms.append(se.sympify(f.coulomb) * se.diff(coulomb_shape(qd[i], model.coulomb_smoothing), qd[i]))
-        out.append(se.Add(*terms) if terms else se.Integer(0))
-    return out
 
 
 def with_diagonal(A, diagonal):
@@ -374,12 +361,24 @@ def tau_derivatives(model: RobotModel, params: str = "numeric", name: str = "tau
     ne = _NewtonEuler(ts, qd, qdd)
     rows = [ne.adjoint(_unit(i, n)) for i in range(n)]
     dq, dqd = [row[0] for row in rows], [row[1] for row in rows]
-    dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
-    lanes = _lane_sweep(model, ne)
+    if has_load_friction(model):
+        # tau = y + fl |y| s + a: row i of dy/dx times 1 + fl s sign(y_i), then a's diagonal
+        y = [t + se.sympify(model.armature(i)) * qdd[i] if model.armature(i) != 0 else t
+             for i, t in enumerate(ne.tau)]
+        factor, diag_q, diag_qd = joint_torque_derivatives(model, y, q, qd)
+        dq = [[factor[i] * e for e in row] if factor[i] != 1 else row for i, row in enumerate(dq)]
+        dqd = [[factor[i] * e for e in row] if factor[i] != 1 else row for i, row in enumerate(dqd)]
+        lanes = None        # the row factors depend on the state: the identity seeds would not stay constant
+    else:
+        diag_q, diag_qd = additive_derivatives(model, q, qd)
+        lanes = _lane_sweep(model, ne, diagonal=(diag_q, diag_qd))
+    dq, dqd = with_diagonal(dq, diag_q), with_diagonal(dqd, diag_qd)
     f = dynamics_function(
         name, "Partial derivatives of the inverse dynamics tau(q, qd, qdd) (the function tau, effects included): "
         "dtau/dq and dtau/dqd by one adjoint (reverse) sweep per joint over the Newton-Euler pass (plus the "
-        "friction derivative on the diagonal of dtau/dqd); dtau/dqdd is M.",
+        + ("effects' derivatives on the diagonals); dtau/dqdd is M" if _position_dependent(model) else
+           "friction derivative on the diagonal of dtau/dqd); dtau/dqdd is M")
+        + (", each row times 1 + fl s sign(y) (load-dependent friction)." if has_load_friction(model) else "."),
         ts, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
         (Port("dtau_dq", (n, n), "dtau_i / dq_j (row-major)", _matrix_unit(model, TORQUE, ANGLE, "N m/rad")),
          Port("dtau_dqd", (n, n), "dtau_i / dqd_j (row-major)", _matrix_unit(model, TORQUE, RATE, "N m s/rad"))),
@@ -391,10 +390,13 @@ def _unit(i: int, n: int) -> tuple:
     return tuple(se.Integer(1 if k == i else 0) for k in range(n))
 
 
-def _lane_sweep(model: RobotModel, ne: "_NewtonEuler", stages=(), factor=None, minv_port=None) -> LaneSweep:
+def _lane_sweep(model: RobotModel, ne: "_NewtonEuler", stages=(), factor=None, minv_port=None,
+                diagonal=None) -> LaneSweep:
     """:meth:`_NewtonEuler.adjoint` weighted by lane as a lane program: lane l, seeded with row
-    l of the identity, gives row l of the ports dq (0) and dqd (1), the friction derivative
-    ``weight_k dfriction_k/dqd_k`` on column k of dtau/dqd. With ``factor`` (the ``(L,
+    l of the identity, gives row l of the ports dq (0) and dqd (1), the effects' derivatives
+    ``weight_k diagonal[0][k]`` on column k of dtau/dq and ``weight_k diagonal[1][k]`` on
+    column k of dtau/dqd (``diagonal``: per joint, the effect torque's derivatives by its own
+    q and qd). With ``factor`` (the ``(L,
     inv_d)`` of :func:`kindyngen.algorithms.ldlt.ldlt_factor`) the weights are row l of
     ``-M^-1``, solved from the factor in the lane itself, and ``minv_port`` (if given) gets
     row l of ``M^-1``: the seeds stay a constant table, which compilers vectorise the loop
@@ -403,8 +405,9 @@ def _lane_sweep(model: RobotModel, ne: "_NewtonEuler", stages=(), factor=None, m
     seeds = tuple(se.Symbol(f"_seed{k}") for k in range(n))
     weights = seeds if factor is None else tuple(-x for x in ldlt_substitute(*factor, list(seeds)))
     dq, dqd = ne.adjoint(weights)
-    friction = effect_velocity_derivatives(model, ne.qd)
-    dqd = [d + weights[k] * friction[k] if friction[k] != 0 else d for k, d in enumerate(dqd)]
+    diag_q, diag_qd = diagonal
+    dq = [d + weights[k] * diag_q[k] if diag_q[k] != 0 else d for k, d in enumerate(dq)]
+    dqd = [d + weights[k] * diag_qd[k] if diag_qd[k] != 0 else d for k, d in enumerate(dqd)]
     exprs = tuple(dq) + tuple(dqd)
     places = tuple((0, k, n) for k in range(n)) + tuple((1, k, n) for k in range(n))
     if minv_port is not None:
@@ -426,13 +429,14 @@ def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_d
     M = crba(ts)[0]
     L, inv_d = ldlt_factor(with_armature(model, M))
     rigid_bias = _NewtonEuler(ts, qd, None)
-    bias = [b + e for b, e in zip(rigid_bias.tau, effect_torques(model, qd, None))]
-    qdd = ldlt_substitute(L, inv_d, [t - b for t, b in zip(tau, bias)])
+    applied = transmitted_torques(model, tau, q, qd)
+    qdd = ldlt_substitute(L, inv_d, [t - b for t, b in zip(applied, rigid_bias.tau)])
     dM = mass_matrix_partials(M, q)
     dbias = _columns([rigid_bias.tangent(m) for m in range(n)])
     dq = [[se.Add(dbias[i][j], *(dM[j][i][k] * qdd[k] for k in range(n))) for j in range(n)] for i in range(n)]
     dqd = coriolis_velocity_jacobian(dM, qd)
-    dqd = with_diagonal(dqd, effect_velocity_derivatives(model, qd))
+    diagonal = transmitted_derivatives(model, tau, q, qd)
+    dq, dqd = with_diagonal(dq, diagonal[0]), with_diagonal(dqd, diagonal[1])
     ddq, ddqd = solve_columns(L, inv_d, dq), solve_columns(L, inv_d, dqd)
     ports = [Port("dqdd_dq", (n, n), "dqdd_i / dq_j (row-major)", _matrix_unit(model, ACCEL, ANGLE, "1/s^2")),
              Port("dqdd_dqd", (n, n), "dqdd_i / dqd_j (row-major)", _matrix_unit(model, ACCEL, RATE, "1/s"))]
@@ -449,16 +453,22 @@ def fd_derivatives(model: RobotModel, params: str = "numeric", name: str = "fd_d
     # that row, at qdd = fd named once (a sweep through fd's expression is too deep for CSE)
     named = tuple(se.Symbol(f"_qdd{k}") for k in range(n))
     lanes = _lane_sweep(model, _NewtonEuler(ts, qd, named), tuple(zip(named, qdd)), (L, inv_d),
-                        2 if with_minv else None)
+                        2 if with_minv else None, diagonal)
     f = dynamics_function(
         name, "Partial derivatives of the forward dynamics qdd = fd(q, qd, tau) (the function fd, effects "
         "included): dqdd/dx = -M^-1 dtau/dx at qdd = fd(q, qd, tau), with dtau/dq = d(c + g)/dq (one tangent "
         "sweep per joint over the Newton-Euler pass) + dM/dq qdd, dtau/dqd = 2 S(q, qd) (Christoffel symbols) "
-        f"plus the friction derivative, and {products} from one unrolled LDL^T factorisation of M (no "
+        f"plus the {'effects' if _position_dependent(model) else 'friction'} derivative"
+        f"{'s (ripple on dtau/dq)' if _position_dependent(model) else ''}, and {products} from one unrolled LDL^T factorisation of M (no "
         f"square roots); {minv}.",
         ts, (q_port(model), qd_port(model), tau_port(model, "applied joint torques")), (q, qd, tau),
         tuple(ports), tuple(outputs))
     return _with_note(replace(f, lanes=lanes), model)
+
+
+def _position_dependent(model: RobotModel) -> bool:
+    """Whether an effect depends on q (the ripple) or is load-dependent: the headers say so."""
+    return any(e in model.effects for e in ("position_ripple", "load_dependent_friction"))
 
 
 def _with_note(f: SymbolicFunction, model: RobotModel) -> SymbolicFunction:

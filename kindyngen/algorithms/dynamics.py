@@ -60,7 +60,7 @@ from .ldlt import tree_ldlt_solve
 from .geometry import constant_parts, exact, joint_cos_sin
 from .kinematics_conventions import joint_units, q_port
 from ..model.placement import Placement
-from .effect_torques import effect_torques, with_armature
+from .effect_torques import joint_torques, transmitted_torques, with_armature
 from .rigid_bodies import (ZERO, Body, JointFrame, conventions as arm_conventions, cross, inertials, qd_port, qdd_port,
                            root_inertials, vadd, vscale)
 from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
@@ -479,13 +479,26 @@ def _flat(matrix):
     return [e for row in matrix for e in row]
 
 
-def joint_effects(model: RobotModel, qd, qdd) -> list:
-    """The description's friction, offset and armature torques (:mod:`kindyngen.algorithms.effect_torques`)
-    on the velocity coordinates (zeros on a floating base's six)."""
+def joint_effects(model: RobotModel, q, qd, qdd, rigid) -> list:
+    """The joint torques from the rigid-body torques ``rigid`` with the description's effects
+    (:func:`kindyngen.algorithms.effect_torques.joint_torques`) on the velocity coordinates (a
+    floating base's six unchanged)."""
     base = FREE_FLYER_NV if model.floating_base else 0
     if not model.effects:
-        return [ZERO] * model.nv
-    return [ZERO] * base + effect_torques(model, None if qd is None else qd[base:], None if qdd is None else qdd[base:])
+        return list(rigid)
+    inner = joint_torques(model, rigid[base:], q[base:] if base == 0 else None, qd[base:],
+                          None if qdd is None else qdd[base:])
+    return list(rigid[:base]) + inner
+
+
+def transmitted(model: RobotModel, q, qd, tau) -> list:
+    """The applied torques ``tau`` less the description's friction, offset and ripple: what
+    accelerates the rigid bodies and the armature
+    (:func:`kindyngen.algorithms.effect_torques.transmitted_torques`)."""
+    base = FREE_FLYER_NV if model.floating_base else 0
+    if not model.effects:
+        return list(tau)
+    return list(tau[:base]) + transmitted_torques(model, tau[base:], q[base:] if base == 0 else None, qd[base:])
 
 
 def mass_matrix_with_armature(model: RobotModel, M):
@@ -510,7 +523,7 @@ def inverse_dynamics_tree(model: RobotModel, params: str = "numeric", name: str 
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     tau = rnea(ts, qd, qdd, True, stages)
     if effects:
-        tau = [t + e for t, e in zip(tau, joint_effects(model, qd, qdd))]
+        tau = joint_effects(model, ts.q, qd, qdd, tau)
     return dynamics_function(name, ROUTE + "inverse dynamics tau = M qdd + c + g by recursive Newton-Euler over the tree.",
                              ts, (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
                              (force_port(model, "tau", "torque"),), (tau,), stages)
@@ -555,8 +568,9 @@ def forward_dynamics_tree(model: RobotModel, params: str = "numeric", name: str 
     stages = Stages()
     M, _, _ = crba(ts, stages)
     M = mass_matrix_with_armature(model, M)
-    bias = [b + e for b, e in zip(rnea(ts, qd, None, True, stages), joint_effects(model, qd, None))]
-    qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(tau, bias)], stages)
+    bias = rnea(ts, qd, None, True, stages)
+    qdd = tree_ldlt_solve(M, expanded_parents(model), [t - b for t, b in zip(transmitted(model, ts.q, qd, tau), bias)],
+                          stages)
     return dynamics_function(name, ROUTE + "forward dynamics qdd = M^-1 (tau - c - g): M by composite rigid bodies, c + g "
                              "by one Newton-Euler pass (qdd = 0), M = L^T D L with L as sparse as the tree (no fill-in) "
                              "and the two sparse triangular solves.", ts,

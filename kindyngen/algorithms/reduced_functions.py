@@ -38,8 +38,9 @@ from dataclasses import replace
 
 import symengine as se
 
-from .derivatives_sweeps import effect_velocity_derivatives, with_diagonal
+from .derivatives_sweeps import with_diagonal
 from .derivatives_world_frame import NOTE as DERIVATIVES_NOTE, WorldPass
+from .effect_torques import additive_derivatives
 from .dynamics import (ROUTE, centre_of_mass_tree, coriolis_tree, crba, dynamics_function, force_port, gravity_tree,
                        inverse_dynamics_tree, joint_effects, mass_matrix_tree, mass_matrix_with_armature, rnea, setup)
 from .kinematics import fk_hom_tree, jacobian_tree
@@ -107,7 +108,9 @@ class _ReducedDynamics:
         self.qd = port_symbols("qd", (free.nv,))
         M, _, _ = crba(self.ts, stages)
         M = mass_matrix_with_armature(free, M)
-        bias = [b + e for b, e in zip(rnea(self.ts, self.qd, None, True, stages), joint_effects(free, self.qd, None))]
+        # no load-dependent friction here (the reader refuses it beside mimic joints): the
+        # joint effects are additive, a(q, qd) on the bias
+        bias = joint_effects(free, self.ts.q, self.qd, None, rnea(self.ts, self.qd, None, True, stages))
         reduced = cmap.congruence(M)
         nv = cmap.nv
         upper = {(r, c): name(reduced[r][c]) for r in range(nv) for c in range(r, nv)}
@@ -130,7 +133,11 @@ def _derivatives(cmap, ts, qd, qdd_full, stages: Stages):
     dq, dqd = WorldPass(ts, qd, qdd_full, stages).derivatives()
     base = FREE_FLYER_NV if free.floating_base else 0
     if free.effects:
-        dqd = with_diagonal(dqd, [ZERO] * base + effect_velocity_derivatives(free, qd[base:]))
+        # the additive effects depend on each joint's own q (ripple) and qd (friction) only
+        da_dq, da_dqd = additive_derivatives(free, ts.q[base:] if base == 0 else None, qd[base:])
+        if any(d != 0 for d in da_dq):
+            dq = with_diagonal(dq, [ZERO] * base + da_dq)
+        dqd = with_diagonal(dqd, [ZERO] * base + da_dqd)
     return cmap.congruence(dq), cmap.congruence(dqd)
 
 

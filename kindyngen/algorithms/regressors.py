@@ -48,7 +48,7 @@ import symengine as se
 import sympy
 
 from .base_parameters import BaseParameterError, BaseParameters, find_base_parameters
-from .dynamics import carry, conventions as dynamics_conventions, force_port, frame_body, motion_states, setup
+from .dynamics import carry, conventions as dynamics_conventions, force_port, frame_body, motion_states, rnea, setup
 from .effect_torques import effect_columns, effect_parameter_names, effect_parameter_values
 from .joint_frame_steps import mat3
 from .kinematics_conventions import q_port
@@ -198,7 +198,15 @@ def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
         input_symbols = (setup(model).q, port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,)))
         rigid_rows, link_names = None, link_parameter_names(model)
         base = FREE_FLYER_NV if model.floating_base else 0
-        shapes = effect_columns(model, input_symbols[1][base:], input_symbols[2][base:])
+        qd, qdd = input_symbols[1][base:], input_symbols[2][base:]
+        y = None
+        if "load_dependent_friction" in model.effects:
+            # the load-dependent column |y| s holds the transmitted torque of the description's
+            # own parameters (the term is bilinear): tau = Y p is exact at those parameters
+            rigid = rnea(setup(model), input_symbols[1], input_symbols[2])[base:]
+            y = [t + se.sympify(model.armature(i)) * qdd[i] if model.armature(i) != 0 else t
+                 for i, t in enumerate(rigid)]
+        shapes = effect_columns(model, input_symbols[0] if base == 0 else None, qd, qdd, y)
         row_index = {i: base + i for i in range(n)}
         row_names = tuple(f"tau{i}" for i in range(model.nv))
     else:
@@ -209,7 +217,7 @@ def full_regressor(model: RobotModel, kind: str) -> FullRegressor:
         inputs, input_symbols = f.inputs[:k] + f.inputs[k + 1:], f.input_symbols[:k] + f.input_symbols[k + 1:]
         exprs = f.output_exprs[0]
         # the armature's column is 1 on M_ii (qd = 0, qdd = 1 in its torque)
-        shapes = effect_columns(model, [zero] * n, [se.Integer(1)] * n)
+        shapes = effect_columns(model, [zero] * n, [zero] * n, [se.Integer(1)] * n, [zero] * n)
         if kind == "Y_m":
             rigid_rows = tuple(exprs[i * n + j] for i in range(n) for j in range(i + 1))
             row_names = tuple(f"M{i}{j}" if n <= 10 else f"M{i}_{j}" for i in range(n) for j in range(i + 1))
@@ -290,7 +298,8 @@ def _select(*args):
     return np.select(values[1::2], values[0::2])
 
 
-_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "atan2": np.arctan2, "piecewise": _select,
+_FUNCTIONS = {"sin": np.sin, "cos": np.cos, "tanh": np.tanh, "exp1": lambda: np.e, "abs": np.abs, "atan2": np.arctan2,
+              "piecewise": _select,
               "strictlessthan": np.less, "booleantrue": lambda: True}
 
 

@@ -34,7 +34,8 @@ EXIT_BAD_INPUT = 2
 #: what each command writes into --out (an earlier run's file of these names that a new run
 #: does not write is dropped, so two runs never mix: kindyngen.output_folder.replace_outputs)
 IDENTIFY_OUTPUTS = ("identification.json", "model.yaml", "report.md", "validation_torques.png")
-DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "residuals.png", "gap.png", "heldout_torques.png")
+DISCOVER_OUTPUTS = ("discovery.json", "model.yaml", "report.md", "report.html", "residuals.png", "steps.png",
+                    "heldout_torques.png")
 EXCITE_OUTPUTS = ("excitation.csv", "excitation.json")
 REPRODUCE_OUTPUTS = ("reproduction.json", "report.md", "fig4_torque_validation.png", "fig6_elements.png",
                      "g2_published.png")

@@ -35,6 +35,8 @@ array([[ 0.5,  0. ],
 from __future__ import annotations
 
 import difflib
+from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -147,3 +149,70 @@ def effect_torques(effects, values, qd, qdd, eps: float | None = None) -> np.nda
     if values.shape != (len(names),):
         raise ValueError(f"{len(values)} coefficients for {len(names)} effect parameters {names}")
     return columns @ values
+
+
+@dataclass(frozen=True)
+class JointLaws:
+    """A description's joint effects as float arrays (per joint; zeros where not declared):
+    the coefficients of :mod:`kindyngen.algorithms.effect_torques`' laws, numerically.
+    ``stribeck_velocity`` is 1 where no Stribeck term is declared, ``ripple_order`` 0 where no
+    ripple is."""
+
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    offset: np.ndarray
+    armature: np.ndarray
+    stribeck: np.ndarray
+    stribeck_velocity: np.ndarray
+    load: np.ndarray
+    ripple_sin: np.ndarray
+    ripple_cos: np.ndarray
+    ripple_order: np.ndarray
+    eps: float | None
+
+
+@lru_cache(maxsize=64)
+def joint_laws(model) -> JointLaws:
+    """The description's joint effects as float arrays (:class:`JointLaws`)."""
+    def column(get):
+        return np.array([float(get(i)) for i in range(model.n)])
+    ripple = [j.ripple for j in model.joints]
+    return JointLaws(
+        viscous=column(lambda i: model.friction(i).viscous), coulomb=column(lambda i: model.friction(i).coulomb),
+        offset=column(lambda i: model.friction(i).offset), armature=column(model.armature),
+        stribeck=column(lambda i: model.friction(i).stribeck),
+        stribeck_velocity=column(lambda i: model.friction(i).stribeck_velocity or 1),
+        load=column(lambda i: model.friction(i).load or 0),
+        ripple_sin=column(lambda i: ripple[i].sin_amplitude if ripple[i] else 0),
+        ripple_cos=column(lambda i: ripple[i].cos_amplitude if ripple[i] else 0),
+        ripple_order=column(lambda i: ripple[i].order if ripple[i] else 0), eps=coulomb_eps(model))
+
+
+def coulomb_shape(qd, eps: float | None) -> np.ndarray:
+    """``sign(qd)`` (0 at 0), or ``tanh(qd / eps)``."""
+    return np.sign(qd) if eps is None else np.tanh(qd / eps)
+
+
+def law_torques(model, q, qd, qdd, rigid) -> np.ndarray:
+    """The joint torques (N, n) of a description from its rigid-body torques ``rigid`` (N, n)
+    and its effects, numerically, the laws of :mod:`kindyngen.algorithms.effect_torques`:
+    ``y + fl |y| s + fv qd + fc s + fs exp(-(qd / vs)^2) s + rs sin(k q) + rc cos(k q) + f0``
+    with ``y = rigid + Ia qdd`` and ``s`` the Coulomb shape.
+
+    >>> from kindyngen.readers.yaml_description import parse_robot
+    >>> m = parse_robot({"name": "one", "dh": "none", "gravity": [0, 0, -9.81], "joints": [{"lower": -3,
+    ...     "upper": 3, "friction": {"coulomb": 0.5, "load": 0.1}, "ripple": {"sin": 0.2, "order": 6}}],
+    ...     "links": [{"mass": 1, "com": [0, 0, 0], "inertia": [0.01, 0.01, 0.01, 0, 0, 0]}]})
+    >>> float(law_torques(m, [[0.0]], [[1.0]], [[0.0]], [[2.0]])[0, 0])      # 2 + 0.1 * 2 + 0.5 + 0.2 sin(0)
+    2.7
+    """
+    laws = joint_laws(model)
+    q, qd, qdd, rigid = (np.asarray(a, float) for a in (q, qd, qdd, rigid))
+    s = coulomb_shape(qd, laws.eps)
+    y = rigid + laws.armature * qdd
+    out = y + laws.load * np.abs(y) * s + laws.viscous * qd + laws.coulomb * s + laws.offset
+    if np.any(laws.stribeck):
+        out = out + laws.stribeck * np.exp(-(qd / laws.stribeck_velocity) ** 2) * s
+    if np.any(laws.ripple_order):
+        out = out + laws.ripple_sin * np.sin(laws.ripple_order * q) + laws.ripple_cos * np.cos(laws.ripple_order * q)
+    return out

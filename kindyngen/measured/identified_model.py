@@ -25,11 +25,13 @@ from ..readers.yaml_writer import describe
 from . import MeasuredDataError
 
 EFFECT_FIELDS = {"fv": ("friction", "viscous"), "fc": ("friction", "coulomb"), "f0": ("friction", "offset"),
+                 "fs": ("friction", "stribeck"), "vs": ("friction", "stribeck_velocity"), "fl": ("friction", "load"),
+                 "rs": ("ripple", "sin"), "rc": ("ripple", "cos"), "rk": ("ripple", "order"),
                  "Ia": ("armature", None), "ce": ("stiffness", None), "dq": ("encoder_offset", None),
                  "gt": ("torque_gain", None)}
 #: how a fitted coefficient becomes the description's value: compliance ce = 1 / stiffness,
-#: relative gain error gt = torque_gain - 1
-_CONVERT = {"ce": lambda v: 1.0 / v, "gt": lambda v: 1.0 + v}
+#: relative gain error gt = torque_gain - 1, a ripple's order a whole number
+_CONVERT = {"ce": lambda v: 1.0 / v, "gt": lambda v: 1.0 + v, "rk": lambda v: int(round(v))}
 
 
 class ModelWriteError(MeasuredDataError):
@@ -40,10 +42,12 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
                       name: str | None = None, payload: dict | None = None, gravity=None, model=None) -> dict:
     """The starting description (file ``source``) with identified links and effects.
     ``links``: new link entries (None keeps the description's links, and its payload);
-    ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``; ``ce1`` a compliance
-    written as ``stiffness = 1 / ce1``, ``dq1`` as ``encoder_offset``, ``gt1`` as ``torque_gain =
-    1 + gt1``; 1-based joints) to values, replacing the description's friction, armature and
-    sensing; ``payload``
+    ``effects`` maps coefficient names (``fv1``, ``fc1``, ``f01``, ``Ia1``; ``fs1`` and ``vs1``
+    the Stribeck friction and velocity, ``fl1`` the load-dependent friction, ``rs1``, ``rc1``,
+    ``rk1`` the ripple's sine and cosine amplitudes and order; ``ce1`` a compliance written as
+    ``stiffness = 1 / ce1``, ``dq1`` as ``encoder_offset``, ``gt1`` as ``torque_gain = 1 +
+    gt1``; 1-based joints) to values, replacing the description's friction, ripple, armature
+    and sensing; ``payload``
     (``{mass, com, inertia}``) and ``gravity`` replace the description's when given. A URDF
     ``source`` is written as the YAML of ``model`` (the chain read from it; joints by origin
     and axis, :func:`kindyngen.readers.yaml_writer.describe`)."""
@@ -66,7 +70,7 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
     if gravity is not None:
         data["gravity"] = [float(v) for v in gravity]
     for joint in data["joints"]:
-        for key in ("friction", "armature", "stiffness", "encoder_offset", "torque_gain"):
+        for key in ("friction", "armature", "ripple", "stiffness", "encoder_offset", "torque_gain"):
             joint.pop(key, None)
     for key, value in effects.items():
         prefix, index = key[:2], int(key[2:]) - 1
@@ -82,7 +86,12 @@ def model_description(source: str | Path, links: list[dict] | None, effects: dic
         if sub is None:
             joint[field] = float(value)
         else:
-            joint.setdefault(field, {})[sub] = float(value)
+            joint.setdefault(field, {})[sub] = value if isinstance(value, int) else float(value)
+    for k, joint in enumerate(data["joints"]):
+        if "stribeck" in joint.get("friction", {}) and "stribeck_velocity" not in joint["friction"]:
+            raise ModelWriteError(f"fs{k + 1} without its Stribeck velocity vs{k + 1}")
+        if "ripple" in joint and "order" not in joint["ripple"]:
+            raise ModelWriteError(f"ripple of joint {k + 1} without its order rk{k + 1}")
     return data
 
 

@@ -65,6 +65,12 @@ def _update(R: np.ndarray, c: np.ndarray, A: np.ndarray, b: np.ndarray):
     return _triangle(stacked, k)
 
 
+def fold_rows(R: np.ndarray, c: np.ndarray, A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """One joint's factor with rows added: ``(R', c', extra)`` with ``||A' p - b'||^2 = ||R' p -
+    c'||^2 + rss + extra`` for the rows of ``[R c]`` stacked on ``[A b]``."""
+    return _update(R, c, A, b)
+
+
 def _map_joints(function, n: int):
     """``[function(j) for j in range(n)]`` on two threads: LAPACK releases the GIL, and each
     joint's factorisation is the same arithmetic whichever thread runs it."""

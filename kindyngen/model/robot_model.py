@@ -134,6 +134,7 @@ class Joint:
     name: str = ""
     friction: "Friction | None" = None       # None: the description declares no friction
     armature: sympy.Rational | None = None   # kg m^2 (kg, prismatic): reflected rotor inertia
+    ripple: "Ripple | None" = None           # None: no position-periodic torque
     dh: DHRow | None = None                  # the DH row, when the description is a DH table
     # how the joint is *measured* (not part of the dynamics, nor of the generated code):
     # q_logged = q + tau / stiffness + encoder_offset, tau_logged = torque_gain * tau
@@ -167,12 +168,30 @@ class Joint:
 
 @dataclass(frozen=True)
 class Friction:
-    """Joint friction and torque bias, exact (``tau_f = viscous qd + coulomb sign(qd) + offset``;
-    with ``coulomb_smoothing`` eps, ``tanh(qd / eps)`` replaces ``sign(qd)``)."""
+    """Joint friction and torque bias, exact: ``tau_f = viscous qd + coulomb s + stribeck
+    exp(-(qd / stribeck_velocity)^2) s + load |y| s + offset`` with ``s = sign(qd)`` (with
+    ``coulomb_smoothing`` eps, ``tanh(qd / eps)``) and ``y`` the torque the joint transmits
+    apart from friction (rigid bodies plus armature, :mod:`kindyngen.algorithms.effect_torques`).
+    ``stribeck_velocity`` None: no Stribeck term declared; ``load`` None: no load-dependent
+    term declared."""
 
     viscous: sympy.Rational = sympy.Integer(0)   # N m s/rad
     coulomb: sympy.Rational = sympy.Integer(0)   # N m
     offset: sympy.Rational = sympy.Integer(0)    # N m, constant bias of the sensor or drive
+    stribeck: sympy.Rational = sympy.Integer(0)  # N m, static friction in excess of Coulomb's
+    stribeck_velocity: sympy.Rational | None = None   # rad/s (> 0)
+    load: sympy.Rational | None = None           # dimensionless, 0 <= load < 1
+
+
+@dataclass(frozen=True)
+class Ripple:
+    """A torque periodic in the joint position (cogging, gear ripple), exact:
+    ``sin_amplitude sin(order q) + cos_amplitude cos(order q)`` (N m), ``order`` periods per
+    revolution (a positive integer)."""
+
+    sin_amplitude: sympy.Rational
+    cos_amplitude: sympy.Rational
+    order: int
 
 
 @dataclass(frozen=True)
@@ -336,12 +355,20 @@ class RobotModel:
     def effects(self) -> tuple[str, ...]:
         """The joint effects the description declares, in a fixed order: friction (any joint
         with a ``friction`` entry gives every joint viscous, Coulomb and offset terms, zero
-        where not given) and ``armature``."""
+        where not given), ``armature``, then the Stribeck term (any joint declaring a
+        ``stribeck_velocity``), the position ripple (any joint with ``ripple``) and the
+        load-dependent friction (any joint declaring ``load``), each zero on the other joints."""
         out = []
         if any(j.friction is not None for j in self.joints):
             out += ["viscous_friction", "coulomb_friction", "torque_offset"]
         if any(j.armature is not None for j in self.joints):
             out.append("armature")
+        if any(j.friction is not None and j.friction.stribeck_velocity is not None for j in self.joints):
+            out.append("stribeck_friction")
+        if any(j.ripple is not None for j in self.joints):
+            out.append("position_ripple")
+        if any(j.friction is not None and j.friction.load is not None for j in self.joints):
+            out.append("load_dependent_friction")
         return tuple(out)
 
     def friction(self, i: int) -> Friction:

@@ -24,8 +24,8 @@ from pathlib import Path
 import sympy
 
 from ..model.robot_model import (CONVENTIONS, DHRow, DIRECTIONS, Frame, Friction, Joint, Link, LOOP_DIRECTIONS,
-                                 LOOP_TYPES, LoopClosure, Mimic, RobotDescriptionError, RobotModel, check_inertia,
-                                 check_name)
+                                 LOOP_TYPES, LoopClosure, Mimic, RobotDescriptionError, RobotModel, Ripple,
+                                 check_inertia, check_name)
 from ..model.placement import (Placement, Reading, axis_alignment, dh_modified, dh_standard, exact_length, rpy_xyz,
                                unit_axis)
 from ..model.user_text import is_identifier
@@ -88,14 +88,16 @@ TOP_KEYS = ("name", "dh", "gravity", "joints", "links", "payload", "coulomb_smoo
 JOINT_TYPES = ("revolute", "prismatic")
 # a DH row's keys (plus "offset" on revolute rows, "theta" on prismatic ones)
 SENSING_KEYS = ("stiffness", "encoder_offset", "torque_gain")   # how a joint is measured
-JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature", "mimic") + SENSING_KEYS
+JOINT_KEYS = ("a", "alpha", "d", "type", "name", "lower", "upper", "friction", "armature", "ripple",
+              "mimic") + SENSING_KEYS
 # a joint given by origin and axis (dh: none)
-FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature",
+FRAME_JOINT_KEYS = ("origin", "axis", "type", "name", "lower", "upper", "friction", "armature", "ripple",
                     "mimic") + SENSING_KEYS
 ORIGIN_KEYS = ("xyz", "rpy")
 FRAMES = "none"     # the value of ``dh`` for joints given by origin and axis
 LINK_KEYS = ("mass", "com", "inertia")
-FRICTION_KEYS = ("viscous", "coulomb", "offset")
+FRICTION_KEYS = ("viscous", "coulomb", "offset", "stribeck", "stribeck_velocity", "load")
+RIPPLE_KEYS = ("sin", "cos", "order")
 MIMIC_KEYS = ("joint", "multiplier", "offset")
 
 
@@ -229,6 +231,7 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
         raise RobotDescriptionError(source, f"{field}.lower", f"limits reversed or empty: lower {lower:g} >= upper {upper:g}")
     friction = _parse_friction(row["friction"], source, f"{field}.friction") if "friction" in row else None
     armature = _nonnegative(row["armature"], source, f"{field}.armature", "inertia") if "armature" in row else None
+    ripple = _parse_ripple(row["ripple"], source, f"{field}.ripple") if "ripple" in row else None
     name = row.get("name", "")
     if not isinstance(name, str):
         raise RobotDescriptionError(source, f"{field}.name", f"expected a string, got {name!r}")
@@ -243,7 +246,7 @@ def _parse_joint(row, convention: str, reading: Reading, field: str) -> Joint:
     if "encoder_offset" in row:
         sensing["encoder_offset"] = _rational(row["encoder_offset"], source, f"{field}.encoder_offset")
     return Joint(before=before, after=after, offset=offset, lower=lower, upper=upper, kind=kind, name=name,
-                 friction=friction, armature=armature, dh=dh, **sensing)
+                 friction=friction, armature=armature, ripple=ripple, dh=dh, **sensing)
 
 
 def _limit(value, kind: str, source: str, field: str) -> float:
@@ -278,15 +281,49 @@ def _nonnegative(value, source: str, field: str, quantity: str = "coefficient") 
 
 
 def _parse_friction(row, source: str, field: str) -> Friction:
-    """``{viscous: fv, coulomb: fc, offset: f0}``, each optional (0), fv and fc >= 0."""
+    """``{viscous: fv, coulomb: fc, offset: f0, stribeck: fs, stribeck_velocity: vs, load:
+    fl}``, each optional (0; ``stribeck`` needs ``stribeck_velocity``), fv, fc, fs >= 0, vs > 0,
+    0 <= fl < 1 (a load-dependent friction of the whole load or more would let the joint
+    transmit no torque: the forward dynamics has no solution)."""
     if not isinstance(row, dict):
         raise RobotDescriptionError(source, field,
                                     f"expected a mapping with {', '.join(FRICTION_KEYS)}, got {shown(row)}")
     _check_keys(row, FRICTION_KEYS, source, field + ".")
     zero = sympy.Integer(0)
+    velocity = None
+    if "stribeck_velocity" in row:
+        velocity = _rational(row["stribeck_velocity"], source, f"{field}.stribeck_velocity")
+        if not velocity > 0:
+            raise RobotDescriptionError(source, f"{field}.stribeck_velocity",
+                                        f"must be a positive velocity (rad/s), got {float(velocity):g}")
+    elif "stribeck" in row:
+        raise RobotDescriptionError(source, f"{field}.stribeck_velocity",
+                                    "required with 'stribeck' (the velocity below which the static friction acts)")
+    load = None
+    if "load" in row:
+        load = _nonnegative(row["load"], source, f"{field}.load")
+        if not load < 1:
+            raise RobotDescriptionError(source, f"{field}.load", f"must be below 1 (a fraction of the transmitted "
+                                        f"torque), got {float(load):g}")
     return Friction(viscous=_nonnegative(row.get("viscous", 0), source, f"{field}.viscous"),
                     coulomb=_nonnegative(row.get("coulomb", 0), source, f"{field}.coulomb"),
-                    offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero)
+                    offset=_rational(row.get("offset", 0), source, f"{field}.offset") if "offset" in row else zero,
+                    stribeck=_nonnegative(row.get("stribeck", 0), source, f"{field}.stribeck"),
+                    stribeck_velocity=velocity, load=load)
+
+
+def _parse_ripple(row, source: str, field: str) -> Ripple:
+    """``{sin: rs, cos: rc, order: k}``: ``rs sin(k q) + rc cos(k q)``, k a positive integer
+    (periods per revolution), the amplitudes optional (0)."""
+    if not isinstance(row, dict):
+        raise RobotDescriptionError(source, field, f"expected a mapping with {', '.join(RIPPLE_KEYS)}, got {shown(row)}")
+    _check_keys(row, RIPPLE_KEYS, source, field + ".")
+    order = _require(row, "order", source, field + ".")
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise RobotDescriptionError(source, f"{field}.order", f"expected a positive whole number of periods per "
+                                    f"revolution, got {order!r}")
+    return Ripple(sin_amplitude=_rational(row.get("sin", 0), source, f"{field}.sin"),
+                  cos_amplitude=_rational(row.get("cos", 0), source, f"{field}.cos"), order=order)
 
 
 def _parse_link(row, source: str, field: str, point_mass_allowed: bool = False) -> Link:
@@ -382,6 +419,7 @@ def parse_robot(data, source: str = "<memory>", snap_angles: bool = True, *, tre
     else:
         joints = tuple(_parse_joint(row, convention, reading, f"joints[{k}]") for k, row in enumerate(rows))
     joints = _with_mimics(rows, joints, reading)
+    _refuse_load_friction_with_mimics(joints, source)
     links_data = _require(data, "links", source, "")
     if not isinstance(links_data, list):
         raise RobotDescriptionError(source, "links", "expected a list with one entry per joint")
@@ -478,6 +516,20 @@ def _mimic_entry(row: dict, kind: str, source: str, field: str) -> tuple:
     if kind != "prismatic":
         check_angle(float(offset), source, f"{field}.offset")
     return name, multiplier, offset
+
+
+def _refuse_load_friction_with_mimics(joints: tuple, source: str) -> None:
+    """Load-dependent friction acts on a joint's own transmitted torque, which a robot with
+    mimic joints does not have per joint (its functions are reduced to the independent joints
+    through G^T): refused, naming the first joint that declares it."""
+    if not any(joint.mimic is not None for joint in joints):
+        return
+    for k, joint in enumerate(joints):
+        if joint.friction is not None and joint.friction.load not in (None, 0):
+            raise RobotDescriptionError(source, f"joints[{k}].friction.load",
+                                        "load-dependent friction is not supported on a robot with mimic joints (it "
+                                        "acts on each joint's own transmitted torque; the functions of this robot are "
+                                        "reduced to its independent joints)")
 
 
 def _with_mimics(rows: list, joints: tuple, reading: Reading) -> tuple:

@@ -123,8 +123,16 @@ def _effects(friction: Friction | None, armature, joint=None) -> dict:
     if friction is not None:
         out["friction"] = {"viscous": _number(friction.viscous), "coulomb": _number(friction.coulomb),
                            "offset": _number(friction.offset)}
+        if friction.stribeck_velocity is not None:
+            out["friction"].update(stribeck=_number(friction.stribeck),
+                                   stribeck_velocity=_number(friction.stribeck_velocity))
+        if friction.load is not None:
+            out["friction"]["load"] = _number(friction.load)
     if armature is not None:
         out["armature"] = _number(armature)
+    if joint is not None and joint.ripple is not None:
+        r = joint.ripple
+        out["ripple"] = {"sin": _number(r.sin_amplitude), "cos": _number(r.cos_amplitude), "order": int(r.order)}
     for key in ("stiffness", "encoder_offset", "torque_gain"):
         if joint is not None and getattr(joint, key) is not None:
             out[key] = _number(getattr(joint, key))

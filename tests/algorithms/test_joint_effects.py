@@ -58,7 +58,7 @@ def test_effect_torques_are_the_formulas(smoothing):
 
 def test_columns_times_coefficients_are_the_torques():
     model = _model()
-    columns = effect_columns(model, QD, QDD)
+    columns = effect_columns(model, None, QD, QDD)
     values = [float(v) for v in effect_parameter_values(model)]
     names = effect_parameter_names(model)
     assert len(columns) == len(values) == len(names) == 4 * 7

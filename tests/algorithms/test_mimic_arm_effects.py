@@ -1,8 +1,9 @@
 """An arm (read as an arm, not a tree) with mimic joints and joint effects: friction (smoothed
-Coulomb), offsets and armature on every joint, the mimic joints' included.
+Coulomb), offsets and armature on every joint, the mimic joints' included, Stribeck friction on
+an independent joint and a position ripple on a mimic one (its derivative in q through G).
 
 The reduction folds the effects in as it folds the rigid bodies: ``tau_y = G^T (tau_x + effects
-at G qd, G qdd)``, the armature inside ``G^T M G``. References: the same description without the
+at G q + b, G qd, G qdd)``, the armature inside ``G^T M G``. References: the same description without the
 mimic entries (every joint a coordinate; its functions are checked against Pinocchio and the
 effect formulas elsewhere), generated and evaluated at ``(G q + b, G qd, G qdd)`` and contracted
 with G here in numpy; fd by ``numpy.linalg.solve``; the derivatives by central finite
@@ -24,11 +25,13 @@ from kindyngen.runtime.evaluate import load_generated
 LINK = {"mass": 1.2, "com": [0.05, 0.01, 0.1], "inertia": [0.012, 0.011, 0.003, 0.0002, 0, 0.0001]}
 ARM = {"name": "mimic_arm", "dh": "none", "gravity": [0, 0, -9.81], "coulomb_smoothing": 0.05, "joints": [
     {"name": "a", "axis": [0, 0, 1], "lower": -2, "upper": 2,
-     "friction": {"viscous": 0.3, "coulomb": 0.2, "offset": 0.05}, "armature": 0.02},
+     "friction": {"viscous": 0.3, "coulomb": 0.2, "offset": 0.05, "stribeck": 0.15, "stribeck_velocity": 0.1},
+     "armature": 0.02},
     {"name": "b", "origin": {"xyz": [0, 0, 0.3]}, "axis": [0, 1, 0], "lower": -2, "upper": 2,
      "friction": {"viscous": 0.2, "coulomb": 0.1}, "armature": 0.01},
     {"name": "c", "origin": {"xyz": [0.3, 0, 0], "rpy": [0.2, 0, 0]}, "axis": [0, 1, 0], "lower": -2, "upper": 2,
      "friction": {"viscous": 0.1, "coulomb": 0.3, "offset": -0.02}, "armature": 0.03,
+     "ripple": {"sin": 0.04, "cos": -0.03, "order": 6},
      "mimic": {"joint": "b", "multiplier": -0.5, "offset": 0.1}},
     {"name": "d", "origin": {"xyz": [0.25, 0, 0]}, "axis": [1, 0, 0], "lower": -2, "upper": 2,
      "friction": {"viscous": 0.05}, "armature": 0.005},
@@ -94,8 +97,8 @@ def test_functions_of_a_mimic_arm(libraries):
 
 
 def test_derivatives_by_finite_differences(libraries):
-    """tau_derivatives and fd_derivatives (friction derivative included, the mimic joints'
-    friction at G qd) equal central differences of the generated reduced tau and fd."""
+    """tau_derivatives and fd_derivatives (friction and Stribeck derivatives included, the mimic
+    joints' friction at G qd, a mimic joint's position ripple at G q + b) equal central differences of the generated reduced tau and fd."""
     _, _, lib = libraries["reduced"]
     Q, QD, QDD, TAU = _states(np.random.default_rng(8), 5)
     h = 1e-6

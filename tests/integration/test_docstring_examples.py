@@ -27,6 +27,8 @@ STAYS_SKIPPED = {
     "kindyngen.measured.consistent": "needs a log's q, qd, qdd, tau",
     "kindyngen.measured.discovery": "needs logged segments",
     "kindyngen.measured.discrepancy": "needs log.csv",
+    "kindyngen.measured.discovery_fit": "needs a pass over logged data",
+    "kindyngen.measured.discovery_report": "needs a discover result",
     "kindyngen.measured.identify": "needs run1.npz",
     "kindyngen.measured.identified_model": "needs identified parameter values",
     "kindyngen.measured.identification_report": "needs a log's t, tau and a prediction",

@@ -60,10 +60,10 @@ def test_hidden_viscous_friction_is_named_and_the_model_reproduces_the_gap(tmp_p
     assert doc["effects"] == ["viscous_friction"]
     assert max(doc["rms_before"]) > 10 * NOISE
     assert max(doc["rms_after"]) < 1.5 * NOISE
-    values = doc["steps"][0]["parameters"]
+    values, std = doc["coefficients"], doc["std"]
     for i in range(7):
-        assert abs(values[f"fv{i + 1}"]["value"] - FV[i]) < 5 * values[f"fv{i + 1}"]["std"] + 1e-3
-    for name in ("report.md", "residuals.png", "gap.png", "heldout_torques.png", "model.yaml"):
+        assert abs(values[f"fv{i + 1}"] - FV[i]) < 5 * std[f"fv{i + 1}"] + 1e-3
+    for name in ("report.md", "report.html", "residuals.png", "steps.png", "heldout_torques.png", "model.yaml"):
         assert (tmp_path / "out" / name).is_file(), name
     # code generated from model.yaml, run along the held-out data, gives the reported rms_after
     model = load_robot(tmp_path / "out" / "model.yaml")

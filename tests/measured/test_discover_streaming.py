@@ -1,5 +1,6 @@
 """`discover` streamed (issue 25): the data pass folds each window's filtered rows into moments
-(per fold Gram matrices and per-joint factors, lagged products for the effective sample count),
+(per fold and joint the triangular factor over the joint's columns; in the final pass lagged
+products for the effective sample count),
 so memory does not grow with the log.
 
 * the moments against plain numpy on random rows fed in uneven chunks: the fit (numpy
@@ -15,7 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kindyngen.measured.discovery import _Moments, _Problem, discover, effective_samples
+from kindyngen.measured.discovery import discover
+from kindyngen.measured.discovery_data import Moments, PassResult, effective_samples, layout_of, make_block
+from kindyngen.measured.discovery_fit import Problem
 from kindyngen.measured.effect_columns import coulomb_eps
 from kindyngen.measured.discrepancy import DiscrepancyRequest, run_discrepancy
 from kindyngen.measured.log_formats import joint_names_of, read_any
@@ -24,41 +27,51 @@ from kindyngen.readers.yaml_description import load_robot
 from tests.measured.test_discover_issue24 import write_log
 
 
-def _rows(seed, m, n, p):
-    rng = np.random.default_rng(seed)
-    A = rng.standard_normal((m, n, p))
-    theta = rng.standard_normal(p)
-    # noise correlated over a few samples (a moving average): the lags matter
-    e = np.apply_along_axis(lambda x: np.convolve(x, np.ones(4) / 4, "same"), 0, rng.standard_normal((m, n)))
-    return A, A @ theta + 0.1 * e
+def _problem(A, r, fold_of, folds, chunks, n, lags=32):
+    """Moments of compact rows (a dense block of 3 columns and a per-joint block) fed in
+    ``chunks``, and their Problem; the same rows in the full layout (m, n, 3 + n)."""
+    blocks = [make_block("base_tilt", n), make_block("torque_offset", n)]
+    layout = layout_of(blocks, n)
+    moments = Moments(n, layout.w, folds, lags, signals=True)
+    start = 0
+    for size in chunks:
+        rows = slice(start, start + size)
+        moments.add(fold_of[rows], A[rows], r[rows], r[rows], np.zeros((size, n, 5)))
+        start += size
+    assert start == len(r)
+    result = PassResult(moments, layout, np.zeros(n), [], (), len(r))
+    p = layout.p
+    full = np.zeros((len(r), n, p))
+    full[:, :, :3] = A[:, :, :3]
+    for j in range(n):
+        full[:, j, 3 + j] = A[:, j, 3]
+    return Problem(result, (np.full(p, -np.inf), np.full(p, np.inf))), full
 
 
 def test_moments_equal_plain_numpy():
-    m, n, p, folds = 2000, 3, 4, 5
-    A, r = _rows(0, m, n, p)
+    m, n, folds = 2000, 3, 5
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((m, n, 4))
+    # noise correlated over a few samples (a moving average): the lags matter
+    e = np.apply_along_axis(lambda x: np.convolve(x, np.ones(4) / 4, "same"), 0, rng.standard_normal((m, n)))
     fold_of = np.minimum((np.arange(m) * folds) // m, folds - 1)
-    moments = _Moments(n, [p], [np.arange(p)] * n, folds, 32)
-    start = 0
-    for size in (7, 300, 1, 450, 33, 1209):            # uneven chunks, across fold boundaries
-        rows = slice(start, start + size)
-        signals = np.zeros((size, n, 5))
-        moments.add(fold_of[rows], A[rows], r[rows], signals, r[rows])
-        start += size
-    assert start == m
-    problem = _Problem(moments, ["torque_offset"], [p], {"torque_offset": ""},
-                       {"torque_offset": tuple(f"x{i}" for i in range(p))}, None, {})
-    fit = problem.fit(["torque_offset"])
+    problem, full = _problem(A, np.zeros((m, n)), fold_of, folds, (m,), n)
+    theta = rng.standard_normal(problem.p)
+    r = full @ theta + 0.1 * e
+    # uneven chunks, across fold boundaries
+    problem, full = _problem(A, r, fold_of, folds, (7, 300, 1, 450, 33, 1209), n)
+    fit = problem.fit(np.arange(problem.p))
     # plain numpy: the stacked least squares, its residual, the out-of-fold residuals
-    A2, r2 = A.reshape(m * n, p), r.reshape(-1)
+    A2, r2 = full.reshape(m * n, -1), r.reshape(-1)
     coef = np.linalg.lstsq(A2, r2, rcond=None)[0]
-    residual = r - A @ coef
+    residual = r - full @ coef
     np.testing.assert_allclose(problem.raw(fit["idx"], fit["theta"]), coef, rtol=1e-10)
     np.testing.assert_allclose(fit["joint_rss"], np.sum(residual ** 2, axis=0), rtol=1e-10)
     oof = np.empty_like(r)
     for k in range(folds):
         out = fold_of == k
-        c = np.linalg.lstsq(A[~out].reshape(-1, p), r[~out].reshape(-1), rcond=None)[0]
-        oof[out] = r[out] - A[out] @ c
+        c = np.linalg.lstsq(full[~out].reshape(-1, problem.p), r[~out].reshape(-1), rcond=None)[0]
+        oof[out] = r[out] - full[out] @ c
     np.testing.assert_allclose(fit["heldout"], np.sqrt(np.mean(oof ** 2, axis=0)), rtol=1e-10)
     n_eff, exact = problem.effective_samples(fit)
     assert exact
@@ -67,15 +80,12 @@ def test_moments_equal_plain_numpy():
 
 
 def test_a_residual_correlated_beyond_the_folded_lags_is_flagged():
-    m, n, p = 3000, 2, 2
+    m, n = 3000, 2
     rng = np.random.default_rng(1)
-    A = rng.standard_normal((m, n, p))
+    A = rng.standard_normal((m, n, 4))
     r = np.cumsum(rng.standard_normal((m, n)), axis=0)          # a random walk: correlated for long
-    moments = _Moments(n, [p], [np.arange(p)] * n, 2, 32)
-    moments.add(np.minimum((np.arange(m) * 2) // m, 1), A, r, np.zeros((m, n, 5)), r)
-    problem = _Problem(moments, ["torque_offset"], [p], {"torque_offset": ""},
-                       {"torque_offset": ("a", "b")}, None, {})
-    _, exact = problem.effective_samples(problem.fit([]))
+    problem, _ = _problem(A, r, np.minimum((np.arange(m) * 2) // m, 1), 2, (m,), n)
+    _, exact = problem.effective_samples(problem.fit(np.zeros(0, int)))
     assert not exact
 
 

@@ -9,7 +9,8 @@ Matrix (kept small for time; 20 s at 200 Hz per log, analytic qd and qdd, Gaussi
 the torques only): every library effect alone at noise 0.02 N m on a multisine; payload,
 base tilt, offset and Coulomb friction alone at 0.1 N m on slow point-to-point moves; six
 pairs at 0.1 N m; no effect at 0, 0.02 and 0.1 N m; one effect on clean data; a tilted base
-on a slow, small motion around one pose (indistinguishable from an offset there).
+on a slow, small motion around one pose (offsets fit it as well there, with more coefficients:
+the tilt is named).
 """
 from __future__ import annotations
 
@@ -159,12 +160,14 @@ def test_nothing_missing_names_nothing(noise, kind):
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.02, 0.1])
-@pytest.mark.parametrize("effect", [c for c in CANDIDATES if c not in MEASUREMENT_EFFECTS])
+@pytest.mark.parametrize("effect", [c for c in CANDIDATES if c not in MEASUREMENT_EFFECTS + ("rigid_bodies",)])
 def test_each_effect_alone_is_named(effect, noise):
     d = check_named((effect,), noise)
     step = d.steps[0]
-    # joints the effect barely touches may gain nothing; the total must fall
-    assert step.effect == effect and np.sum(step.rms_after ** 2) < np.sum(step.rms_before ** 2)
+    # joints the effect barely touches may gain nothing; the total must fall.  The first step may
+    # be a larger candidate that holds the effect (the rigid bodies hold a payload): the smallest
+    # set then replaces it (its fit is as good with fewer coefficients)
+    assert step.effect in (effect, "rigid_bodies") and np.sum(step.rms_after ** 2) < np.sum(step.rms_before ** 2)
     assert np.all(step.rms_after <= 1.05 * step.rms_before)
     if effect == "viscous_friction":
         assert np.allclose([d.values[f"fv{i + 1}"] for i in range(7)], FV, atol=0.02)
@@ -194,7 +197,7 @@ def test_slow_point_to_point_motion_separates_gravity_like_effects(effect):
                                   ("payload", "base_tilt")])
 def test_pairs_are_named(pair):
     d = check_named(pair, 0.1)
-    assert len(d.steps) == 2
+    assert d.fitted == d.effects and len(d.effects) == 2, (d.fitted, [(s.effect, s.kept) for s in d.steps])
 
 
 def test_unknown_candidate_is_refused():
@@ -207,12 +210,12 @@ def test_clean_effect_is_fitted_to_rounding():
     assert np.allclose([d.values[f"fc{i + 1}"] for i in range(7)], FC, atol=1e-6)
 
 
-def test_tilt_near_one_pose_is_indistinguishable_from_offset():
+def test_tilt_near_one_pose_is_named_over_offsets_that_fit_as_well():
+    # near one pose seven offsets fit a tilted base as well as its three gravity components do:
+    # the smaller set is named, and the report says the offsets fit as well with more coefficients
     d = discover(NOMINAL, simulate(motion("near_pose"), ("base_tilt",), 0.1))
-    groups = [set(g) for g, _ in d.indistinguishable]
-    assert any({"base_tilt", "torque_offset"} <= g for g in groups), (d.effects, d.indistinguishable, d.notes)
-    assert "base_tilt" not in d.effects and "torque_offset" not in d.effects
-    assert "separate" in d.indistinguishable[0][1]
+    assert d.effects == ("base_tilt",), (d.effects, d.indistinguishable, d.notes)
+    assert any("torque_offset" in note and "more coefficients" in note for note in d.notes), d.notes
 
 
 def test_statistics_helpers_can_fail():
@@ -233,6 +236,12 @@ def test_a_40s_log_at_200Hz():
 def test_module_examples():
     import doctest
 
-    import kindyngen.measured.discovery as module
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
-    assert result.failed == 0 and result.attempted >= 6
+    import kindyngen.measured.discovery as discovery
+    import kindyngen.measured.discovery_data as data
+    import kindyngen.measured.measurement_model as measurement
+    attempted = 0
+    for module in (discovery, data, measurement):
+        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0, module.__name__
+        attempted += result.attempted
+    assert attempted >= 8

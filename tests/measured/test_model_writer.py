@@ -62,3 +62,16 @@ def test_earlier_effects_are_replaced_not_merged():
 def test_bad_values_are_refused_by_name(links, effects, message):
     with pytest.raises(ModelWriteError, match=message):
         model_yaml(SOURCE, links, effects)
+
+
+def test_a_compliance_too_small_for_a_description_leaves_the_joint_rigid():
+    """discover's points are written through measurement_model.model_at: a fitted compliance of
+    1.7e-21 rad/(N m) (a UR10 trial of the known-truth benchmark) would be a stiffness of 5.9e20
+    N m/rad, beyond what the loader takes (1e12): the joint is written rigid, the other
+    compliance as 1 / ce."""
+    from kindyngen.measured.measurement_model import model_at
+    nominal = load_robot(SOURCE)
+    model = model_at(nominal, SOURCE, {"ce3": 1.7e-21, "ce4": 2e-4, "fv1": 0.5})
+    assert model.joints[2].stiffness is None
+    assert float(model.joints[3].stiffness) == pytest.approx(5e3, rel=1e-12)
+    assert float(model.friction(0).viscous) == 0.5

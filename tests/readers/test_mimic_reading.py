@@ -162,3 +162,13 @@ def test_urdf_mimic_errors(text, kwargs, field, reason):
         parse_urdf(text, "r.urdf", **kwargs)
     assert error.value.source == "r.urdf" and error.value.field == field and reason in error.value.reason, \
         str(error.value)
+
+
+def test_load_dependent_friction_beside_mimic_joints_is_refused():
+    """Load-dependent friction acts on a joint's own transmitted torque, which the reduced
+    functions of a mimic robot do not have: refused naming the field."""
+    data = copy.deepcopy(YAML_ARM)
+    data["joints"][0]["friction"] = {"coulomb": 0.1, "load": 0.1}
+    with pytest.raises(RobotDescriptionError) as error:
+        parse_robot(data, "arm.yaml")
+    assert error.value.field == "joints[0].friction.load" and "mimic joints" in error.value.reason

@@ -57,7 +57,7 @@ from fractions import Fraction
 
 import symengine as se
 
-from ..effect_torques import effect_torques, with_armature
+from ..effect_torques import joint_torques, with_armature
 from .dq_kinematics import dq_conjugate, dq_mul, joint_factors
 from ..kinematics_conventions import q_port
 from ...model.robot_model import RobotModel
@@ -297,7 +297,7 @@ def inverse_dynamics_dq(model: RobotModel, params: str = "numeric", name: str = 
     qd, qdd = port_symbols("qd", (model.n,)), port_symbols("qdd", (model.n,))
     tau = rnea_dq(poses, bodies, qd, qdd, gravity(model))
     if effects:
-        tau = [t + e for t, e in zip(tau, effect_torques(model, qd, qdd))]
+        tau = joint_torques(model, tau, q, qd, qdd)
     return dynamics_function(name, DQ + "inverse dynamics tau = M qdd + c + g by dual-quaternion Newton-Euler.",
                              ts, (q_port(model), qd_port(model), qdd_port(model)), (q, qd, qdd),
                              (tau_port(model, "joint torques"),), (tau,))
