@@ -260,6 +260,10 @@ def run_discrepancy(request: DiscrepancyRequest,
         samples={"selection": int(d.samples), "held_out": int(len(h["tau"]))})
 
 
+#: model.yaml's held-out RMS above this times the nominal's on a joint is reported as worse
+WORSE_FACTOR = 1.05
+
+
 def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
     """Sentences on where a residual above the stated factor x noise floor lives: from the
     selection's cross-validation (with what it correlates with) and from the held-out data
@@ -273,6 +277,11 @@ def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
         out.append(f"joint {j + 1} on the held-out data: RMS {result.rms_after[j]:.3g} N m with model.yaml "
                    f"= {result.rms_after[j] / max(floor[j], 1e-300):.3g} x its noise floor"
                    + (f"; largest in the phase '{phase}' ({phases[phase]:.3g} N m)" if phase else ""))
+    for j in np.flatnonzero(result.rms_after > WORSE_FACTOR * result.rms_before):
+        # the fit was judged on the selection: said loudly where it does not carry over
+        out.append(f"joint {j + 1}: model.yaml is worse than the nominal model on the held-out data "
+                   f"({result.rms_after[j]:.3g} against {result.rms_before[j]:.3g} N m): what was fitted does not "
+                   f"carry over beyond the selection; do not use this model.yaml for that joint")
     return tuple(out)
 
 
