@@ -260,7 +260,8 @@ def run_discrepancy(request: DiscrepancyRequest,
         samples={"selection": int(d.samples), "held_out": int(len(h["tau"]))})
 
 
-#: model.yaml's held-out RMS above this times the nominal's on a joint is reported as worse
+#: model.yaml's held-out RMS above this times the nominal's on a joint (and above the verdict's
+#: factor x the noise floor: not a difference within the noise) is reported as worse
 WORSE_FACTOR = 1.05
 
 
@@ -277,7 +278,8 @@ def where_unexplained(result: DiscrepancyResult) -> tuple[str, ...]:
         out.append(f"joint {j + 1} on the held-out data: RMS {result.rms_after[j]:.3g} N m with model.yaml "
                    f"= {result.rms_after[j] / max(floor[j], 1e-300):.3g} x its noise floor"
                    + (f"; largest in the phase '{phase}' ({phases[phase]:.3g} N m)" if phase else ""))
-    for j in np.flatnonzero(result.rms_after > WORSE_FACTOR * result.rms_before):
+    worse = (result.rms_after > WORSE_FACTOR * result.rms_before) & (result.rms_after > EXPLAINED_FACTOR * floor)
+    for j in np.flatnonzero(worse):
         # the fit was judged on the selection: said loudly where it does not carry over
         out.append(f"joint {j + 1}: model.yaml is worse than the nominal model on the held-out data "
                    f"({result.rms_after[j]:.3g} against {result.rms_before[j]:.3g} N m): what was fitted does not "
