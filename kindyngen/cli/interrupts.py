@@ -11,7 +11,7 @@ here, so that it unwinds the same way (staging folders removed on the way out).
 Python runs those handlers between bytecodes only: a main thread inside one long C call (a
 symengine CSE of a large robot's derivatives, minutes) would not see a Ctrl-C until the call
 returns. A watcher thread (:func:`stuck_main_thread_ends`) learns of the signal through
-Python's wakeup file descriptor; when the main thread has not moved on by STUCK_GRACE_S, it
+Python's wakeup file descriptor; when no handler has run by STUCK_GRACE_S, it
 says the line and ends the process with the same exit code (nothing is unwound then; a
 staging folder of a write under way is removed by the next run, kindyngen.output_folder).
 
@@ -38,15 +38,27 @@ EXIT_TERMINATED = 128 + signal.SIGTERM       # 143
 RESEND_DELAY_S = 0.05
 #: how long the main thread may stay in the one C call it was in when a signal came before the
 #: watcher ends the process (a Python-level handler runs within microseconds otherwise)
-STUCK_GRACE_S = 2.0
+STUCK_GRACE_S = 3.0
 
 
 class Terminated(BaseException):
     """SIGTERM, raised in the main thread as Python raises KeyboardInterrupt for SIGINT."""
 
 
+#: set by the handlers below when Python acts on a signal: the watcher then leaves it to them
+_acted = threading.Event()
+#: one ``interrupted`` / ``terminated`` line, whichever thread says it
+_said = threading.Lock()
+
+
 def _raise_terminated(signum, frame):
+    _acted.set()
     raise Terminated()
+
+
+def _raise_interrupt(signum, frame):
+    _acted.set()
+    raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -82,6 +94,7 @@ def signals_not_swallowed():
         # process run the handler at once, inside this hook, where it would be swallowed again
         for kind, signum in ((KeyboardInterrupt, signal.SIGINT), (Terminated, signal.SIGTERM)):
             if isinstance(unraisable.exc_value, kind):
+                _acted.set()            # a handler ran (inside a finaliser): the resend follows
                 resend = threading.Timer(RESEND_DELAY_S, os.kill, (os.getpid(), signum))
                 resend.daemon = True
                 _swallowed.append((kind, resend))
@@ -97,12 +110,6 @@ def signals_not_swallowed():
             resend.cancel()
 
 
-def _position(thread_id: int):
-    """The frame the thread runs and its last instruction, or None (the thread is gone)."""
-    frame = sys._current_frames().get(thread_id)
-    return None if frame is None else (frame, frame.f_lasti)
-
-
 def _forget_wakeup_fd() -> None:
     """In a forked child (identify's workers): its signals are its own, not the watcher's."""
     with contextlib.suppress(ValueError):
@@ -114,8 +121,8 @@ os.register_at_fork(after_in_child=_forget_wakeup_fd)
 
 @contextlib.contextmanager
 def stuck_main_thread_ends():
-    """Inside the block (main thread only), a SIGINT or SIGTERM the main thread does not act on
-    within STUCK_GRACE_S, because it is inside one C call all that time, ends the process:
+    """Inside the block (main thread only), a SIGINT or SIGTERM no handler acts on within
+    STUCK_GRACE_S, because the main thread is inside one C call all that time, ends the process:
     ``interrupted`` or ``terminated`` and exit code 130 or 143 (see the module's text)."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -123,7 +130,11 @@ def stuck_main_thread_ends():
     read_fd, write_fd = os.pipe()
     os.set_blocking(write_fd, False)
     previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-    main_id, done = threading.main_thread().ident, threading.Event()
+    done = threading.Event()
+    _acted.clear()
+    previous_int = signal.getsignal(signal.SIGINT)
+    if previous_int is signal.default_int_handler:     # the same, telling the watcher it ran
+        signal.signal(signal.SIGINT, _raise_interrupt)
 
     def watch():
         while True:
@@ -136,11 +147,9 @@ def stuck_main_thread_ends():
             for signum in dict.fromkeys(received):
                 if signum not in (signal.SIGINT, signal.SIGTERM):
                     continue
-                before = _position(main_id)
                 if done.wait(STUCK_GRACE_S):
                     return
-                now = _position(main_id)
-                if before is not None and now is not None and now[0] is before[0] and now[1] == before[1]:
+                if not _acted.is_set():         # no handler ran: the main thread is inside one C call
                     _say("interrupted" if signum == signal.SIGINT else "terminated")
                     os._exit(128 + signum)
 
@@ -150,6 +159,8 @@ def stuck_main_thread_ends():
         yield
     finally:
         done.set()
+        if signal.getsignal(signal.SIGINT) is _raise_interrupt:
+            signal.signal(signal.SIGINT, previous_int)
         signal.set_wakeup_fd(previous_fd)
         os.close(write_fd)              # the watcher reads the end of the pipe and returns
         watcher.join(timeout=1.0)
@@ -157,6 +168,8 @@ def stuck_main_thread_ends():
 
 
 def _say(word: str) -> None:
+    if not _said.acquire(blocking=False):         # said already, by the other thread
+        return
     stream = sys.stderr
     with contextlib.suppress(Exception):          # a closed or broken standard error: the exit code says it
         # a progress line redrawn in place on a terminal has no newline yet
@@ -167,6 +180,8 @@ def _say(word: str) -> None:
 def ending_on_signals(run: Callable[[], int]) -> int:
     """``run()``'s exit code, or 130 after one ``interrupted`` line (SIGINT) or 143 after one
     ``terminated`` line (SIGTERM) on standard error."""
+    if _said.locked():              # a command before this one (in this process) said its line
+        _said.release()
     try:
         with sigterm_raises(), signals_not_swallowed(), stuck_main_thread_ends():
             code = run()
