@@ -13,7 +13,7 @@ derivation (symengine):
   ``fd_derivatives_no_minv`` against central differences of Pinocchio's rnea / aba plus those
   effects written out here with numpy;
 * the helpers: ``inverse_from_ldlt`` and ``solve_columns`` against numpy's inverse and solve,
-  ``effect_velocity_derivatives`` against differences of the friction torque, ``with_diagonal``;
+  ``additive_derivatives`` (their qd slopes) against differences of the friction torque, ``with_diagonal``;
   a floating base is refused.
 
 Tolerances: analytic references 1e-10, central differences (step 1e-6) 1e-6, both relative to
@@ -27,10 +27,11 @@ import pytest
 import sympy
 import symengine as se
 
-from kindyngen.algorithms.derivatives_sweeps import (coriolis_velocity_jacobian, effect_velocity_derivatives,
+from kindyngen.algorithms.derivatives_sweeps import (coriolis_velocity_jacobian,
                                                      fd_derivatives, inverse_from_ldlt, mass_matrix_partials,
                                                      solve_columns, tau_derivatives, with_diagonal)
 from kindyngen.algorithms.dynamics import crba, setup
+from kindyngen.algorithms.effect_torques import additive_derivatives
 from kindyngen.algorithms.ldlt import ldlt_factor
 from kindyngen.codegen.catalog import derive_all
 from kindyngen.model.robot_model import Friction
@@ -212,12 +213,13 @@ def test_chain_with_effects_fd_derivatives_equal_differences(chain):
 def test_effect_velocity_derivatives_are_the_friction_slopes(chain):
     model, _, _ = chain
     qd_symbols = se.symbols(f"v0:{model.n}")
-    slopes = se.Lambdify(list(qd_symbols), effect_velocity_derivatives(model, qd_symbols))
+    q_symbols = se.symbols(f"p0:{model.n}")
+    slopes = se.Lambdify(list(qd_symbols), additive_derivatives(model, q_symbols, qd_symbols)[1])
     for qd in np.random.default_rng(7).normal(scale=0.1, size=(5, model.n)):
         assert _close(np.diag(_jacobian(_friction, qd)), np.ravel(slopes(qd)), DIFFERENCE)
     # the sign form (no smoothing) contributes only the viscous slope
     signed = replace(model, coulomb_smoothing=None)
-    assert [float(v) for v in effect_velocity_derivatives(signed, qd_symbols)] == [e[0] for e in EFFECTS]
+    assert [float(v) for v in additive_derivatives(signed, q_symbols, qd_symbols)[1]] == [e[0] for e in EFFECTS]
 
 
 # ----------------------------------------------------------------------------- helpers
