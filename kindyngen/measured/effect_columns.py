@@ -206,13 +206,19 @@ def law_torques(model, q, qd, qdd, rigid) -> np.ndarray:
     >>> float(law_torques(m, [[0.0]], [[1.0]], [[0.0]], [[2.0]])[0, 0])      # 2 + 0.1 * 2 + 0.5 + 0.2 sin(0)
     2.7
     """
-    laws = joint_laws(model)
     q, qd, qdd, rigid = (np.asarray(a, float) for a in (q, qd, qdd, rigid))
+    return applied_laws(joint_laws(model), q, qd, qdd, rigid)[0]
+
+
+def applied_laws(laws: JointLaws, q, qd, qdd, rigid) -> tuple:
+    """``(tau, y, s)``: the joint torques of ``laws`` on the rigid-body torques ``rigid`` (see
+    :func:`law_torques`), the transmitted torque ``y = rigid + Ia qdd`` and the Coulomb shape
+    ``s`` of qd (the one place the laws are written numerically)."""
     s = coulomb_shape(qd, laws.eps)
     y = rigid + laws.armature * qdd
-    out = y + laws.load * np.abs(y) * s + laws.viscous * qd + laws.coulomb * s + laws.offset
+    tau = y + laws.load * np.abs(y) * s + laws.viscous * qd + laws.coulomb * s + laws.offset
     if np.any(laws.stribeck):
-        out = out + laws.stribeck * np.exp(-(qd / laws.stribeck_velocity) ** 2) * s
+        tau = tau + laws.stribeck * np.exp(-(qd / laws.stribeck_velocity) ** 2) * s
     if np.any(laws.ripple_order):
-        out = out + laws.ripple_sin * np.sin(laws.ripple_order * q) + laws.ripple_cos * np.cos(laws.ripple_order * q)
-    return out
+        tau = tau + laws.ripple_sin * np.sin(laws.ripple_order * q) + laws.ripple_cos * np.cos(laws.ripple_order * q)
+    return tau, y, s

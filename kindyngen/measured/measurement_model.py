@@ -53,7 +53,7 @@ import yaml
 from ..model.inertial_parameters import NAMES as BARYCENTRIC_NAMES
 from ..model.robot_model import RobotModel
 from ..readers.input_bounds import QUANTITIES
-from .effect_columns import JointLaws, coulomb_shape, joint_laws
+from .effect_columns import JointLaws, applied_laws, joint_laws
 from .regressor_rows import full_values, torque_regressor
 
 #: the joint coefficients of each candidate (per joint, one column on its own joint's row each)
@@ -190,16 +190,8 @@ def joint_spring(point: Point, spring) -> tuple | None:
 
 def joint_torques(point: Point, rigid: RigidBodies, q, qd, qdd, Y=None) -> np.ndarray:
     """The joint torques (N, n) of a point along the true motion (no measurement effects)."""
-    laws = point.laws
     r = rigid.torques(point.values, point.gravity, q, qd, qdd, Y)
-    s = coulomb_shape(qd, laws.eps)
-    y = r + laws.armature * qdd
-    out = y + laws.load * np.abs(y) * s + laws.viscous * qd + laws.coulomb * s + laws.offset
-    if np.any(laws.stribeck):
-        out = out + laws.stribeck * np.exp(-(qd / laws.stribeck_velocity) ** 2) * s
-    if np.any(laws.ripple_order):
-        out = out + laws.ripple_sin * np.sin(laws.ripple_order * q) + laws.ripple_cos * np.cos(laws.ripple_order * q)
-    return out
+    return applied_laws(point.laws, q, qd, qdd, r)[0]
 
 
 def state(point: Point, rigid: RigidBodies, q_logged, qd_logged, qdd_logged, spring=None) -> State:
@@ -217,13 +209,7 @@ def state(point: Point, rigid: RigidBodies, q_logged, qd_logged, qdd_logged, spr
     laws = point.laws
     Y = rigid.regressor(q, qd, qdd)
     r = rigid.torques(point.values, point.gravity, q, qd, qdd, Y)
-    s = coulomb_shape(qd, laws.eps)
-    y = r + laws.armature * qdd
-    tau = y + laws.load * np.abs(y) * s + laws.viscous * qd + laws.coulomb * s + laws.offset
-    if np.any(laws.stribeck):
-        tau = tau + laws.stribeck * np.exp(-(qd / laws.stribeck_velocity) ** 2) * s
-    if np.any(laws.ripple_order):
-        tau = tau + laws.ripple_sin * np.sin(laws.ripple_order * q) + laws.ripple_cos * np.cos(laws.ripple_order * q)
+    tau, y, s = applied_laws(laws, q, qd, qdd, r)
     load = 1.0 + laws.load * s * np.sign(y)
     return State(q=q, qd=qd, qdd=qdd, Y=Y, rigid=r, y=y, s=s, load=load, tau=tau, reading=point.gain * tau,
                  spring=joint)
