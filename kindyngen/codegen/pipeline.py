@@ -134,13 +134,14 @@ def _address_space_limit(extra: int | None):
     """Lower the soft RLIMIT_AS to the current address space plus ``extra`` bytes for the
     block (yields ``extra``; nothing where ``extra`` is None or the platform has no such
     limit), and restore it after."""
+    if extra is None:
+        yield extra
+        return
+    _touch_native_state()
     try:
         import resource
         pages = int(Path("/proc/self/statm").read_text().split()[0])
     except (ImportError, OSError, ValueError):
-        yield extra
-        return
-    if extra is None:
         yield extra
         return
     soft, hard = resource.getrlimit(resource.RLIMIT_AS)
@@ -152,6 +153,19 @@ def _address_space_limit(extra: int | None):
         yield extra
     finally:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def _touch_native_state() -> None:
+    """Have symengine throw and catch one C++ exception before the limit drops. Its library
+    carries its own C++ runtime, whose per-thread exception state is allocated on the first
+    throw in a thread; glibc ends the process when that allocation fails ("cannot allocate
+    memory for thread-local data: ABORT", exit 127), so a first throw that is itself the
+    std::bad_alloc of running out would kill the run instead of raising MemoryError."""
+    import symengine as se
+    try:
+        se.sympify("1 +* (")            # symengine's parser throws ParseError
+    except RuntimeError:
+        pass
 
 
 def _write(path: Path, text: str) -> None:
