@@ -56,10 +56,11 @@ refined between the neighbouring grid points, each joint's ripple order over
   (where: its values per block), not as a constant.
 * *Verdict*: explained when every joint's held-out RMS is within :data:`EXPLAINED_FACTOR` floors.
 
-The fit is made where the model is written (Gauss-Newton): the linearised fit at the nominal
-model selects; the chosen effects are then fitted at the model holding them, re-linearised until
-the reading changes by less than :data:`GN_TOLERANCE`, so that model.yaml's prediction is the
-fitted one (:func:`kindyngen.measured.measurement_model.model_at`).
+The fit is made where the model is written (Levenberg-Marquardt, :func:`_converge`): the
+linearised fit at the nominal model selects; the chosen effects are then fitted at the model
+holding them, re-linearised until a step changes the residual by less than :data:`GN_TOLERANCE`,
+a step taken only when the model it leads to has the lower residual, so that model.yaml's
+prediction is the fitted one (:func:`kindyngen.measured.measurement_model.model_at`).
 
 Example (runs in seconds; ``segments`` are :class:`kindyngen.measured.log_preparing.Segment`):
 
@@ -137,9 +138,16 @@ NOISE_BIAS_FACTOR = 3.0
 #: drift: block values this many standard errors apart
 DRIFT_SE = 4.0
 #: Gauss-Newton: stop once a step changes the summed squared residual by less than this fraction
-GN_TOLERANCE = 1e-6
-#: ... or after this many passes
-GN_PASSES = 6
+#: (1e-4 of the squared residual is 5e-5 of its RMS: a thousandth of the smallest change the
+#: selection's margin, 5 % of a joint's RMS, resolves)
+GN_TOLERANCE = 1e-4
+#: ... or after this many passes over the data
+GN_PASSES = 8
+#: Levenberg-Marquardt: the damping (on the scaled columns' unit diagonal) a step that raised the
+#: residual is tried again with first, and the factor it grows by on each such step (and falls by
+#: on each step taken)
+DAMPING_START = 1e-3
+DAMPING_FACTOR = 10.0
 
 NOISE_METHOD = ("robust scale of the second difference of the unfiltered residual within each segment, "
                 "1.4826 median|d2 r| / sqrt(6), times the noise gain of the parallel filter")
@@ -728,13 +736,11 @@ class _Fitter:
     def point(self, values):
         return point_of(model_at(self.nominal, self.source, values))
 
-    def step(self, values, blocks, held=frozenset(), final=True):
-        """A pass at the model holding ``values`` and the fit of the blocks' columns (but those of
-        the coefficients ``held`` at the description's default)."""
-        self.last_values = dict(values)          # what the pass's point holds
+    def at(self, values, blocks):
+        """A pass at the model holding ``values``: (point, pass result, problem, named bounds)."""
         point = self.point(values)
         result = data_pass(point, self.rigid, self.recordings, blocks, self.folds, self.chunk_rows, self.progress,
-                           lags=MAX_LAG if final else 0, signals=final, need_spring=self.need_spring)
+                           lags=MAX_LAG, signals=True, need_spring=self.need_spring)
         if self.peak is None:
             self.peak = result.peak
         n = point.n
@@ -747,45 +753,64 @@ class _Fitter:
             if self.nominal.payload is not None:
                 from ..model.inertial_parameters import barycentric
                 payload = payload + np.array([float(v) for v in barycentric(self.nominal.payload)])
-        problem = Problem(result, bounds, links, payload)
-        idx = [c for b in blocks for nm, c in zip(b.names, problem.layout.slices[b.key]) if nm not in held]
-        fit = problem.fit(np.array(sorted(idx), int))
-        change = _values_of(problem, fit, blocks)
+        return point, result, Problem(result, bounds, links, payload), named
+
+    @staticmethod
+    def stepped(values, problem, fit, blocks):
+        """``values`` moved by a fit's change (the linearised optimum at their point)."""
         new = dict(values)
-        for nm, v in change.items():
+        for nm, v in _values_of(problem, fit, blocks).items():
             new[nm] = new.get(nm, 0.0) + v
         if fit["links"] is not None:
-            for nm, v in zip(link_parameter_names(n), fit["links"]):
+            for nm, v in zip(link_parameter_names(problem.n), fit["links"]):
                 new[nm] = new.get(nm, 0.0) + float(v)
-        return point, result, problem, fit, new, named
+        return new
 
 
 def _converge(fitter: _Fitter, values, blocks, progress, notes, nonlinear: bool, held=frozenset()):
-    """Gauss-Newton passes at the model holding the values until a step changes the reading's
-    squared residual by less than GN_TOLERANCE (one pass for a set linear in its coefficients).
-    A step after which the residual at the new model is larger than at the old one is halved
-    (at most 4 times) before it is taken."""
-    passes, previous = 0, None
+    """Levenberg-Marquardt at the model holding the values: a pass over the data at the model
+    linearises the reading there; the damped linear fit proposes new values, taken only when a
+    pass at the model holding them shows a lower summed squared residual (else the damping grows
+    and the fit is solved again at the same point, no pass needed). Stops once the undamped step
+    changes the residual by less than GN_TOLERANCE (one pass for a set linear in its
+    coefficients), or after GN_PASSES passes. Returns (point, pass result, problem, fit, values,
+    named bounds): the values are the converged model's, or, unconverged, the last model a pass
+    evaluated (never an untried step), so that model.yaml reads what the fit says it reads.
+
+    ``fitter.last_values`` is set to the values of the point returned."""
+    def columns(problem):
+        return np.array(sorted(c for b in blocks for nm, c in zip(b.names, problem.layout.slices[b.key])
+                               if nm not in held), int)
+    point, result, problem, named = fitter.at(values, blocks)
+    here = float(np.sum(problem.joint_rss(np.zeros(problem.p))))        # the point's own residual
+    passes, damping = 1, 0.0
     while True:
-        passes += 1
-        point, result, problem, fit, new, named = fitter.step(values, blocks, held)
-        here = float(np.sum(problem.joint_rss(np.zeros(problem.p))))      # the point's own residual
-        if previous is not None and here > previous[0] and previous[2] < 4:
-            # the step overshot: half of it from the previous model
-            rss, old, halvings = previous
-            values = {k: old.get(k, 0.0) + 0.5 * (values.get(k, 0.0) - old.get(k, 0.0)) for k in set(old) | set(values)}
-            previous = (rss, old, halvings + 1)
-            progress("Gauss-Newton: the step raised the residual, halved")
-            continue
+        fit = problem.fit(columns(problem), damping=damping)
+        new = fitter.stepped(values, problem, fit, blocks)
         gain = (here - fit["rss"]) / max(here, 1e-300)
-        if not nonlinear or gain < GN_TOLERANCE or passes >= GN_PASSES:
+        if not nonlinear or gain < GN_TOLERANCE:
             if nonlinear:
                 notes.append(f"fitted at the model itself in {passes} Gauss-Newton passes (last step: summed squared "
                              f"residual {100 * gain:.2g} % lower)")
+            fitter.last_values = dict(values)
             return point, result, problem, fit, new, named
-        progress(f"Gauss-Newton pass {passes}: summed squared residual {100 * gain:.3g} % lower")
-        previous = (here, values, 0)
-        values = new
+        if passes >= GN_PASSES:
+            notes.append(f"Gauss-Newton did not converge in {passes} passes (the last step would lower the summed "
+                         f"squared residual by {100 * gain:.2g} %): model.yaml holds the last model a pass evaluated; "
+                         f"the cross-validated figures are its linearised fit's")
+            fitter.last_values = dict(values)
+            return point, result, problem, fit, values, named
+        trial = fitter.at(new, blocks)
+        passes += 1
+        there = float(np.sum(trial[2].joint_rss(np.zeros(trial[2].p))))
+        if there < here:
+            point, result, problem, named = trial
+            values, here = new, there
+            damping = damping / DAMPING_FACTOR if damping > DAMPING_START else 0.0
+            progress(f"Gauss-Newton pass {passes}: summed squared residual {100 * gain:.3g} % lower (predicted)")
+        else:
+            damping = DAMPING_START if damping == 0 else damping * DAMPING_FACTOR
+            progress(f"Gauss-Newton: the step raised the residual; damped ({damping:.3g}) and solved again")
 
 
 def _nonlinear(blocks) -> bool:

@@ -241,9 +241,12 @@ class Problem:
         rhs = np.concatenate(blocks_b) if blocks_b else np.zeros(0)
         return E, A, rhs, cones, nl
 
-    def fit(self, idx, fixed=None) -> dict:
+    def fit(self, idx, fixed=None, damping: float = 0.0) -> dict:
         """Full-data fit and out-of-fold residual sums of the columns ``idx``; ``fixed``:
-        ``(columns, theta)`` held at those scaled values (not fitted, in every fold)."""
+        ``(columns, theta)`` held at those scaled values (not fitted, in every fold);
+        ``damping``: Levenberg-Marquardt's ``lambda``, added to the normal matrix's diagonal of
+        the scaled columns (whose own diagonal is 1), so that a step at a point of a nonlinear
+        reading stays where the linearisation holds."""
         idx = np.asarray(idx, int)
         if fixed is not None:
             fcols, fth = np.asarray(fixed[0], int), np.asarray(fixed[1], float)
@@ -259,12 +262,13 @@ class Problem:
             out[fcols] = fth * self.scale[fcols]
             return out
         G, b = self.G[np.ix_(idx, idx)], shifted(self.G, self.b)
-        theta, inv, rank, links = self._solve(G, b, idx)
+        damp = damping * np.eye(len(idx))
+        theta, inv, rank, links = self._solve(G + damp, b, idx)
         joint_rss = self.joint_rss(whole(theta))
         oof = np.zeros((self.m.folds, self.n))
         for k in range(self.m.folds):
             Gk, bk = (self.G - self.Gf[k]), (self.b - self.bf[k])
-            th = self._solve(Gk[np.ix_(idx, idx)], shifted(Gk, bk), idx)[0]
+            th = self._solve(Gk[np.ix_(idx, idx)] + damp, shifted(Gk, bk), idx)[0]
             oof[k] = self.joint_rss(whole(th), folds=(k,))
         if len(fcols):           # the fit's columns and values include the fixed ones
             order = np.argsort(np.concatenate([idx, fcols]))

@@ -91,3 +91,26 @@ def test_panda_consistent_model_beats_the_published_one_on_every_joint(tmp_path,
           f"published {np.round(rms_published, 3).tolist()} sum {rms_published.sum():.2f}")
     np.testing.assert_allclose(rms_ours, doc["rms_validation"], rtol=1e-6)
     assert np.all(rms_ours < rms_published)
+
+
+@pytest.mark.skipif(not PANDA.is_dir(), reason="the Panda log (../shared/data/panda_gaz2019) is not here")
+def test_panda_discover_model_yaml_carries_over_to_the_held_out_part(tmp_path, capsys):
+    """discover on the Panda log (its documented command: 5 Hz, resampled at 1 kHz): model.yaml,
+    with the rigid bodies, gains and tilt fitted together, is better than the nominal model on
+    every joint of the held-out 30 %, and no worse in sum than identify's consistent fit trained
+    on the same 70 %. Before, the fit's last Gauss-Newton step was written untried: model.yaml
+    read 15.8 N m summed over the joints there against the nominal's 2.73."""
+    out = tmp_path / "discover"
+    common = ["--robot", str(PANDA / "robot.yaml"), "--data", str(PANDA / "measured.csv"), "--cutoff", "5",
+              "--rate", "1000"]
+    assert main(["discover", *common, "--out", str(out), "--quiet"]) == 0
+    doc = json.loads((out / "discovery.json").read_text())
+    before, after = np.array(doc["rms_before"]), np.array(doc["rms_after"])        # the held-out part
+    identified, _ = _identify(tmp_path, "identify", [*common, "--split", "0.7", "--effects", FRICTION,
+                                                     "--consistent"])
+    capsys.readouterr()
+    print(f"Panda held-out RMS sum (N m): nominal {before.sum():.3f}, discover's model.yaml {after.sum():.3f}, "
+          f"identify {identified['rms_validation_sum']:.3f}; named {doc['effects']}")
+    assert np.all(after < before), (after, before)
+    assert after.sum() <= identified["rms_validation_sum"], (after.sum(), identified["rms_validation_sum"])
+    assert not any("worse than the nominal" in line for line in doc["unexplained"]), doc["unexplained"]
