@@ -209,6 +209,9 @@ _SEPARATE = {
 }
 
 
+_GAIN_SCALE = frozenset({"torque_sensor_gain", "rigid_bodies"})
+
+
 def separating_motion(a: str, b: str) -> str:
     """What motion would tell candidate ``a`` from ``b`` (a sentence)."""
     return _SEPARATE.get(frozenset({a, b}), "a motion that excites the two candidates' columns differently "
@@ -1084,6 +1087,10 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
     n_eff, _ = fproblem.effective_samples(fit)
     final_model = model_at(nominal, source, values)
     fitted = tuple(dict.fromkeys(b.candidate for b in final_blocks))
+    if _GAIN_SCALE <= set(fitted):
+        notes.append("torque_sensor_gain with rigid_bodies: " + _SEPARATE[_GAIN_SCALE] +
+                     "; the data fixes the gains relative to one another only, so the gains written and the "
+                     "links' masses share one common factor this data cannot decide")
     named = tuple(c for c in named if c in fitted)
     for c in [it.candidate for it in final_items]:
         if c not in fitted:

@@ -209,3 +209,23 @@ def test_a_model_yaml_worse_than_the_nominal_on_the_held_out_data_is_said_so():
     assert worse == ["joint 1: model.yaml is worse than the nominal model on the held-out data (6.75 against 0.76 N m): "
                      "what was fitted does not carry over beyond the selection; do not use this model.yaml for that "
                      "joint"]
+
+
+def test_gains_named_with_the_links_say_their_common_factor_is_undecided(tmp_path):
+    # heavier links 2-4 and gains 0.9 and 1.08 on joints 2 and 4: named together, the gains and
+    # every mass share one factor no motion separates, and the notes say so
+    truth = yaml.safe_load((ROOT / "robots" / "panda.yaml").read_text())
+    for i in (1, 2, 3):
+        truth["links"][i]["mass"] *= 1.3
+    from kindyngen.readers.yaml_description import parse_robot
+    gain = np.ones(7)
+    gain[1], gain[3] = 0.9, 1.08
+    log = simulate(tmp_path / "log.npz", "panda", lambda t, q, qd, qdd: FC * np.sign(qd), gain=gain, seconds=30,
+                   truth=parse_robot(truth, "truth"))
+    result = run_discrepancy(DiscrepancyRequest(str(ROOT / "robots" / "panda.yaml"), (str(log),),
+                                                candidates=("rigid_bodies", "torque_sensor_gain", "coulomb_friction",
+                                                            "torque_offset")))
+    doc = json.loads(json.dumps(result_document(result)))
+    check(doc, {"rigid_bodies", "torque_sensor_gain", "coulomb_friction"})
+    assert any(note.startswith("torque_sensor_gain with rigid_bodies: a gain common to every sensor is every mass "
+                               "scaled") for note in doc["notes"]), doc["notes"]
