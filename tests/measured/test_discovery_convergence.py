@@ -52,12 +52,6 @@ class Fitter:
     def stepped(values, problem, fit, blocks):
         return {"a": values["a"] + fit["step"]}
 
-    def step(self, values, blocks, held=frozenset(), final=True):      # the interface before the fix
-        self.last_values = dict(values)
-        point, result, problem, named = self.at(values, blocks)
-        fit = problem.fit(np.array([0]))
-        return point, result, problem, fit, self.stepped(values, problem, fit, blocks), named
-
 
 BLOCKS = [SimpleNamespace(names=("a",), key="a")]
 
