@@ -13,7 +13,7 @@ candidate                      coefficients                acts
 ``torque_offset``              ``f01..f0n``                ``f0_i``
 ``armature``                   ``Ia1..Ian`` (>= 0)         ``Ia_i qdd_i``
 ``payload``                    ``payload_m .. payload_Izz``  a body on the flange (PD)
-``base_tilt``                  ``dgx, dgy, dgz``           gravity ``g_nom + dg``
+``base_tilt``                  ``tilt_x, tilt_y`` (rad)    gravity ``g_nom`` turned, same magnitude
 ``stribeck_friction``          ``fs1..fsn`` (>= 0), ``vs_i``  ``fs_i exp(-(qd_i/vs_i)^2) s_i``
 ``position_ripple``            ``rs_i, rc_i``, order k_i   ``rs_i sin(k_i q_i) + rc_i cos(k_i q_i)``
 ``load_dependent_friction``    ``fl1..fln`` in [0, 0.9]    ``fl_i |y_i| s_i``, y the transmitted torque
@@ -23,9 +23,11 @@ candidate                      coefficients                acts
 ``torque_sensor_gain``         ``gt_i`` (+-0.5)            ``tau_logged = (1 + gt_i) tau_i``
 =============================  ==========================  =====================================
 
-The open parameters are searched: each joint's Stribeck velocity on :data:`STRIBECK_VS` then
-refined between the neighbouring grid points, each joint's ripple order over
-:data:`RIPPLE_ORDERS`, each by that joint's held-out error.
+The open parameters are searched: each joint's Stribeck velocity on :data:`STRIBECK_VS` and ripple
+order over :data:`RIPPLE_ORDERS`, each by that joint's held-out error beside the members chosen so
+far, and chosen again beside each of the :data:`SEARCHED_AGAIN` best candidates of every later
+step (:func:`_searched_again`); the Stribeck velocities are then searched again beside the whole
+set and refined (:func:`_refine_stribeck`).
 
 **The rules** (docs/discovery.md states them for users; constants below):
 
@@ -40,7 +42,12 @@ refined between the neighbouring grid points, each joint's ripple order over
   with a column on this motion) whose held-out RMS is, on every joint, within the margin of the
   best subset's (so every name lowers some joint's held-out RMS by the margin beside the others);
   among equally small ones, the lowest summed MSE.  A candidate with fewer coefficients whose fit
-  in a member's place is *close* (every joint within the margin of the final fit's) replaces it.
+  in a member's place is *close* (every joint within the margin of the final fit's) replaces it
+  when nested in it (:data:`NESTED`), otherwise only when the member's held-out error is not
+  lower on every fold.
+* *Judged again at the model*: the members chosen after an approximate one (:data:`APPROXIMATE`)
+  are dropped, last chosen first, when the fit at the model without them stays within the margin
+  (:func:`_rejudged_at_model`).
 * *Indistinguishable*: a candidate with as many coefficients whose fit in a member's place is
   close, and whose columns nearly span the member's (smallest principal angle at most
   :data:`AMBIGUITY_ANGLE_DEG`, the other members' columns projected out), cannot be told apart
@@ -85,8 +92,8 @@ from .discovery_data import (CHUNK_ROWS, MAX_LAG, SIGNALS, WINDOW_ROWS, Block, R
                              median_pass, noise_correlation, noise_floor, piece_windows, sensing_columns, spring_of,
                              spring_torque)
 from .discovery_fit import Problem
-from .measurement_model import (MEASUREMENT, RigidBodies, joint_torques, link_parameter_names, model_at,
-                                point_of, reading)
+from .measurement_model import (MEASUREMENT, TILT_NAMES, RigidBodies, joint_torques, link_parameter_names,
+                                model_at, point_of, reading, tilted_gravity)
 from .regressor_rows import full_values, rigid_body_model
 
 __all__ = ("CANDIDATES", "Discovery", "Step", "discover", "Recording", "in_memory", "piece_windows", "spring_of",
@@ -124,6 +131,10 @@ CLOSE = 0.05
 #: indistinguishable: the columns of two candidates of the same size nearly span the same space
 #: (the chosen others projected out): their smallest principal angle at most this
 AMBIGUITY_ANGLE_DEG = 20.0
+#: (candidate, member) where the candidate's columns lie in the member's: the payload is a change
+#: of the last link's inertial parameters, which the rigid bodies hold (it replaces them whenever
+#: it fits within the margin)
+NESTED = frozenset({("payload", "rigid_bodies")})
 #: stop adding once every joint's held-out RMS is within this factor of its noise floor
 NOISE_STOP = 1.2
 #: the verdict: explained when every joint's held-out RMS is within this factor of its floor
@@ -160,7 +171,8 @@ RULES = {
     "final": "the smallest subset (fewest coefficients) of the added effects whose held-out RMS is within the margin "
              "of the best subset's on every joint: each name then lowers some joint's held-out RMS by the margin beside "
              "the others; a candidate with fewer coefficients whose held-out RMS in a member's place is within the "
-             "margin on every joint replaces it",
+             "margin on every joint replaces it when nested in it (the payload in the rigid bodies), otherwise only "
+             "when the member's held-out error is not lower on every fold",
     "indistinguishable": "a candidate with as many coefficients whose held-out RMS in a member's place is within the "
                          "margin of the final fit's on every joint, and whose columns nearly span the member's (smallest "
                          f"principal angle at most {AMBIGUITY_ANGLE_DEG:g} deg, the others projected out): the data "
@@ -546,11 +558,13 @@ def _forward(search: _Search, candidates, floor, scale, progress, notes):
         for c in remaining:
             found = search.item(c, chosen)
             if found is not None:
-                trials[c] = found
+                trials[c] = (*found, list(chosen))
         if not trials:
             break
+        for c in sorted(trials, key=lambda c: trials[c][1]["mse"])[:SEARCHED_AGAIN]:
+            trials[c] = _searched_again(search, chosen, *trials[c][:2])
         best = min(trials, key=lambda c: trials[c][1]["mse"])
-        item, fit = trials[best]
+        item, fit, beside = trials[best]
         if not improves(current, fit, floor):
             fall = np.max((current["heldout"] - fit["heldout"]) / np.maximum(_margin(current["heldout"], floor),
                                                                               1e-300))
@@ -559,10 +573,33 @@ def _forward(search: _Search, candidates, floor, scale, progress, notes):
                          f"stopped adding: the best remaining candidate, {best}, raises the summed held-out MSE")
             break
         steps.append((item, current, fit))
-        chosen.append(item)
+        chosen = beside + [item]
         remaining.remove(best)
         current = fit
     return chosen, steps, nominal
+
+
+#: the candidates of lowest summed held-out MSE at a step whose trials are judged again with the
+#: chosen members' searched parameters chosen beside them (each such trial fits every variant)
+SEARCHED_AGAIN = 3
+
+
+def _searched_again(search: _Search, chosen, item, fit):
+    """A candidate's trial with the searched parameters of the chosen members (each joint's
+    Stribeck velocity, ripple order) chosen again beside it: (item, fit, the chosen members as
+    re-chosen). A joint's searched value chosen before the candidate was in took up part of its
+    effect (a ripple chosen at order 2 on a joint whose torque sensor's gain was not yet fitted,
+    for a true order 6), and the candidate would be judged beside that misfit."""
+    searched = [it for it in chosen if it.stribeck_velocity is not None or it.ripple_order is not None]
+    if not searched:
+        return item, fit, list(chosen)
+    beside = list(chosen)
+    for member in searched:
+        k = next(i for i, it in enumerate(beside) if it.candidate == member.candidate)
+        found = search.item(member.candidate, beside[:k] + beside[k + 1:] + [item])
+        if found is not None and found[1]["mse"] < fit["mse"]:
+            beside[k], fit = found[0], found[1]
+    return item, fit, beside
 
 
 #: the smallest subset is searched among all subsets of up to this many added effects; of more,
@@ -648,7 +685,11 @@ def _swaps(search: _Search, final_items, candidates, floor, fit, notes):
     member (the set is then smaller: the payload for the rigid bodies, a tilt for seven
     offsets); one of as many whose columns nearly span the member's (smallest principal angle
     at most :data:`AMBIGUITY_ANGLE_DEG`, the others projected out) cannot be told apart from it;
-    a larger one, or one whose columns differ, has nothing the data prefers."""
+    a larger one, or one whose columns differ, has nothing the data prefers. A smaller one not
+    nested in the member (:data:`NESTED`) replaces it only when the member's held-out error is
+    not lower on every fold: the margin says what matters to a user, the folds whether the data
+    prefers one (a payload of 3.7 noise floors: the gains in its place stay within the margin,
+    yet above the payload's on all five folds)."""
     problem = search.problem
     replace_by, out = {}, {}
     names = {it.candidate for it in final_items}
@@ -664,6 +705,11 @@ def _swaps(search: _Search, final_items, candidates, floor, fit, notes):
             alt, alt_fit = found
             alt_size = _size(problem, alt)
             if alt_size < size:
+                if (c, it.candidate) not in NESTED and np.all(alt_fit["fold_mse"] > fit["fold_mse"]):
+                    notes.append(f"{c} in place of {it.candidate} fits within the margin with fewer coefficients "
+                                 f"({alt_size} against {size}), but its held-out error is higher on every one of "
+                                 f"the {len(fit['fold_mse'])} folds: {it.candidate} is named")
+                    continue
                 best = replace_by.get(it.candidate)
                 if best is None or (alt_size, alt_fit["mse"]) < (_size(problem, best[0]), best[1]["mse"]):
                     replace_by[it.candidate] = (alt, alt_fit)
@@ -744,10 +790,15 @@ class _Fitter:
         point = self.point(values)
         result = data_pass(point, self.rigid, self.recordings, blocks, self.folds, self.chunk_rows, self.progress,
                            lags=MAX_LAG, signals=True, need_spring=self.need_spring)
+        problem, named = self.problem(point, result, blocks, values)
+        return point, result, problem, named
+
+    def problem(self, point, result, blocks, values):
+        """The fit of a pass at ``point`` (holding ``values``) over ``blocks``: (problem, named
+        bounds), with the physical domain of the rigid bodies and the payload where they are in."""
         if self.peak is None:
             self.peak = result.peak
-        n = point.n
-        bounds, named = _bounds_arrays(blocks, n, self.peak, values)
+        bounds, named = _bounds_arrays(blocks, point.n, self.peak, values)
         links = payload = None
         if any(b.candidate == "rigid_bodies" for b in blocks):
             links = (self.rigid.base_map, full_values(point.model))
@@ -756,7 +807,7 @@ class _Fitter:
             if self.nominal.payload is not None:
                 from ..model.inertial_parameters import barycentric
                 payload = payload + np.array([float(v) for v in barycentric(self.nominal.payload)])
-        return point, result, Problem(result, bounds, links, payload), named
+        return Problem(result, bounds, links, payload), named
 
     @staticmethod
     def stepped(values, problem, fit, blocks):
@@ -826,43 +877,85 @@ def _nonlinear(blocks) -> bool:
 
 
 #: the Stribeck velocity's refinement: passes of nine velocities 2^(m s) times the estimate
-#: (m = -4 .. 4) per joint, s of each pass (the step shrinks eightfold: 19 %, 2.2 %, 0.27 %)
-STRIBECK_ZOOM = (1 / 4, 1 / 32, 1 / 256)
+#: (m = -4 .. 4) per joint, s of each pass: first the grid's own steps over 16x either side (the
+#: selection chose each joint's grid velocity beside the effects chosen before it: Stribeck
+#: friction chosen before Coulomb friction takes a broad hump, 0.16 rad/s for a true 0.045),
+#: then steps of 19 %, 2.2 %, 0.27 %
+STRIBECK_ZOOM = (1, 1 / 4, 1 / 32, 1 / 256)
 
 
-def _refine_stribeck(fitter: _Fitter, values, blocks, n, base_names, progress):
-    """Each joint's Stribeck velocity between the neighbours of its grid value: passes with
-    nine velocities around the estimate (:data:`STRIBECK_ZOOM`), per joint the one of lowest
-    full-data residual, then the vertex of the parabola through it and its neighbours (log
-    velocity) as the next estimate."""
+def _refine_stribeck(fitter: _Fitter, values, blocks, n, base_names, progress, limit):
+    """Each joint's Stribeck velocity, beside the whole chosen set: passes with nine velocities
+    around the estimate (:data:`STRIBECK_ZOOM`), per joint the one of lowest full-data residual
+    within the grid's range (from its lowest velocity up to ``limit``), then the vertex of the
+    parabola through it and its neighbours (log velocity) as the next estimate. Below the grid a
+    "Stribeck" term is a spike at the velocity's zero crossings (0.001 rad/s on a real Panda
+    log), which fits the noise there and stalls the fit at the model."""
     k = next(i for i, b in enumerate(blocks) if b.candidate == "stribeck_friction")
     vs = blocks[k].stribeck_velocity.copy()
     steps = np.arange(-4, 5)
     others = [b for i, b in enumerate(blocks) if i != k]
-    point = fitter.point({nm: v for nm, v in values.items() if not nm.startswith(("fs", "vs"))})
+    held = {nm: v for nm, v in values.items() if not nm.startswith(("fs", "vs"))}
+    point = fitter.point(held)
     for zoom in STRIBECK_ZOOM:
         trial_blocks = others + [make_block("stribeck_friction", n, base_names, vs * 2.0 ** (m * zoom),
                                             key=f"stribeck_friction~{m}") for m in steps]
         progress(f"refining the Stribeck velocities (steps of {100 * (2 ** zoom - 1):.2g} %, one pass)")
         result = data_pass(point, fitter.rigid, fitter.recordings, trial_blocks, fitter.folds, fitter.chunk_rows,
                            progress, need_spring=fitter.need_spring)
-        bounds, _ = _bounds_arrays(trial_blocks, n, fitter.peak if fitter.peak is not None else result.peak, values)
-        links = (fitter.rigid.base_map, full_values(point.model)) \
-            if any(b.candidate == "rigid_bodies" for b in others) else None
-        problem = Problem(result, bounds, links, None)
+        problem = fitter.problem(point, result, trial_blocks, held)[0]
         base = [b.key for b in others]
         rss = np.array([problem.fit(problem.columns(base + [f"stribeck_friction~{m}"]))["joint_rss"]
                         for m in steps])
         h = zoom * math.log(2.0)
         for j in range(n):
-            i = int(np.argmin(rss[:, j]))
+            trial_vs = vs[j] * 2.0 ** (steps * zoom)
+            ok = (trial_vs <= limit[j] * (1 + 1e-12)) & (trial_vs >= STRIBECK_VS[0] * (1 - 1e-12))
+            if not ok.any():
+                continue
+            i = int(np.argmin(np.where(ok, rss[:, j], np.inf)))
             shift = 0.0
-            if 0 < i < len(steps) - 1:
+            if 0 < i < len(steps) - 1 and ok[i - 1] and ok[i + 1]:
                 y0, y1, y2 = rss[i - 1:i + 2, j]
                 den = y0 - 2 * y1 + y2
                 shift = float(np.clip(0.5 * (y0 - y2) / den, -1, 1)) if den > 0 else 0.0
             vs[j] = math.exp(math.log(vs[j]) + (steps[i] + shift) * h)
     return vs
+
+
+#: members fitted at the nominal model by a linearisation or at a searched parameter's grid value:
+#: the selection judged the members chosen after them beside that approximation
+APPROXIMATE = ("stribeck_friction", "position_ripple", "base_tilt") + MEASUREMENT
+
+
+def _rejudged_at_model(fitter: _Fitter, values, blocks, progress, notes, floor):
+    """The set without the members chosen after an approximate one (:data:`APPROXIMATE`) that the
+    fit at the model does not need: the selection judged them beside a linearisation or a grid
+    value, whose misfit a spurious member can take up (an elastic joint beside a Stribeck curve
+    chosen at 0.16 rad/s for a true 0.08). Last chosen first, each is dropped when the fit at the
+    model without it keeps every joint's held-out RMS within the margin of the fit with them all
+    (:func:`within`). Returns (blocks, values, the candidates dropped)."""
+    names = [b.candidate for b in blocks]
+    first = next((i for i, c in enumerate(names) if c in APPROXIMATE), None)
+    later = names[first + 1:] if first is not None else []
+    if not later:
+        return blocks, values, ()
+    scratch, dropped = [], []
+    full = _converge(fitter, values, blocks, progress, scratch, _nonlinear(blocks))[3]
+    for candidate in reversed(later):
+        fewer = [b for b in blocks if b.candidate != candidate]
+        gone = set(next(b for b in blocks if b.candidate == candidate).names)
+        gone |= set(link_parameter_names(fitter.nominal.n)) if candidate == "rigid_bodies" else set()
+        kept = {k: v for k, v in values.items() if k not in gone}
+        progress(f"judging {candidate} again at the model")
+        without = _converge(fitter, kept, fewer, progress, scratch, _nonlinear(fewer))[3]
+        if within(without, full, floor):
+            notes.append(f"{candidate}: dropped at the model: without it every joint's held-out RMS stays within the "
+                         f"margin of the fit with it (it was chosen beside {names[first]} fitted at the nominal "
+                         f"model or at a grid value)")
+            blocks, values = fewer, kept
+            dropped.append(candidate)
+    return blocks, values, tuple(dropped)
 
 
 def _drift(problem: Problem, fit, blocks, floor, correlation, folds, at_point: dict) -> dict:
@@ -1031,6 +1124,7 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
     final_blocks = _blocks_of(final_items, n, base_names)
     fitter = _Fitter(nominal, source, rigid, recordings, folds, chunk_rows, progress, need_spring)
     fitter.peak = main.peak
+    rejudged = ()
     # the selection's fit (linearised at the nominal model) is where the fit at the model starts
     start = problem.raw(final_fit["idx"], final_fit["theta"])
     values = {nm: float(start[c]) for it in final_items for nm, c in it.named.items() if it.candidate != "rigid_bodies"}
@@ -1038,12 +1132,14 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
         values.update(zip(link_parameter_names(n), map(float, final_fit["links"])))
     values.update(_hyper(final_blocks))
     if any(b.candidate == "stribeck_friction" for b in final_blocks):
-        vs = _refine_stribeck(fitter, values, final_blocks, n, base_names, progress)
+        vs = _refine_stribeck(fitter, values, final_blocks, n, base_names, progress,
+                              STRIBECK_SPEED_FRACTION * speed)
         final_blocks = [make_block(b.candidate, n, base_names, vs, None) if b.candidate == "stribeck_friction" else b
                         for b in final_blocks]
         values.update(_hyper(final_blocks))
-        notes.append("stribeck_friction: velocities refined between the grid points: "
+        notes.append("stribeck_friction: velocities refined beside the chosen set: "
                      + ", ".join("%.3g" % v for v in vs) + " rad/s")
+    final_blocks, values, rejudged = _rejudged_at_model(fitter, values, final_blocks, progress, notes, floor)
     nonlinear = _nonlinear(final_blocks)
     undetermined_now, bias, negligible = {}, None, []
     fitted_values = {}
@@ -1093,7 +1189,7 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
                      "links' masses share one common factor this data cannot decide")
     named = tuple(c for c in named if c in fitted)
     for c in [it.candidate for it in final_items]:
-        if c not in fitted:
+        if c not in fitted and c not in rejudged:
             notes.append(f"{c}: none of its coefficients is determined by the data: left out")
     correlation = max(noise_correlation(lp) for lp in _low_passes(recordings)) if recordings else 1.0
     drift = _drift(fproblem, fit, final_blocks, floor, correlation, folds, fitter.last_values) if final_blocks else {}
@@ -1113,7 +1209,7 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
                          "parameters are)")
     if "base_tilt" in fitted:
         g0 = np.array([float(v) for v in nominal.gravity])
-        gravity = g0 + np.array([values.get(k, 0.0) for k in ("dgx", "dgy", "dgz")])
+        gravity = tilted_gravity(g0, [values.get(k, 0.0) for k in TILT_NAMES])
         total = math.degrees(math.acos(np.clip(g0 @ gravity / (np.linalg.norm(g0) * np.linalg.norm(gravity)), -1, 1)))
         tilt = (math.degrees(math.atan2(-gravity[1], -gravity[2])), math.degrees(math.atan2(gravity[0], -gravity[2])),
                 total)

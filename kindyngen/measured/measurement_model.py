@@ -27,7 +27,8 @@ Coefficient names (1-based joints): ``fv fc f0 Ia fs fl rs rc`` + joint (frictio
 armature, Stribeck, load-dependent, ripple sine and cosine), ``vs`` and ``rk`` + joint (the
 Stribeck velocity and the ripple order: fixed, not fitted, in a linearisation), ``ce`` (compliance
 ``1 / stiffness``), ``dq`` (encoder offset), ``gt`` (torque gain - 1), ``payload_m ..
-payload_Izz`` (barycentric values added at the flange), ``dgx dgy dgz`` (gravity change),
+payload_Izz`` (barycentric values added at the flange), ``tilt_x tilt_y`` (the base's tilt, rad:
+gravity turned about two axes square to it, its magnitude the description's; :func:`tilted_gravity`),
 ``d_m1 .. d_Izzn`` (link parameters added to the description's, barycentric).
 
 Example (the LWR with a torque sensor reading 0.94 of joint 2's torque and 0.8 N m of Coulomb
@@ -65,19 +66,57 @@ DENSE = ("payload", "base_tilt", "rigid_bodies", "motor_side_elasticity", "encod
 MEASUREMENT = ("motor_side_elasticity", "encoder_offset", "torque_sensor_gain")
 
 
+#: the base tilt's two angles (rad): a tilt turns gravity, it does not change its magnitude (local
+#: gravity is the description's to 0.3 %; a free gravity vector would let its magnitude stand in
+#: for a torque gain or a payload, a common scale of the gravity torques)
+TILT_NAMES = ("tilt_x", "tilt_y")
+
+
+def tilt_axes(gravity) -> np.ndarray:
+    """(2, 3): the unit axes the tilt angles turn gravity about, square to ``gravity``: the base
+    axis least aligned with it made square to it, then that axis crossed with gravity's
+    direction. For gravity along -z, the base x and y axes.
+
+    >>> (tilt_axes([0, 0, -9.81]) + 0.0).round(12).tolist()
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    """
+    g = np.asarray(gravity, float)
+    d = g / np.linalg.norm(g)
+    e = np.eye(3)[int(np.argmin(np.abs(d)))]
+    u1 = e - (e @ d) * d
+    u1 /= np.linalg.norm(u1)
+    return np.array([u1, np.cross(u1, d)])
+
+
+def tilted_gravity(gravity, angles) -> np.ndarray:
+    """``gravity`` turned by the rotation vector ``angles[0] u1 + angles[1] u2`` (the
+    :func:`tilt_axes`; Rodrigues' formula): its magnitude unchanged.
+
+    >>> tilted_gravity([0, 0, -9.81], [0.1, 0.0]).round(3).tolist()
+    [0.0, 0.979, -9.761]
+    """
+    g = np.asarray(gravity, float)
+    w = np.asarray(angles, float) @ tilt_axes(g)
+    theta = float(np.linalg.norm(w))
+    if theta == 0.0:
+        return g.copy()
+    k = w / theta
+    return g * np.cos(theta) + np.cross(k, g) * np.sin(theta) + k * (k @ g) * (1 - np.cos(theta))
+
+
 def parameter_names(candidate: str, n: int, base_names=None) -> tuple[str, ...]:
     """The coefficient names of a candidate for ``n`` joints (``base_names``: the rigid bodies'
     base parameters, whose columns ``rigid_bodies`` folds).
 
     >>> parameter_names("position_ripple", 2), parameter_names("base_tilt", 2)
-    (('rs1', 'rs2', 'rc1', 'rc2'), ('dgx', 'dgy', 'dgz'))
+    (('rs1', 'rs2', 'rc1', 'rc2'), ('tilt_x', 'tilt_y'))
     """
     if candidate in JOINT_PREFIXES:
         return tuple(f"{p}{i + 1}" for p in JOINT_PREFIXES[candidate] for i in range(n))
     if candidate == "payload":
         return tuple(f"payload_{k}" for k in BARYCENTRIC_NAMES)
     if candidate == "base_tilt":
-        return ("dgx", "dgy", "dgz")
+        return TILT_NAMES
     if candidate == "motor_side_elasticity":
         return tuple(f"ce{i + 1}" for i in range(n))
     if candidate == "encoder_offset":
@@ -272,7 +311,9 @@ def dense_columns(candidate: str, point: Point, rigid: RigidBodies, st: State) -
             cols = cols + np.stack([rigid.gravity_columns(st.q, e, which) @ dg for e in np.eye(10)], axis=2)
         return factor * cols
     if candidate == "base_tilt":
-        return factor * rigid.gravity_columns(st.q, point.values)
+        # turning gravity by a small angle about u moves it by u x g (square to g)
+        turns = np.stack([np.cross(u, point.gravity) for u in tilt_axes(rigid.gravity)], axis=1)
+        return factor * (rigid.gravity_columns(st.q, point.values) @ turns)
     if candidate == "rigid_bodies":
         return factor * st.Y
     n = point.n
@@ -342,8 +383,8 @@ def description_data(nominal: RobotModel, source, values: dict, header: str = ""
             links = links_from_barycentric(full, n)
         else:
             payload = _payload_link(nominal, payload_delta)
-    if any(values.get(k, 0.0) for k in ("dgx", "dgy", "dgz")):
-        gravity = np.array([float(v) for v in nominal.gravity]) + [values.get(k, 0.0) for k in ("dgx", "dgy", "dgz")]
+    if any(values.get(k, 0.0) for k in TILT_NAMES):
+        gravity = tilted_gravity([float(v) for v in nominal.gravity], [values.get(k, 0.0) for k in TILT_NAMES])
     return model_yaml(source, links, effects, header=header, name=name, model=nominal, payload=payload,
                       gravity=gravity)
 

@@ -28,8 +28,8 @@ from tests.measured.test_discover_issue24 import write_log
 
 
 def _problem(A, r, fold_of, folds, chunks, n, lags=32):
-    """Moments of compact rows (a dense block of 3 columns and a per-joint block) fed in
-    ``chunks``, and their Problem; the same rows in the full layout (m, n, 3 + n)."""
+    """Moments of compact rows (a dense block of 2 columns, the tilt's, and a per-joint block) fed
+    in ``chunks``, and their Problem; the same rows in the full layout (m, n, 2 + n)."""
     blocks = [make_block("base_tilt", n), make_block("torque_offset", n)]
     layout = layout_of(blocks, n)
     moments = Moments(n, layout.w, folds, lags, signals=True)
@@ -42,16 +42,16 @@ def _problem(A, r, fold_of, folds, chunks, n, lags=32):
     result = PassResult(moments, layout, np.zeros(n), [], (), len(r))
     p = layout.p
     full = np.zeros((len(r), n, p))
-    full[:, :, :3] = A[:, :, :3]
+    full[:, :, :2] = A[:, :, :2]
     for j in range(n):
-        full[:, j, 3 + j] = A[:, j, 3]
+        full[:, j, 2 + j] = A[:, j, 2]
     return Problem(result, (np.full(p, -np.inf), np.full(p, np.inf))), full
 
 
 def test_moments_equal_plain_numpy():
     m, n, folds = 2000, 3, 5
     rng = np.random.default_rng(0)
-    A = rng.standard_normal((m, n, 4))
+    A = rng.standard_normal((m, n, 3))
     # noise correlated over a few samples (a moving average): the lags matter
     e = np.apply_along_axis(lambda x: np.convolve(x, np.ones(4) / 4, "same"), 0, rng.standard_normal((m, n)))
     fold_of = np.minimum((np.arange(m) * folds) // m, folds - 1)
@@ -82,7 +82,7 @@ def test_moments_equal_plain_numpy():
 def test_a_residual_correlated_beyond_the_folded_lags_is_flagged():
     m, n = 3000, 2
     rng = np.random.default_rng(1)
-    A = rng.standard_normal((m, n, 4))
+    A = rng.standard_normal((m, n, 3))
     r = np.cumsum(rng.standard_normal((m, n)), axis=0)          # a random walk: correlated for long
     problem, _ = _problem(A, r, np.minimum((np.arange(m) * 2) // m, 1), 2, (m,), n)
     _, exact = problem.effective_samples(problem.fit(np.zeros(0, int)))

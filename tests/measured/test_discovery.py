@@ -176,6 +176,10 @@ def test_each_effect_alone_is_named(effect, noise):
     if effect == "base_tilt":
         roll, pitch, _ = d.tilt_deg
         assert abs(roll - TILT_DEG[0]) < 0.05 and abs(pitch - TILT_DEG[1]) < 0.05, d.tilt_deg
+        # a tilt turns gravity; its magnitude stays the description's (a free gravity vector once
+        # let the magnitude stand in for a gain or a payload: 8.95 m/s^2 on the real LWR4+ log)
+        assert abs(np.linalg.norm(d.gravity) / 9.81 - 1) < 1e-12, d.gravity
+        assert abs(np.linalg.norm([float(g) for g in d.model.gravity]) / 9.81 - 1) < 1e-12, d.model.gravity
     if effect == "payload":
         assert d.payload is not None
         if d.payload_mass is not None:
@@ -211,7 +215,7 @@ def test_clean_effect_is_fitted_to_rounding():
 
 
 def test_tilt_near_one_pose_is_named_over_offsets_that_fit_as_well():
-    # near one pose seven offsets fit a tilted base as well as its three gravity components do:
+    # near one pose seven offsets fit a tilted base as well as its two tilt angles do:
     # the smaller set is named, and the report says the offsets fit as well with more coefficients
     d = discover(NOMINAL, simulate(motion("near_pose"), ("base_tilt",), 0.1))
     assert d.effects == ("base_tilt",), (d.effects, d.indistinguishable, d.notes)
