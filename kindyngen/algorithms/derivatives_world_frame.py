@@ -57,7 +57,7 @@ import symengine as se
 
 from .kinematics_conventions import q_port
 from .rigid_bodies import ZERO, Body, cross, qd_port, qdd_port, vadd
-from .symbolic import Port, Stages, SymbolicFunction, naming, port_symbols
+from .symbolic import LaneSweep, Port, Stages, SymbolicFunction, naming, port_symbols
 from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, dynamics_function, setup
 from .ldlt import tree_ldlt_factor, tree_ldlt_substitute
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
@@ -282,6 +282,7 @@ def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_mi
     bias = rnea(ts, qd, None, True, stages)
     qdd = tree_ldlt_substitute(factor, [t - b for t, b in zip(tau, bias)], name_)
     dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
+    lanes = _solved_rows(factor, (dq, dqd), stages.definitions, 2 if with_minv else None)
     solved = [[tree_ldlt_substitute(factor, [-B[i][j] for i in range(nv)], name_) for j in range(nv)]
               for B in (dq, dqd)]
     outputs = [[col[i] for i in range(nv) for col in columns] for columns in solved]
@@ -301,7 +302,33 @@ def fd_derivatives_tree(model: RobotModel, name: str = "fd_derivatives", with_mi
                           + what + ".", ts,
                           (q_port(model), qd_port(model), force_port(model, "tau", "applied torque")), (ts.q, qd, tau),
                           tuple(ports), tuple(outputs), stages, route="world frame")
-    return _noted(f)
+    return _noted(replace(f, lanes=lanes))
+
+
+def _solved_rows(factor, matrices, once, minv_port=None) -> LaneSweep:
+    """``-M^-1 B`` for each B of ``matrices`` (nv x nv nested lists) as a lane program: lane
+    l, seeded with row l of the identity, solves ``x = M^-1 e_l`` from the tree-sparse
+    ``factor`` (row l of ``M^-1``, M symmetric) and gives row l of port p as ``-sum_i x_i
+    B[i][j]`` over the structurally non-zero ``B[i][j]``; ``minv_port`` (if given) gets x
+    itself. ``once``: the named intermediates B and the factor are written in; B's entries
+    are named too (computed once, not per lane), the solve's intermediates apart (prefix
+    ``_l``: they read the seeds, so the lane program computes them per lane)."""
+    nv = len(factor[1])
+    entries = Stages("_d")
+    matrices = [[[entries.cut(e) if e != 0 else e for e in row] for row in B] for B in matrices]
+    seeds = tuple(se.Symbol(f"_seed{k}") for k in range(nv))
+    solve = Stages("_l")
+    x = tree_ldlt_substitute(factor, list(seeds), solve.cut)
+    exprs, places = [], []
+    for port, B in enumerate(matrices):
+        for j in range(nv):
+            exprs.append(se.Add(*(-x[i] * B[i][j] for i in range(nv) if B[i][j] != 0)))
+            places.append((port, j, nv))
+    if minv_port is not None:
+        exprs += x
+        places += [(minv_port, k, nv) for k in range(nv)]
+    return LaneSweep(seeds=seeds, values=tuple(tuple(_unit_column(nv, l)) for l in range(nv)), exprs=tuple(exprs),
+                     places=tuple(places), stages=tuple(once) + entries.definitions + solve.definitions)
 
 
 def _unit_column(n: int, k: int) -> list:
