@@ -34,7 +34,14 @@ zero and its orientation columns (Pinocchio's local tangent ``R exp(theta)``) ar
 ``fd``: ``dqdd/dx = -M^-1 dtau/dx`` at ``qdd = fd(q, qd, tau)`` (differentiating ``tau(q, qd,
 fd(q, qd, tau)) = tau``), ``M`` factorised once as the tree-sparse ``L^T D L`` of
 :func:`kindyngen.algorithms.ldlt.tree_ldlt_solve`; every column is solved through the
-factor, ``M^-1`` only where the caller asks for it.
+factor, ``M^-1`` only where the caller asks for it. The C single call runs it as a lane program
+(:class:`kindyngen.algorithms.symbolic.LaneSweep`, as the chains' derivatives do): the pass, the
+factor and the terms ``r_i, s_i, u_j, psi_j, Y_j, Z_j`` once, then lane l, seeded with row l of
+the identity, solves ``x = M^-1 e_l`` from the factor (row l of ``M^-1``) and forms row l of
+``dqdd/dx = -x^T dtau/dx`` from the terms by subtree and ancestor sums
+(:meth:`WorldPass.weighted_rows`), every lane the same arithmetic in one loop that compilers
+vectorise; on the G1 (nv = 35) 34k operations once and 36 lanes of 4.4k against 121k scalar,
+2.1x faster (docs/latency.md, "Lane programs over a tree").
 
 Trees carry no joint effects (friction, armature): these are the rigid-body derivatives.
 
