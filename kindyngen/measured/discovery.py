@@ -934,28 +934,35 @@ def _rejudged_at_model(fitter: _Fitter, values, blocks, progress, notes, floor):
     value, whose misfit a spurious member can take up (an elastic joint beside a Stribeck curve
     chosen at 0.16 rad/s for a true 0.08). Last chosen first, each is dropped when the fit at the
     model without it keeps every joint's held-out RMS within the margin of the fit with them all
-    (:func:`within`). Returns (blocks, values, the candidates dropped)."""
+    (:func:`within`). Returns (blocks, values, the candidates dropped, the fit at the model of the
+    blocks returned: :func:`_converge`'s result, its notes and ``fitter.last_values``; None when
+    nothing was judged), so that fit is not made twice."""
     names = [b.candidate for b in blocks]
     first = next((i for i, c in enumerate(names) if c in APPROXIMATE), None)
     later = names[first + 1:] if first is not None else []
     if not later:
-        return blocks, values, ()
-    scratch, dropped = [], []
-    full = _converge(fitter, values, blocks, progress, scratch, _nonlinear(blocks))[3]
+        return blocks, values, (), None
+
+    def converged(vals, blks):
+        said = []
+        return _converge(fitter, vals, blks, progress, said, _nonlinear(blks)), said, dict(fitter.last_values)
+    dropped = []
+    kept_fit = converged(values, blocks)
+    full = kept_fit[0][3]
     for candidate in reversed(later):
         fewer = [b for b in blocks if b.candidate != candidate]
         gone = set(next(b for b in blocks if b.candidate == candidate).names)
         gone |= set(link_parameter_names(fitter.nominal.n)) if candidate == "rigid_bodies" else set()
         kept = {k: v for k, v in values.items() if k not in gone}
         progress(f"judging {candidate} again at the model")
-        without = _converge(fitter, kept, fewer, progress, scratch, _nonlinear(fewer))[3]
-        if within(without, full, floor):
+        trial = converged(kept, fewer)
+        if within(trial[0][3], full, floor):
             notes.append(f"{candidate}: dropped at the model: without it every joint's held-out RMS stays within the "
                          f"margin of the fit with it (it was chosen beside {names[first]} fitted at the nominal "
                          f"model or at a grid value)")
-            blocks, values = fewer, kept
+            blocks, values, kept_fit = fewer, kept, trial
             dropped.append(candidate)
-    return blocks, values, tuple(dropped)
+    return blocks, values, tuple(dropped), kept_fit
 
 
 def _drift(problem: Problem, fit, blocks, floor, correlation, folds, at_point: dict) -> dict:
@@ -1139,12 +1146,15 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
         values.update(_hyper(final_blocks))
         notes.append("stribeck_friction: velocities refined beside the chosen set: "
                      + ", ".join("%.3g" % v for v in vs) + " rad/s")
-    final_blocks, values, rejudged = _rejudged_at_model(fitter, values, final_blocks, progress, notes, floor)
-    nonlinear = _nonlinear(final_blocks)
+    final_blocks, values, rejudged, converged = _rejudged_at_model(fitter, values, final_blocks, progress, notes,
+                                                                   floor)
     undetermined_now, bias, negligible = {}, None, []
     fitted_values = {}
-    point, result, fproblem, fit, values, named_bounds = _converge(fitter, values, final_blocks, progress, notes,
-                                                                   nonlinear)
+    if converged is None:
+        converged = (_converge(fitter, values, final_blocks, progress, notes, _nonlinear(final_blocks)), [],
+                     fitter.last_values)
+    (point, result, fproblem, fit, values, named_bounds), said, fitter.last_values = converged
+    notes.extend(said)
     for _ in range(3):
         # the values' standard errors, inflated by the effective sample size of the residual
         n_eff, exact = fproblem.effective_samples(fit)
