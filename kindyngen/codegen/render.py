@@ -531,6 +531,7 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", 
         "kernel_latency": kernel_latency(),
         "batch_block": BATCH_BLOCK,
         "batch_stack": BATCH_STACK,
+        "loop_datarefs": LOOP_DATAREFS,
         # iterative IK (templates/*/ik_dls.*.j2) where asked for (--functions) and applicable, else None
         "ik_dls": dls_view(model, programs) if ik_dls else None,
     }
