@@ -9,9 +9,9 @@
 #endif
 
 /* Batches that store outputs in place, port[k*count + start + j]: no two iterations of the loop
-   over a block's configurations touch the same entry (j < size <= count - start), which
-   compilers cannot prove without a run-time check per pair of output entries, so they do not
-   vectorise the loop; this pragma before it says so. */
+ * over a block's configurations touch the same entry (j < size <= count - start), which
+ * compilers cannot prove without a run-time check per pair of output entries, so they do not
+ * vectorise the loop; this pragma before it says so. */
 #if defined(__clang__)
 #define KDG_INDEPENDENT _Pragma("clang loop vectorize(assume_safety)")
 #elif defined(__GNUC__)
