@@ -92,7 +92,14 @@ PRESSURE_ORDER_EXCLUDED = ("fd_derivatives",)
 """Functions kept in demand order whatever their size: measured slower in a run (above).
 
 Both orders apply to scalar programs: the derivatives' single calls print their lane programs
-(:class:`LaneView`) unless generated with ``--no-lanes``."""
+(:class:`LaneView`) unless generated with ``--no-lanes``.
+
+Both were measured on chains, and apply to chains only (:attr:`RobotModel.is_chain`): a tree's
+single calls keep CSE's order, which follows the derivation's pass over the tree. On the G1
+(floating base, 29 joints), ad hoc driver, minima over 5-11 interleaved rounds, CSE's order
+against pressure order: M 1.25x faster, fd 1.12x, tau 1.06x, tau_derivatives 1.05x; on solo12
+tau 1.14x (against demand order) and tau_derivatives 1.03x, fd 0.96x (docs/latency.md, "Print
+order on trees")."""
 
 
 def demand_order(assignments, outputs) -> list:
@@ -294,12 +301,13 @@ def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
 
 
 def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "libm",
-                  batch: bool = False, lanes: bool = True) -> FunctionView:
+                  batch: bool = False, lanes: bool = True, chain: bool = True) -> FunctionView:
     """What the templates print of one function. C: ``trig="kernel"`` reads sin/cos of joint
     angles from the arrays sin_q/cos_q the kernel fills; ``batch`` prints inputs and outputs of
     configuration start + j of a structure-of-arrays batch (entry k at ``port[k*count + start + j]``,
     sin/cos at ``sin_q[k][j]``; output entry k goes to ``out_<port>[k][j]``) and always reads sin/cos
-    of joint angles from those arrays."""
+    of joint angles from those arrays; ``chain``: a chain's large single calls print in demand or
+    pressure order, a tree's in CSE's (PRESSURE_ORDER_EXCLUDED)."""
     f = program.function
     names = input_names(program, dialect)
     if batch:
@@ -366,7 +374,8 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     statements = ()
     pressure = False
     # the scalar program's print order, for single calls that do not print a lane program
-    if dialect.name == "c" and not batch and lane is None and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
+    if (dialect.name == "c" and not batch and lane is None and chain
+            and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS):
         kept = [(sym, e) for sym, e in program.assignments if sym in printed]
         pressure = (program.after.add + program.after.mul > PRESSURE_ORDER_OPERATIONS
                     and f.name not in PRESSURE_ORDER_EXCLUDED)
@@ -524,7 +533,8 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", 
         "structure": model.structure_text,       # a tree says what it is; an arm: None
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
-        "functions": [function_view(p, dialect, model.identifier, trig, lanes=lanes) for p in programs],
+        "functions": [function_view(p, dialect, model.identifier, trig, lanes=lanes, chain=model.is_chain)
+                      for p in programs],
         "trig": trig,
         "trig_bound": TRIG_BOUND,
         "trig_max_ulp": TRIG_MAX_ULP,
