@@ -10,6 +10,7 @@ it is printed in: C comments, Python docstrings, MATLAB comments, the CMake comm
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -41,6 +42,14 @@ BATCH_MIN_BLOCK = 16
 """Fewest configurations per block worth a local output array; functions whose outputs need
 smaller blocks (regressors, hundreds of entries, mostly zeros: their time is the stores) write
 outputs in place instead, in blocks of BATCH_BLOCK."""
+
+LOOP_DATAREFS = 1000
+"""Most array references (distinct loads, and stores) in a batch block's loop over configurations
+that compilers vectorise: gcc gives a loop of more up (its ``loop-max-datarefs-for-datadeps``,
+1000 by default). A batch above it runs its configurations one at a time through the single
+call instead (``FunctionView.per_state``), which prints the faster program (its print order,
+or its lane program): the G1's tau_derivatives (1150 distinct outputs) and fd_derivatives
+(3675 outputs, and a lane program), measured in docs/latency.md ("Batches of large outputs")."""
 
 SCALARS = ("double", "float")
 """C scalar types (``generate --scalar``): double (default), or float for single-precision FPUs."""
@@ -83,7 +92,14 @@ PRESSURE_ORDER_EXCLUDED = ("fd_derivatives",)
 """Functions kept in demand order whatever their size: measured slower in a run (above).
 
 Both orders apply to scalar programs: the derivatives' single calls print their lane programs
-(:class:`LaneView`) unless generated with ``--no-lanes``."""
+(:class:`LaneView`) unless generated with ``--no-lanes``.
+
+Both were measured on chains, and apply to chains only (:attr:`RobotModel.is_chain`): a tree's
+single calls keep CSE's order, which follows the derivation's pass over the tree. On the G1
+(floating base, 29 joints), ad hoc driver, minima over 5-11 interleaved rounds, CSE's order
+against pressure order: M 1.25x faster, fd 1.12x, tau 1.06x, tau_derivatives 1.05x; on solo12
+tau 1.14x (against demand order) and tau_derivatives 1.03x, fd 0.96x (docs/latency.md, "Print
+order on trees")."""
 
 
 def demand_order(assignments, outputs) -> list:
@@ -156,7 +172,9 @@ class FunctionView:
     half: int = 0                 # C single calls whose kernel arguments are all half joint angles: the
                                   # half-angle kernel over this many entries of q from first_angle, in place
     block: int = 0                # C batch: configurations per block
-    in_place: bool = False        # C batch: outputs stored straight into the caller's arrays
+    in_place: bool = False        # C batch: outputs stored straight into the caller's arrays ...
+    constants: tuple = ()         # ... those of constant entries before the loop, (port, dtype, ((entry, text), ...))
+    per_state: bool = False       # C batch: one configuration at a time through the single call (LOOP_DATAREFS)
     batch: "FunctionView | None" = None  # C: the same body, printed for the batch variant
     # C single calls in demand order (DEMAND_ORDER_OPERATIONS): ("t", name, text) and
     # ("out", port name, entry, text, dtype) in print order; empty: assignments, then outputs
@@ -283,12 +301,13 @@ def _batch_block(angles: int, outputs: int) -> tuple[int, bool]:
 
 
 def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "libm",
-                  batch: bool = False, lanes: bool = True) -> FunctionView:
+                  batch: bool = False, lanes: bool = True, chain: bool = True) -> FunctionView:
     """What the templates print of one function. C: ``trig="kernel"`` reads sin/cos of joint
     angles from the arrays sin_q/cos_q the kernel fills; ``batch`` prints inputs and outputs of
     configuration start + j of a structure-of-arrays batch (entry k at ``port[k*count + start + j]``,
     sin/cos at ``sin_q[k][j]``; output entry k goes to ``out_<port>[k][j]``) and always reads sin/cos
-    of joint angles from those arrays."""
+    of joint angles from those arrays; ``chain``: a chain's large single calls print in demand or
+    pressure order, a tree's in CSE's (PRESSURE_ORDER_EXCLUDED)."""
     f = program.function
     names = input_names(program, dialect)
     if batch:
@@ -334,6 +353,20 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
                              UserText(p.unit), UserText(p.description),
                              entries=tuple((k, dialect.expr(e, names)) for k, e in enumerate(exprs)))
                     for p, exprs in zip(f.outputs, program.outputs))
+    constants, per_state = (), False
+    if batch:
+        # constant entries (a tree's structural zeros) of a batch storing in place, or running the
+        # single call, are filled for the block before the loop over its configurations, in runs of
+        # consecutive entries; the loop stores only the others: fewer array references
+        # (LOOP_DATAREFS), fewer strided stores per configuration
+        varying = tuple(replace(p, entries=tuple(kt for kt, e in zip(p.entries, exprs) if not e.is_Number))
+                        for p, exprs in zip(outputs, program.outputs))
+        per_state = (_array_references(assignments, varying if in_place else outputs) > LOOP_DATAREFS
+                     and 8 * sum(p.size for p in (*f.inputs, *f.outputs)) <= BATCH_STACK)
+        if in_place or per_state:
+            constants = tuple((p.name, p.dtype, tuple(kt for kt, e in zip(p.entries, exprs) if e.is_Number))
+                              for p, exprs in zip(outputs, program.outputs) if any(e.is_Number for e in exprs))
+            outputs = varying
     lane = None
     if dialect.name == "c" and not batch and lanes and program.lanes is not None:
         lane, first, angles, arguments = _lane_view(program, dialect, trig)
@@ -341,7 +374,8 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
     statements = ()
     pressure = False
     # the scalar program's print order, for single calls that do not print a lane program
-    if dialect.name == "c" and not batch and lane is None and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS:
+    if (dialect.name == "c" and not batch and lane is None and chain
+            and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS):
         kept = [(sym, e) for sym, e in program.assignments if sym in printed]
         pressure = (program.after.add + program.after.mul > PRESSURE_ORDER_OPERATIONS
                     and f.name not in PRESSURE_ORDER_EXCLUDED)
@@ -355,19 +389,37 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         before=program.before.to_json(), after=program.after.to_json(),
         has_select=("where(" in text or "if_else(" in text or "kdg_select(" in text or "?" in text),
         critical=program.critical.to_json(),
-        angles=angles,
+        angles=0 if per_state else angles,
         first_angle=first,
-        arguments=tuple(arguments),
+        arguments=() if per_state else tuple(arguments),
         lanes=(angles + len(arguments)) if split else -(-(angles + len(arguments)) // KERNEL_LANES) * KERNEL_LANES,
         split=split,
         half=half,
         block=block,
         in_place=in_place,
+        constants=constants,
+        per_state=per_state,
         batch=function_view(program, dialect, prefix, trig, batch=True) if dialect.name == "c" and not batch else None,
         statements=statements,
         pressure=pressure,
         lane=lane,
     )
+
+
+def _array_references(assignments, outputs) -> int:
+    """The array references of a batch block's loop body as printed: distinct entries read
+    (``q[3*count + start + j]``, ``sin_q[2][j]``) and one store per output entry it prints.
+
+    >>> _array_references([("t0", "q[0*count + start + j]*sin_q[1][j]"), ("t1", "t0*q[0*count + start + j]")],
+    ...                   [PortView("y", (2,), 2, "double", "", "", entries=((0, "t1"), (1, "cos_q[1][j]")))])
+    5
+    """
+    texts = [t for _, t in assignments] + [t for p in outputs for _, t in p.entries]
+    reads = {m for t in texts for m in _ARRAY_ENTRY.findall(t)}
+    return len(reads) + sum(len(p.entries) for p in outputs)
+
+
+_ARRAY_ENTRY = re.compile(r"\b[A-Za-z_]\w*\[[^\[\]]*\](?:\[[^\[\]]*\])?")
 
 
 def _served(program: Program) -> dict:
@@ -481,13 +533,15 @@ def _context(model: RobotModel, programs, dialect: Dialect, trig: str = "libm", 
         "structure": model.structure_text,       # a tree says what it is; an arm: None
         "gravity": [float(v) for v in model.gravity],
         "version": __version__,
-        "functions": [function_view(p, dialect, model.identifier, trig, lanes=lanes) for p in programs],
+        "functions": [function_view(p, dialect, model.identifier, trig, lanes=lanes, chain=model.is_chain)
+                      for p in programs],
         "trig": trig,
         "trig_bound": TRIG_BOUND,
         "trig_max_ulp": TRIG_MAX_ULP,
         "kernel_latency": kernel_latency(),
         "batch_block": BATCH_BLOCK,
         "batch_stack": BATCH_STACK,
+        "loop_datarefs": LOOP_DATAREFS,
         # iterative IK (templates/*/ik_dls.*.j2) where asked for (--functions) and applicable, else None
         "ik_dls": dls_view(model, programs) if ik_dls else None,
     }
@@ -510,7 +564,8 @@ def render_c(model: RobotModel, programs, trig: str = "kernel", scalar: str = "d
                libm_sin="sinf" if single else "sin", libm_cos="cosf" if single else "cos",
                float_trig_bound=FLOAT_BOUND, float_trig_max_ulp=FLOAT_MAX_ULP,
                sincos_kernel=_float_kernel(ctx["functions"], batch) if single else _kernels(ctx["functions"], batch),
-               float_error={name: e.text() for name, e in (float_error or {}).items()})
+               float_error={name: e.text() for name, e in (float_error or {}).items()},
+               independent=batch and any(f.batch.in_place and not f.batch.per_state for f in ctx["functions"]))
     if single:
         ctx["ik_dls"] = None
     return {f"{model.identifier}.h": env.get_template("c/header.h.j2").render(ctx),

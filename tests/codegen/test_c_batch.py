@@ -177,3 +177,46 @@ def test_floating_tree_kernel_skips_the_base(tmp_path):
                 want = expected[port["name"]].reshape(count, -1)
                 np.testing.assert_allclose(s, want, rtol=1e-12, atol=1e-12 * np.abs(want).max(),
                                            err_msg=f"{trig} {spec['name']}.{port['name']}")
+
+
+def test_batches_of_large_outputs_equal_single_calls(tmp_path, monkeypatch):
+    """The two routes of batches with large outputs, on a small floating tree with smaller limits
+    (the G1 takes them at the real ones: M in place, tau_derivatives and fd_derivatives per
+    state): outputs stored in place, their constant entries (structural zeros) filled before a
+    loop marked independent; and, where that loop would reference more array entries than
+    LOOP_DATAREFS, a loop over the single call (fd_derivatives': its lane program). Both equal
+    count single calls bit for bit (-O2), and to 1e-15 vectorised with contraction."""
+    from kindyngen.codegen import render
+    from kindyngen.readers.urdf import load_urdf
+    monkeypatch.setattr(render, "BATCH_STACK", 4096)     # M's 121 entries, the derivatives': in place
+    monkeypatch.setattr(render, "LOOP_DATAREFS", 150)    # M's loop under it, the derivatives' over it
+    model = load_urdf(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    folder = generate(model, tmp_path / "c", languages=("c",), progress=False,
+                      only={"M", "tau_derivatives", "fd_derivatives"})
+    manifest = json.loads((folder / "functions.json").read_text())
+    source = (folder / "c" / f"{model.identifier}.c").read_text()
+    prefix = model.identifier
+
+    def body(name):
+        start = source.index(f"void {prefix}_{name}_batch(")
+        return source[start:source.index("\n}\n", start)]
+    assert "KDG_INDEPENDENT" in body("M") and "static const double value[" in body("M")
+    for name in ("tau_derivatives", "fd_derivatives"):
+        assert f"{prefix}_{name}(in_q, in_qd, " in body(name) and "static const double value[" in body(name)
+    assert "kdg_lane" in source[source.index(f"void {prefix}_fd_derivatives("):source.index(f"void {prefix}_fd_derivatives_batch(")]
+    rng = np.random.default_rng(8)
+    for flags in (("-O2",), ("-O3", "-march=native", "-ffp-contract=fast")):
+        dll = ctypes.CDLL(str(compile_shared_library(folder / "c", prefix, flags)))
+        for spec in manifest["functions"]:
+            for count in COUNTS:
+                q = np.hstack([rng.uniform(-1, 1, (count, 3)), rng.standard_normal((count, 4)),
+                               rng.uniform(-2, 2, (count, 5))])
+                q[:, 3:7] /= np.maximum(np.linalg.norm(q[:, 3:7], axis=1, keepdims=True), 1e-300)
+                arrays = [q if p["name"] == "q" else rng.uniform(-3, 3, (count, port_size(p))) for p in spec["inputs"]]
+                single, batch = call_single(dll, spec, arrays), call_batch(dll, spec, arrays)
+                for port, s, b in zip(spec["outputs"], single, batch):
+                    if flags == ("-O2",):
+                        np.testing.assert_array_equal(b, s, err_msg=f"{spec['name']}.{port['name']} count {count}")
+                    else:
+                        np.testing.assert_allclose(b, s, rtol=1e-15, atol=1e-15 * max(1.0, np.abs(s).max(initial=0)),
+                                                   err_msg=f"{spec['name']}.{port['name']} count {count}")

@@ -68,8 +68,10 @@ def test_c_has_no_globals_or_allocation(robot):
     half = [statics_of(trig_kernel.kernel_c("kdg_sincos_half", half=True, blocks=blocks)) for blocks in (True, False)]
     # the batch variants' one loop over a block's arguments (trig_kernel.batch_kernel_c)
     batch = statics_of(trig_kernel.batch_kernel_c())
-    # and, inside the derivatives' lane programs, their read-only seed tables (re-entrant)
-    statics = [line for line in source.splitlines() if "static " in line and not line.startswith("    static const double kdg_seed[")]
+    # and, inside functions, read-only tables (re-entrant): the derivatives' lane programs' seeds,
+    # the batches' constant output entries and the entries they copy
+    tables = re.compile(r"^ +static const (double|int) (kdg_seed|entry|value)\[")
+    statics = [line for line in source.splitlines() if "static " in line and not tables.match(line)]
     assert statics in [a + b + c for a in plain + [[]] for b in half + [[]] for c in (batch, [])]
     # each printed where a call uses it
     calls = source[source.index("\nvoid "):]                 # the generated functions

@@ -112,3 +112,21 @@ def test_reprs_stay_short(programs):
     for obj in (p, p.function, p.function.lanes, p.lanes, found):
         assert len(repr(obj)) < 1000, type(obj).__name__
     assert "tau_derivatives" in repr(p) and "lanes" in repr(p.function)
+
+
+def test_a_trees_large_single_calls_keep_cse_order():
+    """Demand and pressure order were measured on chains; a tree's single calls print CSE's
+    order whatever their size (render.PRESSURE_ORDER_EXCLUDED's note: on the G1 M 1.25x, fd
+    1.12x faster). A floating tree's fd (over DEMAND_ORDER_OPERATIONS) and tau_derivatives
+    (over PRESSURE_ORDER_OPERATIONS, its scalar program) print as a chain's would not."""
+    from kindyngen.readers.urdf import load_urdf
+    model = load_urdf(ROOT / "tests" / "data" / "urdf" / "mobile_slider_tree.urdf", floating_base=True)
+    assert not model.is_chain
+    found = {p.function.name: p for p in build_programs(model, only=["fd", "tau_derivatives"], progress=False)}
+    assert found["fd"].after.add + found["fd"].after.mul > render.DEMAND_ORDER_OPERATIONS
+    assert found["tau_derivatives"].after.add + found["tau_derivatives"].after.mul > PRESSURE_ORDER_OPERATIONS
+    text = render_c(model, list(found.values()), batch=False, lanes=False)[f"{model.identifier}.c"]
+    assert "in demand order" not in text and "register-pressure order" not in text
+    for p in found.values():
+        assert not function_view(p, render.C, model.identifier, "kernel", lanes=False, chain=False).statements
+        assert function_view(p, render.C, model.identifier, "kernel", lanes=False).statements    # as a chain's

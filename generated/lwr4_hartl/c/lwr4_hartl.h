@@ -41,7 +41,11 @@
  * Work is done in blocks of up to 64 configurations looping over the configurations
  * innermost, so that compilers vectorise the arithmetic across them; each call uses at most
  * 32 KiB of stack for a block's sin/cos and outputs (smaller blocks for larger outputs; functions
- * with too many output entries for that store them in place, and gain little from batching).
+ * with too many output entries for that store them in place, their constant entries filled
+ * first). Functions whose loop over a block would reference more than 1000 array entries,
+ * which compilers do not vectorise, run their configurations one at a time through the single
+ * call instead: their time per configuration is the single call's and the stores of its
+ * outputs in this layout, one cache line per entry.
  *
  * Operation counts: add = additions/subtractions, mul = multiplications/divisions,
  * call = sin, cos, sqrt, atan2, ... (rule in the project README), after CSE. Critical path:
