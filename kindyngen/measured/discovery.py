@@ -1221,16 +1221,14 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
         # in every coefficient there (a compliance: the deflection moves the rigid torque; on the
         # Panda log ce7 read 0.02 margins there and doubled joint 7's error at the model): a drop the
         # fit at the model does not bear is undone for the coefficients of the joints it raised
-        rose = set(np.flatnonzero(fit["heldout"] - before_fit["heldout"] >
-                                  _margin(before_fit["heldout"], floor)).tolist())
-        back = [nm for nm in new if nm in weak and _joint_index(nm) in rose]
+        back, rose = undone_at_model(new, weak, before_fit["heldout"], fit["heldout"], floor)
         if back:
             for nm in back:
                 needed_at_model[nm] = undetermined_now.pop(nm)
                 fitted_values.pop(nm)
             notes.append("kept, though a linear refit at the fitted point did without them: " + ", ".join(back) +
                          " (the fit at the model without them raised joint " +
-                         ", ".join(str(j + 1) for j in sorted(rose)) + "'s held-out RMS by more than the margin)")
+                         ", ".join(str(j + 1) for j in rose) + "'s held-out RMS by more than the margin)")
             point, result, fproblem, fit, values, named_bounds, final_blocks = _without(
                 fitter, before_blocks, before_values, undetermined_now, progress, notes)
     n_eff, _ = fproblem.effective_samples(fit)
@@ -1286,6 +1284,19 @@ def _low_passes(recordings):
         if first is not None:
             out.append(first.low_pass)
     return out or [None]
+
+
+def undone_at_model(dropped, weak, before, after, floor) -> tuple[list[str], list[int]]:
+    """Which of the coefficients ``dropped`` go back in, and the joints that show it: those the
+    held-out rule (``weak``, a linear refit at the point) let go, of a joint whose held-out RMS
+    at the model rose from ``before`` to ``after`` by more than the margin.
+
+    >>> undone_at_model(["fc2", "ce1", "fv2"], {"fc2": "", "fv2": ""}, np.array([0.1, 0.03]),
+    ...                 np.array([0.1001, 0.25]), np.array([0.01, 0.01]))
+    (['fc2', 'fv2'], [1])
+    """
+    rose = np.flatnonzero(np.asarray(after) - before > _margin(np.asarray(before), floor)).tolist()
+    return [nm for nm in dropped if nm in weak and _joint_index(nm) in rose], rose
 
 
 def _without(fitter: _Fitter, blocks, values, dropped, progress, notes):
