@@ -1,7 +1,7 @@
 """discover's not-determined rule (kindyngen.measured.discovery.unneeded) beside a torque-sensor
 gain. The reading is the gain times the joint's torque, so a joint's coefficients are bilinear
-with its gain: at a fitted gain of 0.5 with Coulomb friction 0.5 (in the sensor's units: 0.25
-N m at the joint), a first-order refit without the friction lets the gain's column (the torque,
+with its gain: at a fitted gain of 0.5 with Coulomb friction 0.5 N m at the joint (the sensor
+reads 0.25 of it), a first-order refit without the friction lets the gain's column (the torque,
 friction included) take it up, and one without both cancels them. On the real Panda log the
 rule dropped joint 7's friction and gain together that way, and the model written was worse
 than the nominal one on that joint (0.285 N m against 0.276).
