@@ -384,7 +384,7 @@ def undetermined(blocks: dict, values: dict, bounds: dict, negligible=(), elasti
             if candidate in MEASUREMENT and nm in negligible:
                 reasons.append(f"its torque stays below {MATTER:g} noise floors on every joint")
             if candidate == "motor_side_elasticity" and elastic_bias is not None:
-                i = int(nm[2:]) - 1
+                i = _joint_index(nm)
                 if abs(v) < NOISE_BIAS_FACTOR * elastic_bias[i]:
                     reasons.append(f"the torque sensor's noise alone gives ce = {elastic_bias[i]:.3g} through the "
                                    f"spring torque (needs {NOISE_BIAS_FACTOR:g} x that): the joint's torque is too "
@@ -964,13 +964,11 @@ def _rejudged_at_model(fitter: _Fitter, values, blocks, progress, notes, floor):
     chosen at 0.16 rad/s for a true 0.08). Last chosen first, each is dropped when the fit at the
     model without it keeps every joint's held-out RMS within the margin of the fit with them all
     (:func:`within`). Returns (blocks, values, the candidates dropped, the fit at the model of the
-    blocks returned: :func:`_converge`'s result, its notes and ``fitter.last_values``; None when
-    nothing was judged), so that fit is not made twice."""
+    blocks returned: :func:`_converge`'s result, its notes and ``fitter.last_values``), so that
+    fit is not made twice."""
     names = [b.candidate for b in blocks]
     first = next((i for i, c in enumerate(names) if c in APPROXIMATE), None)
     later = names[first + 1:] if first is not None else []
-    if not later:
-        return blocks, values, (), None
 
     def converged(vals, blks):
         said = []
@@ -1015,7 +1013,7 @@ def _drift(problem: Problem, fit, blocks, floor, correlation, folds, at_point: d
                 continue
             i, k = int(np.argmin(v)), int(np.argmax(v))
             spread = v[k] - v[i]
-            j = (int(nm[2:]) - 1) if nm[2:].isdigit() else 0
+            j = _joint_index(nm) or 0
             column_rms = problem.column_rms(c)[j]
             if spread > DRIFT_SE * math.hypot(se[i], se[k]) and spread * column_rms >= MATTER * floor[j]:
                 where = "rises" if k > i else "falls"
@@ -1160,7 +1158,6 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
     final_blocks = _blocks_of(final_items, n, base_names)
     fitter = _Fitter(nominal, source, rigid, recordings, folds, chunk_rows, progress, need_spring)
     fitter.peak = main.peak
-    rejudged = ()
     # the selection's fit (linearised at the nominal model) is where the fit at the model starts
     start = problem.raw(final_fit["idx"], final_fit["theta"])
     values = {nm: float(start[c]) for it in final_items for nm, c in it.named.items() if it.candidate != "rigid_bodies"}
@@ -1179,9 +1176,6 @@ def discover(model: RobotModel, segments: Sequence, candidates: Sequence[str] = 
                                                                    floor)
     undetermined_now, bias, negligible = {}, None, []
     fitted_values, needed_at_model = {}, {}
-    if converged is None:
-        converged = (_converge(fitter, values, final_blocks, progress, notes, _nonlinear(final_blocks)), [],
-                     fitter.last_values)
     (point, result, fproblem, fit, values, named_bounds), said, fitter.last_values = converged
     notes.extend(said)
     for _ in range(3):

@@ -103,7 +103,7 @@ DISCOVER_RUNS = {
 }
 
 
-@pytest.mark.parametrize("name", ["panda", "lwr4"])
+@pytest.mark.parametrize("name", sorted(DISCOVER_RUNS))
 def test_discover_model_yaml_carries_over_to_the_held_out_part(tmp_path, capsys, name):
     """discover on a real log: model.yaml, with the rigid bodies, gains and tilt fitted together,
     is better than the nominal model on every joint of the held-out 30 %, and no worse in sum than
