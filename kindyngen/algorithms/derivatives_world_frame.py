@@ -58,13 +58,13 @@ neither joint's torque depends on the other joint's angle:
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import symengine as se
 
 from .kinematics_conventions import q_port
 from .rigid_bodies import ZERO, Body, cross, qd_port, qdd_port, vadd
-from .symbolic import LaneSweep, Port, Stages, SymbolicFunction, naming, port_symbols
+from .symbolic import JointLoops, LaneSweep, LoopBody, Port, Stages, SymbolicFunction, naming, port_symbols
 from .dynamics import ROUTE, TreeSetup, crba, expanded_parents, force_port, rnea, dynamics_function, setup
 from .ldlt import tree_ldlt_factor, tree_ldlt_substitute
 from ..model.robot_model import FREE_FLYER_NV, RobotModel
@@ -113,6 +113,53 @@ UNIT = [[se.Integer(1 if r == k else 0) for r in range(6)] for k in range(6)]
 
 # ----------------------------------------------------------------------------- the world-frame pass
 
+@dataclass(frozen=True)
+class WorldKinematics:
+    """Per joint j: the rotation R and origin o of its frame, its axis S, velocity v and
+    acceleration a (world frame, :mod:`module text <kindyngen.algorithms.derivatives_world_frame>`);
+    the gravity in the base frame and the root's v0, a0 (gravity as ``a_root = -g``)."""
+
+    gravity: list
+    v0: list
+    a0: list
+    R: list
+    o: list
+    S: list
+    v: list
+    a: list
+
+
+def world_kinematics(ts: TreeSetup, qd, qdd, name) -> WorldKinematics:
+    """The forward pass of the world-frame quantities, each named by ``name``."""
+    model = ts.model
+    base = FREE_FLYER_NV if model.floating_base else 0
+    n = model.n
+    g = [name(e) for e in ts.gravity_in_base()]
+    if model.floating_base:
+        v0 = list(qd[0:6])
+        a0 = [qdd[r] - g[r] for r in range(3)] + list(qdd[3:6])
+    else:
+        v0 = [ZERO] * 6
+        a0 = [-e for e in g] + [ZERO] * 3
+    eye = [[se.Integer(1 if r == c else 0) for c in range(3)] for r in range(3)]
+    R, o = [None] * n, [None] * n
+    S, v, a = [None] * n, [None] * n, [None] * n
+    for j, (joint, parent) in enumerate(zip(ts.joints, model.parents)):
+        Rp, op = (R[parent], o[parent]) if parent >= 0 else (eye, [ZERO] * 3)
+        vp, ap = (v[parent], a[parent]) if parent >= 0 else (v0, a0)
+        A = [[name(se.Add(*(Rp[r][k] * joint.C[k][c] for k in range(3) if joint.C[k][c] != 0)))
+              for c in range(3)] for r in range(3)]
+        c, s = joint.c, joint.s
+        R[j] = [[name(c * A[r][0] + s * A[r][1]), name(c * A[r][1] - s * A[r][0]), A[r][2]] for r in range(3)]
+        o[j] = [name(op[r] + se.Add(*(Rp[r][k] * joint.t[k] for k in range(3)))) for r in range(3)]
+        z = [A[r][2] for r in range(3)]
+        S[j] = z + [ZERO] * 3 if joint.prismatic else [name(e) for e in cross(o[j], z)] + z
+        qdj, qddj = qd[base + j], qdd[base + j]
+        v[j] = [name(e) for e in _add6(vp, _scale6(qdj, S[j]))]
+        a[j] = [name(e) for e in _add6(ap, _scale6(qddj, S[j]), _scale6(qdj, mcross(v[j], S[j])))]
+    return WorldKinematics(g, v0, a0, R, o, S, v, a)
+
+
 class WorldPass:
     """The world-frame quantities of :mod:`the module text <kindyngen.algorithms.derivatives_world_frame>` at
     (q, qd, qdd), each named in ``stages``: per joint its axis S, velocity v, acceleration a,
@@ -122,36 +169,13 @@ class WorldPass:
     def __init__(self, ts: TreeSetup, qd, qdd, stages: Stages):
         model = self.model = ts.model
         name = self.name = naming(stages)
-        base = self.base = FREE_FLYER_NV if model.floating_base else 0
+        self.base = FREE_FLYER_NV if model.floating_base else 0
         n = model.n
-        g = [name(e) for e in ts.gravity_in_base()]
-        self.gravity = g
-        if model.floating_base:
-            v0 = list(qd[0:6])
-            a0 = [qdd[r] - g[r] for r in range(3)] + list(qdd[3:6])
-        else:
-            v0 = [ZERO] * 6
-            a0 = [-e for e in g] + [ZERO] * 3
-        self.v0, self.a0 = v0, a0
-        eye = [[se.Integer(1 if r == c else 0) for c in range(3)] for r in range(3)]
-        R, o = [None] * n, [None] * n
-        S, v, a = [None] * n, [None] * n, [None] * n
-        bodies = [None] * n
-        for j, (joint, parent) in enumerate(zip(ts.joints, model.parents)):
-            Rp, op = (R[parent], o[parent]) if parent >= 0 else (eye, [ZERO] * 3)
-            vp, ap = (v[parent], a[parent]) if parent >= 0 else (v0, a0)
-            A = [[name(se.Add(*(Rp[r][k] * joint.C[k][c] for k in range(3) if joint.C[k][c] != 0)))
-                  for c in range(3)] for r in range(3)]
-            c, s = joint.c, joint.s
-            R[j] = [[name(c * A[r][0] + s * A[r][1]), name(c * A[r][1] - s * A[r][0]), A[r][2]] for r in range(3)]
-            o[j] = [name(op[r] + se.Add(*(Rp[r][k] * joint.t[k] for k in range(3)))) for r in range(3)]
-            z = [A[r][2] for r in range(3)]
-            S[j] = z + [ZERO] * 3 if joint.prismatic else [name(e) for e in cross(o[j], z)] + z
-            qdj, qddj = qd[base + j], qdd[base + j]
-            v[j] = [name(e) for e in _add6(vp, _scale6(qdj, S[j]))]
-            a[j] = [name(e) for e in _add6(ap, _scale6(qddj, S[j]), _scale6(qdj, mcross(v[j], S[j])))]
-            bodies[j] = ts.bodies[j].moved(R[j], o[j])
-        self.S, self.v, self.a = S, v, a
+        k = world_kinematics(ts, qd, qdd, name)
+        self.gravity, self.v0, self.a0 = k.gravity, k.v0, k.a0
+        v0, a0, v, a = k.v0, k.a0, k.v, k.a
+        self.S, self.v, self.a = k.S, v, a
+        bodies = [ts.bodies[j].moved(k.R[j], k.o[j]) for j in range(n)]
         forces = [self._force(b, vj, aj) for b, vj, aj in zip(bodies, v, a)]
         coriolis = [self._b_matrix(b, vj) for b, vj in zip(bodies, v)]
         parts = [[(b, f, B)] for b, f, B in zip(bodies, forces, coriolis)]
@@ -286,6 +310,196 @@ def _subtree(model: RobotModel, j: int):
     return out
 
 
+# ----------------------------------------------------------------------------- joint loops
+
+W_ROWS = ("R", 9), ("o", 3), ("S", 6), ("vp", 6), ("ap", 6), ("v", 6), ("a", 6)
+"""The rows of ``kdg_w`` per joint: its frame's rotation (row-major) and origin, its axis, its
+parent's velocity and acceleration (the root's for a joint on the root), its own."""
+C_ROWS = ("m", 1), ("h", 3), ("I", 6), ("F", 6), ("K", 21), ("H", 6)
+"""The rows of ``kdg_c`` (summed over a subtree): mass, first moment, inertia (xx xy xz yy yz zz),
+force, the symmetric ``K + K^T`` (upper triangle by rows) with ``K x = I (v x x)``, momentum ``I v``."""
+T_ROWS = ("u", 6), ("psi", 6), ("Y", 6), ("Z", 6), ("r", 6), ("s", 6)
+"""The rows of ``kdg_t`` per joint: the terms of :meth:`WorldPass.derivatives`."""
+LOOP_LANE = 8
+"""Joint loops run over the joints padded with zero lanes to a multiple of this (an AVX-512
+vector of doubles), so they vectorise without a remainder."""
+_PAIRS = tuple((k, r) for k in range(6) for r in range(k, 6))
+_SYM6 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _rows(layout, name: str) -> dict:
+    """{quantity: first row} of a layout such as :data:`W_ROWS`, and the total under ``name``."""
+    out, row = {}, 0
+    for key, size in layout:
+        out[key] = row
+        row += size
+    out[name] = row
+    return out
+
+
+W, C, T = _rows(W_ROWS, "rows"), _rows(C_ROWS, "rows"), _rows(T_ROWS, "rows")
+
+
+def _full3(six):
+    I = [[None] * 3 for _ in range(3)]
+    for k, (r, c) in enumerate(_SYM6):
+        I[r][c] = I[c][r] = six[k]
+    return I
+
+
+def body_sums(body: Body, v, a) -> list:
+    """A body's rows of ``kdg_c`` (:data:`C_ROWS`) moving with v, accelerating with a. The
+    world-frame ``B`` of the module text is linear in the body, and ``B x = -(K + K^T) x + x
+    x* (I v)`` with ``K x = I (v x x)`` (the cross products' duality, I symmetric), so its sum
+    over a subtree is the sums of ``K + K^T`` (21 entries) and of ``I v`` (6), not 36.
+
+    >>> body = Body(se.Integer(2), [0, 0, 0], [[1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    >>> len(body_sums(body, [0] * 6, [0, 0, 9, 0, 0, 0]))
+    43
+    """
+    Iv = inertia_times(body, v)
+    force = _add6(inertia_times(body, a), fcross(v, Iv))
+    K = [inertia_times(body, mcross(v, e)) for e in UNIT]       # K e_k
+    return ([body.m] + list(body.h) + [body.I[r][c] for r, c in _SYM6] + force
+            + [K[k][r] + K[r][k] for k, r in _PAIRS] + Iv)
+
+
+def _b_columns(sums) -> list:
+    """``B e_k`` of a subtree from its ``K + K^T`` and ``I v`` sums (:func:`body_sums`)."""
+    K = {}
+    for q, (k, r) in enumerate(_PAIRS):
+        K[k, r] = K[r, k] = sums[C["K"] + q]
+    H = sums[C["H"]:C["H"] + 6]
+    return [[fcross(e, H)[r] - K[k, r] for r in range(6)] for k, e in enumerate(UNIT)]
+
+
+def _loop(name, sources, build) -> LoopBody:
+    """A :class:`LoopBody` whose input k reads ``sources[k]``; ``build(lane symbols)`` gives
+    (places, expressions)."""
+    lane = port_symbols("lane", (len(sources),))
+    places, exprs = build(lane)
+    function = SymbolicFunction(name, "", (Port("lane", (len(lane),), ""),), (Port("out", (len(exprs),), ""),),
+                                (lane,), (tuple(se.sympify(e) for e in exprs),))
+    return LoopBody(function, tuple(sources), tuple(places))
+
+
+def _w(key, k, index="j"):
+    return ("kdg_w", W[key] + k, "", 0, index)
+
+
+def _t(key, k, index="j"):
+    return ("kdg_t", T[key] + k, "", 0, index)
+
+
+def joint_loops(ts: TreeSetup, inputs, input_symbols, qd, qdd, out_names) -> JointLoops:
+    """``tau_derivatives`` of the tree as :class:`JointLoops` (numeric parameters): the
+    kinematics of :func:`world_kinematics` once, the bodies' sums (:func:`body_sums`) per
+    joint, summed over subtrees, the terms ``u, psi, Y, Z, r, s`` of :meth:`WorldPass.derivatives`
+    per joint, then each entry from them. ``out_names``: the caller's two output ports."""
+    model = ts.model
+    n, nv = model.n, model.nv
+    base = FREE_FLYER_NV if model.floating_base else 0
+    lanes = -(-n // LOOP_LANE) * LOOP_LANE
+    stages = Stages()
+    k = world_kinematics(ts, qd, qdd, naming(stages))
+    parent_v = [k.v[p] if p >= 0 else k.v0 for p in model.parents]
+    parent_a = [k.a[p] if p >= 0 else k.a0 for p in model.parents]
+    per_joint = {"R": [[e for row in R for e in row] for R in k.R], "o": k.o, "S": k.S, "vp": parent_v,
+                 "ap": parent_a, "v": k.v, "a": k.a}
+    w = [per_joint[key][j][r] if j < n else ZERO for key, size in W_ROWS for r in range(size) for j in range(lanes)]
+    ports, exprs = [Port("kdg_w", (W["rows"], lanes), "")], [w]
+    if base:
+        root = body_sums(ts.root, k.v0, k.a0)
+        g = k.gravity
+        orientation = [e for kk in range(3) for e in cross(UNIT[kk][:3], g)]
+        twist = [e for kk in range(6) for e in mcross(UNIT[kk], k.v0)]
+        ports += [Port("kdg_root", (C["rows"],), ""), Port("kdg_base", (9 + 36,), "")]
+        exprs += [root, orientation + twist]
+    once = SymbolicFunction("once", "", tuple(inputs), tuple(ports), tuple(input_symbols),
+                            tuple(tuple(se.sympify(e) for e in x) for x in exprs), stages=stages.definitions)
+    table = tuple(tuple(se.sympify(v) for v in row) for row in zip(*(
+        [b.m] + list(b.h) + [b.I[r][c] for r, c in _SYM6] for b in ts.bodies))) 
+    table = tuple(row + (se.Integer(0),) * (lanes - n) for row in table)
+
+    def body(x):
+        R, o, v, a = x[0:9], x[9:12], x[12:18], x[18:24]
+        b = Body(x[24], list(x[25:28]), _full3(x[28:34])).moved([R[0:3], R[3:6], R[6:9]], o)
+        sums = body_sums(b, v, a)
+        return [("kdg_c", r, "", 0, "j") for r in range(len(sums))], sums
+
+    body_sources = ([_w("R", r) for r in range(9)] + [_w("o", r) for r in range(3)] + [_w("v", r) for r in range(6)]
+                    + [_w("a", r) for r in range(6)] + [("kdg_table", r, "", 0, "j") for r in range(10)])
+
+    def columns(x):
+        S, vp, ap, sums = x[0:6], x[6:12], x[12:18], x[18:]
+        Ic = Body(sums[C["m"]], list(sums[C["h"]:C["h"] + 3]), _full3(sums[C["I"]:C["I"] + 6]))
+        F = sums[C["F"]:C["F"] + 6]
+        B = _b_columns(sums)
+        u = mcross(S, vp)
+        psi = _add6(mcross(S, ap), mcross(vp, u))
+        Y = _add6(fcross(S, F), [-e for e in inertia_times(Ic, psi)], [-e for e in _matvec6(B, u)])
+        Z = _add6(_matvec6(B, S), _scale6(-2, inertia_times(Ic, u)))
+        r = inertia_times(Ic, S)
+        s_ = [dot6(S, B[kk]) for kk in range(6)]
+        terms = [*u, *psi, *Y, *Z, *r, *s_]
+        return [("kdg_t", q, "", 0, "j") for q in range(len(terms))], terms
+
+    column_sources = ([_w("S", r) for r in range(6)] + [_w("vp", r) for r in range(6)] + [_w("ap", r) for r in range(6)]
+                      + [("kdg_c", r, "", 0, "j") for r in range(C["rows"])])
+    dq, dqd = out_names
+
+    def lower(x):
+        r, s_, psi, u, S = x[0:6], x[6:12], x[12:18], x[18:24], x[24:30]
+        return ([(dq, base, "i", base, "j"), (dqd, base, "i", base, "j")],
+                [-(dot6(r, psi) + dot6(s_, u)), dot6(s_, S) - 2 * dot6(r, u)])
+
+    lower_sources = ([_t("r", q, "i") for q in range(6)] + [_t("s", q, "i") for q in range(6)]
+                     + [_t("psi", q) for q in range(6)] + [_t("u", q) for q in range(6)] + [_w("S", q) for q in range(6)])
+
+    def upper(x):
+        S, Y, Z = x[0:6], x[6:12], x[12:18]
+        return [(dq, base, "i", base, "j"), (dqd, base, "i", base, "j")], [dot6(S, Y), dot6(S, Z)]
+
+    upper_sources = [_w("S", q, "i") for q in range(6)] + [_t("Y", q) for q in range(6)] + [_t("Z", q) for q in range(6)]
+    joint = row = root_loop = None
+    if base:
+        joint = _loop("joint", [_t("Y", q) for q in range(6)] + [_t("Z", q) for q in range(6)],
+                      lambda x: ([(dq, q, "", base, "j") for q in range(6)] + [(dqd, q, "", base, "j") for q in range(6)],
+                                 list(x)))
+
+        def row_terms(x):
+            r, s_, m, tw = x[0:6], x[6:12], x[12:21], x[21:57]
+            places = ([(dq, base, "i", 3 + kk, "") for kk in range(3)] + [(dqd, base, "i", kk, "") for kk in range(6)])
+            return places, ([dot6(r[:3], m[3 * kk:3 * kk + 3]) for kk in range(3)]
+                            + [s_[kk] - dot6(r, tw[6 * kk:6 * kk + 6]) for kk in range(6)])
+
+        row = _loop("row", [_t("r", q, "i") for q in range(6)] + [_t("s", q, "i") for q in range(6)]
+                    + [("kdg_base", 0, "", q, "") for q in range(45)], row_terms)
+
+        def root_terms(x):
+            sums, m, tw = x[:C["rows"]], x[C["rows"]:C["rows"] + 9], x[C["rows"] + 9:]
+            body0 = Body(sums[C["m"]], list(sums[C["h"]:C["h"] + 3]), _full3(sums[C["I"]:C["I"] + 6]))
+            B0 = _b_columns(sums)
+            places, terms = [], []
+            for kk in range(3):
+                col = inertia_times(body0, list(m[3 * kk:3 * kk + 3]) + [ZERO] * 3)
+                places += [(dq, rr, "", 3 + kk, "") for rr in range(6)]
+                terms += col
+            for kk in range(6):
+                col = _add6(B0[kk], [-e for e in inertia_times(body0, tw[6 * kk:6 * kk + 6])])
+                places += [(dqd, rr, "", kk, "") for rr in range(6)]
+                terms += col
+            return places, terms
+
+        root_loop = _loop("root", [("kdg_root", 0, "", q, "") for q in range(C["rows"])]
+                          + [("kdg_base", 0, "", q, "") for q in range(45)], root_terms)
+    return JointLoops(joints=n, lanes=lanes, parents=tuple(model.parents),
+                      ends=tuple(_subtree(model, j)[-1] + 1 for j in range(n)), table=table, once=once,
+                      body=_loop("body", body_sources, body), columns=_loop("columns", column_sources, columns),
+                      joint=joint, lower=_loop("lower", lower_sources, lower),
+                      upper=_loop("upper", upper_sources, upper), row=row, root=root_loop)
+
+
 # ----------------------------------------------------------------------------- the tree-sparse factor
 
 # ----------------------------------------------------------------------------- functions
@@ -309,13 +523,16 @@ def tau_derivatives_tree(model: RobotModel, name: str = "tau_derivatives", param
     ts, stages = setup(model, params), Stages()
     qd, qdd = port_symbols("qd", (model.nv,)), port_symbols("qdd", (model.nv,))
     dq, dqd = WorldPass(ts, qd, qdd, stages).derivatives()
+    inputs = (q_port(model), qd_port(model), qdd_port(model))
     f = dynamics_function(name, ROUTE + "partial derivatives of the inverse dynamics tau(q, qd, qdd) in the world-frame "
                           "formulation of Carpentier and Mansard (RSS 2018): a joint's motion turns its subtree rigidly, "
                           "each entry one or two spatial dot products; dtau/dqdd is M.", ts,
-                          (q_port(model), qd_port(model), qdd_port(model)), (ts.q, qd, qdd),
+                          inputs, (ts.q, qd, qdd),
                           (_matrix_port(model, "dtau_dq", "dtau_i / dq_j", "N m/rad and mixed units by coordinate"),
                        _matrix_port(model, "dtau_dqd", "dtau_i / dqd_j", "N m s/rad and mixed units by coordinate")),
                       (_flat(dq), _flat(dqd)), stages, route="world frame")
+    if params == "numeric":
+        f = replace(f, joint_loops=joint_loops(ts, f.inputs, f.input_symbols, qd, qdd, ("dtau_dq", "dtau_dqd")))
     return _noted(f)
 
 

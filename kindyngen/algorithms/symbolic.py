@@ -59,13 +59,16 @@ class SymbolicFunction:
     # the same outputs as one program run once per lane (the C prints it as a loop over
     # lanes that compilers vectorise); None: scalar code only
     lanes: "LaneSweep | None" = None
+    # the same outputs as loops over a tree's joints (the C single call prints them); None: not
+    joint_loops: "JointLoops | None" = None
 
     def __repr__(self) -> str:
         # the generated repr prints every expression as a tree: a DAG's shared nodes once per
         # use, gigabytes for the derivatives (a failing test's report once ran out of memory)
         ports = lambda ports: ", ".join(f"{p.name}{list(p.shape)}" for p in ports)
         return (f"SymbolicFunction({self.name!r}: ({ports(self.inputs)}) -> ({ports(self.outputs)}), "
-                f"{len(self.stages)} stages, {len(self.alternatives)} alternatives, lanes={self.lanes is not None})")
+                f"{len(self.stages)} stages, {len(self.alternatives)} alternatives, lanes={self.lanes is not None}, "
+                f"joint_loops={self.joint_loops is not None})")
 
     def inlined_outputs(self) -> tuple[tuple[se.Basic, ...], ...]:
         """``output_exprs`` with the named intermediates substituted: expressions of the
@@ -134,6 +137,69 @@ class LaneSweep:
             staged[symbol] = expr.xreplace(staged) if staged else expr
         values = {k: v.xreplace(staged) for k, v in values.items()}
         return self.exprs[m].xreplace(values).xreplace(staged)
+
+
+@dataclass(frozen=True)
+class LoopBody:
+    """One program a loop over a tree's joints runs per iteration (see :class:`JointLoops`):
+    ``function`` has the one input port ``lane``; input k reads ``sources[k]`` and output
+    entry m goes to ``places[m]``, each ``(array, row, row_index, column, column_index)``:
+    entry ``(row + row_index) * stride + column + column_index`` of ``array`` (one of the
+    loops' arrays, stride the lanes, or an output port of the caller, stride its columns),
+    the indices "i", "j" (the loop's) or "" (none).
+
+    >>> LoopBody.address(("dtau_dq", 6, "i", 6, "j"), 35)
+    '(6 + i)*35 + 6 + j'
+    """
+
+    function: "SymbolicFunction"
+    sources: tuple
+    places: tuple
+
+    @staticmethod
+    def address(place: tuple, stride: int) -> str:
+        _, row, row_index, column, column_index = place
+        line = f"({row} + {row_index})" if row_index else str(row)
+        start = f"{line}*{stride}" if line != "0" else ""
+        rest = " + ".join(str(x) for x in (column, column_index) if x not in (0, ""))
+        return " + ".join(x for x in (start, rest) if x) or "0"
+
+
+@dataclass(frozen=True)
+class JointLoops:
+    """A tree function's outputs as loops over its joints (the C single call of the
+    world-frame ``tau_derivatives`` prints them; docs/latency.md, "Joint loops"): the work
+    per joint, and per pair of joints, is the same arithmetic on different data, which
+    straight-line code repeats and a loop runs vectorised across joints.
+
+    In order: ``once`` (a function of the caller's inputs) fills the arrays ``kdg_w`` (rows
+    of ``lanes`` entries: joint j of row r at ``r*lanes + j``; the lanes past ``joints`` are
+    zero) and, with a floating base, ``kdg_root``, ``kdg_base``; ``body`` per lane fills
+    ``kdg_c``; each joint's ``kdg_c`` entries are added to its parent's, leaves first
+    (``parents``; a joint on the root to ``kdg_root``, with a floating base), so lane j holds
+    the sums over j's subtree; ``columns`` per lane fills ``kdg_t``; the caller's outputs are
+    zeroed, then ``joint`` runs per joint j, ``lower`` per pair (i, j) with i in j's subtree
+    (``j <= i < ends[j]``: depth-first order makes a subtree contiguous), ``upper`` per pair
+    with j in i's strict subtree, ``row`` per joint i, and ``root`` once. ``table``: rows of
+    per-joint constants (exact numbers, ``lanes`` each) that sources name as "table"; a
+    missing piece is None."""
+
+    joints: int
+    lanes: int
+    parents: tuple
+    ends: tuple
+    table: tuple
+    once: "SymbolicFunction"
+    body: LoopBody
+    columns: LoopBody
+    joint: "LoopBody | None"
+    lower: LoopBody
+    upper: LoopBody
+    row: "LoopBody | None"
+    root: "LoopBody | None"
+
+    def __repr__(self) -> str:
+        return f"JointLoops({self.joints} joints in {self.lanes} lanes)"
 
 
 class Stages:

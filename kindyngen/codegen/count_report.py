@@ -23,13 +23,16 @@ def opcounts_json(programs: list[Program], float_error: dict | None = None) -> d
     count after CSE); ``"critical_path"``: cycles and operations of the longest chain of
     dependent operations (:func:`kindyngen.codegen.opcount.program_critical_path`); a function
     whose C single call is a lane program has ``"c_lanes"`` (:meth:`kindyngen.codegen.optimize.LaneProgram.to_json`:
-    lanes, the counts once and per lane, those executed, its critical path); with ``--scalar float``
+    lanes, the counts once and per lane, those executed, its critical path), one whose C single
+    call runs joint loops ``"c_loops"`` (:meth:`kindyngen.codegen.optimize.JointLoopProgram.to_json`:
+    each piece's count and runs, those executed); with ``--scalar float``
     each measured function has ``"float_error"`` (kindyngen/runtime/float_accuracy.py); a bundle
     ``"members"`` and ``"members_after"`` (their count called one by one)."""
     float_error = float_error or {}
     return {p.function.name: {"before": p.before.to_json(), "after": p.after.to_json(),
                               "critical_path": p.critical.to_json(), **_routes_json(p),
                               **({"c_lanes": p.lanes.to_json()} if p.lanes is not None else {}),
+                              **({"c_loops": p.joint_loops.to_json()} if p.joint_loops is not None else {}),
                               **_bundle_json(p),
                               **({"float_error": float_error[p.function.name].to_json()}
                                  if p.function.name in float_error else {})}
@@ -101,6 +104,20 @@ def opcounts_markdown(robot_name: str, programs: list[Program], compare_with_pap
             lines.append(f"| {p.function.name} | {lp.uniform.add} / {lp.uniform.mul} / {lp.uniform.call} | "
                          f"{lp.lane.add} / {lp.lane.mul} | {lp.count} ({lp.used}) | "
                          f"{lp.executed.add} / {lp.executed.mul} | {lp.critical.cycles} |")
+    looped = [p for p in programs if p.joint_loops is not None]
+    if looped:
+        lines += ["", "## Joint loops (C single calls)", "",
+                  "These functions' C single calls run the kinematics once, then loops over the joints (padded "
+                  "with zero lanes to a multiple of eight) and over pairs of joints that compilers vectorise "
+                  "across joints (docs/latency.md, \"Joint loops\"). More operations are executed than by the "
+                  "scalar program above, in fewer instructions. `generate --no-lanes` prints the scalar program "
+                  "instead.", "",
+                  "| function | piece | add / mul / call | runs |", "|---|---|---|---|"]
+        for p in looped:
+            for piece, (count, runs) in p.joint_loops.parts().items():
+                lines.append(f"| {p.function.name} | {piece} | {count.add} / {count.mul} / {count.call} | {runs} |")
+            ex = p.joint_loops.executed
+            lines.append(f"| {p.function.name} | executed | {ex.add} / {ex.mul} / {ex.call} | |")
     bundled = [p for p in programs if "members" in p.function.metadata]
     if bundled:
         lines += ["", "## Bundles", "",

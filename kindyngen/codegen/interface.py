@@ -18,7 +18,8 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
     CasADi stay double) and has no ik_dls in C (its entry lists the languages it is in, whose
     ports are double); ``--no-batch`` adds "c_batch": false, ``--no-lanes`` "c_lanes": false.
     Default (double, batch, lanes) documents carry none of these keys. A function whose C
-    single call is a lane program has its cost in "opcount": "c_lanes"; a bundle says what it
+    single call is a lane program has its cost in "opcount": "c_lanes", one that runs joint
+    loops in "opcount": "c_loops"; a bundle says what it
     bundles in "bundle" (:func:`_bundle`). ``ik_dls``: whether the
     iterative IK was asked for (``--functions``); it is listed where it applies."""
     dls = [dls_manifest_entry(model, programs)] if ik_dls and dls_applies(model, programs) else []
@@ -52,7 +53,8 @@ def manifest(model: RobotModel, programs: list[Program], params: str, trig: str 
             "inputs": [_port(port, scalar) for port in p.function.inputs],
             "outputs": [_port(port, scalar) for port in p.function.outputs],
             "opcount": {"before": p.before.to_json(), "after": p.after.to_json(),
-                        **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {})},
+                        **({"c_lanes": p.lanes.to_json()} if lanes and p.lanes is not None else {}),
+                        **({"c_loops": p.joint_loops.to_json()} if lanes and p.joint_loops is not None else {})},
             **_bundle(p),
         } for p in programs] + dls,
     }

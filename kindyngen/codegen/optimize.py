@@ -57,6 +57,8 @@ class Program:
     critical: CriticalPath = CriticalPath(0, 0)
     # the C single call's lane program (function.lanes), or None: the C prints this program
     lanes: "LaneProgram | None" = None
+    # the C single call's joint loops (function.joint_loops), or None: the C prints them
+    joint_loops: "JointLoopProgram | None" = None
 
     def __repr__(self) -> str:
         # expressions stay out of the repr (see SymbolicFunction.__repr__)
@@ -109,6 +111,95 @@ class LaneProgram:
                 "critical_path": self.critical.to_json()}
 
 
+@dataclass(frozen=True)
+class JointLoopProgram:
+    """:class:`kindyngen.algorithms.symbolic.JointLoops` as code: each piece optimised alone
+    (``once`` with the function's inputs, each loop body with its lane inputs); a piece the
+    loops do not have is None. Operations executed: once and root once, body and columns per
+    lane, the subtree sums one addition per entry of ``kdg_c`` per joint with a parent (or on
+    a floating base's root), joint and row per joint, lower and upper per pair."""
+
+    loops: "JointLoops"
+    once: Program
+    body: Program
+    columns: Program
+    joint: "Program | None"
+    lower: Program
+    upper: Program
+    row: "Program | None"
+    root: "Program | None"
+
+    def __repr__(self) -> str:
+        return f"JointLoopProgram({self.loops!r})"
+
+    @property
+    def sums(self) -> int:
+        """Additions of the subtree sums."""
+        loops = self.loops
+        into = sum(1 for p in loops.parents if p >= 0 or self.root is not None)
+        return into * self.body.function.outputs[0].size
+
+    @property
+    def pairs(self) -> tuple[int, int]:
+        """(lower, upper) pairs: i in j's subtree, j in i's strict subtree."""
+        ends = self.loops.ends
+        return sum(e - j for j, e in enumerate(ends)), sum(e - j - 1 for j, e in enumerate(ends))
+
+    def parts(self) -> dict:
+        """{piece: (operations per run, runs)}."""
+        loops, (lower, upper) = self.loops, self.pairs
+        out = {"once": (self.once.after, 1), "body": (self.body.after, loops.lanes),
+               "sums": (OpCount(add=self.sums), 1), "columns": (self.columns.after, loops.lanes),
+               "lower": (self.lower.after, lower), "upper": (self.upper.after, upper)}
+        for name, runs in (("joint", loops.joints), ("row", loops.joints), ("root", 1)):
+            if getattr(self, name) is not None:
+                out[name] = (getattr(self, name).after, runs)
+        return out
+
+    @property
+    def executed(self) -> OpCount:
+        total = OpCount()
+        for count, runs in self.parts().values():
+            total = total + OpCount(count.add * runs, count.mul * runs, count.call * runs)
+        return total
+
+    def to_json(self) -> dict:
+        return {"joints": self.loops.joints, "lanes": self.loops.lanes,
+                "parts": {name: {**count.to_json(), "runs": runs} for name, (count, runs) in self.parts().items()},
+                "executed": self.executed.to_json()}
+
+
+JOINT_LOOPS_RATIO = 2.5
+"""A C single call runs its joint loops when they execute at most this many times the
+operations (add + mul) of the scalar program, else the scalar program. tau_derivatives,
+gcc 12 -O3 -march=native on Zen 5 (docs/latency.md, "Joint loops"), executed / scalar
+operations -> speed against the scalar program: two pendulums on a body 10.6 -> 0.42x, the
+mobile slider tree 3.5 -> 0.82x, solo12 with a fixed body 3.02 -> 1.05x, floating 2.06 -> 1.76x,
+tests/algorithms/test_tree_joint_loops.py's three branches fixed 2.03 -> 1.92x, floating 1.68 ->
+1.94x, the G1 1.38 -> 2.13x, Talos 1.29 -> 2.09x.
+Counts are integers: the choice is the same on every machine."""
+
+
+def _paying(loops: JointLoopProgram, scalar: OpCount) -> "JointLoopProgram | None":
+    """``loops`` if they pay against the scalar program's count (:data:`JOINT_LOOPS_RATIO`), else None."""
+    executed = loops.executed
+    return loops if executed.add + executed.mul <= JOINT_LOOPS_RATIO * (scalar.add + scalar.mul) else None
+
+
+def optimize_joint_loops(loops) -> JointLoopProgram:
+    """Each piece of ``loops`` (:class:`kindyngen.algorithms.symbolic.JointLoops`) through
+    :func:`optimize`."""
+    def one(function):
+        return optimize(function) if function is not None else None
+
+    def piece(body):
+        return one(body.function) if body is not None else None
+
+    return JointLoopProgram(loops=loops, once=one(loops.once), body=piece(loops.body), columns=piece(loops.columns),
+                            joint=piece(loops.joint), lower=piece(loops.lower), upper=piece(loops.upper),
+                            row=piece(loops.row), root=piece(loops.root))
+
+
 def optimize(function: SymbolicFunction, report=None) -> Program:
     """CSE over all outputs of ``function`` together, with temporaries named t0, t1, ...
 
@@ -146,6 +237,8 @@ def optimize(function: SymbolicFunction, report=None) -> Program:
     critical = critical_path(function, assignments, reduced)
     if function.lanes is not None:
         report("lane program")
+    if function.joint_loops is not None:
+        report("joint loops")
     return Program(
         function=function,
         assignments=assignments,
@@ -154,6 +247,8 @@ def optimize(function: SymbolicFunction, report=None) -> Program:
         after=program_count(assignments, reduced),
         critical=critical,
         lanes=optimize_lanes(function, report) if function.lanes is not None else None,
+        joint_loops=_paying(optimize_joint_loops(function.joint_loops), program_count(assignments, reduced))
+        if function.joint_loops is not None else None,
     )
 
 

@@ -22,6 +22,7 @@ from .environment import UserText, blank, environment
 from .trig_kernel import (BOUND as TRIG_BOUND, FLOAT_BOUND, FLOAT_MAX_ULP, MAX_ULP as TRIG_MAX_ULP, SPLIT, batch_kernel_c, kernel_c, split_slot,
                           kernel_c_float, kernel_latency)
 from ..ik.damped_least_squares import dls_view
+from ..algorithms.symbolic import LoopBody
 from .optimize import Program, half_angles, kernel_arguments
 from .schedule import pressure_order
 from .printer import C, C_FLOAT, CASADI, JAX, MATLAB, NUMPY, Dialect
@@ -181,6 +182,7 @@ class FunctionView:
     statements: tuple = ()
     pressure: bool = False        # C single calls: those statements in pressure order (PRESSURE_ORDER_OPERATIONS)
     lane: "LaneView | None" = None  # C single calls of a lane program: printed instead of the statements
+    loops: "JointLoopView | None" = None  # C single calls of joint loops: printed instead of the statements
 
 
 @dataclass(frozen=True)
@@ -199,6 +201,33 @@ class LaneView:
     per_lane: dict
     executed: dict
     critical: dict
+
+
+@dataclass(frozen=True)
+class JointLoopView:
+    """What the C template prints of a :class:`kindyngen.codegen.optimize.JointLoopProgram`:
+    per piece its statements, ("t", name, text) or ("out", target, text)."""
+
+    joints: int
+    lanes: int
+    sizes: tuple                  # (array, entries) of the local arrays
+    table: tuple                  # rows of constants (texts), lanes each
+    ends: tuple
+    once: tuple
+    body: tuple
+    edges: tuple                  # (joint, parent) leaves first: the subtree sums
+    root_joints: tuple            # joints whose sums go into kdg_root
+    sum_rows: int
+    columns: tuple
+    zeroed: tuple                 # output ports zeroed before the entries
+    nv: int
+    joint: tuple
+    lower: tuple
+    upper: tuple
+    row: tuple
+    root: tuple
+    parts: dict
+    executed: dict
 
 
 def _index(k: int, shape) -> str:
@@ -367,14 +396,17 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
             constants = tuple((p.name, p.dtype, tuple(kt for kt, e in zip(p.entries, exprs) if e.is_Number))
                               for p, exprs in zip(outputs, program.outputs) if any(e.is_Number for e in exprs))
             outputs = varying
-    lane = None
+    lane = loops = None
     if dialect.name == "c" and not batch and lanes and program.lanes is not None:
         lane, first, angles, arguments = _lane_view(program, dialect, trig)
+        split = _splits(angles + len(arguments), dialect, batch)
+    if dialect.name == "c" and not batch and lanes and program.joint_loops is not None:
+        loops, first, angles, arguments = _joint_loop_view(program, dialect, trig)
         split = _splits(angles + len(arguments), dialect, batch)
     statements = ()
     pressure = False
     # the scalar program's print order, for single calls that do not print a lane program
-    if (dialect.name == "c" and not batch and lane is None and chain
+    if (dialect.name == "c" and not batch and lane is None and loops is None and chain
             and program.after.add + program.after.mul > DEMAND_ORDER_OPERATIONS):
         kept = [(sym, e) for sym, e in program.assignments if sym in printed]
         pressure = (program.after.add + program.after.mul > PRESSURE_ORDER_OPERATIONS
@@ -403,6 +435,7 @@ def function_view(program: Program, dialect: Dialect, prefix: str, trig: str = "
         statements=statements,
         pressure=pressure,
         lane=lane,
+        loops=loops,
     )
 
 
@@ -518,6 +551,68 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
         copies=tuple((f.outputs[port].name, m, offset, stride) for m, (port, offset, stride) in enumerate(lp.places)),
         uniform=lp.uniform.to_json(), per_lane=lp.lane.to_json(), executed=lp.executed.to_json(),
         critical=lp.critical.to_json())
+    return view, first, angles, arguments
+
+
+PIECE_PREFIX = {"body": "b", "columns": "c", "joint": "j", "lower": "l", "upper": "u", "row": "r", "root": "o"}
+
+
+def _joint_loop_view(program: Program, dialect: Dialect, trig: str) -> tuple:
+    """(JointLoopView, first kernel angle, kernel angles, kernel arguments) of the program's joint
+    loops: the once piece reads the caller's inputs and the sincos kernel, each loop piece its
+    lane inputs from the arrays its sources name (:class:`kindyngen.algorithms.symbolic.LoopBody`),
+    its temporaries prefixed by the piece's initial (its own CSE numbers them from t0 too)."""
+    jp = program.joint_loops
+    loops = jp.loops
+    once = jp.once
+    names = input_names(once, dialect)
+    first, angles = kernel_angles(once) if trig == "kernel" else (0, 0)
+    served = _served(once) if trig == "kernel" else {}
+    arguments = _kernel_argument_names(served, dialect, names)
+    split = _splits(angles + len(arguments), dialect, False)
+    _name_kernel_results(once.function, served, names, first, angles, arguments, False, split)
+    live = _live_beside_kernel(once, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    statements = []
+    for sym, expr in once.assignments:
+        names[sym] = str(sym)
+        if live is None or sym in live:
+            statements.append(("t", str(sym), dialect.expr(expr, names)))
+    for port, exprs in zip(once.function.outputs, once.outputs):
+        statements += [("out", f"{port.name}[{k}]", dialect.expr(e, names)) for k, e in enumerate(exprs)]
+    nv = program.function.outputs[0].shape[1]
+    strides = {p.name: nv for p in program.function.outputs}
+
+    def where(place):
+        return f"{place[0]}[{LoopBody.address(place, strides.get(place[0], loops.lanes))}]"
+
+    def piece(body, key: str) -> tuple:
+        if body is None:
+            return ()
+        code = getattr(jp, key)
+        local = {sym: where(src) for sym, src in zip(body.function.input_symbols[0], body.sources)}
+        out = []
+        for sym, expr in code.assignments:
+            local[sym] = f"{PIECE_PREFIX[key]}{sym}"
+            out.append(("t", local[sym], dialect.expr(expr, local)))
+        out += [("out", where(place), dialect.expr(e, local)) for place, e in zip(body.places, code.outputs[0])]
+        return tuple(out)
+
+    base = loops.root is not None
+    rows = loops.body.function.outputs[0].size
+    sizes = [("kdg_w", once.function.outputs[0].size), ("kdg_c", rows * loops.lanes),
+             ("kdg_t", loops.columns.function.outputs[0].size * loops.lanes)]
+    if base:
+        sizes += [(p.name, p.size) for p in once.function.outputs[1:]]
+    view = JointLoopView(
+        joints=loops.joints, lanes=loops.lanes, sizes=tuple(sizes),
+        table=tuple(tuple(dialect.expr(v, {}) for v in row) for row in loops.table), ends=loops.ends,
+        once=tuple(statements), body=piece(loops.body, "body"),
+        edges=tuple((j, p) for j, p in reversed(list(enumerate(loops.parents))) if p >= 0),
+        root_joints=tuple(j for j, p in enumerate(loops.parents) if p < 0 and base), sum_rows=rows,
+        columns=piece(loops.columns, "columns"), zeroed=tuple(p.name for p in program.function.outputs), nv=nv,
+        joint=piece(loops.joint, "joint"), lower=piece(loops.lower, "lower"), upper=piece(loops.upper, "upper"),
+        row=piece(loops.row, "row"), root=piece(loops.root, "root"),
+        parts={k: {**c.to_json(), "runs": r} for k, (c, r) in jp.parts().items()}, executed=jp.executed.to_json())
     return view, first, angles, arguments
 
 
