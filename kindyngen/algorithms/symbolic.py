@@ -198,8 +198,26 @@ class JointLoops:
     row: "LoopBody | None"
     root: "LoopBody | None"
 
+    PIECES = ("body", "columns", "joint", "lower", "upper", "row", "root")
+
     def __repr__(self) -> str:
         return f"JointLoops({self.joints} joints in {self.lanes} lanes)"
+
+    def pieces(self) -> tuple:
+        """(name, LoopBody) of the loop pieces there are, in order."""
+        return tuple((name, getattr(self, name)) for name in self.PIECES if getattr(self, name) is not None)
+
+    def runs(self, name: str) -> int:
+        """How often a call runs piece ``name``: per lane, per joint, per pair or once.
+
+        >>> loops = JointLoops(3, 8, (-1, 0, 0), (3, 2, 3), (), None, *(None,) * 7)
+        >>> [loops.runs(name) for name in JointLoops.PIECES]
+        [8, 8, 3, 5, 2, 3, 1]
+        """
+        ends = self.ends
+        return {"body": self.lanes, "columns": self.lanes, "joint": self.joints, "row": self.joints, "root": 1,
+                "lower": sum(e - j for j, e in enumerate(ends)),
+                "upper": sum(e - j - 1 for j, e in enumerate(ends))}[name]
 
 
 class Stages:

@@ -113,21 +113,15 @@ class LaneProgram:
 
 @dataclass(frozen=True)
 class JointLoopProgram:
-    """:class:`kindyngen.algorithms.symbolic.JointLoops` as code: each piece optimised alone
-    (``once`` with the function's inputs, each loop body with its lane inputs); a piece the
-    loops do not have is None. Operations executed: once and root once, body and columns per
-    lane, the subtree sums one addition per entry of ``kdg_c`` per joint with a parent (or on
-    a floating base's root), joint and row per joint, lower and upper per pair."""
+    """:class:`kindyngen.algorithms.symbolic.JointLoops` as code: ``once`` and each loop piece
+    (``pieces``: (name, Program)) optimised alone, the pieces with their lane inputs.
+    Operations executed: each piece's count times its runs (``JointLoops.runs``), and the
+    subtree sums, one addition per entry of ``kdg_c`` per joint with a parent (or on a floating
+    base's root)."""
 
     loops: "JointLoops"
     once: Program
-    body: Program
-    columns: Program
-    joint: "Program | None"
-    lower: Program
-    upper: Program
-    row: "Program | None"
-    root: "Program | None"
+    pieces: tuple
 
     def __repr__(self) -> str:
         return f"JointLoopProgram({self.loops!r})"
@@ -136,24 +130,16 @@ class JointLoopProgram:
     def sums(self) -> int:
         """Additions of the subtree sums."""
         loops = self.loops
-        into = sum(1 for p in loops.parents if p >= 0 or self.root is not None)
-        return into * self.body.function.outputs[0].size
-
-    @property
-    def pairs(self) -> tuple[int, int]:
-        """(lower, upper) pairs: i in j's subtree, j in i's strict subtree."""
-        ends = self.loops.ends
-        return sum(e - j for j, e in enumerate(ends)), sum(e - j - 1 for j, e in enumerate(ends))
+        into = sum(1 for p in loops.parents if p >= 0 or loops.root is not None)
+        return into * loops.body.function.outputs[0].size
 
     def parts(self) -> dict:
-        """{piece: (operations per run, runs)}."""
-        loops, (lower, upper) = self.loops, self.pairs
-        out = {"once": (self.once.after, 1), "body": (self.body.after, loops.lanes),
-               "sums": (OpCount(add=self.sums), 1), "columns": (self.columns.after, loops.lanes),
-               "lower": (self.lower.after, lower), "upper": (self.upper.after, upper)}
-        for name, runs in (("joint", loops.joints), ("row", loops.joints), ("root", 1)):
-            if getattr(self, name) is not None:
-                out[name] = (getattr(self, name).after, runs)
+        """{piece: (operations per run, runs)}, in the order a call runs them."""
+        out = {"once": (self.once.after, 1)}
+        for name, program in self.pieces:
+            out[name] = (program.after, self.loops.runs(name))
+            if name == "body":
+                out["sums"] = (OpCount(add=self.sums), 1)
         return out
 
     @property
@@ -187,17 +173,10 @@ def _paying(loops: JointLoopProgram, scalar: OpCount) -> "JointLoopProgram | Non
 
 
 def optimize_joint_loops(loops) -> JointLoopProgram:
-    """Each piece of ``loops`` (:class:`kindyngen.algorithms.symbolic.JointLoops`) through
-    :func:`optimize`."""
-    def one(function):
-        return optimize(function) if function is not None else None
-
-    def piece(body):
-        return one(body.function) if body is not None else None
-
-    return JointLoopProgram(loops=loops, once=one(loops.once), body=piece(loops.body), columns=piece(loops.columns),
-                            joint=piece(loops.joint), lower=piece(loops.lower), upper=piece(loops.upper),
-                            row=piece(loops.row), root=piece(loops.root))
+    """``loops.once`` and each piece of ``loops`` (:class:`kindyngen.algorithms.symbolic.JointLoops`)
+    through :func:`optimize`."""
+    return JointLoopProgram(loops=loops, once=optimize(loops.once),
+                            pieces=tuple((name, optimize(body.function)) for name, body in loops.pieces()))
 
 
 def optimize(function: SymbolicFunction, report=None) -> Program:

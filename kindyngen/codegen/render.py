@@ -585,10 +585,7 @@ def _joint_loop_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     def where(place):
         return f"{place[0]}[{LoopBody.address(place, strides.get(place[0], loops.lanes))}]"
 
-    def piece(body, key: str) -> tuple:
-        if body is None:
-            return ()
-        code = getattr(jp, key)
+    def piece(key: str, body, code: Program) -> tuple:
         local = {sym: where(src) for sym, src in zip(body.function.input_symbols[0], body.sources)}
         out = []
         for sym, expr in code.assignments:
@@ -596,6 +593,9 @@ def _joint_loop_view(program: Program, dialect: Dialect, trig: str) -> tuple:
             out.append(("t", local[sym], dialect.expr(expr, local)))
         out += [("out", where(place), dialect.expr(e, local)) for place, e in zip(body.places, code.outputs[0])]
         return tuple(out)
+
+    printed = {key: () for key in loops.PIECES}
+    printed.update((key, piece(key, body, code)) for (key, body), (_, code) in zip(loops.pieces(), jp.pieces))
 
     base = loops.root is not None
     rows = loops.body.function.outputs[0].size
@@ -606,12 +606,12 @@ def _joint_loop_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     view = JointLoopView(
         joints=loops.joints, lanes=loops.lanes, sizes=tuple(sizes),
         table=tuple(tuple(dialect.expr(v, {}) for v in row) for row in loops.table), ends=loops.ends,
-        once=tuple(statements), body=piece(loops.body, "body"),
+        once=tuple(statements), body=printed["body"],
         edges=tuple((j, p) for j, p in reversed(list(enumerate(loops.parents))) if p >= 0),
         root_joints=tuple(j for j, p in enumerate(loops.parents) if p < 0 and base), sum_rows=rows,
-        columns=piece(loops.columns, "columns"), zeroed=tuple(p.name for p in program.function.outputs), nv=nv,
-        joint=piece(loops.joint, "joint"), lower=piece(loops.lower, "lower"), upper=piece(loops.upper, "upper"),
-        row=piece(loops.row, "row"), root=piece(loops.root, "root"),
+        columns=printed["columns"], zeroed=tuple(p.name for p in program.function.outputs), nv=nv,
+        joint=printed["joint"], lower=printed["lower"], upper=printed["upper"], row=printed["row"],
+        root=printed["root"],
         parts={k: {**c.to_json(), "runs": r} for k, (c, r) in jp.parts().items()}, executed=jp.executed.to_json())
     return view, first, angles, arguments
 
