@@ -364,6 +364,11 @@ def body_sums(body: Body, v, a) -> list:
             + [K[k][r] + K[r][k] for k, r in _PAIRS] + Iv)
 
 
+def _composite(sums) -> Body:
+    """The composite body of a subtree's sums (:func:`body_sums`)."""
+    return Body(sums[C["m"]], list(sums[C["h"]:C["h"] + 3]), _full3(sums[C["I"]:C["I"] + 6]))
+
+
 def _b_columns(sums) -> list:
     """``B e_k`` of a subtree from its ``K + K^T`` and ``I v`` sums (:func:`body_sums`)."""
     K = {}
@@ -397,7 +402,7 @@ def joint_loops(ts: TreeSetup, inputs, input_symbols, qd, qdd, out_names) -> Joi
     joint, summed over subtrees, the terms ``u, psi, Y, Z, r, s`` of :meth:`WorldPass.derivatives`
     per joint, then each entry from them. ``out_names``: the caller's two output ports."""
     model = ts.model
-    n, nv = model.n, model.nv
+    n = model.n
     base = FREE_FLYER_NV if model.floating_base else 0
     lanes = -(-n // LOOP_LANE) * LOOP_LANE
     stages = Stages()
@@ -418,7 +423,7 @@ def joint_loops(ts: TreeSetup, inputs, input_symbols, qd, qdd, out_names) -> Joi
     once = SymbolicFunction("once", "", tuple(inputs), tuple(ports), tuple(input_symbols),
                             tuple(tuple(se.sympify(e) for e in x) for x in exprs), stages=stages.definitions)
     table = tuple(tuple(se.sympify(v) for v in row) for row in zip(*(
-        [b.m] + list(b.h) + [b.I[r][c] for r, c in _SYM6] for b in ts.bodies))) 
+        [b.m] + list(b.h) + [b.I[r][c] for r, c in _SYM6] for b in ts.bodies)))
     table = tuple(row + (se.Integer(0),) * (lanes - n) for row in table)
 
     def body(x):
@@ -432,7 +437,7 @@ def joint_loops(ts: TreeSetup, inputs, input_symbols, qd, qdd, out_names) -> Joi
 
     def columns(x):
         S, vp, ap, sums = x[0:6], x[6:12], x[12:18], x[18:]
-        Ic = Body(sums[C["m"]], list(sums[C["h"]:C["h"] + 3]), _full3(sums[C["I"]:C["I"] + 6]))
+        Ic = _composite(sums)
         F = sums[C["F"]:C["F"] + 6]
         B = _b_columns(sums)
         u = mcross(S, vp)
@@ -478,7 +483,7 @@ def joint_loops(ts: TreeSetup, inputs, input_symbols, qd, qdd, out_names) -> Joi
 
         def root_terms(x):
             sums, m, tw = x[:C["rows"]], x[C["rows"]:C["rows"] + 9], x[C["rows"] + 9:]
-            body0 = Body(sums[C["m"]], list(sums[C["h"]:C["h"] + 3]), _full3(sums[C["I"]:C["I"] + 6]))
+            body0 = _composite(sums)
             B0 = _b_columns(sums)
             places, terms = [], []
             for kk in range(3):
