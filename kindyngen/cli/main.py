@@ -624,7 +624,8 @@ def parser() -> argparse.ArgumentParser:
                    help="C: leave out the <name>_batch variants (a firmware compiles only what it calls)")
     g.add_argument("--no-lanes", action="store_true",
                    help="C: print the derivatives' single calls as their scalar program instead of a loop over "
-                        "lanes (fewer operations; for cores without vector units, e.g. Cortex-M)")
+                        "lanes or, for a large tree's tau_derivatives, loops over its joints (fewer operations, "
+                        "less stack; for cores without vector units, e.g. Cortex-M)")
     g.add_argument("--quiet", action="store_true", help="no progress output")
     _large_robot_options(g)
     g.set_defaults(run=_cmd_generate)
