@@ -133,3 +133,12 @@ def test_a_small_tree_keeps_the_scalar_program(tmp_path):
     spec = json.loads((folder / "functions.json").read_text())["functions"][0]
     assert "c_loops" not in spec["opcount"]
     assert "joint loops" not in (folder / "c" / f"{tree.identifier}.c").read_text()
+
+
+def test_no_lanes_prints_the_scalar_program(tmp_path):
+    tree = parse_urdf(THREE_BRANCHES, floating_base=True)
+    folder = generate(tree, tmp_path, languages=("c",), progress=False, only={"tau_derivatives"}, lanes=False)
+    spec = json.loads((folder / "functions.json").read_text())["functions"][0]
+    source = (folder / "c" / f"{tree.identifier}.c").read_text()
+    assert "c_loops" not in spec["opcount"] and "kdg_table" not in source
+    assert "joint loops instead" not in (folder / "c" / f"{tree.identifier}.h").read_text()
