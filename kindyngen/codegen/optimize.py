@@ -215,6 +215,7 @@ def optimize(function: SymbolicFunction, report=None) -> Program:
         outputs.append(tuple(reduced[start:start + port.size]))
         start += port.size
     critical = critical_path(function, assignments, reduced)
+    after = program_count(assignments, reduced)
     if function.lanes is not None:
         report("lane program")
     if function.joint_loops is not None:
@@ -224,11 +225,11 @@ def optimize(function: SymbolicFunction, report=None) -> Program:
         assignments=assignments,
         outputs=tuple(outputs),
         before=tree_count(staged + flat),
-        after=program_count(assignments, reduced),
+        after=after,
         critical=critical,
         lanes=optimize_lanes(function, report) if function.lanes is not None else None,
-        joint_loops=_paying(optimize_joint_loops(function.joint_loops), program_count(assignments, reduced))
-        if function.joint_loops is not None else None,
+        joint_loops=(_paying(optimize_joint_loops(function.joint_loops), after)
+                     if function.joint_loops is not None else None),
     )
 
 

@@ -503,6 +503,18 @@ def _name_kernel_results(f, served: dict, names: dict, first: int, angles: int, 
         names[call] = f"{'sin' if isinstance(call, se.sin) else 'cos'}_q{where(lane[argument])}"
 
 
+def _kernel_served(program: Program, names: dict, dialect: Dialect, trig: str) -> tuple:
+    """(first kernel angle, kernel angles, kernel arguments, temporaries live beside the kernel or
+    None) of a single call whose sin/cos ``program`` has: the kernel's results named in ``names``."""
+    first, angles = kernel_angles(program) if trig == "kernel" else (0, 0)
+    served = _served(program) if trig == "kernel" else {}
+    arguments = _kernel_argument_names(served, dialect, names)
+    split = _splits(angles + len(arguments), dialect, False)
+    _name_kernel_results(program.function, served, names, first, angles, arguments, False, split)
+    live = _live_beside_kernel(program, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    return first, angles, arguments, live
+
+
 def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     """(LaneView, first kernel angle, kernel angles, kernel arguments) of the program's lane program: seed k of
     the current lane reads ``kdg_seed[k][kdg_lane]``, lane output m is stored in
@@ -513,12 +525,7 @@ def _lane_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     everything = replace(program, assignments=lp.assignments + lp.lane_assignments,
                          outputs=(tuple(e for port in lp.outputs if port is not None for e in port)
                                   + tuple(v for row in lp.values for v in row) + lp.lane_outputs,))
-    first, angles = kernel_angles(everything) if trig == "kernel" else (0, 0)
-    served = _served(everything) if trig == "kernel" else {}
-    arguments = _kernel_argument_names(served, dialect, names)
-    split = _splits(angles + len(arguments), dialect, False)
-    _name_kernel_results(f, served, names, first, angles, arguments, False, split)
-    live = _live_beside_kernel(everything, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    first, angles, arguments, live = _kernel_served(everything, names, dialect, trig)
     for k, seed in enumerate(lp.seeds):
         names[seed] = f"kdg_seed[{k}][kdg_lane]"
     printed = {}
@@ -566,12 +573,7 @@ def _joint_loop_view(program: Program, dialect: Dialect, trig: str) -> tuple:
     loops = jp.loops
     once = jp.once
     names = input_names(once, dialect)
-    first, angles = kernel_angles(once) if trig == "kernel" else (0, 0)
-    served = _served(once) if trig == "kernel" else {}
-    arguments = _kernel_argument_names(served, dialect, names)
-    split = _splits(angles + len(arguments), dialect, False)
-    _name_kernel_results(once.function, served, names, first, angles, arguments, False, split)
-    live = _live_beside_kernel(once, [c for c in names if isinstance(c, (se.sin, se.cos))]) if arguments else None
+    first, angles, arguments, live = _kernel_served(once, names, dialect, trig)
     statements = []
     for sym, expr in once.assignments:
         names[sym] = str(sym)
