@@ -125,6 +125,8 @@ def test_joint_loop_counts_equal_the_operators_printed(generated):
     assert parts["sums"]["add"] == edges * 43
     executed = {k: sum(p[k] * p["runs"] for p in parts.values()) for k in ("add", "mul", "call")}
     assert executed == spec["opcount"]["c_loops"]["executed"]
+    report = (folder / "opcounts.md").read_text()
+    assert "| tau_derivatives | executed | {add} / {mul} / {call} | |".format(**executed) in report
 
 
 def test_a_small_tree_keeps_the_scalar_program(tmp_path):
